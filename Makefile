@@ -1,0 +1,28 @@
+# The two quick-start commands: `make demo` (the main job) and `make test` (the test suite).
+# Both create the virtual environment .venv on first use and install stillframe into it.
+PYTHON ?= python3
+VENV := .venv
+BIN := $(VENV)/bin
+
+.PHONY: setup demo test lint clean
+
+$(BIN)/stillframe: pyproject.toml
+	$(PYTHON) -m venv $(VENV)
+	$(BIN)/pip install --quiet --upgrade pip
+	$(BIN)/pip install --quiet -e '.[test]'
+	touch $@
+
+setup: $(BIN)/stillframe
+
+demo: setup
+	$(BIN)/stillframe simulate scenes/thesis_lumped.yaml --out out/thesis_lumped.npz
+
+test: setup
+	$(BIN)/ruff check .
+	$(BIN)/python -m pytest -q
+
+lint: setup
+	$(BIN)/ruff check .
+
+clean:
+	rm -rf $(VENV) out .pytest_cache .ruff_cache

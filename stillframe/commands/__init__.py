@@ -1,0 +1,1 @@
+"""Subcommands of the ``stillframe`` command; each module has ``register(subparsers)``."""

@@ -1,0 +1,31 @@
+"""``stillframe modes SCENE``: natural frequencies, damping ratios and mode shapes."""
+
+from __future__ import annotations
+
+import argparse
+
+from stillframe.commands.common import add_scene_arguments, emit_json, format_table, scene_from_args
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    parser = sub.add_parser("modes", help="modes of the scene's model, linearised at rest")
+    add_scene_arguments(parser)
+    parser.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from stillframe.models import build_model
+    from stillframe.modal_analysis import modal_table
+
+    scene = scene_from_args(args)
+    model = build_model(scene)
+    table = modal_table(model)
+    if args.json:
+        emit_json(table)
+        return 0
+    print(f"model {table['model']}: {table['dofs']} DOFs; mode shapes at floors 1..3 and phi, "
+          "normalised to floor 1")
+    rows = [[i + 1, f, z, *shape] for i, (f, z, shape) in enumerate(
+        zip(table["frequencies_hz"], table["damping_ratios"], table["mode_shapes"], strict=True))]
+    print(format_table(["mode", "f [Hz]", "zeta", "x1", "x2", "x3", "phi"], rows))
+    return 0
