@@ -18,6 +18,8 @@ COMMANDS: tuple[str, ...] = (
     "stillframe.commands.simulate",
     "stillframe.commands.bench",
     "stillframe.commands.bag",
+    "stillframe.commands.record",
+    "stillframe.commands.play",
 )
 
 

@@ -1,0 +1,224 @@
+"""record / play over real DDS: separate ``stillframe`` processes on loopback, one random
+``ROS_DOMAIN_ID`` per test.
+
+The source bag is written with ``rosbags``'s own ``Writer`` (not through stillframe), so the
+first ``play`` also shows that foreign bags play; what comes back is compared byte for byte.
+"""
+
+from __future__ import annotations
+
+import os
+import random
+import signal
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability
+from rosbags.interfaces import QosTime as T
+from rosbags.rosbag2 import Reader, StoragePlugin, Writer
+from rosbags.typesys import Stores, get_typestore
+
+ROOT = Path(__file__).resolve().parents[1]
+TS = get_typestore(Stores.ROS2_JAZZY)
+INF = T(9223372036, 854775807)
+SENSOR = Qos(QosHistory.KEEP_LAST, 5, QosReliability.BEST_EFFORT, QosDurability.VOLATILE,
+             INF, INF, QosLiveliness.AUTOMATIC, INF, False)
+RELIABLE = SENSOR._replace(depth=10, reliability=QosReliability.RELIABLE)
+IMU, JS = "/frame/floor1/imu", "/frame/state_estimate"
+T0 = 1_750_000_000_000_000_000
+
+pytestmark = pytest.mark.slow
+
+
+def _header(stamp_ns: int, frame: str) -> object:
+    t = TS.types
+    return t["std_msgs/msg/Header"](t["builtin_interfaces/msg/Time"](*divmod(stamp_ns, 10**9)),
+                                    frame)
+
+
+def imu(k: int, stamp_ns: int) -> bytes:
+    t = TS.types
+    msg = t["sensor_msgs/msg/Imu"](
+        _header(stamp_ns, f"floor1_{k}"), t["geometry_msgs/msg/Quaternion"](0.0, 0.0, 0.0, 1.0),
+        np.full(9, -1.0), t["geometry_msgs/msg/Vector3"](0.0, 0.0, 0.0), np.full(9, -1.0),
+        t["geometry_msgs/msg/Vector3"](np.sin(0.1 * k), 0.0, 0.0), np.eye(3).ravel() * 1e-4)
+    return bytes(TS.serialize_cdr(msg, "sensor_msgs/msg/Imu"))
+
+
+def joint_state(k: int, stamp_ns: int) -> bytes:
+    msg = TS.types["sensor_msgs/msg/JointState"](
+        _header(stamp_ns, ""), ["x1", "x2", "x3", "phi"], np.array([k, 0.0, 0.0, -k]),
+        np.array([0.5 * k, 0.0, 0.0, 0.0]), np.zeros(0))
+    return bytes(TS.serialize_cdr(msg, "sensor_msgs/msg/JointState"))
+
+
+def write_source(path: Path, n_imu: int, n_js: int, period_ns: int) -> list[tuple[str, int, bytes]]:
+    """A bag written with rosbags directly: Imu (sensor-data QoS) and JointState (reliable)
+    interleaved; the header stamps are the bag stamps."""
+    msgs = [(IMU, T0 + k * period_ns, imu(k, T0 + k * period_ns)) for k in range(n_imu)]
+    msgs += [(JS, T0 + k * 2 * period_ns + period_ns // 2,
+              joint_state(k, T0 + k * 2 * period_ns + period_ns // 2)) for k in range(n_js)]
+    msgs.sort(key=lambda m: m[1])
+    with Writer(path, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+        conns = {IMU: writer.add_connection(IMU, "sensor_msgs/msg/Imu", typestore=TS,
+                                            offered_qos_profiles=[SENSOR]),
+                 JS: writer.add_connection(JS, "sensor_msgs/msg/JointState", typestore=TS,
+                                           offered_qos_profiles=[RELIABLE])}
+        for topic, stamp, data in msgs:
+            writer.write(conns[topic], stamp, data)
+    return msgs
+
+
+def read_all(path: Path) -> list[tuple[str, int, bytes]]:
+    """Messages of a bag through rosbags's Reader (not stillframe.bags)."""
+    with Reader(path) as reader:
+        return [(c.topic, t, bytes(d)) for c, t, d in reader.messages()]
+
+
+def topic_metadata(path: Path) -> dict[str, dict]:
+    meta = yaml.safe_load((path / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+    return {t["topic_metadata"]["name"]: {**t["topic_metadata"], "count": t["message_count"]}
+            for t in meta["topics_with_message_count"]}
+
+
+class Proc:
+    """A ``stillframe`` subprocess whose stderr (the node's log) is collected as it comes."""
+
+    def __init__(self, env: dict[str, str], *args: str) -> None:
+        self.popen = subprocess.Popen(
+            [sys.executable, "-m", "stillframe", *args], cwd=ROOT, env=env,
+            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        self.lines: list[str] = []
+        self._reader = threading.Thread(target=self._collect, daemon=True)
+        self._reader.start()
+
+    def _collect(self) -> None:
+        assert self.popen.stderr is not None
+        for line in self.popen.stderr:
+            self.lines.append(line.rstrip("\n"))
+
+    def wait_for(self, text: str, count: int = 1, timeout: float = 60.0) -> None:
+        deadline = time.monotonic() + timeout
+        while sum(text in line for line in self.lines) < count:
+            if self.popen.poll() is not None or time.monotonic() > deadline:
+                self.stop()
+                raise AssertionError(f"no {count}x {text!r} in log:\n" + "\n".join(self.lines))
+            time.sleep(0.05)
+
+    def finish(self, sig: int | None = None, timeout: float = 60.0) -> int:
+        if sig is not None:
+            self.popen.send_signal(sig)
+        code = self.popen.wait(timeout)
+        self._reader.join(5)
+        return code
+
+    def stop(self) -> None:
+        if self.popen.poll() is None:
+            self.popen.kill()
+            self.popen.wait()
+
+
+@pytest.fixture
+def env() -> Iterator[dict[str, str]]:
+    """A private ROS domain for this test (0..101 are valid ROS domain ids)."""
+    yield {**os.environ, "PYTHONPATH": str(ROOT), "ROS_DOMAIN_ID": str(random.randint(1, 101)),
+           "STILLFRAME_RMW": "dds"}
+
+
+def record_while_playing(env: dict[str, str], source: Path, out: Path,
+                         *play_args: str) -> tuple[Proc, Proc]:
+    recorder = Proc(env, "record", "-o", str(out), IMU, JS)
+    recorder.wait_for("Recording to")
+    player = Proc(env, "play", str(source), "--delay", "2", *play_args)
+    recorder.wait_for("Subscribed to topic", count=2)
+    return recorder, player
+
+
+def test_record_play_record_keeps_every_message_stamp_and_order(
+        env: dict[str, str], tmp_path: Path) -> None:
+    """bag A (rosbags) -play-> record B -play-> record C: B and C hold exactly A's messages,
+    per topic in A's order, with A's header stamps (in the bytes) and A's spacing in time."""
+    source = tmp_path / "A"
+    msgs = write_source(source, n_imu=100, n_js=50, period_ns=20_000_000)  # 2 s of data
+    bags = [source]
+    for name in ("B", "C"):
+        recorder, player = record_while_playing(env, bags[-1], tmp_path / name)
+        try:
+            assert player.finish() == 0, "\n".join(player.lines)
+            time.sleep(0.5)
+            assert recorder.finish(signal.SIGINT) == 0, "\n".join(recorder.lines)
+        finally:
+            player.stop()
+            recorder.stop()
+        bags.append(tmp_path / name)
+
+    for path in bags[1:]:
+        got = read_all(path)
+        for topic in (IMU, JS):
+            assert [d for t, _, d in got if t == topic] == [d for t, _, d in msgs if t == topic]
+        # Played with the recorded spacing: the receive stamps span at least 90 % of A's 2 s.
+        stamps = [s for _, s, _ in got]
+        assert stamps == sorted(stamps)
+        assert stamps[-1] - stamps[0] >= 0.9 * (msgs[-1][1] - msgs[0][1])
+        meta = topic_metadata(path)
+        assert (meta[IMU]["count"], meta[JS]["count"]) == (100, 50)
+        assert meta[IMU]["type_description_hash"] == TS.hash_rihs01("sensor_msgs/msg/Imu")
+        # The player offered what the source's publishers offered; the recorder saw that.
+        assert [(q["reliability"], q["durability"]) for q in meta[IMU]["offered_qos_profiles"]] \
+            == [("best_effort", "volatile")]
+        assert [(q["reliability"], q["durability"]) for q in meta[JS]["offered_qos_profiles"]] \
+            == [("reliable", "volatile")]
+
+
+def test_sigint_keeps_every_message_received(env: dict[str, str], tmp_path: Path) -> None:
+    """Ctrl-C in the middle of a stream: the bag is complete and holds exactly the first k
+    messages published (reliable topic, so nothing in between may be missing), k = the count
+    the recorder reports."""
+    source = tmp_path / "A"
+    msgs = write_source(source, n_imu=0, n_js=400, period_ns=10_000_000)  # 8 s of JointState
+    recorder, player = record_while_playing(env, source, tmp_path / "B")
+    try:
+        time.sleep(2.0 + 2.0)  # the player's delay, then about half the stream
+        assert recorder.finish(signal.SIGINT) == 0, "\n".join(recorder.lines)
+        player.finish(signal.SIGINT)
+    finally:
+        player.stop()
+        recorder.stop()
+    got = read_all(tmp_path / "B")
+    k = len(got)
+    assert k > 0
+    assert [d for _, _, d in got] == [d for _, _, d in msgs[:k]]
+    assert any(f"Recorded {k} messages" in line for line in recorder.lines), recorder.lines
+    published = [line for line in player.lines if "Published" in line]
+    assert published and int(published[0].split("Published ")[1].split()[0]) >= k
+
+
+def test_play_clock_publishes_bag_time(env: dict[str, str], tmp_path: Path) -> None:
+    """``--clock``: /clock carries bag time, from the bag's start to its end."""
+    source = tmp_path / "A"
+    msgs = write_source(source, n_imu=50, n_js=0, period_ns=20_000_000)
+    recorder = Proc(env, "record", "-o", str(tmp_path / "clock"), "/clock")
+    recorder.wait_for("Recording to")
+    player = Proc(env, "play", str(source), "--delay", "2", "--clock", "50")
+    try:
+        recorder.wait_for("Subscribed to topic")
+        assert player.finish() == 0
+        time.sleep(0.3)
+        assert recorder.finish(signal.SIGINT) == 0
+    finally:
+        player.stop()
+        recorder.stop()
+    clock = [TS.deserialize_cdr(d, "rosgraph_msgs/msg/Clock").clock
+             for _, _, d in read_all(tmp_path / "clock")]
+    times = [c.sec * 10**9 + c.nanosec for c in clock]
+    assert len(times) >= 10
+    assert times == sorted(times)
+    assert msgs[0][1] <= times[0] and times[-1] <= msgs[-1][1]
+    assert times[-1] - times[0] >= 0.5 * (msgs[-1][1] - msgs[0][1])
