@@ -67,9 +67,11 @@ class Player:
 
     def play_once(self) -> None:
         """One pass through the bag with the original timing divided by the rate."""
-        self._wall0 = wall0 = time.monotonic_ns()
+        self._wall0 = None
         for m in read_bag(self.path, messages.TYPESTORE):
-            self._sleep_until(wall0 + int((m.stamp - self.summary.start_ns) / self.rate))
+            if self._wall0 is None:  # the bag is open: time starts with its first message
+                self._wall0 = time.monotonic_ns()
+            self._sleep_until(self._wall0 + int((m.stamp - self.summary.start_ns) / self.rate))
             if not ok():
                 return
             self.publishers[m.topic].publish(m.data)

@@ -34,9 +34,6 @@ RELIABLE = SENSOR._replace(depth=10, reliability=QosReliability.RELIABLE)
 IMU, JS = "/frame/floor1/imu", "/frame/state_estimate"
 T0 = 1_750_000_000_000_000_000
 
-pytestmark = pytest.mark.slow
-
-
 def _header(stamp_ns: int, frame: str) -> object:
     t = TS.types
     return t["std_msgs/msg/Header"](t["builtin_interfaces/msg/Time"](*divmod(stamp_ns, 10**9)),
@@ -141,6 +138,7 @@ def record_while_playing(env: dict[str, str], source: Path, out: Path,
     return recorder, player
 
 
+@pytest.mark.slow
 def test_record_play_record_keeps_every_message_stamp_and_order(
         env: dict[str, str], tmp_path: Path) -> None:
     """bag A (rosbags) -play-> record B -play-> record C: B and C hold exactly A's messages,
@@ -177,6 +175,7 @@ def test_record_play_record_keeps_every_message_stamp_and_order(
             == [("reliable", "volatile")]
 
 
+@pytest.mark.slow
 def test_sigint_keeps_every_message_received(env: dict[str, str], tmp_path: Path) -> None:
     """Ctrl-C in the middle of a stream: the bag is complete and holds exactly the first k
     messages published (reliable topic, so nothing in between may be missing), k = the count
@@ -200,6 +199,7 @@ def test_sigint_keeps_every_message_received(env: dict[str, str], tmp_path: Path
     assert published and int(published[0].split("Published ")[1].split()[0]) >= k
 
 
+@pytest.mark.slow
 def test_play_clock_publishes_bag_time(env: dict[str, str], tmp_path: Path) -> None:
     """``--clock``: /clock carries bag time, from the bag's start to its end."""
     source = tmp_path / "A"
@@ -222,3 +222,51 @@ def test_play_clock_publishes_bag_time(env: dict[str, str], tmp_path: Path) -> N
     assert times == sorted(times)
     assert msgs[0][1] <= times[0] and times[-1] <= msgs[-1][1]
     assert times[-1] - times[0] >= 0.5 * (msgs[-1][1] - msgs[0][1])
+
+
+@pytest.mark.slow
+def test_play_loop_at_rate_repeats_the_bag_faster(env: dict[str, str], tmp_path: Path) -> None:
+    """``--loop --rate 4``: the recording is the bag's messages over and over (at least twice
+    through), each pass taking between a quarter of the bag's span (less 10 %) and the span."""
+    source = tmp_path / "A"
+    msgs = write_source(source, n_imu=0, n_js=40, period_ns=20_000_000)  # 1.6 s
+    recorder, player = record_while_playing(env, source, tmp_path / "B", "--loop", "--rate", "4")
+    try:
+        time.sleep(2.0 + 3.0)  # the player's delay, then about seven passes of 0.4 s
+        assert player.finish(signal.SIGINT) == 0, "\n".join(player.lines)
+        time.sleep(0.5)
+        assert recorder.finish(signal.SIGINT) == 0, "\n".join(recorder.lines)
+    finally:
+        player.stop()
+        recorder.stop()
+    got = read_all(tmp_path / "B")
+    data = [d for _, _, d in msgs]
+    passes, rest = divmod(len(got), len(data))
+    assert passes >= 2
+    assert [d for _, _, d in got] == data * passes + data[:rest]
+    span = msgs[-1][1] - msgs[0][1]
+    for p in range(passes):
+        stamps = [s for _, s, _ in got[p * len(data):(p + 1) * len(data)]]
+        assert 0.9 * span / 4 <= stamps[-1] - stamps[0] <= span
+
+
+@pytest.mark.parametrize(("args", "named"), [
+    (["play", "{tmp}/nope"], "{tmp}/nope"),
+    (["play", "{tmp}/A", "--rate", "0"], "--rate"),
+    (["play", "{tmp}/A", "--clock", "-1"], "--clock"),
+    (["record", "-o", "{tmp}/new"], "--all"),
+    (["record", "-o", "{tmp}/new", "--all", "/x"], "--all"),
+    (["record", "-o", "{tmp}/A", "--all"], "{tmp}/A"),
+    (["record", "-o", "{tmp}/new", "bad topic"], "bad topic"),
+])
+def test_bad_arguments_are_one_line_errors(env: dict[str, str], tmp_path: Path,
+                                           args: list[str], named: str) -> None:
+    write_source(tmp_path / "A", n_imu=3, n_js=0, period_ns=1_000_000)
+    argv = [a.format(tmp=tmp_path) for a in args]
+    out = subprocess.run([sys.executable, "-m", "stillframe", *argv],
+                         cwd=ROOT, env=env, capture_output=True, text=True, timeout=60)
+    errors = [line for line in out.stderr.splitlines() if "error" in line]
+    assert out.returncode == 2, out.stderr
+    assert "Traceback" not in out.stderr
+    assert len(errors) == 1 and named.format(tmp=tmp_path) in errors[0], out.stderr
+    assert not (tmp_path / "new").exists()
