@@ -26,8 +26,10 @@ NUMPY_DTYPES: dict[str, type] = {
 }
 
 
-def type_name(name: str) -> str:
-    """Canonical ``pkg/msg/Type`` of ``pkg/msg/Type`` or ``pkg/Type``; InputError if unknown."""
+def type_name(name: str | type) -> str:
+    """Canonical ``pkg/msg/Type`` of ``pkg/msg/Type``, ``pkg/Type`` or a message class;
+    InputError if unknown."""
+    name = getattr(name, "__msgtype__", name)
     parts = name.split("/")
     canonical = f"{parts[0]}/msg/{parts[1]}" if len(parts) == 2 else name
     if canonical not in TYPESTORE.fielddefs:

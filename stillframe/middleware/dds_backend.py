@@ -479,7 +479,7 @@ class DdsNode:
         self, msg_type: str | type, topic: str, qos: QoSProfile | str | int
     ) -> DdsPublisher:
         topic = self.resolve_topic_name(topic)
-        pub = DdsPublisher(self, _type_of(msg_type), topic, as_profile(qos))
+        pub = DdsPublisher(self, messages.type_name(msg_type), topic, as_profile(qos))
         self._publishers.append(pub)
         self.context.publish_graph()
         return pub
@@ -488,8 +488,9 @@ class DdsNode:
         self, msg_type: str | type, topic: str, callback: Callable[..., None],
         qos: QoSProfile | str | int, raw: bool = False,
     ) -> DdsSubscription:
+        topic = self.resolve_topic_name(topic)
         sub = DdsSubscription(
-            self, _type_of(msg_type), self.resolve_topic_name(topic), callback, as_profile(qos), raw
+            self, messages.type_name(msg_type), topic, callback, as_profile(qos), raw
         )
         self._subscriptions.append(sub)
         self._waitset.attach(sub.condition)
@@ -572,9 +573,4 @@ class DdsNode:
         self._subscriptions.clear()
         self._timers.clear()
         self.context.remove_node(self)
-
-
-def _type_of(msg_type: str | type) -> str:
-    """Canonical type name of a type name or a ``rosbags`` message class."""
-    return messages.type_name(getattr(msg_type, "__msgtype__", msg_type))
 
