@@ -13,6 +13,7 @@ floors 1–3 (excitation, floor-3 actuator) and the hinge torque (eq. 5.56).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -63,12 +64,13 @@ class FrameModel:
         self.i3 = i3
         self.k_struct = structure.stiffness
         self.c_struct = structure.damping
-        # M_s + m4 e3 e3ᵀ is constant: factor it once and solve M(q) a = Q by its Schur complement.
+        # M_s + m4 e3 e3ᵀ is constant: invert it once and solve M(q) a = Q by its Schur
+        # complement (a matrix-vector product beats a triangular solve's call overhead here).
         m_const = structure.mass.copy()
         m_const[i3, i3] += self.m4
         self.m_const = m_const
-        self._m_const_factor = sla.cho_factor(m_const)
-        self._w = sla.cho_solve(self._m_const_factor, np.eye(self.n_struct)[:, i3])
+        self._m_const_inv = sla.inv(m_const, overwrite_a=False, check_finite=True)
+        self._w = self._m_const_inv[:, i3].copy()
         self.input_matrix = np.zeros((self.n_dof, 4))
         self.input_matrix[self.floor_index, [0, 1, 2]] = 1.0
         self.input_matrix[self.phi_index, 3] = 1.0
@@ -87,18 +89,20 @@ class FrameModel:
         """Q(q, q̇, u): elastic, viscous, gravity, centrifugal and input forces (eq. 5.237)."""
         n = self.n_struct
         phi, dphi = q[n], v[n]
+        sin_phi = math.sin(phi)
         Q = np.empty(self.n_dof)
-        Q[:n] = -self.k_struct @ q[:n] - self.c_struct @ v[:n]
-        Q[self.i3] += self.m4 * self.l4 * np.sin(phi) * dphi**2
-        Q[n] = -self.m4 * self.g * self.l4 * np.sin(phi) - self.r4 * dphi
-        return Q + self.input_matrix @ u
+        Q[:n] = -(self.k_struct @ q[:n] + self.c_struct @ v[:n])
+        Q[self.floor_index] += u[:3]
+        Q[self.i3] += self.m4 * self.l4 * sin_phi * dphi * dphi
+        Q[n] = u[3] - self.m4 * self.g * self.l4 * sin_phi - self.r4 * dphi
+        return Q
 
     def accelerations(self, q: np.ndarray, v: np.ndarray, u: np.ndarray) -> np.ndarray:
         """q̈ = M(q)⁻¹ Q with one solve of the constant structural block (Schur complement)."""
         Q = self.forces(q, v, u)
         n = self.n_struct
-        c = self.m4 * self.l4 * np.cos(q[n])
-        y = sla.cho_solve(self._m_const_factor, Q[:n])
+        c = self.m4 * self.l4 * math.cos(q[n])
+        y = self._m_const_inv @ Q[:n]
         a_phi = (Q[n] - c * y[self.i3]) / (self.pendulum_inertia - c * c * self._w[self.i3])
         a = np.empty(self.n_dof)
         a[:n] = y - c * a_phi * self._w

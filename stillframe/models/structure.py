@@ -73,6 +73,35 @@ def beam_element(length: float, ei: float, rho_a: float) -> tuple[np.ndarray, np
     return m, k
 
 
+def _scatter_add(target: np.ndarray, local: np.ndarray, dofs: list[int]) -> None:
+    """Add ``local`` into ``target`` at ``dofs``; entries at DOF −1 (held at zero) are dropped."""
+    index = np.asarray(dofs)
+    keep = index >= 0
+    target[np.ix_(index[keep], index[keep])] += local[np.ix_(keep, keep)]
+
+
+def column_matrices(length: float, n_elements: int, ei: float,
+                    rho_a: float) -> tuple[np.ndarray, np.ndarray]:
+    """Mass and stiffness of one story's column clamped at both ends against rotation.
+
+    DOFs: bottom deflection, the inner nodes' (w, θ) from the bottom up, top deflection. The end
+    rotations are held at zero (the floors do not rotate).
+    """
+    n_inner = 2 * (n_elements - 1)
+    n = n_inner + 2
+    top = n - 1
+    mass = np.zeros((n, n))
+    stiffness = np.zeros((n, n))
+    m_el, k_el = beam_element(length / n_elements, ei, rho_a)
+    for e in range(n_elements):
+        # local (w1, θ1, w2, θ2) → column DOF, or -1 where the end rotation is held
+        lower = (0, -1) if e == 0 else (2 * e - 1, 2 * e)
+        upper = (top, -1) if e == n_elements - 1 else (2 * e + 1, 2 * e + 2)
+        _scatter_add(mass, m_el, [*lower, *upper])
+        _scatter_add(stiffness, k_el, [*lower, *upper])
+    return mass, stiffness
+
+
 def fe_structure(rig: Section, elements_per_column: int) -> Structure:
     """Euler–Bernoulli columns, ``elements_per_column`` elements per story (thesis §5.4).
 
@@ -91,18 +120,12 @@ def fe_structure(rig: Section, elements_per_column: int) -> Structure:
     stiffness = np.zeros((n, n))
     names = ["x1", "x2", "x3"]
     for story, length in enumerate(c.lengths):
-        base = 3 + story * n_inner
         names += [f"s{story + 1}n{j}{dof}" for j in range(1, n_e) for dof in ("w", "th")]
-        m_el, k_el = beam_element(length / n_e, ei, rho_a)
-        for e in range(n_e):
-            # global index of each element DOF, or -1 where it is held at zero
-            bottom = (story - 1, -1) if e == 0 else (base + 2 * (e - 1), base + 2 * (e - 1) + 1)
-            top = (story, -1) if e == n_e - 1 else (base + 2 * e, base + 2 * e + 1)
-            dofs = np.array([*bottom, *top])
-            keep = dofs >= 0
-            idx = dofs[keep]
-            mass[np.ix_(idx, idx)] += m_el[np.ix_(keep, keep)]
-            stiffness[np.ix_(idx, idx)] += k_el[np.ix_(keep, keep)]
+        m_col, k_col = column_matrices(length, n_e, ei, rho_a)
+        inner = list(range(3 + story * n_inner, 3 + (story + 1) * n_inner))
+        dofs = [story - 1, *inner, story]  # the ground (-1) is dropped
+        _scatter_add(mass, m_col, dofs)
+        _scatter_add(stiffness, k_col, dofs)
     mass[:3, :3] += np.diag(rig.floor_masses)
     return Structure(f"fe{n_e}", mass, stiffness, (0, 1, 2), tuple(names))
 
