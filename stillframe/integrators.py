@@ -143,7 +143,8 @@ def reference_solution(system: DescriptorSystem, x0: np.ndarray, t_eval: np.ndar
     try:
         scipy_method = ADAPTIVE[method]
     except KeyError:
-        raise InputError(f"integrator.method: {method!r} is not adaptive ({', '.join(ADAPTIVE)})")
+        known = ", ".join(ADAPTIVE)
+        raise InputError(f"integrator.method: {method!r} is not adaptive ({known})") from None
     sol = solve_ivp(system.derivative, (t_eval[0], t_eval[-1]), np.asarray(x0, float),
                     method=scipy_method, t_eval=t_eval, rtol=rtol, atol=atol)
     if not sol.success:
