@@ -6,6 +6,8 @@ from __future__ import annotations
 import pytest
 from rosbags.interfaces import QosReliability
 from rosbags.rosbag2.metadata import dump_qos_v9
+
+from stillframe.bag_qos import RECORD_DEPTH, from_bag, player_offer, recorder_request, to_bag
 from stillframe.middleware.qos import (
     CLOCK,
     DEFAULT,
@@ -16,8 +18,6 @@ from stillframe.middleware.qos import (
     QoSProfile,
     Reliability,
 )
-
-from stillframe.bag_qos import RECORD_DEPTH, from_bag, player_offer, recorder_request, to_bag
 
 LATCHED = QoSProfile(depth=1, durability=Durability.TRANSIENT_LOCAL)
 INFINITE = {"sec": 9223372036, "nsec": 854775807}

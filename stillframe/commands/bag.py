@@ -18,11 +18,10 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run_info(args: argparse.Namespace) -> int:
-    from rosbags.typesys import Stores, get_typestore
-
     from stillframe.bags import bag_summary, format_summary
+    from stillframe.messages import TYPESTORE
 
-    summary = bag_summary(args.bag, get_typestore(Stores.ROS2_JAZZY))
+    summary = bag_summary(args.bag, TYPESTORE)
     if args.json:
         emit_json(summary.as_dict())
     else:
