@@ -32,6 +32,10 @@ from rosbags.typesys.store import Typestore
 from stillframe.errors import InputError
 
 METADATA_VERSION = 9
+#: What reading a damaged bag can raise (rosbags lets KeyError/TypeError through for
+#: incomplete QoS records).
+_BAG_ERRORS = (AnyReaderError, ReaderError, OSError, yaml.YAMLError, KeyError, TypeError,
+               ValueError)
 SERVICE_EVENT_SUFFIX = "/_service_event"
 
 
@@ -157,12 +161,14 @@ def _culprit(bag: Path) -> Path:
         try:
             with Reader(path):
                 pass
-        except (ReaderError, OSError):
+        except _BAG_ERRORS:
             return path
     return bag / "metadata.yaml"
 
 
 def _first_line(exc: BaseException) -> str:
+    if isinstance(exc, KeyError):
+        return f"missing key {exc}"
     return next(iter(str(exc).splitlines()), type(exc).__name__)
 
 
@@ -182,7 +188,7 @@ def open_bag(path: str | Path, default_typestore: Typestore) -> Iterator[AnyRead
     reader = AnyReader([bag], default_typestore=default_typestore)
     try:
         reader.open()
-    except (AnyReaderError, ReaderError, OSError, yaml.YAMLError) as exc:
+    except _BAG_ERRORS as exc:
         raise InputError(f"{_culprit(bag)}: unreadable bag file: {_first_line(exc)}") from None
     try:
         yield reader
@@ -206,7 +212,7 @@ def read_bag(path: str | Path, default_typestore: Typestore, *, topics: Sequence
             for conn, stamp, data in reader.messages(connections=connections):
                 msg = reader.deserialize(data, conn.msgtype) if decode else None
                 yield BagMessage(conn.topic, conn.msgtype, stamp, bytes(data), msg)
-        except (AnyReaderError, ReaderError, OSError) as exc:
+        except _BAG_ERRORS as exc:
             files = ", ".join(str(p) for p in _storage_files(bag))
             raise InputError(f"{files}: corrupt message data: {_first_line(exc)}") from None
 

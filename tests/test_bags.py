@@ -285,3 +285,108 @@ def test_missing_directory_is_an_input_error(tmp_path: Path) -> None:
     out = run_cli("bag", "info", str(tmp_path / "nope"))
     assert (out.returncode, out.stderr.count("\n")) == (2, 1)
     assert str(tmp_path / "nope") in out.stderr
+
+
+JAZZY_METADATA = """\
+rosbag2_bagfile_information:
+  version: 9
+  storage_identifier: mcap
+  duration:
+    nanoseconds: {duration}
+  starting_time:
+    nanoseconds_since_epoch: {start}
+  message_count: {count}
+  topics_with_message_count:
+    - topic_metadata:
+        name: /chatter
+        type: std_msgs/msg/String
+        serialization_format: cdr
+        offered_qos_profiles:
+          - history: keep_last
+            depth: 7
+            reliability: reliable
+            durability: transient_local
+            deadline:
+              sec: 9223372036
+              nsec: 854775807
+            lifespan:
+              sec: 9223372036
+              nsec: 854775807
+            liveliness: automatic
+            liveliness_lease_duration:
+              sec: 9223372036
+              nsec: 854775807
+            avoid_ros_namespace_conventions: false
+        type_description_hash: {hash}
+      message_count: {count}
+  compression_format: ""
+  compression_mode: ""
+  relative_file_paths:
+    - {name}_0.mcap
+  files:
+    - path: {name}_0.mcap
+      starting_time:
+        nanoseconds_since_epoch: {start}
+      duration:
+        nanoseconds: {duration}
+      message_count: {count}
+  custom_data: ~
+  ros_distro: jazzy
+"""
+
+
+def string_cdr(text: str) -> bytes:
+    """std_msgs/msg/String in little-endian CDR, built by hand."""
+    raw = text.encode() + b"\0"
+    return b"\x00\x01\x00\x00" + len(raw).to_bytes(4, "little") + raw
+
+
+def write_like_ros2_bag_record(path: Path, n: int = 25,
+                               channel_qos: str | None = None) -> list[tuple[int, str]]:
+    """A bag laid out as Jazzy's ``ros2 bag record`` writes it, with the ``mcap`` package:
+    ``<dir>_0.mcap`` with zstd chunks, publish_time (sender) before log_time (receive)."""
+    from mcap.writer import CompressionType
+    from mcap.writer import Writer as McapWriter
+
+    meta = JAZZY_METADATA.format(duration=(n - 1) * 100_000_000, start=T0 + 12_345, count=n,
+                                 name=path.name, hash=TS.hash_rihs01("std_msgs/msg/String"))
+    if channel_qos is None:  # the same profile as in metadata.yaml, as a YAML string
+        channel_qos = yaml.safe_dump(yaml.safe_load(meta)["rosbag2_bagfile_information"][
+            "topics_with_message_count"][0]["topic_metadata"]["offered_qos_profiles"])
+    path.mkdir()
+    sent = [(T0 + k * 100_000_000 + 12_345, f"hello {k}") for k in range(n)]
+    with (path / f"{path.name}_0.mcap").open("wb") as f:
+        writer = McapWriter(f, compression=CompressionType.ZSTD, chunk_size=256)
+        writer.start(profile="ros2", library="libmcap 1.4.0")
+        schema = writer.register_schema("std_msgs/msg/String", "ros2msg", b"string data\n")
+        channel = writer.register_channel("/chatter", "cdr", schema, metadata={
+            "offered_qos_profiles": channel_qos,
+            "topic_type_hash": TS.hash_rihs01("std_msgs/msg/String")})
+        for k, (stamp, text) in enumerate(sent):
+            writer.add_message(channel, log_time=stamp, data=string_cdr(text),
+                               publish_time=stamp - 50_000, sequence=k)
+        writer.finish()
+    (path / "metadata.yaml").write_text(meta)
+    return sent
+
+
+def test_bag_as_ros2_bag_record_writes_it_reads_and_summarises(tmp_path: Path) -> None:
+    path = tmp_path / "rosbag2_2026_01_01-00_00_00"
+    sent = write_like_ros2_bag_record(path)
+    got = list(read_bag(path, TS, decode=True))
+    assert [(m.stamp, m.msg.data) for m in got] == sent
+    assert [m.data for m in got] == [string_cdr(text) for _, text in sent]
+    summary = bag_summary(path, TS)
+    assert summary.files == [f"{path.name}_0.mcap"]
+    assert (summary.ros_distro, summary.storage_id) == ("jazzy", "mcap")
+    assert (summary.start_ns, summary.end_ns) == (sent[0][0], sent[-1][0])
+    (topic,) = summary.topics
+    assert (topic.name, topic.count) == ("/chatter", 25)
+    assert [(q.depth, q.durability.name) for q in topic.offered_qos] == [(7, "TRANSIENT_LOCAL")]
+
+
+def test_incomplete_qos_record_is_an_input_error_naming_the_mcap(tmp_path: Path) -> None:
+    path = tmp_path / "partial"
+    write_like_ros2_bag_record(path, channel_qos="- history: keep_last\n  depth: 7\n")
+    with pytest.raises(InputError, match=f"{path / 'partial_0.mcap'}: unreadable bag file"):
+        bag_summary(path, TS)

@@ -129,9 +129,9 @@ def env() -> Iterator[dict[str, str]]:
            "STILLFRAME_RMW": "dds"}
 
 
-def record_while_playing(env: dict[str, str], source: Path, out: Path,
-                         *play_args: str) -> tuple[Proc, Proc]:
-    recorder = Proc(env, "record", "-o", str(out), IMU, JS)
+def record_while_playing(env: dict[str, str], source: Path, out: Path, *play_args: str,
+                         topics: tuple[str, ...] = (IMU, JS)) -> tuple[Proc, Proc]:
+    recorder = Proc(env, "record", "-o", str(out), *topics)
     recorder.wait_for("Recording to")
     player = Proc(env, "play", str(source), "--delay", "2", *play_args)
     recorder.wait_for("Subscribed to topic", count=2)
@@ -179,10 +179,10 @@ def test_record_play_record_keeps_every_message_stamp_and_order(
 def test_sigint_keeps_every_message_received(env: dict[str, str], tmp_path: Path) -> None:
     """Ctrl-C in the middle of a stream: the bag is complete and holds exactly the first k
     messages published (reliable topic, so nothing in between may be missing), k = the count
-    the recorder reports."""
+    the recorder reports. Recording ``--all``."""
     source = tmp_path / "A"
     msgs = write_source(source, n_imu=0, n_js=400, period_ns=10_000_000)  # 8 s of JointState
-    recorder, player = record_while_playing(env, source, tmp_path / "B")
+    recorder, player = record_while_playing(env, source, tmp_path / "B", topics=("--all",))
     try:
         time.sleep(2.0 + 2.0)  # the player's delay, then about half the stream
         assert recorder.finish(signal.SIGINT) == 0, "\n".join(recorder.lines)
