@@ -120,9 +120,6 @@ class BagWriter:
         self._connections[topic] = self._writer.add_connection(
             topic, msgtype, typestore=self._typestore, offered_qos_profiles=list(offered_qos))
 
-    def has_topic(self, topic: str) -> bool:
-        return topic in self._connections
-
     def write(self, topic: str, stamp_ns: int, data: bytes | memoryview) -> None:
         """Append one message (CDR bytes) received at ``stamp_ns``."""
         self._writer.write(self._connections[topic], stamp_ns, data)
