@@ -176,16 +176,18 @@ def test_record_play_record_keeps_every_message_stamp_and_order(
 
 
 @pytest.mark.slow
-def test_sigint_keeps_every_message_received(env: dict[str, str], tmp_path: Path) -> None:
-    """Ctrl-C in the middle of a stream: the bag is complete and holds exactly the first k
-    messages published (reliable topic, so nothing in between may be missing), k = the count
-    the recorder reports. Recording ``--all``."""
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+def test_interrupt_keeps_every_message_received(env: dict[str, str], tmp_path: Path,
+                                                sig: signal.Signals) -> None:
+    """Ctrl-C (or SIGTERM) in the middle of a stream: the bag is complete and holds exactly the
+    first k messages published (reliable topic, so nothing in between may be missing), k = the
+    count the recorder reports. Recording ``--all``."""
     source = tmp_path / "A"
     msgs = write_source(source, n_imu=0, n_js=400, period_ns=10_000_000)  # 8 s of JointState
     recorder, player = record_while_playing(env, source, tmp_path / "B", topics=("--all",))
     try:
         time.sleep(2.0 + 2.0)  # the player's delay, then about half the stream
-        assert recorder.finish(signal.SIGINT) == 0, "\n".join(recorder.lines)
+        assert recorder.finish(sig) == 0, "\n".join(recorder.lines)
         player.finish(signal.SIGINT)
     finally:
         player.stop()
