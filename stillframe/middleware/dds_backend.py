@@ -108,7 +108,7 @@ def dds_qos(profile: QoSProfile, user_data: bytes | None = None, writer: bool = 
 def ros_qos(qos: Qos) -> QoSProfile:
     """The rmw profile of a discovered endpoint's Cyclone QoS."""
     def get(policy: Any) -> Any:
-        return qos.get(policy, None)
+        return qos[policy] if policy in qos else None  # noqa: SIM401 - Qos has no .get
 
     history = get(Policy.History)
     reliability = get(Policy.Reliability)
