@@ -146,11 +146,14 @@ def install_signal_handlers() -> None:
 def backend_name() -> str:
     """``STILLFRAME_RMW`` if set, else ``rclpy`` when importable, else ``dds``."""
     chosen = os.environ.get(BACKEND_ENV, "").strip()
-    if chosen:
-        if chosen not in BACKENDS:
-            raise InputError(f"{BACKEND_ENV}={chosen!r}: expected one of {', '.join(BACKENDS)}")
-        return chosen
-    return "rclpy" if importlib.util.find_spec("rclpy") is not None else "dds"
+    has_rclpy = importlib.util.find_spec("rclpy") is not None
+    if not chosen:
+        return "rclpy" if has_rclpy else "dds"
+    if chosen not in BACKENDS:
+        raise InputError(f"{BACKEND_ENV}={chosen!r}: expected one of {', '.join(BACKENDS)}")
+    if chosen == "rclpy" and not has_rclpy:
+        raise InputError(f"{BACKEND_ENV}=rclpy, but rclpy cannot be imported (source ROS 2 first)")
+    return chosen
 
 
 def create_node(name: str, namespace: str | None = None, argv: list[str] | None = None) -> Node:
