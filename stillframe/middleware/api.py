@@ -19,6 +19,7 @@ otherwise; the environment variable ``STILLFRAME_RMW=dds|rclpy`` overrides the c
 
 from __future__ import annotations
 
+import functools
 import importlib.util
 import os
 import signal
@@ -26,6 +27,7 @@ import sys
 import threading
 from collections.abc import Callable
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any, Protocol
 
 from stillframe.errors import InputError
@@ -146,11 +148,14 @@ def install_signal_handlers() -> None:
 def backend_name() -> str:
     """``STILLFRAME_RMW`` if set, else ``rclpy`` when importable, else ``dds``."""
     chosen = os.environ.get(BACKEND_ENV, "").strip()
-    if chosen:
-        if chosen not in BACKENDS:
-            raise InputError(f"{BACKEND_ENV}={chosen!r}: expected one of {', '.join(BACKENDS)}")
-        return chosen
-    return "rclpy" if importlib.util.find_spec("rclpy") is not None else "dds"
+    has_rclpy = importlib.util.find_spec("rclpy") is not None
+    if not chosen:
+        return "rclpy" if has_rclpy else "dds"
+    if chosen not in BACKENDS:
+        raise InputError(f"{BACKEND_ENV}={chosen!r}: expected one of {', '.join(BACKENDS)}")
+    if chosen == "rclpy" and not has_rclpy:
+        raise InputError(f"{BACKEND_ENV}=rclpy, but rclpy cannot be imported (source ROS 2 first)")
+    return chosen
 
 
 def create_node(name: str, namespace: str | None = None, argv: list[str] | None = None) -> Node:
@@ -169,6 +174,21 @@ def create_node(name: str, namespace: str | None = None, argv: list[str] | None 
     install_signal_handlers()
     node.get_logger().info(f"middleware backend: {backend}", once=True)
     return node
+
+
+def node_main(main: Callable[[], int | None]) -> Callable[[], int]:
+    """Wrap a node executable's ``main`` (a ``console_scripts`` entry point): bad input
+    (:class:`InputError`, e.g. a wrong parameter) prints one line and exits with code 2."""
+
+    @functools.wraps(main)
+    def wrapped() -> int:
+        try:
+            return int(main() or 0)
+        except InputError as exc:
+            print(f"{Path(sys.argv[0]).name}: error: {exc}", file=sys.stderr)
+            return 2
+
+    return wrapped
 
 
 def spin_once(node: Node, timeout_sec: float | None = None) -> None:

@@ -1,11 +1,12 @@
 """ROS 2 command-line arguments and parameter files, as ``ros2 run`` passes them to a node.
 
-Understood after ``--ros-args`` (until ``--``): ``-p/--param name:=value`` (value parsed as
-YAML, like rcl), ``--params-file FILE``, ``-r/--remap [node:]from:=to`` (``__ns``, ``__node``
-and topic remaps), ``--log-level LEVEL``. Parameter files have the rcl layout
-``<node key>: {ros__parameters: {...}}``, nested keys joined with ``.``; a node key is the
-fully qualified node name (a missing leading ``/`` is added, as in rcl) and may use the
-wildcards ``*`` (one token) and ``**`` (any tokens), e.g. ``/**:`` or ``/frame/sim_node:``.
+Understood after ``--ros-args`` (until ``--``): ``-p/--param name:=value`` (the value parsed
+as YAML like rcl, ``1e-4`` being a number), ``--params-file FILE``,
+``-r/--remap [node:]from:=to`` (``__ns``, ``__node`` and topic remaps), ``--log-level LEVEL``.
+Parameter files have the rcl layout ``<node key>: {ros__parameters: {...}}``, nested keys
+joined with ``.``; a node key is the fully qualified node name (a missing leading ``/`` is
+added, as in rcl) and may use the wildcards ``*`` (one token) and ``**`` (any tokens), e.g.
+``/**:`` or ``/frame/sim_node:``.
 Overrides apply in command-line order, later ones win.
 """
 
@@ -19,6 +20,7 @@ from typing import Any
 import yaml
 
 from stillframe.errors import InputError
+from stillframe.yamlio import load_yaml
 
 #: Types a ROS parameter may hold (arrays are homogeneous lists of the scalar types).
 SCALAR_TYPES = (bool, int, float, str)
@@ -47,7 +49,7 @@ def _split_assignment(text: str, flag: str) -> tuple[str, str]:
 def parse_value(text: str, where: str) -> Any:
     """A parameter value from its command-line text (YAML, like rcl)."""
     try:
-        value = yaml.safe_load(text) if text != "" else ""
+        value = load_yaml(text) if text != "" else ""
     except yaml.YAMLError as exc:
         raise InputError(f"{where}: cannot parse value {text!r}: {exc.__class__.__name__}") from exc
     return check_value(value, where)
@@ -121,7 +123,7 @@ def _node_key_matches(key: str, node_fqn: str) -> bool:
 def load_param_file(path: Path, node_fqn: str) -> dict[str, Any]:
     """The parameters a ROS 2 parameter file gives the node ``node_fqn`` (flattened names)."""
     try:
-        tree = yaml.safe_load(Path(path).read_text())
+        tree = load_yaml(Path(path).read_text())
     except OSError as exc:
         raise InputError(f"parameter file {path}: {exc.strerror}") from exc
     except yaml.YAMLError as exc:
