@@ -1,5 +1,5 @@
 """record / play over real DDS: separate ``stillframe`` processes on loopback, one random
-``ROS_DOMAIN_ID`` per test.
+``ROS_DOMAIN_ID`` per test (``tests.mw_support.ros_domain``).
 
 The source bag is written with ``rosbags``'s own ``Writer`` (not through stillframe), so the
 first ``play`` also shows that foreign bags play; what comes back is compared byte for byte.
@@ -7,14 +7,11 @@ first ``play`` also shows that foreign bags play; what comes back is compared by
 
 from __future__ import annotations
 
-import os
-import random
 import signal
 import subprocess
 import sys
 import threading
 import time
-from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -25,7 +22,11 @@ from rosbags.interfaces import QosTime as T
 from rosbags.rosbag2 import Reader, StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
 
-ROOT = Path(__file__).resolve().parents[1]
+from tests.mw_support import REPO_ROOT as ROOT
+from tests.mw_support import child_env, ros_domain
+
+__all__ = ["ros_domain"]
+
 TS = get_typestore(Stores.ROS2_JAZZY)
 INF = T(9223372036, 854775807)
 SENSOR = Qos(QosHistory.KEEP_LAST, 5, QosReliability.BEST_EFFORT, QosDurability.VOLATILE,
@@ -123,10 +124,9 @@ class Proc:
 
 
 @pytest.fixture
-def env() -> Iterator[dict[str, str]]:
-    """A private ROS domain for this test (0..101 are valid ROS domain ids)."""
-    yield {**os.environ, "PYTHONPATH": str(ROOT), "ROS_DOMAIN_ID": str(random.randint(1, 101)),
-           "STILLFRAME_RMW": "dds"}
+def env(ros_domain: int) -> dict[str, str]:
+    """A private ROS domain for this test, the dds backend and the repo on the path."""
+    return child_env()
 
 
 def record_while_playing(env: dict[str, str], source: Path, out: Path, *play_args: str,
