@@ -2,7 +2,8 @@
 
 Like ``ros2 bag record``: discovery is polled (every ``DISCOVERY_PERIOD_S``) so topics that appear
 later are recorded too; the offered QoS of the publishers seen on a topic goes into the bag;
-each message is stamped with its receive time.
+each message is stamped with its receive time on the node's clock (``/clock`` time when the node
+uses sim time; discovery still runs on the system clock).
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ from stillframe import messages
 from stillframe.bag_qos import recorder_request, to_bag
 from stillframe.bags import BagWriter
 from stillframe.middleware.api import MessageInfo
+from stillframe.middleware.clock import SYSTEM_CLOCK
 
 DISCOVERY_PERIOD_S = 0.1
 
@@ -27,7 +29,7 @@ class Recorder:
         self.topics = set(topics)
         self._subscriptions: dict[str, Any] = {}
         self.total = 0
-        self.node.create_timer(DISCOVERY_PERIOD_S, self.discover)
+        self.node.create_timer(DISCOVERY_PERIOD_S, self.discover, clock=SYSTEM_CLOCK)
 
     def discover(self) -> None:
         """Subscribe to every wanted topic that has a publisher and is not recorded yet."""

@@ -202,28 +202,40 @@ def test_interrupt_keeps_every_message_received(env: dict[str, str], tmp_path: P
 
 
 @pytest.mark.slow
-def test_play_clock_publishes_bag_time(env: dict[str, str], tmp_path: Path) -> None:
-    """``--clock``: /clock carries bag time, from the bag's start to its end."""
+def test_play_clock_publishes_bag_time_and_sim_time_recording_follows_it(
+        env: dict[str, str], tmp_path: Path) -> None:
+    """``play --clock``: /clock carries bag time, from the bag's start to its end; a recorder
+    with ``--use-sim-time`` stamps the messages with that time, not with the system time."""
     source = tmp_path / "A"
-    msgs = write_source(source, n_imu=50, n_js=0, period_ns=20_000_000)
-    recorder = Proc(env, "record", "-o", str(tmp_path / "clock"), "/clock")
-    recorder.wait_for("Recording to")
-    player = Proc(env, "play", str(source), "--delay", "2", "--clock", "50")
+    msgs = write_source(source, n_imu=0, n_js=50, period_ns=20_000_000)
+    clock_rec = Proc(env, "record", "-o", str(tmp_path / "clock"), "/clock")
+    sim_rec = Proc(env, "record", "-o", str(tmp_path / "sim"), JS, "--use-sim-time")
+    clock_rec.wait_for("Recording to")
+    sim_rec.wait_for("Recording to")
+    player = Proc(env, "play", str(source), "--delay", "2", "--clock", "100")
     try:
-        recorder.wait_for("Subscribed to topic")
+        clock_rec.wait_for("Subscribed to topic")
+        sim_rec.wait_for("Subscribed to topic")
         assert player.finish() == 0
         time.sleep(0.3)
-        assert recorder.finish(signal.SIGINT) == 0
+        assert clock_rec.finish(signal.SIGINT) == 0
+        assert sim_rec.finish(signal.SIGINT) == 0
     finally:
-        player.stop()
-        recorder.stop()
+        for proc in (player, clock_rec, sim_rec):
+            proc.stop()
+    start, end = msgs[0][1], msgs[-1][1]
     clock = [TS.deserialize_cdr(d, "rosgraph_msgs/msg/Clock").clock
              for _, _, d in read_all(tmp_path / "clock")]
     times = [c.sec * 10**9 + c.nanosec for c in clock]
     assert len(times) >= 10
     assert times == sorted(times)
-    assert msgs[0][1] <= times[0] and times[-1] <= msgs[-1][1]
-    assert times[-1] - times[0] >= 0.5 * (msgs[-1][1] - msgs[0][1])
+    assert start <= times[0] and times[-1] <= end
+    assert times[-1] - times[0] >= 0.5 * (end - start)
+    sim = read_all(tmp_path / "sim")
+    assert [d for _, _, d in sim] == [d for _, _, d in msgs]
+    stamps = [s for _, s, _ in sim]
+    assert stamps == sorted(stamps)
+    assert start <= stamps[0] and stamps[-1] <= end  # bag time of 2025, not today
 
 
 @pytest.mark.slow

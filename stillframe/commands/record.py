@@ -14,6 +14,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                         help="bag directory to create (must not exist)")
     parser.add_argument("-a", "--all", action="store_true", help="record every topic")
     parser.add_argument("topics", nargs="*", metavar="TOPIC", help="topics to record")
+    parser.add_argument("--use-sim-time", action="store_true",
+                        help="stamp messages with the time on /clock instead of the system time")
     parser.set_defaults(func=run)
 
 
@@ -28,7 +30,8 @@ def run(args: argparse.Namespace) -> int:
     if args.all == bool(args.topics):
         raise InputError("give either --all or one or more TOPICs")
     topics = [resolve_topic(t) for t in args.topics]
-    node = create_node("stillframe_recorder", argv=sys.argv[:1])
+    sim = ["--ros-args", "-p", "use_sim_time:=true"] if args.use_sim_time else []
+    node = create_node("stillframe_recorder", argv=[*sys.argv[:1], *sim])
     try:
         with BagWriter(args.output, messages.TYPESTORE) as bag:
             recorder = Recorder(node, bag, topics)
