@@ -36,22 +36,36 @@ class Recorder:
         for topic, types in self.node.get_topic_names_and_types():
             if topic in self._subscriptions or (self.topics and topic not in self.topics):
                 continue
-            offers = [info.qos_profile for info in self.node.get_publishers_info_by_topic(topic)]
-            if not offers:
+            publishers = self.node.get_publishers_info_by_topic(topic)
+            if not publishers:
                 continue  # only subscribers so far
             msgtype = types[0]
-            if len(types) > 1:
-                self.node.get_logger().warning(
-                    f"{topic} has several types {types}; recording {msgtype}", once=True)
-            if msgtype not in messages.TYPESTORE.fielddefs:
-                self.node.get_logger().warning(
-                    f"{topic}: type {msgtype} is not a Jazzy standard type; not recorded",
-                    once=True)
+            if not self._recordable(topic, types, publishers):
                 continue
+            offers = [info.qos_profile for info in publishers]
             self.bag.add_topic(topic, msgtype, [to_bag(q) for q in offers])
             self._subscriptions[topic] = self.node.create_subscription(
                 msgtype, topic, self._writer_for(topic), recorder_request(offers), raw=True)
             self.node.get_logger().info(f"Subscribed to topic '{topic}'")
+
+    def _recordable(self, topic: str, types: list[str], publishers: list[Any]) -> bool:
+        """A topic is recorded with its first type if that type is a Jazzy standard type and no
+        publisher announces a different type hash (its bytes would not match the definition
+        written into the bag); otherwise warn once."""
+        log = self.node.get_logger()
+        if len(types) > 1:
+            log.warning(f"{topic} has several types {types}; recording {types[0]}", once=True)
+        if types[0] not in messages.TYPESTORE.fielddefs:
+            log.warning(f"{topic}: type {types[0]} is not a Jazzy standard type; not recorded",
+                        once=True)
+            return False
+        ours = messages.type_hash(types[0])
+        announced = {p.topic_type_hash for p in publishers if p.topic_type_hash.startswith("RIHS")}
+        if others := sorted(announced - {ours}):
+            log.warning(f"{topic}: publishers announce type hash {', '.join(others)}, not "
+                        f"Jazzy's {ours} for {types[0]}; not recorded", once=True)
+            return False
+        return True
 
     def _writer_for(self, topic: str) -> Any:
         def write(data: bytes, info: MessageInfo) -> None:

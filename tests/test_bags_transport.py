@@ -5,8 +5,9 @@ The source bag is written with ``rosbags``'s own ``Writer`` (not through stillfr
 first ``play`` also shows that foreign bags play; what comes back is compared byte for byte.
 """
 
-from __future__ import annotations
+# No "from __future__ import annotations": cyclonedds resolves the IDL struct annotations.
 
+import dataclasses
 import signal
 import subprocess
 import sys
@@ -17,6 +18,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
+from cyclonedds.domain import Domain, DomainParticipant
+from cyclonedds.idl import IdlStruct
+from cyclonedds.pub import DataWriter
+from cyclonedds.qos import Policy
+from cyclonedds.qos import Qos as DdsQos
+from cyclonedds.topic import Topic
 from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability
 from rosbags.interfaces import QosTime as T
 from rosbags.rosbag2 import Reader, StoragePlugin, Writer
@@ -284,3 +291,48 @@ def test_bad_arguments_are_one_line_errors(env: dict[str, str], tmp_path: Path,
     assert "Traceback" not in out.stderr
     assert len(errors) == 1 and named.format(tmp=tmp_path) in errors[0], out.stderr
     assert not (tmp_path / "new").exists()
+
+
+@dataclasses.dataclass
+class DdsString(IdlStruct, typename="std_msgs::msg::dds_::String_"):
+    """std_msgs/msg/String as rmw_cyclonedds_cpp puts it on the wire, declared by hand."""
+
+    data: str
+
+
+def test_records_a_foreign_publisher_and_skips_a_different_type_hash(
+        env: dict[str, str], ros_domain: int, tmp_path: Path) -> None:
+    """Two raw Cyclone DDS writers (not stillframe) named the ROS 2 way: the one announcing
+    Jazzy's type hash of std_msgs/msg/String is recorded message for message; the one announcing
+    another hash is not recorded (its bytes would not match the definition in the bag)."""
+    config = (ROOT / "stillframe/middleware/cyclonedds_loopback.xml").read_text()
+    domain = Domain(ros_domain, config)
+    participant = DomainParticipant(ros_domain, qos=DdsQos(Policy.Userdata(data=b"enclave=/;")))
+    recorder = Proc(env, "record", "-o", str(tmp_path / "B"), "--all")
+    writers = {}
+    try:
+        for name, digest in (("native", TS.hash_rihs01("std_msgs/msg/String")),
+                             ("foreign", "RIHS01_" + "ab" * 32)):
+            qos = DdsQos(Policy.Reliability.Reliable(10**9), Policy.History.KeepLast(10),
+                      Policy.Userdata(data=f"typehash={digest};".encode()))
+            writers[name] = DataWriter(
+                participant, Topic(participant, f"rt/frame/{name}", DdsString), qos)
+        recorder.wait_for("Subscribed to topic '/frame/native'")
+        recorder.wait_for("/frame/foreign: publishers announce type hash RIHS01_abab")
+        deadline = time.monotonic() + 30
+        while not writers["native"].get_matched_subscriptions():
+            assert time.monotonic() < deadline, "the recorder never matched"
+            time.sleep(0.05)
+        for k in range(20):
+            writers["native"].write(DdsString(f"native {k}"))
+            writers["foreign"].write(DdsString(f"foreign {k}"))
+        writers["native"].wait_for_acks(10**10)
+        assert recorder.finish(signal.SIGINT) == 0, "\n".join(recorder.lines)
+    finally:
+        recorder.stop()
+        del writers, participant, domain
+    got = read_all(tmp_path / "B")
+    assert {t for t, _, _ in got} == {"/frame/native"}
+    assert [TS.deserialize_cdr(d, "std_msgs/msg/String").data for _, _, d in got] == [
+        f"native {k}" for k in range(20)]
+    assert set(topic_metadata(tmp_path / "B")) == {"/frame/native"}
