@@ -550,6 +550,7 @@ class DdsNode:
         """Wait for data or the next timer (at most ``timeout_sec``), then run callbacks."""
         if not api.ok():
             return
+        api.freeze_setup_objects()
         wait_ns = MAX_WAIT_NS if timeout_sec is None else min(MAX_WAIT_NS, int(timeout_sec * 1e9))
         for timer in self._timers:
             due = timer.time_until_call_ns()
