@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import re
+import time
 
 import pytest
 
@@ -92,3 +93,27 @@ def test_logger_format_and_once(capsys: pytest.CaptureFixture[str]) -> None:
     assert len(lines) == 2
     assert re.fullmatch(r"\[INFO\] \[\d+\.\d{9}\] \[frame\.sim_node\]: started", lines[0])
     assert lines[1].startswith("[WARN] ")
+
+
+def test_raw_subscription_gets_cdr_and_timestamps(ros_domain: int) -> None:
+    node = create_node("raw", namespace="/frame", argv=["test"])
+    try:
+        got: list = []
+        node.create_subscription("sensor_msgs/msg/JointState", "js",
+                                 lambda data, info: got.append((data, info)), 10, raw=True)
+        pub = node.create_publisher("sensor_msgs/msg/JointState", "js", 10)
+        assert spin_until(node, lambda: pub.get_subscription_count() == 1, 10)
+        msg = messages.new("sensor_msgs/msg/JointState", name=["phi"], position=[0.25])
+        before = time.time_ns()
+        pub.publish(msg)
+        after = time.time_ns()
+        assert spin_until(node, lambda: got, 10)
+        data, info = got[0]
+        cdr = bytes(messages.TYPESTORE.serialize_cdr(msg, "sensor_msgs/msg/JointState"))
+        assert data == cdr + b"\0" * (-len(cdr) % 4)
+        assert before <= info.source_timestamp <= after <= info.received_timestamp
+        pub.publish(data)  # CDR bytes are published as they are
+        assert spin_until(node, lambda: len(got) == 2, 10)
+        assert got[1][0] == data
+    finally:
+        node.destroy_node()
