@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 import random
+import select
 import subprocess
 import sys
 import time
@@ -48,7 +49,9 @@ def run_stillframe(*args: str, timeout: float = 60) -> subprocess.CompletedProce
 def wait_for_line(proc: subprocess.Popen, text: str, timeout: float = 30) -> str:
     """Read the process's stdout until a line containing ``text`` (fails on exit or timeout)."""
     deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
+    while (remaining := deadline - time.monotonic()) > 0:
+        if not select.select([proc.stdout], [], [], remaining)[0]:
+            break
         line = proc.stdout.readline()
         if text in line:
             return line

@@ -182,7 +182,7 @@ class Context:
         self._discovery_writer = DataWriter(
             self.participant, self.topic(DISCOVERY_TOPIC, DISCOVERY_TYPE), dds_qos(discovery_qos)
         )
-        self._graph_readers: dict[str, BuiltinDataReader] = {}
+        self._graph_readers: dict[str, tuple[BuiltinDataReader, ReadCondition]] = {}
         self._discovery_reader: DataReader | None = None
         self._participant_nodes: dict[bytes, list[Any]] = {}
 
@@ -239,9 +239,10 @@ class Context:
                 "publication": BuiltinTopicDcpsPublication,
                 "subscription": BuiltinTopicDcpsSubscription,
             }[kind]
-            self._graph_readers[kind] = BuiltinDataReader(self.participant, builtin)
-        reader = self._graph_readers[kind]
-        return reader.read(N=100_000, condition=ReadCondition(reader, _ALIVE))
+            reader = BuiltinDataReader(self.participant, builtin)
+            self._graph_readers[kind] = (reader, ReadCondition(reader, _ALIVE))
+        reader, alive = self._graph_readers[kind]
+        return reader.read(N=100_000, condition=alive)
 
     def node_names(self) -> dict[bytes, list[tuple[str, str, set[bytes]]]]:
         """Per alive participant GID: its nodes as (namespace, name, endpoint GIDs)."""
@@ -550,6 +551,7 @@ class DdsNode:
         """Wait for data or the next timer (at most ``timeout_sec``), then run callbacks."""
         if not api.ok():
             return
+        api.freeze_setup_objects()
         wait_ns = MAX_WAIT_NS if timeout_sec is None else min(MAX_WAIT_NS, int(timeout_sec * 1e9))
         for timer in self._timers:
             due = timer.time_until_call_ns()

@@ -193,6 +193,7 @@ class RclpyNode:
 
     def spin_once(self, timeout_sec: float | None = None) -> None:
         if api.ok():
+            api.freeze_setup_objects()
             wait = MAX_WAIT_S if timeout_sec is None else min(MAX_WAIT_S, timeout_sec)
             RclpyNode._executor.spin_once(timeout_sec=wait)
 
