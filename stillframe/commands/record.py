@@ -41,8 +41,9 @@ def run(args: argparse.Namespace) -> int:
             recorder.drain()
         for topic in recorder.missing():
             node.get_logger().warning(f"no publisher on '{topic}' was seen: not recorded")
-        node.get_logger().info(f"Recorded {recorder.total} messages: " + ", ".join(
-            f"{t} {n}" for t, n in recorder.counts().items()))
+        per_topic = ", ".join(f"{t} {n}" for t, n in recorder.counts().items())
+        node.get_logger().info(f"Recorded {recorder.total} messages"
+                               + (f": {per_topic}" if per_topic else ""))
     finally:
         node.destroy_node()
     return 0
