@@ -78,5 +78,7 @@ class Player:
             self.published += 1
 
     def finish(self) -> bool:
-        """Wait (at most ``ACK_TIMEOUT_S``) until subscribers acknowledged everything."""
-        return all(pub.wait_for_all_acked(ACK_TIMEOUT_S) for pub in self.publishers.values())
+        """Wait (at most ``ACK_TIMEOUT_S`` in all) until subscribers acknowledged everything."""
+        deadline = time.monotonic() + ACK_TIMEOUT_S
+        return all(pub.wait_for_all_acked(max(0.0, deadline - time.monotonic()))
+                   for pub in self.publishers.values())

@@ -36,8 +36,10 @@ def run(args: argparse.Namespace) -> int:
             player.play_once()
             if not args.loop:
                 break
-        acked = player.finish()
+        interrupted = not ok()
+        acked = interrupted or player.finish()
         node.get_logger().info(f"Published {player.published} messages"
+                               + (" (interrupted)" if interrupted else "")
                                + ("" if acked else " (some not acknowledged by subscribers)"))
     finally:
         node.destroy_node()
