@@ -166,9 +166,9 @@ def test_writer_closes_the_bag_when_interrupted(tmp_path: Path) -> None:
     assert [m.stamp - T0 for m in read_bag(path, TS)] == list(range(7))
 
 
-def write_with_rosbags(path: Path) -> None:
+def write_with_rosbags(path: Path, storage: StoragePlugin = StoragePlugin.MCAP) -> None:
     """The sample messages written by rosbags's own Writer, not through stillframe."""
-    with Writer(path, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+    with Writer(path, version=9, storage_plugin=storage) as writer:
         conns = {topic: writer.add_connection(topic, msgtype, typestore=TS,
                                               offered_qos_profiles=[DEFAULT_QOS])
                  for topic, msgtype in TYPES.items()}
@@ -176,11 +176,15 @@ def write_with_rosbags(path: Path) -> None:
             writer.write(conns[topic], stamp, data)
 
 
-def test_bag_written_by_rosbags_reads_and_summarises(tmp_path: Path) -> None:
+@pytest.mark.parametrize("storage", [StoragePlugin.MCAP, StoragePlugin.SQLITE3])
+def test_bag_written_by_rosbags_reads_and_summarises(tmp_path: Path,
+                                                     storage: StoragePlugin) -> None:
+    """Also the sqlite3 storage (the default before Iron) reads."""
     path = tmp_path / "foreign"
-    write_with_rosbags(path)
+    write_with_rosbags(path, storage)
     assert [(m.topic, m.stamp, m.data) for m in read_bag(path, TS)] == sample_messages()
     summary = bag_summary(path, TS)
+    assert summary.storage_id == storage.name.lower()
     assert (summary.start_ns, summary.end_ns, summary.message_count) == (
         T0, T0 + 290_000_000, 40)
     assert [(t.name, t.count, t.type_description_hash) for t in summary.topics] == [
