@@ -22,6 +22,9 @@ from stillframe.middleware.qos import (
 
 #: rmw's infinite duration as rosbag2 writes it: {sec: 9223372036, nsec: 854775807}.
 _INFINITE = BagTime(*divmod(INFINITE_NS, 1_000_000_000))
+#: "Infinite" as Fast DDS and Connext reported it before rmw had RMW_DURATION_INFINITE (bags
+#: from Foxy); rosbag2 reads both as infinite.
+_FOXY_INFINITE = {(0x7FFFFFFF, 0xFFFFFFFF), (0x7FFFFFFF, 0x7FFFFFFF)}
 #: Depth of the recorder's subscriptions: deep enough that a slow disk loses nothing.
 RECORD_DEPTH = 1000
 
@@ -31,6 +34,8 @@ def _to_time(ns: int) -> BagTime:
 
 
 def _from_time(t: BagTime) -> int:
+    if (t.sec, t.nsec) in _FOXY_INFINITE:
+        return INFINITE_NS
     return min(t.sec * 1_000_000_000 + t.nsec, INFINITE_NS)
 
 

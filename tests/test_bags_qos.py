@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import pytest
 from rosbags.interfaces import QosReliability
+from rosbags.interfaces import QosTime as BagTime
 from rosbags.rosbag2.metadata import dump_qos_v9
 
 from stillframe.bag_qos import RECORD_DEPTH, from_bag, player_offer, recorder_request, to_bag
@@ -41,6 +42,13 @@ def test_finite_durations_survive_the_bag() -> None:
     bag = to_bag(profile)
     assert (bag.deadline.sec, bag.deadline.nsec, bag.lifespan.nsec) == (1, 500_000_000, 7)
     assert from_bag(bag) == profile
+
+
+@pytest.mark.parametrize("sec_nsec", [(2147483647, 4294967295), (2147483647, 2147483647)])
+def test_foxy_era_infinities_read_as_infinite(sec_nsec: tuple[int, int]) -> None:
+    """Fast DDS's and Connext's old "infinite" (rosbag2_storage/qos.cpp translates them)."""
+    old = to_bag(DEFAULT)._replace(deadline=BagTime(*sec_nsec), lifespan=BagTime(*sec_nsec))
+    assert from_bag(old) == DEFAULT
 
 
 def test_unknown_policies_fall_back_to_the_default() -> None:
