@@ -135,15 +135,15 @@ def factorize(markov: Array, dims: EraDimensions, correlated: bool) -> HankelFac
 def auto_order(singular_values: Array, max_order: int) -> tuple[int, float]:
     """Order at the largest relative gap ``sigma_n / sigma_{n+1}`` for n in 1..max_order.
 
-    Singular values below the numerical rank tolerance are not candidates. Returns the order and
-    the gap (the ratio).
+    Only gaps between two singular values above the numerical rank tolerance count (the drop to
+    numerical zero at the rank bound is not a model order). Returns the order and the gap.
     """
     s = np.asarray(singular_values, dtype=float)
     if s.size < 2 or s[0] <= 0:
         raise InputError("need at least two non-zero Hankel singular values to choose an order")
     floor = RANK_TOLERANCE * s[0]
     last = min(max_order, s.size - 1)
-    ratios = [s[n - 1] / max(s[n], floor) for n in range(1, last + 1) if s[n - 1] > floor]
+    ratios = [s[n - 1] / s[n] for n in range(1, last + 1) if s[n] > floor]
     if not ratios:
         raise InputError("no usable Hankel singular values to choose an order")
     best = int(np.argmax(ratios))
