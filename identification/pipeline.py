@@ -104,7 +104,7 @@ def identify(
     combined: bool = False,
 ) -> Identification:
     """Identify a discrete state-space model of order ``order`` (or the largest singular-value
-    gap up to ``max_order`` when ``"auto"``; default: half the Hankel matrix's numerical rank)
+    gap up to ``max_order`` when ``"auto"``; default: half the Hankel matrix's rank bound)
     from inputs ``u (N, r)`` and outputs ``y (N, m)``.
 
     ``observer_order`` is OKID's p (default 20, lowered to what the record allows); ``alpha`` and
@@ -175,7 +175,7 @@ def identify(
 
     s = fac.singular_values
     if order == "auto":
-        limit = min(max_order or fac.numerical_rank // 2, fac.numerical_rank)
+        limit = max_order or fac.max_rank // 2
         chosen, gap = auto_order(s, limit)
     else:
         chosen, gap = order, order_gap(s, order)
