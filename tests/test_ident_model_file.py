@@ -100,6 +100,9 @@ def test_not_a_model_file(tmp_path, model):
     text.write_text("hello")
     with pytest.raises(InputError, match=r"not a readable \.npz"):
         load_model(text)
+    np.save(tmp_path / "array.npy", np.eye(2))
+    with pytest.raises(InputError, match="single array"):
+        load_model(tmp_path / "array.npy")
     with pytest.raises(InputError, match="not found"):
         load_model(tmp_path / "missing.npz")
     with pytest.raises(InputError, match="'G' has shape"):

@@ -86,6 +86,7 @@ def test_auto_order_finds_six_with_a_large_gap(system):
     _, _, u, y = system
     ident = identify(u, y, DT, "okid-era", "auto", observer_order=20)
     assert ident.order == 6
+    assert identify(u, y, DT, "okid-era", np.int64(6), observer_order=20).order == 6
     assert ident.order_gap > 1e6
 
 
