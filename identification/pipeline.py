@@ -183,6 +183,7 @@ def identify(
     else:
         chosen, gap = order, order_gap(s, order)
     real = fac.realize(chosen)
+    D = real.D[:, :r]  # the combined parameters' Gamma_0 is [D, 0]
     if method == "era-impulse":
         B, G = real.B, None
     elif combined:
@@ -190,7 +191,7 @@ def identify(
     else:
         B, G = real.B, observer_gain(real.A, real.C, gain_markov[: p + 1])
     return Identification(
-        A=real.A, B=B, C=real.C, D=real.D, G=G, dt=float(dt), order=chosen, order_gap=gap,
+        A=real.A, B=B, C=real.C, D=D, G=G, dt=float(dt), order=chosen, order_gap=gap,
         hankel_singular_values=s, markov=markov, method=method, observer_order=p,
         dimensions=dims, factorization=fac,
         modes=modal_parameters(real.A, real.C, float(dt), reference=reference_sensor),
