@@ -87,6 +87,59 @@ def _pulse_markov(u: Array, y: Array) -> Array:
     return (y / pulse)[:, :, None]
 
 
+def _impulse_factorization(u: Array, y: Array, order: int, alpha: int | None, beta: int | None,
+                           ) -> tuple[Array, EraDimensions, HankelFactorization]:
+    """Markov parameters of a pulse response, the Hankel sizes and the ERA Hankel SVD."""
+    markov = _pulse_markov(u, y)
+    n_samples, m = y.shape
+    a = alpha or min(50, max(1, (n_samples - 2) // 5))
+    b = beta or min(200, max(1, n_samples - 1 - a))
+    dims = EraDimensions(alpha=a, beta=b)
+    if dims.markov_count(False) > n_samples or a * m < order:
+        raise InputError(
+            f"record of {n_samples} samples too short for order {order} with alpha={a}, "
+            f"beta={b} (needs alpha*outputs >= order and alpha+beta+1 samples)"
+        )
+    markov = markov[: dims.markov_count(False)]
+    return markov, dims, factorize(markov, dims, correlated=False)
+
+
+def _observer_order(n_samples: int, r: int, m: int, order: int, requested: int | None) -> int:
+    """OKID's p: as requested, or the default lowered to what the record allows; checked."""
+    if requested is None:
+        p = DEFAULT_OBSERVER_ORDER
+        while p > max(1, math.ceil(order / m)) and n_samples < minimum_samples(r, m, p):
+            p -= 1
+    else:
+        p = requested
+    if p * m < order:
+        raise InputError(f"observer order {p} with {m} outputs bounds the model order by "
+                         f"{p * m} < {order} (thesis: m p >= n)")
+    if n_samples < minimum_samples(r, m, p):
+        raise InputError(
+            f"record of {n_samples} samples too short for order {order}: OKID with observer "
+            f"order {p} needs at least {minimum_samples(r, m, p)} samples"
+        )
+    return p
+
+
+def _check_request(u: Array, y: Array, dt: float, method: str, order: object,
+                   max_order: int | None, combined: bool) -> None:
+    if u.shape[0] != y.shape[0]:
+        raise InputError(f"input has {u.shape[0]} samples but output has {y.shape[0]}")
+    if isinstance(dt, bool) or not (isinstance(dt, Real) and math.isfinite(dt) and dt > 0):
+        raise InputError(f"sampling interval dt must be a positive number, got {dt!r}")
+    if method not in METHODS:
+        raise InputError(f"unknown method {method!r}; choose one of {', '.join(METHODS)}")
+    if order != "auto" and (isinstance(order, bool) or not isinstance(order, Integral)
+                            or order < 1):
+        raise InputError(f"order must be a positive integer or 'auto', got {order!r}")
+    if max_order is not None and (not isinstance(max_order, Integral) or max_order < 1):
+        raise InputError(f"max order must be a positive integer, got {max_order!r}")
+    if combined and method == "era-impulse":
+        raise InputError("combined realization needs OKID's observer gain: not with era-impulse")
+
+
 def identify(
     u: Array,
     y: Array,
@@ -117,59 +170,21 @@ def identify(
     """
     u = _as_record("input", u)
     y = _as_record("output", y)
-    if u.shape[0] != y.shape[0]:
-        raise InputError(f"input has {u.shape[0]} samples but output has {y.shape[0]}")
-    if isinstance(dt, bool) or not (isinstance(dt, Real) and math.isfinite(dt) and dt > 0):
-        raise InputError(f"sampling interval dt must be a positive number, got {dt!r}")
-    if method not in METHODS:
-        raise InputError(f"unknown method {method!r}; choose one of {', '.join(METHODS)}")
-    if order != "auto":
-        if isinstance(order, bool) or not isinstance(order, Integral) or order < 1:
-            raise InputError(f"order must be a positive integer or 'auto', got {order!r}")
-        order = int(order)
-    if combined and method == "era-impulse":
-        raise InputError("combined realization needs OKID's observer gain: not with era-impulse")
+    _check_request(u, y, dt, method, order, max_order, combined)
     n_samples, r = u.shape
     m = y.shape[1]
-    needed_order = order if isinstance(order, int) else 2
-    correlated = method == "okid-eradc"
+    needed_order = 2 if order == "auto" else int(order)
 
     if method == "era-impulse":
-        markov = _pulse_markov(u, y)
-        a = alpha or min(50, max(1, (n_samples - 2) // 5))
-        b = beta or min(200, max(1, n_samples - 1 - a))
-        dims = EraDimensions(alpha=a, beta=b)
-        if dims.markov_count(False) > n_samples or a * m < needed_order:
-            raise InputError(
-                f"record of {n_samples} samples too short for order {needed_order} with "
-                f"alpha={a}, beta={b} (needs alpha*outputs >= order and alpha+beta+1 samples)"
-            )
-        fac = factorize(markov[: dims.markov_count(False)], dims, correlated=False)
+        markov, dims, fac = _impulse_factorization(u, y, needed_order, alpha, beta)
         p = None
-        gain_markov = None
     else:
-        p_min = max(1, math.ceil(needed_order / m))
-        if observer_order is None:
-            p = DEFAULT_OBSERVER_ORDER
-            while p > p_min and n_samples < minimum_samples(r, m, p):
-                p -= 1
-        else:
-            p = observer_order
-        if p * m < needed_order:
-            raise InputError(
-                f"observer order {p} with {m} outputs bounds the model order by {p * m} < "
-                f"{needed_order} (thesis: m p >= n)"
-            )
-        if n_samples < minimum_samples(r, m, p):
-            raise InputError(
-                f"record of {n_samples} samples too short for order {needed_order}: OKID with "
-                f"observer order {p} needs at least {minimum_samples(r, m, p)} samples"
-            )
+        correlated = method == "okid-eradc"
+        p = _observer_order(n_samples, r, m, needed_order, observer_order)
         fit = okid(u, y, p)
-        a = alpha or p
-        b = beta or 4 * p
-        dims = EraDimensions(alpha=a, beta=b, gamma=gamma if correlated else 0,
-                             delta=delta if correlated else 0, tau=tau)
+        dims = EraDimensions(alpha=alpha or p, beta=beta or 4 * p,
+                             gamma=gamma if correlated else 0, delta=delta if correlated else 0,
+                             tau=tau)
         count = dims.markov_count(correlated)
         markov = fit.system_markov(count)
         gain_markov = fit.observer_gain_markov(max(count, p + 1))
@@ -178,21 +193,19 @@ def identify(
 
     s = fac.singular_values
     if order == "auto":
-        limit = max_order or fac.max_rank // 2
-        chosen, gap = auto_order(s, limit)
+        chosen, gap = auto_order(s, max_order or fac.max_rank // 2)
     else:
-        chosen, gap = order, order_gap(s, order)
+        chosen, gap = needed_order, order_gap(s, needed_order)
     real = fac.realize(chosen)
-    D = real.D[:, :r]  # the combined parameters' Gamma_0 is [D, 0]
-    if method == "era-impulse":
+    if p is None:
         B, G = real.B, None
     elif combined:
         B, G = real.B[:, :r], real.B[:, r:]  # eqs. 3.198, 3.199
     else:
         B, G = real.B, observer_gain(real.A, real.C, gain_markov[: p + 1])
     return Identification(
-        A=real.A, B=B, C=real.C, D=D, G=G, dt=float(dt), order=chosen, order_gap=gap,
-        hankel_singular_values=s, markov=markov, method=method, observer_order=p,
-        dimensions=dims, factorization=fac,
+        A=real.A, B=B, C=real.C, D=real.D[:, :r],  # the combined Gamma_0 is [D, 0]
+        G=G, dt=float(dt), order=chosen, order_gap=gap, hankel_singular_values=s,
+        markov=markov, method=method, observer_order=p, dimensions=dims, factorization=fac,
         modes=modal_parameters(real.A, real.C, float(dt), reference=reference_sensor),
     )
