@@ -66,7 +66,8 @@ class HankelFactorization:
 
     @property
     def max_rank(self) -> int:
-        """The rank bound of ``H(0)``, ``min(alpha m, beta q)``, which also bounds ERA/DC."""
+        """``min(alpha m, beta q)``, the rank bound of ``H(0)``. (Markov parameters from OKID
+        come from a model of order at most ``p m``, which bounds ERA/DC's matrices too.)"""
         return min(self.alpha * self.n_outputs, self.beta * self.n_columns)
 
     @property
