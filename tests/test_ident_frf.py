@@ -45,10 +45,10 @@ def test_coherence_follows_the_signal_to_noise_ratio():
     error of the estimate near 0.01; the partially coherent band lies above the modes."""
     A, B, C, D = mimo_system()
     rng = np.random.default_rng(4)
-    u = rng.standard_normal((2**18, 1))
+    u = rng.standard_normal((2**17, 1))
     clean = simulate(A, B[:, :1], C[:1], D[:1, :1], u)
     noise = 1e-4
-    frf = h1_frf(u, clean + noise * rng.standard_normal(clean.shape), DT, nperseg=256)
+    frf = h1_frf(u, clean + noise * rng.standard_normal(clean.shape), DT, nperseg=128)
     gain2 = np.abs(model_frf(A, B[:, :1], C[:1], D[:1, :1], DT, frf.frequency_hz))[:, 0, 0] ** 2
     expected = gain2 / (gain2 + noise**2)
     mid = (expected > 0.2) & (expected < 0.95)

@@ -85,6 +85,7 @@ def test_the_combined_variant_is_less_accurate_in_damping(lumped):
         assert ident.modes.damping_ratio[0] < 0.9 * rec.damping_ratio[1]
 
 
+@pytest.mark.slow
 def test_hammer_table_command():
     """``python -m identification.hammer`` prints one row per identified mode and variant."""
     root = Path(__file__).resolve().parents[1]
