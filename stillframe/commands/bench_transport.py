@@ -1,0 +1,45 @@
+"""``stillframe bench transport``: ping-pong RTT between two processes, node API vs raw Cyclone.
+
+See :mod:`stillframe.middleware.pingpong` for what is measured and how.
+"""
+
+from __future__ import annotations
+
+import argparse
+
+from stillframe.commands.common import add_json_argument, emit_json, format_table
+from stillframe.errors import InputError
+
+
+def register(benches: argparse._SubParsersAction) -> None:
+    parser = benches.add_parser(
+        "transport", help="ping-pong RTT between two processes: node API vs raw Cyclone DDS"
+    )
+    parser.add_argument("--duration", type=float, default=10.0, metavar="S",
+                        help="seconds of pinging per variant (default 10)")
+    parser.add_argument("--rate", type=float, default=1000.0, metavar="HZ",
+                        help="pings per second (default 1000)")
+    add_json_argument(parser)
+    parser.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    if not args.duration > 0 or not args.rate > 0:
+        raise InputError("bench transport: --duration and --rate must be > 0")
+    from stillframe.middleware import api
+    from stillframe.middleware.pingpong import IMU, measure
+
+    results = measure(args.rate, args.duration)
+    ratios = {key: results["api"][key] / results["raw"][key] for key in ("p50_us", "p99_us")}
+    document = {"message": IMU, "qos": "sensor_data", "rate_hz": args.rate,
+                "duration_s": args.duration, "backend": api.backend_name(),
+                **results, "api_over_raw": ratios}
+    if args.json:
+        emit_json(document)
+        return 0
+    rows = [[name, r["sent"], r["lost"], r["p50_us"], r["p99_us"], r["max_us"]]
+            for name, r in results.items()]
+    print(format_table(["variant", "sent", "lost", "p50 [us]", "p99 [us]", "max [us]"], rows))
+    print(f"API / raw: p50 x{ratios['p50_us']:.2f}, p99 x{ratios['p99_us']:.2f} "
+          "(target: p99 <= 1.5)")
+    return 0

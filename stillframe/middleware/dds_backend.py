@@ -1,0 +1,578 @@
+"""The ``dds`` backend: the node API over Eclipse Cyclone DDS with ROS 2's wire conventions.
+
+What a Jazzy workstation (``rmw_cyclonedds_cpp``) expects, see DESIGN.md "Middleware":
+``rt/`` topics and ``pkg::msg::dds_::Type_`` types (:mod:`.dds_types`), participant USER_DATA
+``enclave=/;``, endpoint USER_DATA ``typehash=RIHS01_<hex>;``, and the node list on
+``ros_discovery_info`` (``rmw_dds_common/msg/ParticipantEntitiesInfo``; GIDs are the DDS
+GUIDs). Samples are CDR from ``rosbags`` written as-is (padded to 4 bytes, as Cyclone pads);
+the registered struct type describes exactly those bytes (checked by the tests).
+
+One DDS participant per process and domain (as rmw does per context) carries every node of
+the process. ``ROS_DOMAIN_ID`` selects the domain. When ``CYCLONEDDS_URI`` is unset the
+shipped single-machine configuration ``cyclonedds_loopback.xml`` is applied.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any, ClassVar
+
+import numpy as np
+from cyclonedds.builtin import (
+    BuiltinDataReader,
+    BuiltinTopicDcpsParticipant,
+    BuiltinTopicDcpsPublication,
+    BuiltinTopicDcpsSubscription,
+)
+from cyclonedds.core import (
+    DDSException,
+    InstanceState,
+    ReadCondition,
+    SampleState,
+    ViewState,
+    WaitSet,
+)
+from cyclonedds.domain import Domain, DomainParticipant
+from cyclonedds.pub import DataWriter
+from cyclonedds.qos import Policy, Qos
+from cyclonedds.sub import DataReader
+from cyclonedds.topic import Topic
+
+from cyclonedds._clayer import ddspy_take, ddspy_write, ddspy_write_ts  # isort: skip
+from stillframe import messages
+from stillframe.errors import InputError
+from stillframe.middleware import api, dds_types, names, params
+from stillframe.middleware.clock import Clock
+from stillframe.middleware.logger import Logger
+from stillframe.middleware.qos import (
+    CLOCK,
+    INFINITE_NS,
+    Durability,
+    History,
+    Liveliness,
+    QoSProfile,
+    Reliability,
+    as_profile,
+)
+
+CONFIG_FILE = Path(__file__).with_name("cyclonedds_loopback.xml")
+DISCOVERY_TOPIC = "ros_discovery_info"
+DISCOVERY_TYPE = "rmw_dds_common/msg/ParticipantEntitiesInfo"
+#: Longest single wait inside ``spin_once``, so that signals are handled promptly.
+MAX_WAIT_NS = 100_000_000
+#: Samples taken from one reader per ``spin_once``.
+TAKE_BATCH = 256
+_ANY = SampleState.Any | ViewState.Any | InstanceState.Any
+_ALIVE = SampleState.Any | ViewState.Any | InstanceState.Alive
+_RELIABLE_BLOCKING_NS = 100_000_000  # rmw_cyclonedds' max_blocking_time
+
+
+def domain_id() -> int:
+    """``ROS_DOMAIN_ID`` (default 0); InputError unless an integer 0..232."""
+    text = os.environ.get("ROS_DOMAIN_ID", "").strip() or "0"
+    if not text.isdigit() or int(text) > 232:
+        raise InputError(f"ROS_DOMAIN_ID={text!r}: expected an integer 0..232")
+    return int(text)
+
+
+def dds_qos(profile: QoSProfile, user_data: bytes | None = None, writer: bool = True) -> Qos:
+    """Cyclone QoS of an rmw profile (XCDR1; unset SYSTEM_DEFAULT/infinite policies left out)."""
+    policies: list[Any] = [Policy.DataRepresentation(use_cdrv0_representation=True)]
+    if profile.reliability == Reliability.RELIABLE:
+        policies.append(Policy.Reliability.Reliable(max_blocking_time=_RELIABLE_BLOCKING_NS))
+    elif profile.reliability == Reliability.BEST_EFFORT:
+        policies.append(Policy.Reliability.BestEffort)
+    if profile.history == History.KEEP_LAST:
+        policies.append(Policy.History.KeepLast(depth=profile.depth))
+    elif profile.history == History.KEEP_ALL:
+        policies.append(Policy.History.KeepAll)
+    if profile.durability == Durability.TRANSIENT_LOCAL:
+        policies.append(Policy.Durability.TransientLocal)
+    elif profile.durability == Durability.VOLATILE:
+        policies.append(Policy.Durability.Volatile)
+    if profile.deadline_ns < INFINITE_NS:
+        policies.append(Policy.Deadline(deadline=profile.deadline_ns))
+    if writer and profile.lifespan_ns < INFINITE_NS:
+        policies.append(Policy.Lifespan(lifespan=profile.lifespan_ns))
+    if profile.liveliness == Liveliness.MANUAL_BY_TOPIC:
+        policies.append(Policy.Liveliness.ManualByTopic(profile.liveliness_lease_duration_ns))
+    elif profile.liveliness_lease_duration_ns < INFINITE_NS:
+        policies.append(Policy.Liveliness.Automatic(profile.liveliness_lease_duration_ns))
+    if user_data is not None:
+        policies.append(Policy.Userdata(data=user_data))
+    return Qos(*policies)
+
+
+def ros_qos(qos: Qos) -> QoSProfile:
+    """The rmw profile of a discovered endpoint's Cyclone QoS."""
+    def get(policy: Any) -> Any:
+        return qos[policy] if policy in qos else None  # noqa: SIM401 - Qos has no .get
+
+    history = get(Policy.History)
+    reliability = get(Policy.Reliability)
+    durability = get(Policy.Durability)
+    liveliness = get(Policy.Liveliness)
+    deadline = get(Policy.Deadline)
+    lifespan = get(Policy.Lifespan)
+
+    def duration(value: int | None) -> int:
+        return INFINITE_NS if value is None or value >= INFINITE_NS else value
+
+    return QoSProfile(
+        history=History.KEEP_ALL if history == Policy.History.KeepAll else History.KEEP_LAST,
+        depth=getattr(history, "depth", 0) if history != Policy.History.KeepAll else 0,
+        reliability=(Reliability.BEST_EFFORT if reliability == Policy.Reliability.BestEffort
+                     else Reliability.RELIABLE),
+        durability=(Durability.TRANSIENT_LOCAL if durability == Policy.Durability.TransientLocal
+                    else Durability.VOLATILE),
+        deadline_ns=duration(getattr(deadline, "deadline", None)),
+        lifespan_ns=duration(getattr(lifespan, "lifespan", None)),
+        liveliness=(Liveliness.MANUAL_BY_TOPIC
+                    if isinstance(liveliness, Policy.Liveliness.ManualByTopic)
+                    else Liveliness.AUTOMATIC),
+        liveliness_lease_duration_ns=duration(getattr(liveliness, "lease_duration", None)),
+    )
+
+
+def user_data_field(qos: Qos, key: str) -> str:
+    """The value of ``key=value;`` in an entity's USER_DATA ('' if absent)."""
+    data = qos[Policy.Userdata].data if Policy.Userdata in qos else b""
+    for item in data.decode("utf-8", "replace").split(";"):
+        name, _, value = item.partition("=")
+        if name == key:
+            return value
+    return ""
+
+
+def delete(entity: Any) -> None:
+    """Delete a Cyclone entity now (and its children) instead of at garbage collection."""
+    if entity is not None:
+        entity.__del__()
+
+
+def pad4(data: bytes) -> bytes:
+    """CDR padded to a multiple of 4 bytes, as Cyclone stores serialized samples."""
+    return data + b"\0" * (-len(data) % 4)
+
+
+class Context:
+    """The process's participant in one domain, shared by its nodes; publishes the node list."""
+
+    _instances: ClassVar[dict[int, Context]] = {}
+
+    @classmethod
+    def get(cls) -> Context:
+        domain = domain_id()
+        if domain not in cls._instances:
+            cls._instances[domain] = cls(domain)
+        return cls._instances[domain]
+
+    def __init__(self, domain: int) -> None:
+        self.domain_id = domain
+        self.domain = None if os.environ.get("CYCLONEDDS_URI") else Domain(
+            domain, CONFIG_FILE.read_text()
+        )
+        self.participant = DomainParticipant(domain, qos=Qos(Policy.Userdata(data=b"enclave=/;")))
+        self.gid = self.participant.guid.bytes
+        self.nodes: list[DdsNode] = []
+        self.topics: dict[str, Topic] = {}
+        discovery_qos = QoSProfile(depth=1, durability=Durability.TRANSIENT_LOCAL)
+        self._discovery_writer = DataWriter(
+            self.participant, self.topic(DISCOVERY_TOPIC, DISCOVERY_TYPE), dds_qos(discovery_qos)
+        )
+        self._graph_readers: dict[str, tuple[BuiltinDataReader, ReadCondition]] = {}
+        self._discovery_reader: DataReader | None = None
+        self._participant_nodes: dict[bytes, list[Any]] = {}
+
+    def topic(self, dds_name: str, ros_type: str) -> Topic:
+        """The Cyclone topic ``dds_name`` of type ``ros_type`` (one per name and participant)."""
+        existing = self.topics.get(dds_name)
+        struct = dds_types.idl_struct(ros_type)
+        if existing is not None:
+            if existing.data_type is not struct:
+                raise InputError(
+                    f"topic {dds_name!r} is already used with type "
+                    f"{dds_types.ros_type(existing.data_type.__idl_typename__)}, not {ros_type}"
+                )
+            return existing
+        try:
+            self.topics[dds_name] = Topic(self.participant, dds_name, struct)
+        except DDSException as exc:
+            raise InputError(f"cannot create topic {dds_name!r} ({ros_type}): {exc}") from exc
+        return self.topics[dds_name]
+
+    def publish_graph(self) -> None:
+        """Publish every node of this participant with its reader and writer GIDs."""
+        gid = messages.msg_class("rmw_dds_common/msg/Gid")
+        info = messages.new(
+            DISCOVERY_TYPE,
+            gid=gid(data=_gid_array(self.gid)),
+            node_entities_info_seq=[
+                messages.new(
+                    "rmw_dds_common/msg/NodeEntitiesInfo",
+                    node_namespace=node.get_namespace(),
+                    node_name=node.get_name(),
+                    reader_gid_seq=[gid(data=_gid_array(g)) for g in node.reader_gids()],
+                    writer_gid_seq=[gid(data=_gid_array(g)) for g in node.writer_gids()],
+                )
+                for node in self.nodes
+            ],
+        )
+        write_raw(self._discovery_writer, messages.serialize(info))
+
+    def remove_node(self, node: DdsNode) -> None:
+        self.nodes.remove(node)
+        if self.nodes:
+            self.publish_graph()
+            return
+        delete(self.participant)
+        delete(self.domain)
+        del Context._instances[self.domain_id]
+
+    # -- graph ----------------------------------------------------------------------------
+    def _alive(self, kind: str) -> list[Any]:
+        if kind not in self._graph_readers:
+            builtin = {
+                "participant": BuiltinTopicDcpsParticipant,
+                "publication": BuiltinTopicDcpsPublication,
+                "subscription": BuiltinTopicDcpsSubscription,
+            }[kind]
+            reader = BuiltinDataReader(self.participant, builtin)
+            self._graph_readers[kind] = (reader, ReadCondition(reader, _ALIVE))
+        reader, alive = self._graph_readers[kind]
+        return reader.read(N=100_000, condition=alive)
+
+    def node_names(self) -> dict[bytes, list[tuple[str, str, set[bytes]]]]:
+        """Per alive participant GID: its nodes as (namespace, name, endpoint GIDs)."""
+        if self._discovery_reader is None:
+            qos = QoSProfile(depth=1000, durability=Durability.TRANSIENT_LOCAL)
+            topic = self.topic(DISCOVERY_TOPIC, DISCOVERY_TYPE)
+            self._discovery_reader = DataReader(self.participant, topic, dds_qos(qos, writer=False))
+        for data, sample in ddspy_take(self._discovery_reader._ref, _ANY, 100_000):
+            if sample.valid_data:
+                info = messages.deserialize(data, DISCOVERY_TYPE)
+                self._participant_nodes[bytes(info.gid.data)] = [
+                    (n.node_namespace, n.node_name,
+                     {bytes(g.data) for g in (*n.reader_gid_seq, *n.writer_gid_seq)})
+                    for n in info.node_entities_info_seq
+                ]
+        alive = {p.key.bytes for p in self._alive("participant")}
+        return {gid: nodes for gid, nodes in self._participant_nodes.items() if gid in alive}
+
+    def endpoints(self, kind: str) -> list[api.TopicEndpointInfo]:
+        """Every alive ROS publisher (``kind='publication'``) or subscription on the network."""
+        owners = {
+            gid: (namespace, name)
+            for nodes in self.node_names().values()
+            for namespace, name, gids in nodes
+            for gid in gids
+        }
+        result = []
+        for ep in self._alive(kind):
+            topic, rtype = dds_types.ros_topic(ep.topic_name), dds_types.ros_type(ep.type_name)
+            if topic is None or rtype is None:
+                continue
+            namespace, name = owners.get(ep.key.bytes, ("", ""))
+            result.append(api.TopicEndpointInfo(
+                topic_name=topic, topic_type=rtype,
+                topic_type_hash=user_data_field(ep.qos, "typehash"),
+                endpoint_gid=ep.key.bytes, qos_profile=ros_qos(ep.qos),
+                node_name=name, node_namespace=namespace,
+            ))
+        return result
+
+
+def _gid_array(gid: bytes) -> Any:
+    return np.frombuffer(gid.ljust(16, b"\0")[:16], dtype=np.uint8).copy()
+
+
+def write_raw(writer: DataWriter, cdr: bytes, timestamp_ns: int | None = None) -> None:
+    """Write one serialized sample (CDR with encapsulation header)."""
+    data = pad4(cdr)
+    ret = ddspy_write(writer._ref, data) if timestamp_ns is None else ddspy_write_ts(
+        writer._ref, data, timestamp_ns
+    )
+    if ret < 0:
+        raise DDSException(ret, f"writing on {writer.topic.name}")
+
+
+class DdsPublisher:
+    """A ROS publisher: ``publish`` a message of its type, or CDR bytes."""
+
+    def __init__(self, node: DdsNode, ros_type: str, topic: str, qos: QoSProfile) -> None:
+        self.topic_name = topic
+        self.msg_type = ros_type
+        self.qos_profile = qos
+        user_data = f"typehash={messages.type_hash(ros_type)};".encode()
+        self._writer = DataWriter(
+            node.context.participant,
+            node.context.topic(dds_types.dds_topic(topic), ros_type),
+            dds_qos(qos, user_data),
+        )
+        self.gid = self._writer.guid.bytes
+        messages.prepare(ros_type)
+
+    def publish(self, msg: Any) -> None:
+        """Publish a ``rosbags`` message of this publisher's type, or its CDR bytes."""
+        if isinstance(msg, bytes | bytearray | memoryview):
+            write_raw(self._writer, bytes(msg))
+            return
+        if getattr(msg, "__msgtype__", None) != self.msg_type:
+            raise InputError(
+                f"publisher on {self.topic_name} takes {self.msg_type}, "
+                f"got {getattr(msg, '__msgtype__', type(msg).__name__)}"
+            )
+        write_raw(self._writer, messages.serialize(msg))
+
+    def get_subscription_count(self) -> int:
+        return len(self._writer.get_matched_subscriptions())
+
+    def wait_for_all_acked(self, timeout_sec: float) -> bool:
+        """Block until every reliable reader acknowledged everything (True) or the timeout."""
+        return bool(self._writer.wait_for_acks(int(timeout_sec * 1e9)))
+
+
+class DdsSubscription:
+    """A ROS subscription; its callback gets messages, or ``(cdr, MessageInfo)`` when raw."""
+
+    def __init__(
+        self, node: DdsNode, ros_type: str, topic: str,
+        callback: Callable[..., None], qos: QoSProfile, raw: bool,
+    ) -> None:
+        self.topic_name = topic
+        self.msg_type = ros_type
+        self.qos_profile = qos
+        self.raw = raw
+        self.callback = callback
+        user_data = f"typehash={messages.type_hash(ros_type)};".encode()
+        self._reader = DataReader(
+            node.context.participant,
+            node.context.topic(dds_types.dds_topic(topic), ros_type),
+            dds_qos(qos, user_data, writer=False),
+        )
+        self.condition = ReadCondition(self._reader, _ANY)
+        self.gid = self._reader.guid.bytes
+        messages.prepare(ros_type)
+        self._clock = node.get_clock()
+
+    def get_publisher_count(self) -> int:
+        return len(self._reader.get_matched_publications())
+
+    def take_and_dispatch(self) -> int:
+        """Hand every waiting sample to the callback; the number handed."""
+        samples = ddspy_take(self._reader._ref, _ANY, TAKE_BATCH)
+        count = 0
+        for data, info in samples:
+            if not info.valid_data:
+                continue
+            if self.raw:
+                received = self._clock.now().nanoseconds
+                self.callback(bytes(data), api.MessageInfo(info.source_timestamp, received))
+            else:
+                self.callback(messages.deserialize(data, self.msg_type))
+            count += 1
+        return count
+
+
+class DdsTimer:
+    """Calls back every period on a clock; with sim time it starts at the first ``/clock``
+    and, like rcl, skips periods it fell behind on instead of firing a burst."""
+
+    def __init__(self, period_s: float, callback: Callable[[], None], clock: Clock) -> None:
+        if not period_s > 0:
+            raise InputError(f"timer period must be > 0 s, got {period_s}")
+        self.period_ns = round(period_s * 1e9)
+        self.callback = callback
+        self.clock = clock
+        self.canceled = False
+        self.next_ns: int | None = None
+        self.reset()
+
+    def reset(self) -> None:
+        self.canceled = False
+        self.next_ns = self.clock.now().nanoseconds + self.period_ns if self.clock.started else None
+
+    def cancel(self) -> None:
+        self.canceled = True
+
+    def time_until_call_ns(self) -> int | None:
+        if self.canceled or not self.clock.started:
+            return None
+        if self.next_ns is None:
+            self.reset()
+        return self.next_ns - self.clock.now().nanoseconds
+
+    def call_if_due(self) -> bool:
+        wait = self.time_until_call_ns()
+        if wait is None or wait > 0:
+            return False
+        now = self.clock.now().nanoseconds
+        self.next_ns += self.period_ns
+        if self.next_ns <= now:
+            self.next_ns = now + self.period_ns - (now - self.next_ns) % self.period_ns
+        self.callback()
+        return True
+
+
+class DdsNode:
+    """A ROS node on the process's Cyclone participant (API: :class:`.api.Node`)."""
+
+    backend = "dds"
+
+    def __init__(self, name: str, namespace: str, args: list[str]) -> None:
+        ros_args = params.parse_ros_args(args)
+        remapped = {src: dst for node, src, dst in ros_args.remaps if node in (None, name)}
+        self._name = names.validate_node_name(remapped.pop("__node", remapped.pop("__name", name)))
+        self._namespace = names.validate_namespace(remapped.pop("__ns", namespace))
+        self._remaps = {
+            names.resolve_topic(src, self._namespace, self._name):
+            names.resolve_topic(dst, self._namespace, self._name)
+            for src, dst in remapped.items()
+        }
+        fqn = self._namespace.rstrip("/") + "/" + self._name
+        self._logger = Logger(fqn.lstrip("/").replace("/", "."), ros_args.log_level or "info")
+        self._params = params.Parameters(fqn, params.node_overrides(ros_args, fqn))
+        self.user_args = ros_args.user_args
+        self.context = Context.get()
+        self._publishers: list[DdsPublisher] = []
+        self._subscriptions: list[DdsSubscription] = []
+        self._timers: list[DdsTimer] = []
+        self._waitset = WaitSet(self.context.participant)
+        self._clock = Clock(sim=bool(self.declare_parameter("use_sim_time", False).value))
+        self.context.nodes.append(self)
+        if self._clock.sim:
+            self.create_subscription("rosgraph_msgs/msg/Clock", "/clock", self._on_clock, CLOCK)
+        self.context.publish_graph()
+
+    # -- identity, logging, time, parameters -----------------------------------------------
+    def get_name(self) -> str:
+        return self._name
+
+    def get_namespace(self) -> str:
+        return self._namespace
+
+    def get_fully_qualified_name(self) -> str:
+        return self._namespace.rstrip("/") + "/" + self._name
+
+    def get_logger(self) -> Logger:
+        return self._logger
+
+    def get_clock(self) -> Clock:
+        return self._clock
+
+    def _on_clock(self, msg: Any) -> None:
+        self._clock.set_sim_time(messages.stamp_ns(msg.clock))
+
+    def declare_parameter(self, name: str, default: Any = None) -> api.Parameter:
+        return api.Parameter(name, self._params.declare(name, default))
+
+    def get_parameter(self, name: str) -> api.Parameter:
+        return api.Parameter(name, self._params.get(name))
+
+    # -- endpoints ---------------------------------------------------------------------------
+    def resolve_topic_name(self, topic: str) -> str:
+        full = names.resolve_topic(topic, self._namespace, self._name)
+        return self._remaps.get(full, full)
+
+    def create_publisher(
+        self, msg_type: str | type, topic: str, qos: QoSProfile | str | int
+    ) -> DdsPublisher:
+        topic = self.resolve_topic_name(topic)
+        pub = DdsPublisher(self, messages.type_name(msg_type), topic, as_profile(qos))
+        self._publishers.append(pub)
+        self.context.publish_graph()
+        return pub
+
+    def create_subscription(
+        self, msg_type: str | type, topic: str, callback: Callable[..., None],
+        qos: QoSProfile | str | int, raw: bool = False,
+    ) -> DdsSubscription:
+        topic = self.resolve_topic_name(topic)
+        sub = DdsSubscription(
+            self, messages.type_name(msg_type), topic, callback, as_profile(qos), raw
+        )
+        self._subscriptions.append(sub)
+        self._waitset.attach(sub.condition)
+        self.context.publish_graph()
+        return sub
+
+    def destroy_publisher(self, pub: DdsPublisher) -> None:
+        self._publishers.remove(pub)
+        delete(pub._writer)
+        self.context.publish_graph()
+
+    def destroy_subscription(self, sub: DdsSubscription) -> None:
+        self._waitset.detach(sub.condition)
+        self._subscriptions.remove(sub)
+        delete(sub._reader)
+        self.context.publish_graph()
+
+    def create_timer(
+        self, period_s: float, callback: Callable[[], None], clock: Clock | None = None
+    ) -> DdsTimer:
+        timer = DdsTimer(period_s, callback, clock or self._clock)
+        self._timers.append(timer)
+        return timer
+
+    def reader_gids(self) -> list[bytes]:
+        return [sub.gid for sub in self._subscriptions]
+
+    def writer_gids(self) -> list[bytes]:
+        return [pub.gid for pub in self._publishers]
+
+    # -- graph -------------------------------------------------------------------------------
+    def get_topic_names_and_types(self) -> list[tuple[str, list[str]]]:
+        """Every ROS topic with a publisher or subscription on the network, sorted."""
+        found: dict[str, set[str]] = {}
+        for kind in ("publication", "subscription"):
+            for ep in self.context.endpoints(kind):
+                found.setdefault(ep.topic_name, set()).add(ep.topic_type)
+        return [(topic, sorted(types)) for topic, types in sorted(found.items())]
+
+    def get_publishers_info_by_topic(self, topic: str) -> list[api.TopicEndpointInfo]:
+        full = names.resolve_topic(topic, self._namespace, self._name)
+        return [ep for ep in self.context.endpoints("publication") if ep.topic_name == full]
+
+    def get_subscriptions_info_by_topic(self, topic: str) -> list[api.TopicEndpointInfo]:
+        full = names.resolve_topic(topic, self._namespace, self._name)
+        return [ep for ep in self.context.endpoints("subscription") if ep.topic_name == full]
+
+    def get_node_names_and_namespaces(self) -> list[tuple[str, str]]:
+        return sorted(
+            (name, namespace)
+            for nodes in self.context.node_names().values()
+            for namespace, name, _ in nodes
+        )
+
+    # -- execution ---------------------------------------------------------------------------
+    def spin_once(self, timeout_sec: float | None = None) -> None:
+        """Wait for data or the next timer (at most ``timeout_sec``), then run callbacks."""
+        if not api.ok():
+            return
+        api.freeze_setup_objects()
+        wait_ns = MAX_WAIT_NS if timeout_sec is None else min(MAX_WAIT_NS, int(timeout_sec * 1e9))
+        for timer in self._timers:
+            due = timer.time_until_call_ns()
+            if due is not None:
+                wait_ns = min(wait_ns, max(due, 0))
+        if wait_ns > 0:
+            self._waitset.wait(wait_ns)
+        for sub in list(self._subscriptions):
+            sub.take_and_dispatch()
+        for timer in list(self._timers):
+            timer.call_if_due()
+
+    def destroy_node(self) -> None:
+        """Release every entity of the node and drop it from the node list."""
+        if self not in self.context.nodes:
+            return
+        delete(self._waitset)
+        for entity in (*self._publishers, *self._subscriptions):
+            delete(getattr(entity, "_writer", None) or entity._reader)
+        self._publishers.clear()
+        self._subscriptions.clear()
+        self._timers.clear()
+        self.context.remove_node(self)
+

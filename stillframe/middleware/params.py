@@ -1,0 +1,196 @@
+"""ROS 2 command-line arguments and parameter files, as ``ros2 run`` passes them to a node.
+
+Understood after ``--ros-args`` (until ``--``): ``-p/--param name:=value`` (the value parsed
+as YAML like rcl, ``1e-4`` being a number), ``--params-file FILE``,
+``-r/--remap [node:]from:=to`` (``__ns``, ``__node`` and topic remaps), ``--log-level LEVEL``.
+Parameter files have the rcl layout ``<node key>: {ros__parameters: {...}}``, nested keys
+joined with ``.``; a node key is the fully qualified node name (a missing leading ``/`` is
+added, as in rcl) and may use the wildcards ``*`` (one token) and ``**`` (any tokens), e.g.
+``/**:`` or ``/frame/sim_node:``.
+Overrides apply in command-line order, later ones win.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from stillframe.errors import InputError
+from stillframe.yamlio import load_yaml
+
+#: Types a ROS parameter may hold (arrays are homogeneous lists of the scalar types).
+SCALAR_TYPES = (bool, int, float, str)
+
+
+@dataclass
+class RosArgs:
+    """What ``--ros-args`` said, before it is matched against a particular node."""
+
+    #: ("file", Path) or ("param", (name, value)), in command-line order
+    overrides: list[tuple[str, Any]] = field(default_factory=list)
+    remaps: list[tuple[str | None, str, str]] = field(default_factory=list)  # (node, from, to)
+    log_level: str | None = None
+    user_args: list[str] = field(default_factory=list)
+
+
+def _split_assignment(text: str, flag: str) -> tuple[str, str]:
+    if ":=" not in text:
+        raise InputError(f"{flag} {text!r}: expected NAME:=VALUE")
+    name, value = text.split(":=", 1)
+    if not name:
+        raise InputError(f"{flag} {text!r}: empty name")
+    return name, value
+
+
+def parse_value(text: str, where: str) -> Any:
+    """A parameter value from its command-line text (YAML, like rcl)."""
+    try:
+        value = load_yaml(text) if text != "" else ""
+    except yaml.YAMLError as exc:
+        raise InputError(f"{where}: cannot parse value {text!r}: {exc.__class__.__name__}") from exc
+    return check_value(value, where)
+
+
+def check_value(value: Any, where: str) -> Any:
+    """``value`` if ROS parameters can hold it (scalar or homogeneous list), else InputError."""
+    if isinstance(value, SCALAR_TYPES):
+        return value
+    if isinstance(value, list) and value:
+        kinds = {bool if isinstance(v, bool) else type(v) for v in value}
+        if len(kinds) == 1 and kinds <= set(SCALAR_TYPES):
+            return value
+        if kinds == {int, float}:
+            return [float(v) for v in value]
+    raise InputError(f"{where}: {value!r} is not a ROS parameter value (scalar or uniform list)")
+
+
+def parse_ros_args(argv: list[str]) -> RosArgs:
+    """Split ``argv`` (without the program name) into ROS arguments and the user's own."""
+    result = RosArgs()
+    i, in_ros = 0, False
+    while i < len(argv):
+        arg = argv[i]
+        if arg == "--ros-args":
+            in_ros = True
+        elif in_ros and arg == "--":
+            in_ros = False
+        elif not in_ros:
+            result.user_args.append(arg)
+        else:
+            if arg not in ("-p", "--param", "--params-file", "-r", "--remap", "--log-level"):
+                raise InputError(f"unknown ROS argument {arg!r} after --ros-args")
+            if i + 1 >= len(argv):
+                raise InputError(f"ROS argument {arg} needs a value")
+            value = argv[i + 1]
+            i += 1
+            if arg in ("-p", "--param"):
+                name, text = _split_assignment(value, arg)
+                result.overrides.append(("param", (name, parse_value(text, f"{arg} {name}"))))
+            elif arg == "--params-file":
+                result.overrides.append(("file", Path(value)))
+            elif arg == "--log-level":
+                result.log_level = value.rsplit(":=", 1)[-1].lower()
+            else:
+                source, target = _split_assignment(value, arg)
+                node, _, source = source.rpartition(":") if ":" in source else (None, "", source)
+                result.remaps.append((node or None, source, target))
+        i += 1
+    return result
+
+
+def _flatten(prefix: str, tree: Any, where: str) -> dict[str, Any]:
+    if isinstance(tree, dict):
+        flat: dict[str, Any] = {}
+        for key, sub in tree.items():
+            flat.update(_flatten(f"{prefix}.{key}" if prefix else str(key), sub, where))
+        return flat
+    return {prefix: check_value(tree, f"{where}: parameter {prefix!r}")}
+
+
+def _node_key_matches(key: str, node_fqn: str) -> bool:
+    key = key if key.startswith("/") else "/" + key
+    pattern = "".join(
+        "(/[^/]+)*" if token == "**" else "/[^/]+" if token == "*" else "/" + re.escape(token)
+        for token in key.strip("/").split("/")
+    )
+    return re.fullmatch(pattern, node_fqn) is not None
+
+
+def load_param_file(path: Path, node_fqn: str) -> dict[str, Any]:
+    """The parameters a ROS 2 parameter file gives the node ``node_fqn`` (flattened names)."""
+    try:
+        tree = load_yaml(Path(path).read_text())
+    except OSError as exc:
+        raise InputError(f"parameter file {path}: {exc.strerror}") from exc
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        line = f" (line {mark.line + 1})" if mark else ""
+        raise InputError(f"parameter file {path}: not valid YAML{line}") from exc
+    if not isinstance(tree, dict):
+        raise InputError(f"parameter file {path}: expected 'node_name: {{ros__parameters: ...}}'")
+    params: dict[str, Any] = {}
+    for key, body in tree.items():
+        if not isinstance(body, dict) or not isinstance(body.get("ros__parameters"), dict):
+            raise InputError(f"parameter file {path}: node {key!r} has no 'ros__parameters' map")
+        if _node_key_matches(str(key), node_fqn):
+            params.update(_flatten("", body["ros__parameters"], f"parameter file {path}"))
+    return params
+
+
+def node_overrides(ros_args: RosArgs, node_fqn: str) -> dict[str, Any]:
+    """All parameter overrides for node ``node_fqn``, in command-line order."""
+    params: dict[str, Any] = {}
+    for kind, value in ros_args.overrides:
+        if kind == "file":
+            params.update(load_param_file(value, node_fqn))
+        else:
+            params[value[0]] = value[1]
+    return params
+
+
+def _kind(value: Any) -> str:
+    if isinstance(value, list):
+        return f"{_kind(value[0])}[]"
+    return type(value).__name__
+
+
+class Parameters:
+    """A node's declared parameters: a default per name, overridden from the command line."""
+
+    def __init__(self, node_fqn: str, overrides: dict[str, Any]) -> None:
+        self.node_fqn = node_fqn
+        self.overrides = overrides
+        self.values: dict[str, Any] = {}
+
+    def declare(self, name: str, default: Any) -> Any:
+        """Declare ``name``: the override if one was given (same type), else ``default``."""
+        where = f"parameter {name!r} of node {self.node_fqn}"
+        if name in self.values:
+            raise InputError(f"{where} is already declared")
+        if default is not None:
+            default = check_value(default, where)
+        value = self.overrides.get(name, default)
+        if default is not None and value is not default:
+            value = _coerce(value, default, where)
+        self.values[name] = value
+        return value
+
+    def get(self, name: str) -> Any:
+        if name not in self.values:
+            raise InputError(f"parameter {name!r} of node {self.node_fqn} is not declared")
+        return self.values[name]
+
+
+def _coerce(value: Any, default: Any, where: str) -> Any:
+    """``value`` as the type of ``default`` (int widens to float), else InputError."""
+    if _kind(value) == _kind(default):
+        return value
+    if isinstance(default, float) and isinstance(value, int) and not isinstance(value, bool):
+        return float(value)
+    if _kind(default) == "float[]" and _kind(value) == "int[]":
+        return [float(v) for v in value]
+    raise InputError(f"{where}: expected {_kind(default)}, got {value!r} ({_kind(value)})")

@@ -1,0 +1,205 @@
+"""The ``rclpy`` backend: the same node API over real rclpy, on workstations with ROS 2.
+
+Messages stay ``rosbags`` instances: they are published as CDR bytes (rclpy publishes
+serialized messages as they are) and subscriptions take CDR bytes (``raw=True`` in rclpy)
+that ``rosbags`` decodes, so no message conversion code exists. rclpy parses ``--ros-args``
+itself; signals are left to :mod:`.api` (rclpy's own handlers are not installed).
+Raw subscriptions get the receive time as ``source_timestamp`` too: rclpy's callbacks do not
+carry the DDS sample info.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+import rclpy
+from rclpy.clock import ClockType
+from rclpy.duration import Duration
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.qos import (
+    DurabilityPolicy,
+    HistoryPolicy,
+    LivelinessPolicy,
+    ReliabilityPolicy,
+)
+from rclpy.qos import QoSProfile as RclpyQoS
+from rclpy.signals import SignalHandlerOptions
+from rosidl_runtime_py.utilities import get_message
+
+from stillframe import messages
+from stillframe.middleware import api
+from stillframe.middleware.clock import SYSTEM_CLOCK, Clock, Time
+from stillframe.middleware.qos import (
+    INFINITE_NS,
+    Durability,
+    History,
+    Liveliness,
+    QoSProfile,
+    Reliability,
+    as_profile,
+)
+
+MAX_WAIT_S = 0.1
+
+
+def rclpy_qos(profile: QoSProfile) -> RclpyQoS:
+    """rclpy's QoSProfile of ours (the enum values are rmw's in both)."""
+    extra = {}
+    for name in ("deadline", "lifespan", "liveliness_lease_duration"):
+        ns = getattr(profile, name + "_ns")
+        if ns < INFINITE_NS:
+            extra[name] = Duration(nanoseconds=ns)
+    return RclpyQoS(
+        history=HistoryPolicy(int(profile.history)), depth=profile.depth,
+        reliability=ReliabilityPolicy(int(profile.reliability)),
+        durability=DurabilityPolicy(int(profile.durability)),
+        liveliness=LivelinessPolicy(int(profile.liveliness)), **extra,
+    )
+
+
+def ros_qos(qos: RclpyQoS) -> QoSProfile:
+    """Our QoSProfile of rclpy's."""
+    def ns(duration: Duration) -> int:
+        value = duration.nanoseconds
+        return INFINITE_NS if value <= 0 or value >= INFINITE_NS else value
+
+    return QoSProfile(
+        history=History(int(qos.history)), depth=qos.depth,
+        reliability=Reliability(int(qos.reliability)),
+        durability=Durability(int(qos.durability)),
+        deadline_ns=ns(qos.deadline), lifespan_ns=ns(qos.lifespan),
+        liveliness=Liveliness(int(qos.liveliness)),
+        liveliness_lease_duration_ns=ns(qos.liveliness_lease_duration),
+    )
+
+
+class RclpyClock(Clock):
+    """The node's rclpy clock (ROS time, sim time with ``use_sim_time``) as our Clock."""
+
+    def __init__(self, clock: Any) -> None:
+        super().__init__(sim=False)
+        self._clock = clock
+
+    def now(self) -> Time:
+        return Time(self._clock.now().nanoseconds)
+
+
+class RclpyPublisher:
+    def __init__(self, pub: Any, msg_type: str) -> None:
+        self._pub = pub
+        self.msg_type = msg_type
+        self.topic_name = pub.topic_name
+
+    def publish(self, msg: Any) -> None:
+        data = msg if isinstance(msg, bytes | bytearray) else messages.serialize(msg)
+        self._pub.publish(bytes(data))
+
+    def get_subscription_count(self) -> int:
+        return self._pub.get_subscription_count()
+
+    def wait_for_all_acked(self, timeout_sec: float) -> bool:
+        return self._pub.wait_for_all_acked(Duration(nanoseconds=int(timeout_sec * 1e9)))
+
+
+class RclpyNode:
+    """:class:`.api.Node` over an ``rclpy.node.Node``."""
+
+    backend = "rclpy"
+    _executor: SingleThreadedExecutor | None = None
+
+    def __init__(self, name: str, namespace: str, args: list[str]) -> None:
+        if not rclpy.ok():
+            rclpy.init(args=["stillframe", *args], signal_handler_options=SignalHandlerOptions.NO)
+        self._node = rclpy.create_node(name, namespace=namespace)
+        self.user_args = rclpy.utilities.remove_ros_args(["stillframe", *args])[1:]
+        self._clock = RclpyClock(self._node.get_clock())
+        if RclpyNode._executor is None:
+            RclpyNode._executor = SingleThreadedExecutor()
+        RclpyNode._executor.add_node(self._node)
+
+    def get_name(self) -> str:
+        return self._node.get_name()
+
+    def get_namespace(self) -> str:
+        return self._node.get_namespace()
+
+    def get_logger(self) -> Any:
+        return self._node.get_logger()
+
+    def get_clock(self) -> Clock:
+        return self._clock
+
+    def declare_parameter(self, name: str, default: Any = None) -> api.Parameter:
+        return api.Parameter(name, self._node.declare_parameter(name, default).value)
+
+    def get_parameter(self, name: str) -> api.Parameter:
+        return api.Parameter(name, self._node.get_parameter(name).value)
+
+    def create_publisher(
+        self, msg_type: str | type, topic: str, qos: QoSProfile | str | int
+    ) -> RclpyPublisher:
+        name = messages.type_name(msg_type)
+        pub = self._node.create_publisher(get_message(name), topic, rclpy_qos(as_profile(qos)))
+        return RclpyPublisher(pub, name)
+
+    def create_subscription(
+        self, msg_type: str | type, topic: str, callback: Callable[..., None],
+        qos: QoSProfile | str | int, raw: bool = False,
+    ) -> Any:
+        name = messages.type_name(msg_type)
+
+        def on_data(data: bytes) -> None:
+            if raw:
+                now = self._clock.now().nanoseconds
+                callback(data, api.MessageInfo(now, now))
+            else:
+                callback(messages.deserialize(data, name))
+
+        return self._node.create_subscription(
+            get_message(name), topic, on_data, rclpy_qos(as_profile(qos)), raw=True
+        )
+
+    def create_timer(
+        self, period_s: float, callback: Callable[[], None], clock: Clock | None = None
+    ) -> Any:
+        rclpy_clock = rclpy.clock.Clock(clock_type=ClockType.SYSTEM_TIME) if (
+            clock is SYSTEM_CLOCK) else None
+        return self._node.create_timer(period_s, callback, clock=rclpy_clock)
+
+    def get_topic_names_and_types(self) -> list[tuple[str, list[str]]]:
+        return sorted(self._node.get_topic_names_and_types())
+
+    def _endpoints(self, topic: str, infos: list[Any]) -> list[api.TopicEndpointInfo]:
+        return [
+            api.TopicEndpointInfo(
+                topic_name=self._node.resolve_topic_name(topic),
+                topic_type=info.topic_type,
+                topic_type_hash=str(getattr(info, "topic_type_hash", "")),
+                endpoint_gid=bytes(info.endpoint_gid), qos_profile=ros_qos(info.qos_profile),
+                node_name=info.node_name, node_namespace=info.node_namespace,
+            )
+            for info in infos
+        ]
+
+    def get_publishers_info_by_topic(self, topic: str) -> list[api.TopicEndpointInfo]:
+        return self._endpoints(topic, self._node.get_publishers_info_by_topic(topic))
+
+    def get_subscriptions_info_by_topic(self, topic: str) -> list[api.TopicEndpointInfo]:
+        return self._endpoints(topic, self._node.get_subscriptions_info_by_topic(topic))
+
+    def get_node_names_and_namespaces(self) -> list[tuple[str, str]]:
+        return sorted(self._node.get_node_names_and_namespaces())
+
+    def spin_once(self, timeout_sec: float | None = None) -> None:
+        if api.ok():
+            api.freeze_setup_objects()
+            wait = MAX_WAIT_S if timeout_sec is None else min(MAX_WAIT_S, timeout_sec)
+            RclpyNode._executor.spin_once(timeout_sec=wait)
+
+    def destroy_node(self) -> None:
+        RclpyNode._executor.remove_node(self._node)
+        self._node.destroy_node()
+        if not RclpyNode._executor.get_nodes():
+            RclpyNode._executor = None
+            rclpy.try_shutdown()
