@@ -1,0 +1,83 @@
+"""Watching topics from a tool: discovering a topic's type and QoS, printing messages as YAML,
+receive-rate statistics (what ``stillframe topic`` shows, shaped like ``ros2 topic``'s)."""
+
+from __future__ import annotations
+
+import os
+import statistics
+import sys
+from collections import deque
+from typing import Any
+
+import yaml
+
+from stillframe import messages
+from stillframe.errors import InputError
+from stillframe.middleware import api, names
+from stillframe.middleware.qos import DEFAULT, Durability, QoSProfile, Reliability
+
+
+def cli_node() -> api.Node:
+    """A hidden node (name starting with '_') for a command-line tool."""
+    return api.create_node(f"_stillframe_topic_{os.getpid()}", argv=["stillframe"])
+
+
+def wait_for_publisher(
+    node: api.Node, topic: str, timeout: float | None
+) -> tuple[str, QoSProfile]:
+    """The type of ``topic`` and a QoS compatible with all its publishers (like ``ros2 topic``:
+    reliable/transient-local only if every publisher offers it)."""
+    full = names.resolve_topic(topic)
+    found: list[api.TopicEndpointInfo] = []
+
+    def discovered() -> bool:
+        found[:] = node.get_publishers_info_by_topic(full)
+        return bool(found)
+
+    if not api.spin_until(node, discovered, 0.5 if timeout is None else min(timeout, 0.5)):
+        print(f"WARNING: topic [{full}] does not appear to be published yet", file=sys.stderr)
+        remaining = 1e9 if timeout is None else max(timeout - 0.5, 0.0)
+        if not api.spin_until(node, discovered, remaining):
+            if api.ok():
+                raise InputError(f"no publisher of topic {full} appeared within {timeout:g} s")
+            return "", DEFAULT
+    types = sorted({ep.topic_type for ep in found})
+    if len(types) > 1:
+        raise InputError(f"topic {full} is published with several types: {', '.join(types)}")
+    reliable = all(ep.qos_profile.reliability == Reliability.RELIABLE for ep in found)
+    latched = all(ep.qos_profile.durability == Durability.TRANSIENT_LOCAL for ep in found)
+    qos = QoSProfile(
+        depth=10,
+        reliability=Reliability.RELIABLE if reliable else Reliability.BEST_EFFORT,
+        durability=Durability.TRANSIENT_LOCAL if latched else Durability.VOLATILE,
+    )
+    return types[0], qos
+
+
+def select_field(msg: Any, path: str | None) -> Any:
+    """The nested field ``a.b`` of a message (InputError naming the missing part)."""
+    value = msg
+    for part in path.split(".") if path else ():
+        kind = getattr(value, "__msgtype__", None)
+        if kind is None or part not in dict(messages.fielddefs(kind)):
+            kind = kind or type(value).__name__
+            raise InputError(f"--field {path}: {kind} has no field {part!r}")
+        value = getattr(value, part)
+    return value
+
+
+def to_yaml(value: Any) -> str:
+    """The YAML ``ros2 topic echo`` prints for a message or field."""
+    return yaml.safe_dump(messages.to_plain(value), sort_keys=False, default_flow_style=False,
+                          allow_unicode=True, explicit_end=False).removesuffix("...\n")
+
+
+def rate_report(stamps_ns: deque[int]) -> str | None:
+    """``ros2 topic hz``'s two lines for receive times in ns (None with fewer than 2)."""
+    if len(stamps_ns) < 2:
+        return None
+    gaps = [(b - a) * 1e-9 for a, b in zip(stamps_ns, list(stamps_ns)[1:], strict=False)]
+    mean = statistics.fmean(gaps)
+    return (f"average rate: {1.0 / mean:.3f}\n"
+            f"\tmin: {min(gaps):.3f}s max: {max(gaps):.3f}s "
+            f"std dev: {statistics.pstdev(gaps):.5f}s window: {len(gaps) + 1}")
