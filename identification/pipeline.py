@@ -1,0 +1,185 @@
+"""One entry point from sampled input/output records to an identified model and its modes.
+
+Methods (thesis ch. 3):
+
+- ``okid-era``: OKID observer Markov parameters (eq. 3.106), system Markov parameters (eq. 3.107),
+  ERA (eq. 3.137), observer gain G by least squares from the observer gain Markov parameters
+  (eqs. 3.108, 3.112);
+- ``okid-eradc``: OKID, then ERA/DC on the combined parameters ``[Y_k, Y^0_k]`` giving A, B, C and
+  G together (eqs. 3.165–3.203) — the thesis's method for the rig (§5.5);
+- ``era-impulse``: the record is the response to one pulse on a single input at the first
+  sample; ``Y_k = y(k) / u(0)`` and ERA. No observer gain.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Literal
+
+import numpy as np
+from numpy.typing import NDArray
+
+from identification.era import EraDimensions, HankelFactorization, auto_order, factorize, order_gap
+from identification.modal import ModalTable, modal_parameters
+from identification.okid import minimum_samples, observer_gain, okid
+from stillframe.errors import InputError
+
+Array = NDArray[np.float64]
+Method = Literal["okid-era", "okid-eradc", "era-impulse"]
+METHODS: tuple[str, ...] = ("okid-era", "okid-eradc", "era-impulse")
+
+DEFAULT_OBSERVER_ORDER = 20
+PULSE_TOLERANCE = 1e-9
+"""era-impulse: input samples after the first must be below this fraction of the pulse."""
+
+
+@dataclass(frozen=True)
+class Identification:
+    """An identified discrete model, how it was obtained and its modes."""
+
+    A: Array
+    B: Array
+    C: Array
+    D: Array
+    G: Array | None
+    """Observer gain (eq. 3.77 sign: ``Abar = A + G C``); None for ``era-impulse``."""
+    dt: float
+    order: int
+    order_gap: float
+    """``sigma_n / sigma_{n+1}`` at the chosen order (the auto criterion's value)."""
+    hankel_singular_values: Array
+    markov: Array
+    """System Markov parameters ``Y_0 .. Y_K``, ``(K + 1, m, r)``."""
+    modes: ModalTable
+    method: str
+    observer_order: int | None
+    dimensions: EraDimensions
+    factorization: HankelFactorization = field(repr=False)
+    """The Hankel SVD, reusable for other orders (e.g. a stabilization diagram)."""
+
+
+def _as_record(name: str, values: Array) -> Array:
+    arr = np.asarray(values, dtype=float)
+    if arr.ndim == 1:
+        arr = arr[:, None]
+    if arr.ndim != 2 or arr.shape[0] == 0 or arr.shape[1] == 0:
+        raise InputError(f"{name} must be a non-empty (samples, channels) array, got {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise InputError(f"{name} contains NaN or inf")
+    return arr
+
+
+def _pulse_markov(u: Array, y: Array) -> Array:
+    if u.shape[1] != 1:
+        raise InputError(f"era-impulse needs a single input, got {u.shape[1]}")
+    pulse = u[0, 0]
+    if pulse == 0 or np.max(np.abs(u[1:]), initial=0.0) > PULSE_TOLERANCE * abs(pulse):
+        raise InputError(
+            "era-impulse needs a single pulse at the first input sample and zeros after it; "
+            "use okid-era or okid-eradc for general inputs"
+        )
+    return (y / pulse)[:, :, None]
+
+
+def identify(
+    u: Array,
+    y: Array,
+    dt: float,
+    method: Method = "okid-eradc",
+    order: int | Literal["auto"] = "auto",
+    *,
+    observer_order: int | None = None,
+    max_order: int | None = None,
+    alpha: int | None = None,
+    beta: int | None = None,
+    gamma: int = 2,
+    delta: int = 2,
+    tau: int = 1,
+    reference_sensor: int | None = None,
+) -> Identification:
+    """Identify a discrete state-space model of order ``order`` (or the largest singular-value
+    gap up to ``max_order`` when ``"auto"``) from inputs ``u (N, r)`` and outputs ``y (N, m)``.
+
+    ``observer_order`` is OKID's p (default 20, lowered to what the record allows); ``alpha`` and
+    ``beta`` are the Hankel block rows and columns (defaults: p and 4 p; for era-impulse, as many
+    as the record allows up to 50 and 200); ``gamma``, ``delta``, ``tau`` are the ERA/DC
+    correlation sizes (eq. 3.141). ``reference_sensor`` normalises the mode shapes (default: the
+    largest component). Raises :class:`InputError` on bad input or a record too short.
+    """
+    u = _as_record("input", u)
+    y = _as_record("output", y)
+    if u.shape[0] != y.shape[0]:
+        raise InputError(f"input has {u.shape[0]} samples but output has {y.shape[0]}")
+    if not (isinstance(dt, int | float) and math.isfinite(dt) and dt > 0):
+        raise InputError(f"sampling interval dt must be a positive number, got {dt!r}")
+    if method not in METHODS:
+        raise InputError(f"unknown method {method!r}; choose one of {', '.join(METHODS)}")
+    if order != "auto" and (isinstance(order, bool) or not isinstance(order, int) or order < 1):
+        raise InputError(f"order must be a positive integer or 'auto', got {order!r}")
+    n_samples, r = u.shape
+    m = y.shape[1]
+    needed_order = order if isinstance(order, int) else 2
+    correlated = method == "okid-eradc"
+
+    if method == "era-impulse":
+        markov = _pulse_markov(u, y)
+        a = alpha or min(50, max(1, (n_samples - 2) // 5))
+        b = beta or min(200, max(1, n_samples - 1 - a))
+        dims = EraDimensions(alpha=a, beta=b)
+        if dims.markov_count(False) > n_samples or a * m < needed_order:
+            raise InputError(
+                f"record of {n_samples} samples too short for order {needed_order} with "
+                f"alpha={a}, beta={b} (needs alpha*outputs >= order and alpha+beta+1 samples)"
+            )
+        fac = factorize(markov[: dims.markov_count(False)], dims, correlated=False)
+        p = None
+        gain_markov = None
+    else:
+        p_min = max(1, math.ceil(needed_order / m))
+        if observer_order is None:
+            p = DEFAULT_OBSERVER_ORDER
+            while p > p_min and n_samples < minimum_samples(r, m, p):
+                p -= 1
+        else:
+            p = observer_order
+        if p * m < needed_order:
+            raise InputError(
+                f"observer order {p} with {m} outputs bounds the model order by {p * m} < "
+                f"{needed_order} (thesis: m p >= n)"
+            )
+        if n_samples < minimum_samples(r, m, p):
+            raise InputError(
+                f"record of {n_samples} samples too short for order {needed_order}: OKID with "
+                f"observer order {p} needs at least {minimum_samples(r, m, p)} samples"
+            )
+        fit = okid(u, y, p)
+        a = alpha or p
+        b = beta or 4 * p
+        dims = EraDimensions(alpha=a, beta=b, gamma=gamma if correlated else 0,
+                             delta=delta if correlated else 0, tau=tau)
+        count = dims.markov_count(correlated)
+        markov = fit.system_markov(count)
+        gain_markov = fit.observer_gain_markov(max(count, p + 1))
+        params = np.concatenate([markov, gain_markov[:count]], axis=2) if correlated else markov
+        fac = factorize(params, dims, correlated=correlated)
+
+    s = fac.singular_values
+    if order == "auto":
+        limit = min(max_order or fac.numerical_rank, fac.numerical_rank)
+        chosen, gap = auto_order(s, limit)
+    else:
+        chosen, gap = order, order_gap(s, order)
+    real = fac.realize(chosen)
+    if method == "okid-eradc":
+        B, G = real.B[:, :r], real.B[:, r:]
+    elif method == "okid-era":
+        B, G = real.B, observer_gain(real.A, real.C, gain_markov[: p + 1])
+    else:
+        B, G = real.B, None
+    return Identification(
+        A=real.A, B=B, C=real.C, D=real.D, G=G, dt=float(dt), order=chosen, order_gap=gap,
+        hankel_singular_values=s, markov=markov, method=method, observer_order=p,
+        dimensions=dims, factorization=fac,
+        modes=modal_parameters(real.A, real.C, float(dt), reference=reference_sensor),
+    )
