@@ -178,7 +178,7 @@ def identify(
     else:
         B, G = real.B, None
     return Identification(
-        A=real.A, B=B, C=real.C, D=real.D, G=G, dt=float(dt), order=chosen, order_gap=gap,
+        A=real.A, B=B, C=real.C, D=real.D[:, :r], G=G, dt=float(dt), order=chosen, order_gap=gap,
         hankel_singular_values=s, markov=markov, method=method, observer_order=p,
         dimensions=dims, factorization=fac,
         modes=modal_parameters(real.A, real.C, float(dt), reference=reference_sensor),
