@@ -1,5 +1,10 @@
-"""Stabilization diagram data: the modes of the realizations of one Hankel factorization at a
-range of orders (thesis §3.6: physical modes persist as the order grows, noise modes wander)."""
+"""Stabilization diagram: the modes of the realizations of increasing order from one Hankel
+factorization (thesis §3.6; the usual way to read the order off ERA results).
+
+A mode at order n is *stable* when a mode of order ``n - step`` lies within ``frequency_tol``
+(relative) in frequency, within ``damping_tol`` (relative) in damping ratio and, when both have
+shapes, has a MAC of at least ``mac_min`` with it.
+"""
 
 from __future__ import annotations
 
@@ -7,48 +12,54 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import NDArray
 
 from identification.era import HankelFactorization
-from identification.modal import modal_parameters
+from identification.modal import ModalTable, mac, modal_parameters
+from stillframe.errors import InputError
 
-FREQUENCY_TOLERANCE = 0.01
-"""A pole is stable when the previous order has one within this relative frequency ..."""
-DAMPING_TOLERANCE = 0.05
-"""... and within this relative damping ratio."""
+Array = NDArray[np.float64]
 
 
 @dataclass(frozen=True)
-class OrderPoles:
-    """The oscillatory poles (0 < ζ < 1) of the realization of one order."""
+class StabilizationRow:
+    """Modes of one order with their stability flags."""
 
     order: int
-    frequency_hz: np.ndarray
-    damping_ratio: np.ndarray
-    stable: np.ndarray
+    modes: ModalTable
+    stable_frequency: NDArray[np.bool_]
+    stable: NDArray[np.bool_]
+    """Frequency, damping and MAC all within tolerance of the previous order."""
 
 
-def stabilization(factorization: HankelFactorization, dt: float, orders: Sequence[int]
-                  ) -> list[OrderPoles]:
-    """Poles per order, each flagged stable against the previous order's poles."""
-    out: list[OrderPoles] = []
-    prev_f = prev_z = np.empty(0)
+def stabilization_diagram(
+    factorization: HankelFactorization,
+    dt: float,
+    orders: Sequence[int],
+    frequency_tol: float = 0.01,
+    damping_tol: float = 0.05,
+    mac_min: float = 0.98,
+) -> list[StabilizationRow]:
+    """One :class:`StabilizationRow` per order (ascending); orders above the Hankel matrix's
+    numerical rank are refused."""
+    orders = sorted(set(int(n) for n in orders))
+    if not orders or orders[0] < 1 or orders[-1] > factorization.numerical_rank:
+        raise InputError(f"stabilization orders must lie in 1..{factorization.numerical_rank}")
+    rows: list[StabilizationRow] = []
+    previous: ModalTable | None = None
     for n in orders:
         real = factorization.realize(n)
         modes = modal_parameters(real.A, real.C, dt)
-        keep = (modes.damping_ratio > 0) & (modes.damping_ratio < 1)
-        f, z = modes.frequency_hz[keep], modes.damping_ratio[keep]
-        if prev_f.size:
-            df = np.abs(f[:, None] - prev_f[None, :]) / f[:, None]
-            dz = np.abs(z[:, None] - prev_z[None, :]) / z[:, None]
-            stable = np.any((df < FREQUENCY_TOLERANCE) & (dz < DAMPING_TOLERANCE), axis=1)
-        else:
-            stable = np.zeros(f.size, dtype=bool)
-        out.append(OrderPoles(n, f, z, stable))
-        prev_f, prev_z = f, z
-    return out
-
-
-def diagram_orders(chosen: int, rank: int) -> list[int]:
-    """Even orders from 2 up to twice the chosen order (at least 20), within the rank."""
-    top = min(max(2 * chosen, 20), rank)
-    return list(range(2, top + 1, 2))
+        stable_f = np.zeros(len(modes), dtype=bool)
+        stable = np.zeros(len(modes), dtype=bool)
+        if previous is not None and len(previous):
+            f, f0 = modes.frequency_hz[:, None], previous.frequency_hz[None, :]
+            z, z0 = modes.damping_ratio[:, None], previous.damping_ratio[None, :]
+            close_f = np.abs(f - f0) <= frequency_tol * np.abs(f0)
+            close_z = np.abs(z - z0) <= damping_tol * np.abs(z0)
+            close = close_f & close_z & (mac(modes.shapes, previous.shapes) >= mac_min)
+            stable_f, stable = close_f.any(axis=1), close.any(axis=1)
+        rows.append(StabilizationRow(order=n, modes=modes, stable_frequency=stable_f,
+                                     stable=stable))
+        previous = modes
+    return rows

@@ -1,3 +1,3 @@
-"""stillframe: simulate, identify and control a flexible three-story frame with a pendulum damper."""
+"""stillframe: simulate, identify and control a flexible frame with a pendulum damper."""
 
 __version__ = "0.1.0"

@@ -125,7 +125,7 @@ def _leaf(key: str, spec: Field, value: Any) -> Any:
 
 
 def validate(schema: Mapping[str, Any], data: Any, prefix: str = "") -> Section:
-    """Validate ``data`` against ``schema``; fill defaults; raise InputError on the first problem."""
+    """Validate ``data`` against ``schema``, fill defaults; InputError on the first problem."""
     where = prefix.rstrip(".") or "scene"
     if data is None:
         data = {}
@@ -161,6 +161,7 @@ def set_dotted(data: dict[str, Any], dotted: str, value: Any) -> None:
         if child is None:
             child = node[part] = {}
         if not isinstance(child, dict):
-            raise InputError(f"--set {dotted}: {'.'.join(parts[: i + 1])} is a value, not a section")
+            where = ".".join(parts[: i + 1])
+            raise InputError(f"--set {dotted}: {where} is a value, not a section")
         node = child
     node[parts[-1]] = value

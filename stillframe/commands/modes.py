@@ -14,8 +14,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from stillframe.models import build_model
     from stillframe.modal_analysis import modal_table
+    from stillframe.models import build_model
 
     scene = scene_from_args(args)
     model = build_model(scene)

@@ -1,0 +1,58 @@
+"""Structural damping matrices, checked so that no mode gets negative damping (DESIGN.md, rig).
+
+- ``rayleigh``: C = αM + βK (the thesis's identified α, β; eq. 5.237's story dashpots σ_i = βk_i
+  plus floor-to-ground dampers αm_i on the lumped model). With β < 0 the damping ratio
+  ζ(ω) = α/(2ω) + βω/2 turns negative above ω = √(α/−β) ≈ 58 rad/s, so a structure with modes
+  up there is rejected.
+- ``modal``: the first modes get ``modal_ratios`` exactly; the modes above get stiffness-
+  proportional damping with ζ = ``high_mode_ratio`` at the first of them, growing with ω.
+  C = β_h K + Σ_j (2ζ_jω_j − β_hω_j²) M φ_j φ_jᵀ M with mass-normalised φ_j.
+- ``none``: C = 0.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.linalg as sla
+
+from stillframe.errors import InputError
+from stillframe.models.structure import Structure
+from stillframe.schema import Section
+
+
+def undamped_modes(structure: Structure) -> tuple[np.ndarray, np.ndarray]:
+    """Circular frequencies (ascending) and mass-normalised mode shapes of the structure."""
+    w2, phi = sla.eigh(structure.stiffness, structure.mass)
+    return np.sqrt(np.clip(w2, 0.0, None)), phi
+
+
+def rayleigh_ratio(omega: np.ndarray, alpha: float, beta: float) -> np.ndarray:
+    return alpha / (2.0 * omega) + beta * omega / 2.0
+
+
+def damping_matrix(structure: Structure, damping: Section) -> np.ndarray:
+    """The structure's damping matrix under the scene's ``damping`` section."""
+    M, K = structure.mass, structure.stiffness
+    if damping.model == "none":
+        return np.zeros_like(K)
+    omega, phi = undamped_modes(structure)
+    if damping.model == "rayleigh":
+        zeta = rayleigh_ratio(omega, damping.alpha, damping.beta)
+        bad = np.flatnonzero(zeta < 0)
+        if bad.size:
+            j = bad[0]
+            raise InputError(
+                f"damping.beta: Rayleigh damping (alpha={damping.alpha:g}, beta={damping.beta:g}) "
+                f"gives structural mode {j + 1} at {omega[j] / (2 * np.pi):.4g} Hz the negative "
+                f"damping ratio {zeta[j]:.3g}; use damping.model: modal for the {structure.name} "
+                "model"
+            )
+        return damping.alpha * M + damping.beta * K
+    ratios = np.asarray(damping.modal_ratios, dtype=float)
+    r = min(ratios.size, omega.size)
+    beta_high = 0.0
+    if r < omega.size:
+        beta_high = 2.0 * damping.high_mode_ratio / omega[r]
+    Mphi = M @ phi[:, :r]
+    extra = 2.0 * ratios[:r] * omega[:r] - beta_high * omega[:r] ** 2
+    return beta_high * K + (Mphi * extra) @ Mphi.T
