@@ -14,8 +14,9 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from identification.bagdata import Record
+from identification.frf import h1_frf, model_frf
 from identification.pipeline import Identification
-from identification.stabilization import diagram_orders, stabilization
+from identification.stabilization import stabilization_diagram as stabilization_rows
 
 
 def _save(fig: plt.Figure, path: Path) -> Path:
@@ -51,7 +52,7 @@ def stabilization_diagram(orders: Sequence[int], frequencies_hz: Sequence[np.nda
         ax.plot(f[ok], np.full(ok.sum(), n), "o", color="C0", ms=4)
         ax.plot(f[~ok], np.full((~ok).sum(), n), "x", color="C7", ms=4)
     ax.axhline(chosen, color="C3", ls="--", lw=1)
-    ax.plot([], [], "o", color="C0", label="stable (frequency and damping)")
+    ax.plot([], [], "o", color="C0", label="stable (frequency, damping, MAC)")
     ax.plot([], [], "x", color="C7", label="not stable")
     ax.plot([], [], "--", color="C3", label=f"chosen order {chosen}")
     if nyquist_hz:
@@ -60,14 +61,16 @@ def stabilization_diagram(orders: Sequence[int], frequencies_hz: Sequence[np.nda
     ax.set_ylabel("model order")
     ax.set_title("Stabilization diagram")
     ax.grid(True, alpha=0.3)
-    ax.legend(loc="upper right", fontsize=8)
+    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.12), ncols=3, fontsize=8)
+    fig.tight_layout()
     return _save(fig, path)
 
 
 def frf(freq_hz: np.ndarray, h1: np.ndarray, coherence: np.ndarray, model: np.ndarray,
         input_names: Sequence[str], output_names: Sequence[str], path: Path) -> Path:
-    """Magnitude, phase and coherence per input-output pair; ``h1``, ``coherence`` and
-    ``model`` are (frequencies, outputs, inputs)."""
+    """Magnitude and phase per input-output pair and each output's (multiple) coherence;
+    ``h1`` and ``model`` are (frequencies, outputs, inputs), ``coherence`` (frequencies,
+    outputs)."""
     p, m = h1.shape[1:]
     fig, axes = plt.subplots(3, p * m, figsize=(4 * p * m, 8), sharex=True, squeeze=False,
                              gridspec_kw={"height_ratios": [3, 2, 1]})
@@ -79,8 +82,8 @@ def frf(freq_hz: np.ndarray, h1: np.ndarray, coherence: np.ndarray, model: np.nd
             mag.semilogy(freq_hz, np.abs(model[:, i, j]), color="C3", lw=1, label="model")
             ph.plot(freq_hz, np.degrees(np.angle(h1[:, i, j])), color="C0", lw=1)
             ph.plot(freq_hz, np.degrees(np.angle(model[:, i, j])), color="C3", lw=1)
-            coh.plot(freq_hz, coherence[:, i, j], color="C2", lw=1)
-            mag.set_title(f"{output_names[i]} / {input_names[j]}", fontsize=8)
+            coh.plot(freq_hz, coherence[:, i], color="C2", lw=1)
+            mag.set_title(f"y{i + 1} / u{j + 1}", fontsize=9)
             coh.set_ylim(0, 1.05)
             coh.set_xlabel("frequency [Hz]")
             for ax in (mag, ph, coh):
@@ -89,7 +92,10 @@ def frf(freq_hz: np.ndarray, h1: np.ndarray, coherence: np.ndarray, model: np.nd
     axes[1, 0].set_ylabel("phase [deg]")
     axes[2, 0].set_ylabel("coherence")
     axes[0, 0].legend(fontsize=8)
-    fig.tight_layout()
+    legend = [f"u{j + 1} = {n}" for j, n in enumerate(input_names)]
+    legend += [f"y{i + 1} = {n}" for i, n in enumerate(output_names)]
+    fig.tight_layout(rect=(0, 0.03 * len(legend) ** 0.5, 1, 1))
+    fig.text(0.01, 0.005, "    ".join(legend), fontsize=7, wrap=True)
     return _save(fig, path)
 
 
@@ -134,20 +140,26 @@ def validation(t: np.ndarray, measured: np.ndarray, simulated: dict[str, np.ndar
     return _save(fig, path)
 
 
-def identification_plots(ident: Identification, record: Record, directory: str | Path
-                         ) -> list[Path]:
-    """All figures of one identification from a bag record, written into ``directory``."""
+def identification_plots(ident: Identification, record: Record, directory: str | Path,
+                         nperseg: int = 256) -> list[Path]:
+    """All figures of one identification from a bag record, written into ``directory``:
+    Hankel singular values, stabilization diagram (even orders up to twice the chosen order,
+    at least 20), H1 FRF with the model overlaid, mode shapes."""
     out = Path(directory)
     names = [str(c) for c in record.outputs]
     fac = ident.factorization
-    orders = diagram_orders(ident.order, fac.numerical_rank)
-    poles = stabilization(fac, ident.dt, orders)
+    top = min(max(2 * ident.order, 20), fac.numerical_rank)
+    rows = stabilization_rows(fac, ident.dt, range(2, top + 1, 2))
+    measured = h1_frf(record.u, record.y, record.dt, nperseg=min(nperseg, record.samples))
+    model = model_frf(ident.A, ident.B, ident.C, ident.D, ident.dt, measured.frequency_hz)
     return [
         hankel_singular_values(ident.hankel_singular_values, ident.order,
                                out / "hankel_singular_values.png"),
-        stabilization_diagram([p.order for p in poles], [p.frequency_hz for p in poles],
-                              [p.stable for p in poles], ident.order,
+        stabilization_diagram([r.order for r in rows], [r.modes.frequency_hz for r in rows],
+                              [r.stable for r in rows], ident.order,
                               out / "stabilization.png", nyquist_hz=0.5 / ident.dt),
+        frf(measured.frequency_hz, measured.H, measured.coherence, model,
+            [str(c) for c in record.inputs], names, out / "frf.png"),
         mode_shapes(ident.modes.frequency_hz, ident.modes.damping_ratio, ident.modes.shapes,
                     names, out / "mode_shapes.png"),
     ]

@@ -43,3 +43,8 @@ def modes_table(modes: ModalTable, output_names: list[str]) -> str:
                  for mag, phase in modes.magnitude_phase(k)]
         rows.append([k + 1, float(modes.frequency_hz[k]), float(modes.damping_ratio[k]), *shape])
     return format_table(headers, rows)
+
+
+def format_matrix(rows: list[list[float]]) -> str:
+    """A matrix as aligned rows, 6 significant digits."""
+    return "\n".join("  ".join(f"{v:12.6g}" for v in row) for row in rows)

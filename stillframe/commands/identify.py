@@ -59,6 +59,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     parser.add_argument("--plots", metavar="DIR", default=None, help="write PNG figures here")
     parser.add_argument("--save-model", metavar="FILE", default=None,
                         help="write the identified model file")
+    parser.add_argument("--mkr", metavar="SENSOR_DOFS:ACTUATOR_DOFS", default=None,
+                        help="also identify M, K, R (thesis §3.7): the DOF of each output and of "
+                        "each input, e.g. 0,1,2:0 for three floor sensors and a force on floor 1")
+    parser.add_argument("--output-type", choices=("acceleration", "velocity", "displacement"),
+                        default="acceleration", help="what the outputs measure (for --mkr)")
     parser.add_argument("--progress", action="store_true",
                         help="show progress on stderr (default: when stderr is a terminal)")
     parser.set_defaults(func=run)
@@ -77,10 +82,35 @@ class Progress:
                   flush=True)
 
 
+def _dofs(text: str, what: str) -> list[int]:
+    try:
+        return [int(d) for d in text.split(",")]
+    except ValueError:
+        raise InputError(f"--mkr: {what} DOFs {text!r} must be comma-separated integers"
+                         ) from None
+
+
+def _physical(args: argparse.Namespace, ident):  # -> (PhysicalModel, dict) | (None, {})
+    """MKR matrices and the least-squares Rayleigh α, β of the identified modes (eq. 3.213)."""
+    if args.mkr is None:
+        return None, {}
+    from identification.damping import fit_proportional_damping
+    from identification.mkr import mkr
+
+    sensors, sep, actuators = args.mkr.partition(":")
+    if not sep:
+        raise InputError(f"--mkr {args.mkr!r}: expected SENSOR_DOFS:ACTUATOR_DOFS, e.g. 0,1,2:0")
+    physical = mkr(ident.A, ident.B, ident.C, ident.dt, _dofs(sensors, "sensor"),
+                   _dofs(actuators, "actuator"), args.output_type)
+    alpha, beta = fit_proportional_damping(ident.modes.omega, ident.modes.damping_ratio)
+    return physical, {"M": physical.M.tolist(), "K": physical.K.tolist(),
+                      "R": physical.R.tolist(), "rayleigh_alpha": alpha, "rayleigh_beta": beta}
+
+
 def run(args: argparse.Namespace) -> int:
     from identification.bagdata import DEFAULT_JITTER, Channel, read_record
     from identification.pipeline import identify
-    from identification.report import identification_document, modes_table
+    from identification.report import format_matrix, identification_document, modes_table
 
     progress = Progress(args.progress or sys.stderr.isatty())
     inputs = [Channel.parse(s) for s in args.inputs]
@@ -100,12 +130,20 @@ def run(args: argparse.Namespace) -> int:
 
         progress(f"writing plots to {args.plots}")
         identification_plots(ident, record, args.plots)
+    physical, physical_doc = _physical(args, ident)
     if args.save_model:
-        from identification.modelfile import save_model
+        from identification.model_file import model_from_identification, save_model
 
-        save_model(args.save_model, ident, record)
+        provenance = {"bag": str(args.bag), "inputs": [str(c) for c in record.inputs],
+                      "outputs": [str(c) for c in record.outputs], **record.preprocessing}
+        if physical is not None:
+            provenance |= {"mkr": {"dofs": args.mkr, "output": args.output_type},
+                           "rayleigh_alpha": physical_doc["rayleigh_alpha"],
+                           "rayleigh_beta": physical_doc["rayleigh_beta"]}
+        save_model(args.save_model, model_from_identification(
+            ident, provenance["inputs"], provenance["outputs"], provenance, physical))
         progress(f"model written to {args.save_model}")
-    doc = identification_document(ident, args.order == "auto")
+    doc = identification_document(ident, args.order == "auto") | physical_doc
     if args.json:
         emit_json(doc)
         return 0
@@ -116,4 +154,9 @@ def run(args: argparse.Namespace) -> int:
              else ""))
     print("outputs: " + ", ".join(f"y{i + 1} = {n}" for i, n in enumerate(names)))
     print(modes_table(ident.modes, [f"y{i + 1}" for i in range(len(names))]))
+    if physical is not None:
+        for key in ("M", "K", "R"):
+            print(f"{key} =\n{format_matrix(physical_doc[key])}")
+        print(f"Rayleigh fit of the modes: alpha = {physical_doc['rayleigh_alpha']:.6g} 1/s, "
+              f"beta = {physical_doc['rayleigh_beta']:.6g} s")
     return 0
