@@ -37,9 +37,8 @@ def true_modes() -> tuple[np.ndarray, np.ndarray]:
     return np.abs(lam) / (2 * np.pi), -lam.real / np.abs(lam)
 
 
-def simulate(samples: int, dt: float, seed: int = 0, noise: float = 0.0
-             ) -> tuple[np.ndarray, np.ndarray]:
-    """White-noise force on floor 1 (N) and the three floor accelerations (m/s^2)."""
+def discrete_model(dt: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """ZOH-sampled A, B, C, D from the floor-1 force to the three floor accelerations."""
     M, K, C = frame_matrices()
     Minv = np.linalg.inv(M)
     b = Minv @ np.array([1.0, 0.0, 0.0])
@@ -47,9 +46,16 @@ def simulate(samples: int, dt: float, seed: int = 0, noise: float = 0.0
     B = np.concatenate([np.zeros(3), b])[:, None]
     Cy = np.hstack([-Minv @ K, -Minv @ C])
     Ad, Bd, Cd, Dd, _ = signal.cont2discrete((A, B, Cy, b[:, None]), dt, method="zoh")
+    return Ad, Bd, Cd, Dd
+
+
+def simulate(samples: int, dt: float, seed: int = 0, noise: float = 0.0
+             ) -> tuple[np.ndarray, np.ndarray]:
+    """White-noise force on floor 1 (N) and the three floor accelerations (m/s^2), with
+    Gaussian sensor noise of ``noise`` times each output's RMS."""
     rng = np.random.default_rng(seed)
     force = rng.standard_normal(samples)
-    _, acc, _ = signal.dlsim((Ad, Bd, Cd, Dd, dt), force)
+    _, acc, _ = signal.dlsim((*discrete_model(dt), dt), force)
     if noise:
         acc = acc + noise * acc.std(axis=0) * rng.standard_normal(acc.shape)
     return force, acc
