@@ -8,6 +8,8 @@ sampling maps them exactly to the discrete poles, so noise-free data must give t
 
 from __future__ import annotations
 
+import contextlib
+import io
 import json
 import subprocess
 import sys
@@ -18,6 +20,7 @@ import pytest
 from rosbags.rosbag2 import StoragePlugin
 
 from identification.model_file import load_model
+from stillframe.cli import main
 from tests.identify_support import (
     FORCE_TOPIC,
     IMU_TOPICS,
@@ -172,12 +175,24 @@ def test_plots_are_written(noisy_bag: Path, tmp_path: Path) -> None:
 
 
 def refuse(bag: Path, *args: str) -> str:
-    result = stillframe("identify", str(bag), *args)
-    assert result.returncode == 2, (result.stdout, result.stderr)
-    assert "Traceback" not in result.stderr
-    lines = result.stderr.strip().splitlines()
-    assert len(lines) == 1, result.stderr
+    """Run the command in this process (the same ``main`` as ``python -m stillframe``; one
+    subprocess per refusal would only add interpreter start-ups)."""
+    err = io.StringIO()
+    with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
+        code = main(["identify", str(bag), *args])
+    assert code == 2, err.getvalue()
+    lines = err.getvalue().strip().splitlines()
+    assert len(lines) == 1, err.getvalue()
+    assert lines[0].startswith("stillframe identify: error: ")
     return lines[0]
+
+
+def test_refusal_through_the_process_exit_code(noisy_bag: Path) -> None:
+    result = stillframe("identify", str(noisy_bag), *CHANNELS, "--output", "/frame/floor9/imu")
+    assert result.returncode == 2
+    assert result.stderr.strip().splitlines() == [
+        f"stillframe identify: error: bag {noisy_bag} has no topic /frame/floor9/imu (topics: "
+        f"{', '.join(sorted([FORCE_TOPIC, *IMU_TOPICS]))})"]
 
 
 def test_refuses_missing_topic(noisy_bag: Path) -> None:
