@@ -163,3 +163,21 @@ def identification_plots(ident: Identification, record: Record, directory: str |
         mode_shapes(ident.modes.frequency_hz, ident.modes.damping_ratio, ident.modes.shapes,
                     names, out / "mode_shapes.png"),
     ]
+
+
+def mode_comparison(models: dict[str, list[dict[str, float]]], path: Path) -> Path:
+    """Frequency against damping ratio of each model's modes; marker size ~ peak contribution."""
+    fig, ax = plt.subplots(figsize=(8, 4.5))
+    for c, (label, modes) in enumerate(models.items()):
+        peaks = np.array([m["peak"] for m in modes])
+        sizes = 20 + 200 * peaks / peaks.max() if peaks.size else []
+        ax.scatter([m["frequency_hz"] for m in modes], [m["damping_ratio"] for m in modes],
+                   s=sizes, facecolors="none", edgecolors=f"C{c}", label=label)
+    ax.set_yscale("log")
+    ax.set_xlabel("frequency [Hz]")
+    ax.set_ylabel("damping ratio")
+    ax.set_title("Identified modes (marker size: resonance peak)")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    return _save(fig, path)

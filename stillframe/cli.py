@@ -18,6 +18,7 @@ COMMANDS: tuple[str, ...] = (
     "stillframe.commands.simulate",
     "stillframe.commands.bench",
     "stillframe.commands.identify",
+    "stillframe.commands.identify_daisy",
 )
 
 
