@@ -8,7 +8,9 @@ from __future__ import annotations
 import argparse
 import importlib
 
-BENCHES: tuple[str, ...] = ()
+BENCHES: tuple[str, ...] = (
+    "stillframe.commands.bench_identify",
+)
 
 
 def register(sub: argparse._SubParsersAction) -> None:
