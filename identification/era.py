@@ -61,7 +61,13 @@ class HankelFactorization:
     n_outputs: int
     n_columns: int
     alpha: int
+    beta: int
     correlated: bool
+
+    @property
+    def max_rank(self) -> int:
+        """The rank bound of ``H(0)``, ``min(alpha m, beta q)``, which also bounds ERA/DC."""
+        return min(self.alpha * self.n_outputs, self.beta * self.n_columns)
 
     @property
     def numerical_rank(self) -> int:
@@ -128,15 +134,18 @@ def factorize(markov: Array, dims: EraDimensions, correlated: bool) -> HankelFac
     left, s, right_t = np.linalg.svd(base, full_matrices=False)
     return HankelFactorization(
         left=left, singular_values=s, right_t=right_t, shifted=shifted, hankel0=h0,
-        D=markov[0].copy(), n_outputs=m, n_columns=q, alpha=dims.alpha, correlated=correlated,
+        D=markov[0].copy(), n_outputs=m, n_columns=q, alpha=dims.alpha, beta=dims.beta,
+        correlated=correlated,
     )
 
 
 def auto_order(singular_values: Array, max_order: int) -> tuple[int, float]:
     """Order at the largest relative gap ``sigma_n / sigma_{n+1}`` for n in 1..max_order.
 
-    Singular values below the numerical rank tolerance are not candidates. Returns the order and
-    the gap (the ratio).
+    Singular values below the rank tolerance count as the tolerance (so noise-free data give a
+    finite gap at their exact order). Keep ``max_order`` well below the Hankel matrix's size
+    (:attr:`HankelFactorization.max_rank`): noisy singular values fall to numerical zero there,
+    which is no model order. Returns the order and the gap.
     """
     s = np.asarray(singular_values, dtype=float)
     if s.size < 2 or s[0] <= 0:

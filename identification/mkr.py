@@ -59,6 +59,10 @@ def _check_layout(sensor_dofs: Sequence[int], actuator_dofs: Sequence[int], orde
         raise InputError(f"{len(sensor_dofs)} sensor DOFs given for a model with {m} outputs")
     if len(actuator_dofs) != r:
         raise InputError(f"{len(actuator_dofs)} actuator DOFs given for a model with {r} inputs")
+    if len(set(sensor_dofs)) != m:
+        raise InputError("MKR needs one sensor per DOF at most (two sensors share a DOF)")
+    if len(set(actuator_dofs)) != r:
+        raise InputError("MKR needs one actuator per DOF at most (two actuators share a DOF)")
     dofs = set(sensor_dofs) | set(actuator_dofs)
     n_dof = len(dofs)
     if dofs != set(range(n_dof)):
@@ -69,10 +73,6 @@ def _check_layout(sensor_dofs: Sequence[int], actuator_dofs: Sequence[int], orde
             f"MKR needs every DOF instrumented: model order {order} means {order // 2} DOFs but "
             f"sensors and actuators cover {n_dof}"
         )
-    if len(set(sensor_dofs)) != m:
-        raise InputError("MKR needs one sensor per DOF at most (two sensors share a DOF)")
-    if len(set(actuator_dofs)) != r:
-        raise InputError("MKR needs one actuator per DOF at most (two actuators share a DOF)")
     if not set(sensor_dofs) & set(actuator_dofs):
         raise InputError("MKR needs at least one co-located sensor-actuator pair")
     return n_dof

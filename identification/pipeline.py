@@ -5,8 +5,12 @@ Methods (thesis ch. 3):
 - ``okid-era``: OKID observer Markov parameters (eq. 3.106), system Markov parameters (eq. 3.107),
   ERA (eq. 3.137), observer gain G by least squares from the observer gain Markov parameters
   (eqs. 3.108, 3.112);
-- ``okid-eradc``: OKID, then ERA/DC on the combined parameters ``[Y_k, Y^0_k]`` giving A, B, C and
-  G together (eqs. 3.165–3.203) — the thesis's method for the rig (§5.5);
+- ``okid-eradc``: the same with ERA/DC (eq. 3.164) in place of ERA.
+
+With ``combined=True`` the OKID methods realize the combined parameters ``[Y_k, Y^0_k]`` instead
+(eqs. 3.165–3.203, the thesis's variant for the rig in §5.5), which gives B and G together; on the
+simulated hammer test its damping ratios are worse (docs/identification.md), so it is not the
+default.
 - ``era-impulse``: the record is the response to one pulse on a single input at the first
   sample; ``Y_k = y(k) / u(0)`` and ERA. No observer gain.
 """
@@ -97,15 +101,18 @@ def identify(
     delta: int = 2,
     tau: int = 1,
     reference_sensor: int | None = None,
+    combined: bool = False,
 ) -> Identification:
     """Identify a discrete state-space model of order ``order`` (or the largest singular-value
-    gap up to ``max_order`` when ``"auto"``) from inputs ``u (N, r)`` and outputs ``y (N, m)``.
+    gap up to ``max_order`` when ``"auto"``; default: half the Hankel matrix's rank bound)
+    from inputs ``u (N, r)`` and outputs ``y (N, m)``.
 
     ``observer_order`` is OKID's p (default 20, lowered to what the record allows); ``alpha`` and
     ``beta`` are the Hankel block rows and columns (defaults: p and 4 p; for era-impulse, as many
     as the record allows up to 50 and 200); ``gamma``, ``delta``, ``tau`` are the ERA/DC
     correlation sizes (eq. 3.141). ``reference_sensor`` normalises the mode shapes (default: the
-    largest component). Raises :class:`InputError` on bad input or a record too short.
+    largest component). ``combined`` realizes ``[Y_k, Y^0_k]`` (eq. 3.165) for the OKID methods.
+    Raises :class:`InputError` on bad input or a record too short.
     """
     u = _as_record("input", u)
     y = _as_record("output", y)
@@ -117,6 +124,8 @@ def identify(
         raise InputError(f"unknown method {method!r}; choose one of {', '.join(METHODS)}")
     if order != "auto" and (isinstance(order, bool) or not isinstance(order, int) or order < 1):
         raise InputError(f"order must be a positive integer or 'auto', got {order!r}")
+    if combined and method == "era-impulse":
+        raise InputError("combined realization needs OKID's observer gain: not with era-impulse")
     n_samples, r = u.shape
     m = y.shape[1]
     needed_order = order if isinstance(order, int) else 2
@@ -161,22 +170,22 @@ def identify(
         count = dims.markov_count(correlated)
         markov = fit.system_markov(count)
         gain_markov = fit.observer_gain_markov(max(count, p + 1))
-        params = np.concatenate([markov, gain_markov[:count]], axis=2) if correlated else markov
+        params = np.concatenate([markov, gain_markov[:count]], axis=2) if combined else markov
         fac = factorize(params, dims, correlated=correlated)
 
     s = fac.singular_values
     if order == "auto":
-        limit = min(max_order or fac.numerical_rank, fac.numerical_rank)
+        limit = max_order or fac.max_rank // 2
         chosen, gap = auto_order(s, limit)
     else:
         chosen, gap = order, order_gap(s, order)
     real = fac.realize(chosen)
-    if method == "okid-eradc":
-        B, G = real.B[:, :r], real.B[:, r:]
-    elif method == "okid-era":
-        B, G = real.B, observer_gain(real.A, real.C, gain_markov[: p + 1])
-    else:
+    if method == "era-impulse":
         B, G = real.B, None
+    elif combined:
+        B, G = real.B[:, :r], real.B[:, r:]  # eqs. 3.198, 3.199
+    else:
+        B, G = real.B, observer_gain(real.A, real.C, gain_markov[: p + 1])
     return Identification(
         A=real.A, B=B, C=real.C, D=real.D[:, :r], G=G, dt=float(dt), order=chosen, order_gap=gap,
         hankel_singular_values=s, markov=markov, method=method, observer_order=p,
