@@ -73,22 +73,29 @@ def test_noise_free_bag_gives_the_exact_modes(clean_bag: Path) -> None:
     np.testing.assert_allclose(got_z, zeta, rtol=1e-4)
 
 
-@pytest.mark.parametrize("method", ["okid-era", "okid-eradc"])
-def test_noisy_bag_recovers_frequencies(noisy_bag: Path, method: str) -> None:
-    """2 % noise: frequencies within 0.5 %, damping ratios within 25 % (the issue's hammer-test
-    tolerances are 0.5 % and 10 %; damping from 2048 noisy samples is the weaker estimate)."""
-    doc = identify_json(noisy_bag, "--order", "6", "--method", method)
+@pytest.mark.parametrize(("options", "damping_tol"), [
+    (("--method", "okid-era"), 0.1),
+    (("--method", "okid-eradc"), 0.1),
+    (("--method", "okid-eradc", "--combined"), 0.2),
+])
+def test_noisy_bag_recovers_frequencies(noisy_bag: Path, options: tuple[str, ...],
+                                        damping_tol: float) -> None:
+    """2 % noise: frequencies within 0.5 %, damping ratios within 10 % (the issue's hammer-test
+    tolerances); the combined [Y, Y0] realization's damping is the weaker estimate (measured
+    15 % off on the first mode), so it gets 20 %."""
+    doc = identify_json(noisy_bag, "--order", "6", *options)
     freq, zeta = true_modes()
     got_f = np.array([m["frequency_hz"] for m in doc["modes"]])
     got_z = np.array([m["damping_ratio"] for m in doc["modes"]])
     np.testing.assert_allclose(got_f, freq, rtol=5e-3)
-    np.testing.assert_allclose(got_z, zeta, rtol=0.25)
+    np.testing.assert_allclose(got_z, zeta, rtol=damping_tol)
 
 
-def test_json_schema(noisy_bag: Path) -> None:
-    doc = identify_json(noisy_bag, "--order", "auto", "--method", "okid-era")
+@pytest.mark.parametrize("method", ["okid-era", "okid-eradc"])
+def test_json_schema_and_auto_order(noisy_bag: Path, method: str) -> None:
+    doc = identify_json(noisy_bag, "--order", "auto", "--method", method)
     assert {"order", "dt", "modes", "hankel_singular_values", "method"} <= doc.keys()
-    assert doc["method"] == "okid-era"
+    assert doc["method"] == method
     assert doc["dt"] == pytest.approx(DT, rel=1e-9)
     assert doc["order"] == 6  # three modes: the largest Hankel singular-value gap
     assert doc["order_selection"]["gap"] > 10

@@ -2,7 +2,7 @@
 beside N4SID (nfoursid, a second implementation) on the same split.
 
 Floors measured on this record (stillframe identify-daisy): mean validation fit N4SID 38.8 %,
-OKID + ERA 15.1 %, OKID + ERA/DC 7.4 %; the three most dominant N4SID modes (229.1, 417.5,
+OKID + ERA 15.1 %, OKID + ERA/DC 14.7 %; the three most dominant N4SID modes (229.1, 417.5,
 239.0 Hz) are found by both OKID models within 1.2 %. The floors below sit under those values
 with margin for BLAS differences; an OKID that went unstable or lost a mode would fail them.
 """
@@ -47,7 +47,7 @@ def test_validation_fit_floors(report: tuple[dict, Path]) -> None:
     assert methods["n4sid"]["mean_fit_percent"] > 30.0
     assert min(methods["n4sid"]["fit_percent"]) > 25.0
     assert methods["okid-era"]["mean_fit_percent"] > 10.0
-    assert methods["okid-eradc"]["mean_fit_percent"] > 3.0
+    assert methods["okid-eradc"]["mean_fit_percent"] > 10.0
 
 
 def test_dominant_frequencies_agree(report: tuple[dict, Path]) -> None:

@@ -48,6 +48,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                         help="largest order that --order auto may choose")
     parser.add_argument("--observer-order", type=int, default=None, metavar="P",
                         help="OKID observer order p (default 20, lowered for short records)")
+    parser.add_argument("--combined", action="store_true",
+                        help="OKID methods: realize [Y_k, Y0_k] together, giving B and the "
+                        "observer gain at once (thesis eqs. 3.165-3.203)")
     parser.add_argument("--detrend", action="store_true", help="remove a linear trend first")
     parser.add_argument("--lowpass", type=float, default=None, metavar="HZ",
                         help="zero-phase Butterworth low-pass on inputs and outputs")
@@ -123,7 +126,8 @@ def run(args: argparse.Namespace) -> int:
                          lowpass_hz=args.lowpass, decimate=args.decimate, max_jitter=jitter)
     progress(f"{record.samples} samples at {1 / record.dt:g} Hz; identifying ({args.method})")
     ident = identify(record.u, record.y, record.dt, args.method, args.order,
-                     observer_order=args.observer_order, max_order=args.max_order)
+                     observer_order=args.observer_order, max_order=args.max_order,
+                     combined=args.combined)
     progress(f"order {ident.order}, {len(ident.modes)} modes")
     if args.plots:
         from identification.plots import identification_plots
