@@ -26,6 +26,14 @@ def _save(fig: plt.Figure, path: Path) -> Path:
     return path
 
 
+def _channel_key(fig: plt.Figure, entries: list[str]) -> None:
+    """Lay the figure out, leaving a strip at the bottom that says which channel is which."""
+    rows = (len(entries) + 1) // 2
+    fig.tight_layout(rect=(0, 0.02 + 0.025 * rows, 1, 1))
+    for k, entry in enumerate(entries):
+        fig.text(0.01 + 0.5 * (k % 2), 0.01 + 0.025 * (rows - 1 - k // 2), entry, fontsize=7)
+
+
 def hankel_singular_values(singular_values: np.ndarray, order: int, path: Path,
                            title: str = "Hankel singular values") -> Path:
     """Normalised singular values on a log scale, the chosen order marked."""
@@ -92,10 +100,8 @@ def frf(freq_hz: np.ndarray, h1: np.ndarray, coherence: np.ndarray, model: np.nd
     axes[1, 0].set_ylabel("phase [deg]")
     axes[2, 0].set_ylabel("coherence")
     axes[0, 0].legend(fontsize=8)
-    legend = [f"u{j + 1} = {n}" for j, n in enumerate(input_names)]
-    legend += [f"y{i + 1} = {n}" for i, n in enumerate(output_names)]
-    fig.tight_layout(rect=(0, 0.03 * len(legend) ** 0.5, 1, 1))
-    fig.text(0.01, 0.005, "    ".join(legend), fontsize=7, wrap=True)
+    _channel_key(fig, [*(f"u{j + 1} = {n}" for j, n in enumerate(input_names)),
+                       *(f"y{i + 1} = {n}" for i, n in enumerate(output_names))])
     return _save(fig, path)
 
 
@@ -112,13 +118,13 @@ def mode_shapes(frequency_hz: np.ndarray, damping_ratio: np.ndarray, shapes: np.
         ph.bar(x, np.degrees(np.angle(shapes[:, k])), color="C1")
         mag.set_title(f"{frequency_hz[k]:.4g} Hz, ζ {damping_ratio[k]:.3g}", fontsize=9)
         ph.set_ylim(-185, 185)
-        ph.set_xticks(x, list(output_names), rotation=90, fontsize=7)
+        ph.set_xticks(x, [f"y{i + 1}" for i in x])
         mag.set_xticks(x, [])
         for ax in (mag, ph):
             ax.grid(True, alpha=0.3)
     axes[0, 0].set_ylabel("magnitude (normalised)")
     axes[1, 0].set_ylabel("phase [deg]")
-    fig.tight_layout()
+    _channel_key(fig, [f"y{i + 1} = {n}" for i, n in enumerate(output_names)])
     return _save(fig, path)
 
 
