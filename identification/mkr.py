@@ -128,4 +128,8 @@ def mkr(A: Array, B: Array, C: Array, dt: float, sensor_dofs: Sequence[int],
             raise InputError(f"MKR gave a complex {name} matrix: the model does not satisfy its "
                              "conditions (check sensor/actuator DOFs and output type)")
         out.append(0.5 * (mat.real + mat.real.T))
+    if np.any(np.linalg.eigvalsh(out[0]) <= 0):
+        raise InputError("MKR gave a mass matrix that is not positive definite: check the sign of "
+                         "the inputs against the outputs (a force measured with the opposite "
+                         "sign negates M, K and R)")
     return PhysicalModel(M=out[0], K=out[1], R=out[2])

@@ -95,9 +95,10 @@ def load_model(path: str | Path) -> IdentifiedModel:
     """Read and validate a model file; any defect raises :class:`InputError` naming it."""
     name = str(path)
     try:
-        with np.load(path, allow_pickle=False) as archive:
-            if not isinstance(archive, np.lib.npyio.NpzFile):
-                raise InputError(f"{name}: not a .npz model file")
+        archive = np.load(path, allow_pickle=False)
+        if not isinstance(archive, np.lib.npyio.NpzFile):
+            raise InputError(f"{name}: not a .npz model file (a single array)")
+        with archive:
             data = {key: archive[key] for key in archive.files}
     except FileNotFoundError:
         raise InputError(f"{name}: model file not found") from None

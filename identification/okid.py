@@ -90,7 +90,6 @@ def okid(u: Array, y: Array, observer_order: int) -> OkidResult:
             f"{m} outputs (needs at least {minimum_samples(r, m, p)})"
         )
     v = np.hstack([u, y])
-    cols = n - p
     rows = [u[p:]]
     for j in range(1, p + 1):
         rows.append(v[p - j : n - j])
@@ -107,7 +106,7 @@ def okid(u: Array, y: Array, observer_order: int) -> OkidResult:
     return OkidResult(
         observer_markov=observer_markov,
         observer_order=p,
-        residual_rms=np.sqrt(np.mean(residual**2, axis=0)) if cols else np.zeros(m),
+        residual_rms=np.sqrt(np.mean(residual**2, axis=0)),
     )
 
 

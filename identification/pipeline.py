@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from numbers import Integral, Real
 from typing import Literal
 
 import numpy as np
@@ -118,12 +119,14 @@ def identify(
     y = _as_record("output", y)
     if u.shape[0] != y.shape[0]:
         raise InputError(f"input has {u.shape[0]} samples but output has {y.shape[0]}")
-    if not (isinstance(dt, int | float) and math.isfinite(dt) and dt > 0):
+    if isinstance(dt, bool) or not (isinstance(dt, Real) and math.isfinite(dt) and dt > 0):
         raise InputError(f"sampling interval dt must be a positive number, got {dt!r}")
     if method not in METHODS:
         raise InputError(f"unknown method {method!r}; choose one of {', '.join(METHODS)}")
-    if order != "auto" and (isinstance(order, bool) or not isinstance(order, int) or order < 1):
-        raise InputError(f"order must be a positive integer or 'auto', got {order!r}")
+    if order != "auto":
+        if isinstance(order, bool) or not isinstance(order, Integral) or order < 1:
+            raise InputError(f"order must be a positive integer or 'auto', got {order!r}")
+        order = int(order)
     if combined and method == "era-impulse":
         raise InputError("combined realization needs OKID's observer gain: not with era-impulse")
     n_samples, r = u.shape
@@ -180,6 +183,7 @@ def identify(
     else:
         chosen, gap = order, order_gap(s, order)
     real = fac.realize(chosen)
+    D = real.D[:, :r]  # the combined parameters' Gamma_0 is [D, 0]
     if method == "era-impulse":
         B, G = real.B, None
     elif combined:
@@ -187,7 +191,7 @@ def identify(
     else:
         B, G = real.B, observer_gain(real.A, real.C, gain_markov[: p + 1])
     return Identification(
-        A=real.A, B=B, C=real.C, D=real.D[:, :r], G=G, dt=float(dt), order=chosen, order_gap=gap,
+        A=real.A, B=B, C=real.C, D=D, G=G, dt=float(dt), order=chosen, order_gap=gap,
         hankel_singular_values=s, markov=markov, method=method, observer_order=p,
         dimensions=dims, factorization=fac,
         modes=modal_parameters(real.A, real.C, float(dt), reference=reference_sensor),

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import numpy as np
+
+from stillframe.errors import InputError
 from stillframe.models.damping import damping_matrix
 from stillframe.models.frame import INPUT_NAMES, FrameModel, LinearModel
 from stillframe.models.structure import (
@@ -26,7 +29,17 @@ def build_structure(scene: Section) -> Structure:
     return craig_bampton(full, model.modes)
 
 
+MAX_MASS_CONDITION = 1e12
+
+
 def build_model(scene: Section) -> FrameModel:
     """Structure + damping + pendulum, as the scene's ``model`` and ``damping`` sections say."""
     structure = build_structure(scene)
+    condition = np.linalg.cond(structure.mass)
+    if condition > MAX_MASS_CONDITION:
+        raise InputError(
+            f"rig.columns.density: {scene.rig.columns.density:g} leaves the {structure.name} "
+            f"mass matrix singular or nearly so (condition number {condition:.2g}); use "
+            "model.type: lumped for massless columns, or a larger density"
+        )
     return FrameModel(structure.with_damping(damping_matrix(structure, scene.damping)), scene.rig)
