@@ -153,19 +153,25 @@ def read_series(bag: str | Path, channels: Sequence[Channel]) -> list[Series]:
     except (AnyReaderError, OSError) as exc:
         raise InputError(f"bag {bag}: cannot be read as a rosbag2 bag ({exc})") from None
     try:
-        by_topic = {c.topic: c for c in reader.connections}
-        missing = sorted({ch.topic for ch in channels} - by_topic.keys())
+        types: dict[str, set[str]] = {}
+        for c in reader.connections:
+            types.setdefault(c.topic, set()).add(c.msgtype)
+        missing = sorted({ch.topic for ch in channels} - types.keys())
         if missing:
             raise InputError(f"bag {bag} has no topic {', '.join(missing)} "
-                             f"(topics: {', '.join(sorted(by_topic)) or 'none'})")
+                             f"(topics: {', '.join(sorted(types)) or 'none'})")
         resolved = []
         for ch in channels:
-            msgtype = by_topic[ch.topic].msgtype
+            if len(types[ch.topic]) > 1:
+                raise InputError(f"topic {ch.topic} carries several types in bag {bag}: "
+                                 f"{', '.join(sorted(types[ch.topic]))}")
+            (msgtype,) = types[ch.topic]
             full = Channel(ch.topic, ch.field or _default_field(ch.topic, msgtype))
             resolved.append((full, _split_path(full.field, str(full)), msgtype))
-        wanted = [by_topic[t] for t in dict.fromkeys(ch.topic for ch in channels)]
-        stamps: dict[str, list[int | None]] = {c.topic: [] for c in wanted}
-        logtimes: dict[str, list[int]] = {c.topic: [] for c in wanted}
+        topics = {ch.topic for ch in channels}
+        wanted = [c for c in reader.connections if c.topic in topics]
+        stamps: dict[str, list[int | None]] = {t: [] for t in topics}
+        logtimes: dict[str, list[int]] = {t: [] for t in topics}
         values: list[list[float]] = [[] for _ in resolved]
         for connection, logtime, raw in reader.messages(connections=wanted):
             msg = reader.deserialize(raw, connection.msgtype)

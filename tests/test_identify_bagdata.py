@@ -117,3 +117,36 @@ def test_preprocessing_limits_are_refused() -> None:
         preprocess(data, DT, lowpass_hz=20.0)
     with pytest.raises(InputError, match="--decimate 0"):
         preprocess(data, DT, decimate=0)
+
+
+def test_one_topic_on_two_connections_is_merged(tmp_path: Path) -> None:
+    """A topic recorded from two connections (two publishers, or two QoS offers in a
+    ``ros2 bag record`` MCAP): samples are merged by stamp."""
+    from rosbags.interfaces import (
+        Qos,
+        QosDurability,
+        QosHistory,
+        QosLiveliness,
+        QosReliability,
+        QosTime,
+    )
+
+    from tests.identify_support import imu_message
+
+    def qos(reliability: QosReliability) -> Qos:
+        never = QosTime(0, 0)
+        return Qos(QosHistory.KEEP_LAST, 5, reliability, QosDurability.VOLATILE, never, never,
+                   QosLiveliness.AUTOMATIC, never, False)
+
+    values = np.cos(np.arange(40) * 0.2)
+    path = tmp_path / "bag"
+    with Writer(path, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+        conns = [writer.add_connection("/frame/floor1/imu", "sensor_msgs/msg/Imu",
+                                       typestore=TYPESTORE, offered_qos_profiles=[qos(rel)])
+                 for rel in (QosReliability.BEST_EFFORT, QosReliability.RELIABLE)]
+        for k, v in enumerate(values):
+            ns = 10**9 + k * 10_000_000
+            writer.write(conns[k % 2], ns, TYPESTORE.serialize_cdr(imu_message(ns, float(v)),
+                                                                   "sensor_msgs/msg/Imu"))
+    (series,) = read_series(path, [Channel.parse("/frame/floor1/imu")])
+    np.testing.assert_array_equal(series.values, values)
