@@ -9,11 +9,14 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+from typing import TYPE_CHECKING, Any
 
 from stillframe.commands.common import add_json_argument, emit_json
 from stillframe.errors import InputError
 
-METHODS = ("okid-era", "okid-eradc", "era-impulse")
+if TYPE_CHECKING:
+    from identification.mkr import PhysicalModel
+    from identification.pipeline import Identification
 
 
 def _order(text: str) -> int | str:
@@ -30,11 +33,13 @@ def _order(text: str) -> int | str:
 
 
 def register(sub: argparse._SubParsersAction) -> None:
+    from identification.pipeline import METHODS
+
     parser = sub.add_parser(
         "identify", help="identify a state-space model and its modes from a rosbag2 bag",
         description="Identify a discrete state-space model (OKID + ERA or ERA/DC) and its modes "
                     "from input and output channels recorded in a rosbag2 bag.")
-    parser.add_argument("bag", metavar="BAG", help="rosbag2 bag directory (or .mcap/.db3 file)")
+    parser.add_argument("bag", metavar="BAG", help="rosbag2 bag directory (or a lone .mcap file)")
     parser.add_argument("--input", dest="inputs", action="append", default=[],
                         metavar="TOPIC[:FIELD]", help="input channel (repeatable), e.g. "
                         "/frame/excitation/wrench:wrench.force.x")
@@ -93,7 +98,8 @@ def _dofs(text: str, what: str) -> list[int]:
                          ) from None
 
 
-def _physical(args: argparse.Namespace, ident):  # -> (PhysicalModel, dict) | (None, {})
+def _physical(args: argparse.Namespace, ident: Identification
+              ) -> tuple[PhysicalModel | None, dict[str, Any]]:
     """MKR matrices and the least-squares Rayleigh α, β of the identified modes (eq. 3.213)."""
     if args.mkr is None:
         return None, {}
