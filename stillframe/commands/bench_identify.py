@@ -1,15 +1,14 @@
 """``stillframe bench identify``: OKID + ERA/DC against python-control's ``markov`` + ``era``.
 
-Data: the thesis's identification set-up (§5.5) simulated with the lumped model of
-``scenes/thesis_lumped.yaml`` linearised at rest, sampled exactly (ZOH) at 32 Hz: 2048 samples of
-a white-noise force on floor 1 and the three floor accelerations with 2 % sensor noise (of each
-output's RMS), one fixed seed. Both methods get the same arrays and the same order (6, the
-thesis's); python-control estimates 256 Markov parameters by plain least squares (its ``markov``
-assumes C A^k B = 0 beyond them; 8 s, where the 2 Hz mode has decayed to about 2 %).
-Accuracy: relative frequency and damping errors against the model's eigenvalues for the three
-structural modes the thesis identifies (its pendulum mode, 1.1 Hz with ζ 0.12, is barely
-observable from floor accelerations and neither method is asked for it). Times are the best of
-``--repeat`` runs; the ratio is python-control's time over ours.
+Data: the thesis's hammer test (§5.5) on the lumped model of ``scenes/thesis_lumped.yaml``,
+as :func:`identification.hammer.hammer_test` simulates it: a blow on floor 1, the three floor
+accelerations, 32 Hz, 2048 samples, sensor noise, one fixed seed. Both methods get the same
+arrays and the same order (6, the thesis's); python-control estimates 256 Markov parameters by
+plain least squares (its ``markov`` assumes C A^k B = 0 beyond them; 8 s, where the 2 Hz mode has
+decayed to about 2 %). Accuracy: relative frequency and damping errors against the model's
+eigenvalues for the three structural modes the thesis identifies (its pendulum mode, 1.1 Hz with
+ζ 0.12, is barely observable from floor accelerations and neither method is asked for it).
+Times are the best of ``--repeat`` runs; the ratio is python-control's time over ours.
 """
 
 from __future__ import annotations
@@ -17,18 +16,13 @@ from __future__ import annotations
 import argparse
 import time
 from collections.abc import Callable
-from pathlib import Path
 
 import numpy as np
 
 from stillframe.commands.common import add_json_argument, emit_json, format_table
 
-SAMPLES = 2048
-DT = 1 / 32
 ORDER = 6
 MARKOV_COUNT = 256
-NOISE = 0.02
-SCENE = Path(__file__).resolve().parents[2] / "scenes" / "thesis_lumped.yaml"
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -37,28 +31,6 @@ def register(sub: argparse._SubParsersAction) -> None:
     parser.add_argument("--seed", type=int, default=0)
     add_json_argument(parser)
     parser.set_defaults(func=run)
-
-
-def hammer_data(seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Force (N, 1), accelerations (N, 3), true frequencies [Hz] and damping ratios."""
-    from scipy import signal
-
-    from stillframe.models import build_model
-    from stillframe.scene import load_scene
-
-    model = build_model(load_scene(SCENE))
-    A, B = model.linearized().state_space()
-    rows = model.n_dof + np.asarray(model.floor_index)
-    C, D = A[rows], B[rows][:, :1]
-    lam = np.linalg.eigvals(A)
-    lam = lam[lam.imag > 0]
-    lam = lam[np.argsort(np.abs(lam))]
-    discrete = signal.cont2discrete((A, B[:, :1], C, D), DT, method="zoh")[:4]
-    rng = np.random.default_rng(seed)
-    u = rng.standard_normal((SAMPLES, 1))
-    _, y, _ = signal.dlsim((*discrete, DT), u)
-    y = y + NOISE * y.std(axis=0) * rng.standard_normal(y.shape)
-    return u, y, np.abs(lam) / (2 * np.pi), -lam.real / np.abs(lam)
 
 
 def best_time(fn: Callable[[], np.ndarray], repeat: int) -> tuple[float, np.ndarray]:
@@ -70,11 +42,12 @@ def best_time(fn: Callable[[], np.ndarray], repeat: int) -> tuple[float, np.ndar
     return min(times), out
 
 
-def errors(A: np.ndarray, C: np.ndarray, freq: np.ndarray, zeta: np.ndarray) -> dict:
+def errors(A: np.ndarray, C: np.ndarray, dt: float, freq: np.ndarray, zeta: np.ndarray
+           ) -> dict:
     """Nearest identified mode to each true one: frequency and damping, relative errors."""
     from identification.modal import modal_parameters
 
-    modes = modal_parameters(A, C, DT)
+    modes = modal_parameters(A, C, dt)
     idx = [int(np.argmin(np.abs(modes.frequency_hz - f))) for f in freq]
     got_f, got_z = modes.frequency_hz[idx], modes.damping_ratio[idx]
     return {"frequency_hz": got_f.tolist(), "damping_ratio": got_z.tolist(),
@@ -85,34 +58,39 @@ def errors(A: np.ndarray, C: np.ndarray, freq: np.ndarray, zeta: np.ndarray) -> 
 def run(args: argparse.Namespace) -> int:
     import control
 
+    from identification.hammer import SCENE, hammer_test
     from identification.pipeline import identify
+    from stillframe.models import build_model
+    from stillframe.scene import load_scene
 
-    u, y, freq, zeta = hammer_data(args.seed)
-    freq, zeta = freq[1:], zeta[1:]  # the three structural modes (see the module docstring)
+    record = hammer_test(build_model(load_scene(SCENE)).linearized(), seed=args.seed)
+    u, y, dt = record.u, record.y, record.dt
+    # the three structural modes (see the module docstring)
+    freq, zeta = record.frequency_hz[1:], record.damping_ratio[1:]
 
     def ours() -> tuple[np.ndarray, np.ndarray]:
-        ident = identify(u, y, DT, "okid-eradc", ORDER)
+        ident = identify(u, y, dt, "okid-eradc", ORDER)
         return ident.A, ident.C
 
     def theirs() -> tuple[np.ndarray, np.ndarray]:
         markov = control.markov(y.T, u.T, MARKOV_COUNT)
-        sys, _ = control.eigensys_realization(markov, ORDER, dt=DT)
+        sys, _ = control.eigensys_realization(markov, ORDER, dt=dt)
         return sys.A, sys.C
 
     t_ours, (A1, C1) = best_time(ours, args.repeat)
     t_theirs, (A2, C2) = best_time(theirs, args.repeat)
     doc = {
-        "samples": SAMPLES, "outputs": 3, "dt": DT, "order": ORDER, "noise": NOISE,
+        "samples": len(u), "outputs": y.shape[1], "dt": dt, "order": ORDER,
         "true": {"frequency_hz": freq.tolist(), "damping_ratio": zeta.tolist()},
-        "okid_eradc": {"seconds": t_ours, **errors(A1, C1, freq, zeta)},
+        "okid_eradc": {"seconds": t_ours, **errors(A1, C1, dt, freq, zeta)},
         "python_control": {"seconds": t_theirs, "markov_parameters": MARKOV_COUNT,
-                           **errors(A2, C2, freq, zeta)},
+                           **errors(A2, C2, dt, freq, zeta)},
         "time_ratio_python_control_over_ours": t_theirs / t_ours,
     }
     if args.json:
         emit_json(doc)
         return 0
-    print(f"{SAMPLES} samples x 3 outputs at {1 / DT:g} Hz, {NOISE:.0%} sensor noise, order "
+    print(f"hammer test: {len(u)} samples x {y.shape[1]} outputs at {1 / dt:g} Hz, order "
           f"{ORDER}; best of {args.repeat} runs")
     rows = []
     for label, key in (("OKID + ERA/DC (ours)", "okid_eradc"),
