@@ -21,6 +21,8 @@ COMMANDS: tuple[str, ...] = (
     "stillframe.commands.bag",
     "stillframe.commands.record",
     "stillframe.commands.play",
+    "stillframe.commands.identify",
+    "stillframe.commands.identify_daisy",
 )
 
 

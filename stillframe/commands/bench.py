@@ -8,7 +8,10 @@ from __future__ import annotations
 import argparse
 import importlib
 
-BENCHES: tuple[str, ...] = ("stillframe.commands.bench_transport",)
+BENCHES: tuple[str, ...] = (
+    "stillframe.commands.bench_transport",
+    "stillframe.commands.bench_identify",
+)
 
 
 def register(sub: argparse._SubParsersAction) -> None:
