@@ -17,7 +17,7 @@ from stillframe.signals import Estimate, Sample
 
 @dataclass
 class Counters:
-    """For ``/diagnostics``: samples used, rejected (stale, non-finite channel), channels missing."""
+    """For ``/diagnostics``: samples used, rejected (stale, non-finite), channels missing."""
 
     updates: int = 0
     stale: int = 0

@@ -87,7 +87,7 @@ class Plant:
         return Sample(t, readings, force, truth=self.physical())
 
     def advance(self, command: np.ndarray) -> np.ndarray:
-        """Apply [torque, floor-3 force] through the actuators for one period; the applied values."""
+        """Apply [torque, floor-3 force] via the actuators for one period; the applied values."""
         applied = self.actuators.apply(command)
         self.system.control = np.array([0.0, 0.0, applied[1], applied[0]])
         t0 = self.t

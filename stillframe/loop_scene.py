@@ -111,4 +111,4 @@ def check_loop(scene: Section) -> None:
     if c.type == "lqg" and scene.estimator.type == "ekf":
         raise InputError("estimator.type: LQG works on a linear model; use kf, tvkf or truth")
     if c.type != "none" and scene.estimator.type == "none":
-        raise InputError(f"estimator.type: controller {c.type} needs a state (kf, tvkf, ekf, truth)")
+        raise InputError(f"estimator.type: {c.type} needs a state (kf, tvkf, ekf or truth)")
