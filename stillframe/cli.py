@@ -17,6 +17,7 @@ COMMANDS: tuple[str, ...] = (
     "stillframe.commands.modes",
     "stillframe.commands.simulate",
     "stillframe.commands.bench",
+    "stillframe.commands.closed_loop",
 )
 
 
