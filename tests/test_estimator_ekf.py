@@ -16,7 +16,7 @@ from stillframe.integrators import reference_solution
 from stillframe.models import build_model
 from stillframe.signals import full_inputs
 from stillframe.systems import MechanicalSystem
-from tests.loop_helpers import lumped_scene, sample, thesis_scene
+from tests.loop_helpers import lumped_scene, thesis_scene
 
 PERIOD = 1.0 / 32
 STATE = np.array([1e-3, 2e-3, -1e-3, 0.6, 0.02, -0.01, 0.03, 1.5])  # a large pendulum swing
