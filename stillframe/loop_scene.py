@@ -45,9 +45,10 @@ LOOP_SCHEMA: dict[str, Any] = {
         "force_rate_limit": _limit("floor-3 force slew limit [N/s]"),
     },
     "design": {
-        "model": Field(str, "scene", choices=("scene", "file"), doc=(
-            "model of the estimator and controller: the scene's model, or the identified "
-            "structure of design.file with the rig's pendulum (eq. 5.200–5.205)")),
+        "model": Field(str, "scene", choices=("scene", "lumped", "file"), doc=(
+            "model of the estimator and controller: the scene's model, the lumped model of the "
+            "scene's rig, or the identified structure of design.file with the rig's pendulum "
+            "(eq. 5.200–5.205)")),
         "file": Field(str, "thesis_mkr", doc="identified model: a bundled name or a path"),
     },
     "estimator": {

@@ -14,7 +14,7 @@ from sim_node.actuators import Actuator
 from sim_node.plant import Plant
 from sim_node.sensors import quantise
 from stillframe.closed_loop import run_closed_loop
-from stillframe.models.identified import identified_frame
+from stillframe.models.identified import frame_for, identified_frame
 from tests.loop_helpers import ROOT, lumped_scene, thesis_scene
 
 
@@ -115,3 +115,11 @@ def test_command_prints_json_and_rejects_bad_input() -> None:
     wrong = subprocess.run([*run, "--set", "evaluation.window=30"], cwd=ROOT,
                            capture_output=True, text=True)
     assert wrong.returncode == 2 and "evaluation.window" in wrong.stderr
+
+
+def test_lumped_design_of_an_fe_scene_is_the_lumped_model() -> None:
+    fe = lumped_scene(["model.type=fe", "damping.model=modal"])
+    lumped = frame_for("lumped", "", fe, "design.file")
+    assert lumped.n_dof == 4 and frame_for("scene", "", fe, "design.file").n_dof > 4
+    np.testing.assert_allclose(lumped.linearized().stiffness,
+                               frame_for("scene", "", lumped_scene(), "x").linearized().stiffness)

@@ -91,9 +91,16 @@ def identified_frame(name: str, rig: Section, key: str) -> FrameModel:
 
 
 def frame_for(source: str, file: str, scene: Section, key: str) -> FrameModel:
-    """The scene's own model (``source == "scene"``) or the identified one of ``file``."""
+    """The scene's own model (``scene``), the lumped model of the scene's rig and damping
+    (``lumped``), or the identified one of ``file`` (``file``)."""
     if source == "file":
         return identified_frame(file, scene.rig, key)
     from stillframe.models import build_model
 
+    if source == "lumped" and scene.model.type != "lumped":
+        from stillframe.scene import scene_from_dict
+
+        data = scene.to_dict()
+        data["model"]["type"] = "lumped"
+        scene = scene_from_dict(data)
     return build_model(scene)
