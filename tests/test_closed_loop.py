@@ -14,6 +14,7 @@ from sim_node.actuators import Actuator
 from sim_node.plant import Plant
 from sim_node.sensors import quantise
 from stillframe.closed_loop import run_closed_loop
+from stillframe.errors import InputError
 from stillframe.models.identified import frame_for, identified_frame
 from tests.loop_helpers import ROOT, lumped_scene, thesis_scene
 
@@ -123,3 +124,43 @@ def test_lumped_design_of_an_fe_scene_is_the_lumped_model() -> None:
     assert lumped.n_dof == 4 and frame_for("scene", "", fe, "design.file").n_dof > 4
     np.testing.assert_allclose(lumped.linearized().stiffness,
                                frame_for("scene", "", lumped_scene(), "x").linearized().stiffness)
+
+
+def test_time_varying_filter_gives_the_stationary_loop_once_converged() -> None:
+    kf = run_closed_loop(_short_lqg())
+    tv = run_closed_loop(_short_lqg(["estimator.type=tvkf"]))
+    late = kf.t > 4.0
+    scale = np.abs(kf.command[late, 0]).max()
+    assert np.max(np.abs(tv.command[late, 0] - kf.command[late, 0])) < 1e-3 * scale
+
+
+def test_pendulum_variant_stays_bounded_through_the_thesis_span() -> None:
+    history = run_closed_loop(thesis_scene("thesis_euk_pendulum"))
+    assert np.all(np.isfinite(history.truth))
+    assert np.max(np.abs(history.command[:, 0])) <= 2.0
+    assert history.evaluation["reduction_pct"]["displacement"][2] > 40.0
+
+
+def test_identified_npz_file_loads_like_the_bundled_yaml(tmp_path) -> None:
+    scene = thesis_scene("thesis_lqg")
+    bundled = identified_frame("thesis_mkr", scene.rig, "plant.file").structure
+    path = tmp_path / "model.npz"
+    np.savez(path, M=bundled.mass, K=bundled.stiffness, R=bundled.damping,
+             meta=np.array(json.dumps({"format": "stillframe-identified-model",
+                                       "provenance": {"method": "test"}})))
+    loaded = identified_frame(str(path), scene.rig, "plant.file").structure
+    np.testing.assert_array_equal(loaded.mass, bundled.mass)
+    np.testing.assert_array_equal(loaded.damping, bundled.damping)
+
+
+@pytest.mark.parametrize(("overrides", "key"), [
+    (["controller.type=lqg"], "estimator.type"),
+    (["controller.type=lqg", "estimator.type=ekf"], "estimator.type"),
+    (["plant.model=file", "plant.file=no_such_model"], "plant.file"),
+    (["sensors.rate_hz=30", "controller.type=euk_floor", "estimator.type=truth"],
+     "integrator.dt"),
+    (["actuators.torque_limit=-1"], "actuators.torque_limit"),
+])
+def test_bad_loop_sections_name_their_key(overrides: list[str], key: str) -> None:
+    with pytest.raises(InputError, match=key):
+        Plant(lumped_scene(["duration=30", "controller.start=15", *overrides]))
