@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from estimator_node.base import Counters
+from estimator_node.base import Counters, Filter
 from estimator_node.coordinates import to_design
 from estimator_node.ekf import ExtendedKalman
 from estimator_node.kalman import SteadyStateKalman, TimeVaryingKalman
@@ -39,7 +39,7 @@ def initial_physical(scene: Section) -> np.ndarray:
     return np.array([*i.floors, i.phi, *i.floor_velocities, i.phi_rate], dtype=float)
 
 
-def make_estimator(scene: Section, design: FrameModel) -> TruthEstimator | ExtendedKalman:
+def make_estimator(scene: Section, design: FrameModel) -> TruthEstimator | Filter:
     """The estimator of ``scene.estimator.type`` (not ``none``)."""
     kind = scene.estimator.type
     if kind == "truth":

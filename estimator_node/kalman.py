@@ -9,7 +9,8 @@ acceleration rows of the continuous state equation. Process noise: discrete, per
 - :class:`SteadyStateKalman`: the stationary filter. Its a-priori covariance P∞ solves the
   discrete Riccati equation (scipy ``solve_discrete_are``; filterpy has no stationary filter);
   the gain for the channels present is P∞ Cₛᵀ (Cₛ P∞ Cₛᵀ + Rₛ)⁻¹, the stationary gain when all
-  arrive.
+  arrive. After a gap (an interval longer than the period) the mean is propagated over the true
+  interval but the covariance stays P∞.
 - :class:`TimeVaryingKalman`: filterpy's ``KalmanFilter`` (predict with our input matrices,
   update with the rows present).
 """

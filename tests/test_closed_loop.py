@@ -164,3 +164,12 @@ def test_identified_npz_file_loads_like_the_bundled_yaml(tmp_path) -> None:
 def test_bad_loop_sections_name_their_key(overrides: list[str], key: str) -> None:
     with pytest.raises(InputError, match=key):
         Plant(lumped_scene(["duration=30", "controller.start=15", *overrides]))
+
+
+@pytest.mark.slow
+def test_euk_floor_full_state_holds_floor_3() -> None:
+    """Variant 2 with the true state at 32 Hz: the thesis shows floor 3 held still (plots only);
+    >= 95 % on floor 3 and >= 80 % elsewhere (measured 96.8 / 87–91 %)."""
+    red = run_closed_loop(thesis_scene("thesis_euk_floor")).evaluation["reduction_pct"]
+    assert red["displacement"][2] >= 95.0 and red["velocity"][2] >= 90.0
+    assert min(red["displacement"][:2] + red["velocity"][:2]) >= 80.0
