@@ -82,6 +82,9 @@ LOOP_SCHEMA: dict[str, Any] = {
         "watchdog_periods": Field(int, 3, positive, doc="periods without a fresh estimate"),
     },
     "evaluation": {
+        "baseline": Field(str, "before_start", choices=("before_start", "open_loop"), doc=(
+            "uncontrolled peaks from the window before controller.start of the same run (the "
+            "thesis), or from the last window of a second run without control (same seeds)")),
         "window": Field(float, 10.0, positive, doc=(
             "steady-state peaks: max |.| over the window before controller.start (without "
             "control) and over the last window of the run (with control) [s]")),

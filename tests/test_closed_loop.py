@@ -16,6 +16,7 @@ from sim_node.sensors import quantise
 from stillframe.closed_loop import run_closed_loop
 from stillframe.errors import InputError
 from stillframe.models.identified import frame_for, identified_frame
+from stillframe.simulation import simulate
 from tests.loop_helpers import ROOT, lumped_scene, thesis_scene
 
 
@@ -173,3 +174,20 @@ def test_euk_floor_full_state_holds_floor_3() -> None:
     red = run_closed_loop(thesis_scene("thesis_euk_floor")).evaluation["reduction_pct"]
     assert red["displacement"][2] >= 95.0 and red["velocity"][2] >= 90.0
     assert min(red["displacement"][:2] + red["velocity"][:2]) >= 80.0
+
+
+def test_open_loop_baseline_is_the_uncontrolled_simulation() -> None:
+    """evaluation.baseline: open_loop takes the uncontrolled peaks from a run without control;
+    without noise that run is the foundation's open-loop ``simulate`` of the same scene."""
+    scene = lumped_scene(["duration=6", "controller.type=euk_floor", "estimator.type=truth",
+                          "controller.start=3", "evaluation.window=2",
+                          "evaluation.baseline=open_loop", "initial.floors=[1e-3, 0, 0]",
+                          "controller.hold_stiffness=400", "controller.hold_damping=40"])
+    evaluation = run_closed_loop(scene).evaluation
+    reference = simulate(scene)
+    last = reference.t >= 4.0 - 1e-9
+    np.testing.assert_allclose(evaluation["peak_uncontrolled"]["displacement"],
+                               np.abs(reference.floors[last]).max(axis=0), rtol=1e-10)
+    np.testing.assert_allclose(evaluation["peak_uncontrolled"]["velocity"],
+                               np.abs(reference.floor_velocities[last]).max(axis=0), rtol=1e-10)
+    assert evaluation["reduction_pct"]["displacement"][2] > 90.0
