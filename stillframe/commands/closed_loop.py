@@ -57,8 +57,9 @@ def run(args: argparse.Namespace) -> int:
           f"dt = {e['plant']['dt']:g} s), estimator {scene.estimator.type}, controller "
           f"{scene.controller.type} from {scene.controller.start:g} s at "
           f"{scene.sensors.rate_hz:g} Hz")
-    print(f"steady-state peak reductions (max over {ev.window:g} s before the start vs the last "
-          f"{ev.window:g} s):")
+    baseline = (f"the {ev.window:g} s before the start" if ev.baseline == "before_start"
+                else f"the last {ev.window:g} s of a run without control")
+    print(f"steady-state peak reductions (last {ev.window:g} s against {baseline}):")
     print(reduction_table(e, ev.reference_displacement_pct, ev.reference_velocity_pct))
     c = e["controller"]
     print(f"peak command {e['peak_command']:.4g}; saturated {c['saturated']}, singular "
