@@ -11,9 +11,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-MEASUREMENT_NAMES = ("a1", "a2", "a3", "phi")
-STATE_NAMES = ("x1", "x2", "x3", "phi")
-
 
 @dataclass
 class Sample:
