@@ -96,23 +96,25 @@ LOOP_SCHEMA: dict[str, Any] = {
 
 
 def check_loop(scene: Section) -> None:
-    """Cross-field checks of the closed-loop sections."""
+    """Cross-field checks of the closed-loop sections (only for scenes with a controller)."""
+    c, window = scene.controller, scene.evaluation.window
+    if c.type == "none":
+        return
     period = 1.0 / scene.sensors.rate_hz
     if period > scene.duration:
         raise InputError(f"sensors.rate_hz: one period ({period:g} s) is longer than duration")
     ratio = period / scene.integrator.dt
-    if scene.controller.type != "none" and abs(ratio - round(ratio)) > 1e-6 * ratio:
+    if abs(ratio - round(ratio)) > 1e-6 * ratio:
         raise InputError(
             f"integrator.dt: {scene.integrator.dt:g} s does not divide the sample period "
             f"{period:g} s (1/sensors.rate_hz)"
         )
-    c, window = scene.controller, scene.evaluation.window
-    if c.type != "none" and (c.start - window < -1e-9 or c.start + window > scene.duration + 1e-9):
+    if c.start - window < -1e-9 or c.start + window > scene.duration + 1e-9:
         raise InputError(
             f"evaluation.window: {window:g} s does not fit before controller.start ({c.start:g} s) "
             f"and after it within duration {scene.duration:g} s"
         )
     if c.type == "lqg" and scene.estimator.type == "ekf":
         raise InputError("estimator.type: LQG works on a linear model; use kf, tvkf or truth")
-    if c.type != "none" and scene.estimator.type == "none":
+    if scene.estimator.type == "none":
         raise InputError(f"estimator.type: {c.type} needs a state (kf, tvkf, ekf or truth)")
