@@ -23,6 +23,7 @@ COMMANDS: tuple[str, ...] = (
     "stillframe.commands.play",
     "stillframe.commands.identify",
     "stillframe.commands.identify_daisy",
+    "stillframe.commands.closed_loop",
 )
 
 

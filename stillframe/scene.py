@@ -13,6 +13,7 @@ from typing import Any
 import yaml
 
 from stillframe.errors import InputError
+from stillframe.loop_scene import LOOP_SCHEMA, check_loop
 from stillframe.schema import Field, Section, in_range, non_negative, positive, set_dotted, validate
 from stillframe.yamlio import load_yaml
 
@@ -88,6 +89,7 @@ SCENE_SCHEMA: dict[str, Any] = {
         "phi_rate": Field(float, 0.0, doc="[rad/s]"),
     },
     "duration": Field(float, 10.0, positive, doc="[s]"),
+    **LOOP_SCHEMA,
 }
 
 
@@ -135,6 +137,7 @@ def _check_consistency(scene: Section) -> None:
         )
     if abs(scene.initial.phi) > 100 * math.pi:
         raise InputError("initial.phi: more than 50 turns; give the angle in rad")
+    check_loop(scene)
 
 
 def scene_from_dict(data: dict[str, Any], overrides: list[str] | None = None) -> Section:

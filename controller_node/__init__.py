@@ -1,0 +1,6 @@
+"""Control laws for the loop: LQG (DLQR on a linear design model) and the extended
+Udwadia–Kalaba controller in its two actuator variants, behind a supervisor that adds the enable
+time, saturation and a watchdog (DESIGN.md, controller_node).
+
+Plain numpy; the node wraps :func:`controller_node.factory.make_controller`'s ``command``.
+"""

@@ -1,0 +1,69 @@
+"""Around a control law: enable time, saturation and a watchdog (DESIGN.md, controller_node).
+
+Called once per control period with the newest estimate (or None when none arrived). Zero
+command before ``start``; zero command and the ``watchdog`` flag when the newest estimate is
+``watchdog_periods`` periods old or more; a non-finite law output also gives zero (flagged
+``singular``); otherwise the law's command clipped to ±``limit``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from stillframe.signals import Command, Estimate
+
+Law = Callable[[np.ndarray, float], tuple[float, bool]]
+
+
+@dataclass
+class ControllerCounters:
+    commands: int = 0
+    saturated: int = 0
+    singular: int = 0
+    watchdog: int = 0
+
+
+class Controller:
+    """A law acting on one actuator (0: pendulum torque, 1: floor-3 force)."""
+
+    def __init__(self, law: Law, actuator: int, period: float, start: float = 0.0,
+                 limit: float | None = None, watchdog_periods: int = 3) -> None:
+        self.law = law
+        self.actuator = actuator
+        self.period = period
+        self.start = start
+        self.limit = limit
+        self.watchdog_periods = watchdog_periods
+        self.latest: Estimate | None = None
+        self.counters = ControllerCounters()
+
+    def command(self, t: float, estimate: Estimate | None, force: float) -> Command:
+        """The command at time t from the newest estimate and the measured excitation force."""
+        c = self.counters
+        c.commands += 1
+        if estimate is not None and (self.latest is None or estimate.t > self.latest.t):
+            self.latest = estimate
+        latest = self.latest
+        tolerance = 1e-9 * self.period
+        if latest is None or t - latest.t >= self.watchdog_periods * self.period - tolerance:
+            c.watchdog += 1
+            return Command(t, watchdog=True)
+        out = Command(latest.t)
+        if t < self.start - tolerance:
+            return out
+        out.enabled = True
+        value, out.singular = self.law(latest.z, force)
+        if not np.isfinite(value):
+            value, out.singular = 0.0, True
+        if self.limit is not None and abs(value) > self.limit:
+            value, out.saturated = float(np.clip(value, -self.limit, self.limit)), True
+        c.saturated += out.saturated
+        c.singular += out.singular
+        if self.actuator == 0:
+            out.torque = value
+        else:
+            out.force = value
+        return out
