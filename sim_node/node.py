@@ -148,6 +148,7 @@ class SimNode:
         """The scene's duration, lock-step or real-time; None when interrupted."""
         p, plant = self.params, self.plant
         log = self.node.get_logger()
+        log.info(f"{p.mode}: waiting for the estimator and controller")
         if not wait_for_peers(self.node, self.peers_ready, self.discovery_timeout_s):
             if not api.ok():
                 return None
