@@ -57,7 +57,7 @@ class ControllerNode:
         self.pub = node.create_publisher(spec.type_name, spec.name, spec.qos)
         self.out = CommandMessage(self.controller.actuator)
         self.diagnostics = Diagnostics(node, params.diagnostics_period_s)
-        self.sim_time = node.get_clock().sim
+        self.sim_time = bool(node.get_parameter("use_sim_time").value)
         self.forces: dict[int, float] = {}
         self.force = 0.0
         self.pending: list[tuple[int, np.ndarray, float]] = []   # (ns, physical, arrival)
