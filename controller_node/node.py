@@ -4,7 +4,8 @@ A thin shell around :func:`controller_node.factory.make_controller`. For every
 ``state_estimate`` stamped t_k it calls ``command(t_k, estimate, load cell at t_k)`` and
 publishes the command stamped t_k on ``pendulum/torque_cmd`` (``torque.z``) or
 ``floor3/force_cmd`` (``force.x``). The load cell comes from ``excitation/wrench``: in
-lock-step the controller waits (at most ``lockstep_timeout_s``) for the reading stamped t_k;
+lock-step the controller waits (at most a quarter of ``lockstep_timeout_s``, so that the command
+still reaches the simulator before its timeout) for the reading stamped t_k;
 in real time it uses the newest one.
 
 Watchdog: once armed by a first estimate, when the newest estimate is ``watchdog_periods``
@@ -57,6 +58,7 @@ class ControllerNode:
         self.pub = node.create_publisher(spec.type_name, spec.name, spec.qos)
         self.out = CommandMessage(self.controller.actuator)
         self.diagnostics = Diagnostics(node, params.diagnostics_period_s)
+        self.force_wait_s = params.lockstep_timeout_s / 4
         self.sim_time = bool(node.get_parameter("use_sim_time").value)
         self.forces: dict[int, float] = {}
         self.force = 0.0
@@ -97,7 +99,7 @@ class ControllerNode:
         """Answer pending estimates in order; in lock-step each waits for its load cell."""
         while self.pending:
             ns, physical, arrival = self.pending[0]
-            lockstep, timeout = self.params.lockstep, self.params.lockstep_timeout_s
+            lockstep, timeout = self.params.lockstep, self.force_wait_s
             if ns not in self.forces:
                 if lockstep and time.monotonic() - arrival < timeout:
                     return
@@ -162,7 +164,7 @@ class ControllerNode:
         while api.ok():
             wait = 0.05
             if self.pending and self.params.lockstep:
-                wait = max(0.0, self.pending[0][2] + self.params.lockstep_timeout_s
+                wait = max(0.0, self.pending[0][2] + self.force_wait_s
                            - time.monotonic())
             self.node.spin_once(min(wait, 0.05))
             self.process_ready()
