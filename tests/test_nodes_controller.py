@@ -76,8 +76,8 @@ def test_commands_and_watchdog(ros_domain: int, tmp_path: Path, time_source: str
         trips = STEPS - (ESTIMATED - 1 + scene.controller.watchdog_periods)
 
         def tripped() -> bool:
-            return bool(diagnostics) and diagnostic_values(diagnostics[-1])["watchdog"] == str(
-                trips)
+            return len(commands) == ESTIMATED + trips and bool(diagnostics) and (
+                diagnostic_values(diagnostics[-1])["watchdog"] == str(trips))
 
         assert spin_until(probe, tripped, 5)
     finally:
