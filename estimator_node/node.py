@@ -186,12 +186,12 @@ class EstimatorNode:
 
     def peers_ready(self) -> bool:
         """The controller reads the estimates and publishes the scene's command topic."""
-        return self.state_pub.get_subscription_count() > 0 and (
-            self.active is None or has_publisher(self.node, COMMAND_TOPICS[self.active].name))
+        return self.state_pub.get_subscription_count() > 0 and has_publisher(
+            self.node, COMMAND_TOPICS[self.active].name)
 
     def run(self) -> None:
         """Wait for the controller in lock-step, then estimate until shutdown."""
-        if self.params.lockstep:
+        if self.params.lockstep and self.active is not None:
             self.node.get_logger().info("lock-step: waiting for the controller")
             while api.ok() and not wait_for_peers(self.node, self.peers_ready, 1.0):
                 pass
