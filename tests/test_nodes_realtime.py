@@ -64,16 +64,18 @@ def test_realtime_sim_counts_overruns_when_it_cannot_keep_up(ros_domain: int,
 @pytest.mark.slow
 def test_realtime_three_nodes_close_the_loop(ros_domain: int, tmp_path: Path) -> None:
     """LQG at 32 Hz in real time: the commands arrive within their period nearly always (the
-    loop's latency is ~2 ms); a run without deadline misses is the lock-step run exactly."""
+    loop's latency is ~2 ms), and the reductions are those of the lock-step run (63-74 % here)
+    within 10 points. Not equal: under load a late channel gives the estimator a partial update
+    or a late command is missed, which lock-step would have waited for."""
     overrides = ["duration=3", "controller.start=1.5", "evaluation.window=1"]
     result, hist = run_loop(tmp_path, "thesis_lqg", overrides, mode="realtime")
     assert result["steps"] == 96 and result["wall_s"] >= 95 / 32
     assert result["deadline_misses"] < 24
     assert np.isfinite(result["latency_ms"]["p50"])
     assert np.count_nonzero(hist["command"][:, 0]) > 24   # commands applied after the start
-    if result["deadline_misses"] == 0:
-        reference = run_closed_loop(thesis_scene("thesis_lqg", overrides))
-        np.testing.assert_array_equal(hist["command"], reference.command)
+    reference = run_closed_loop(thesis_scene("thesis_lqg", overrides)).evaluation
+    np.testing.assert_allclose(result["reduction_pct"]["displacement"],
+                               reference["reduction_pct"]["displacement"], atol=10.0)
 
 
 @pytest.mark.parametrize(("package", "args", "message"), [
