@@ -124,7 +124,7 @@ def test_contract_topics_carry_the_plant_samples(ros_domain: int, tmp_path: Path
 def test_missing_command_times_out_and_the_previous_one_is_held(ros_domain: int,
                                                                 tmp_path: Path) -> None:
     answered = 8
-    probe, result, hist = _run_sim(tmp_path, answers=answered, lockstep_timeout_s=0.05)
+    probe, result, hist = _run_sim(tmp_path, answers=answered, lockstep_timeout_s=0.15)
     commands = [torque(min(k, answered - 1)) for k in range(STEPS)]
     assert result["lockstep_timeouts"] == STEPS - answered
     np.testing.assert_array_equal(hist["command"][:, 0], commands)
