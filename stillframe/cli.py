@@ -25,6 +25,8 @@ COMMANDS: tuple[str, ...] = (
     "stillframe.commands.identify_daisy",
     "stillframe.commands.closed_loop",
     "stillframe.commands.launch",
+    "stillframe.commands.reproduce",
+    "stillframe.commands.demo",
 )
 
 

@@ -317,3 +317,17 @@ class Launcher:
         except (OSError, ValueError) as exc:
             raise InputError(f"sim_node's result file {path}: cannot read it ({exc})") from None
         return LaunchResult(evaluation, path, path.with_suffix(".npz"))
+
+
+def run_scene(scene: Path, overrides: Sequence[str], out: Path, mode: str = "lockstep",
+              record: Path | None = None, lockstep_timeout_s: float | None = None,
+              prepare: Callable[[Any], None] | None = None) -> LaunchResult:
+    """Launch ``scene`` through the three nodes to its end; sim_node's results go to ``out``
+    (``result.json``, ``result.npz``). ``prepare(node)`` may subscribe the launcher's hidden
+    node to more topics before the children start."""
+    out.mkdir(parents=True, exist_ok=True)
+    launcher = Launcher(LaunchOptions(scene, list(overrides), mode, out / "result.json", record,
+                                      lockstep_timeout_s))
+    if prepare is not None:
+        prepare(launcher.node)
+    return launcher.run()

@@ -80,15 +80,6 @@ def print_evaluation(evaluation: dict[str, Any], scene: Section) -> None:
           f"{evaluation['wall_s']:.2f} s wall" + (f"; {', '.join(extras)}" if extras else ""))
 
 
-def launch_scene(args: argparse.Namespace, out: Path, record: Path | None = None) -> Any:
-    """Run the scene of ``args`` through the nodes; results in ``out``."""
-    from stillframe.launcher import Launcher, LaunchOptions
-
-    options = LaunchOptions(Path(args.scene), list(args.overrides), args.mode,
-                            out / "result.json", record, args.lockstep_timeout)
-    return Launcher(options).run()
-
-
 def report_death(command: str, exc: Exception) -> int:
     """One line naming the dead node, then the last lines it printed."""
     print(f"stillframe {command}: error: {exc}", file=sys.stderr)
@@ -98,14 +89,13 @@ def report_death(command: str, exc: Exception) -> int:
 
 
 def run(args: argparse.Namespace) -> int:
-    from stillframe.launcher import NodeDiedError
+    from stillframe.launcher import NodeDiedError, run_scene
 
     scene = scene_from_args(args)
     with tempfile.TemporaryDirectory(prefix="stillframe-launch-") as tmp:
-        out = args.out or Path(tmp)
-        out.mkdir(parents=True, exist_ok=True)
         try:
-            result = launch_scene(args, out, args.record)
+            result = run_scene(Path(args.scene), args.overrides, args.out or Path(tmp),
+                               args.mode, args.record, args.lockstep_timeout)
         except NodeDiedError as exc:
             return report_death("launch", exc)
         except KeyboardInterrupt:
