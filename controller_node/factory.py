@@ -10,6 +10,13 @@ from stillframe.models import FrameModel
 from stillframe.schema import Section
 
 TORQUE_INPUT = 3  # index of the hinge torque in u = [f1, f2, f3, torque]
+#: The actuator each controller type drives: 0 pendulum torque, 1 floor-3 force.
+ACTUATOR = {"lqg": 0, "euk_pendulum": 0, "euk_floor": 1}
+
+
+def actuator_of(scene: Section) -> int | None:
+    """The index in [torque, floor-3 force] the scene's controller drives (None: no controller)."""
+    return ACTUATOR.get(scene.controller.type)
 
 
 def make_controller(scene: Section, design: FrameModel) -> Controller:
@@ -20,11 +27,9 @@ def make_controller(scene: Section, design: FrameModel) -> Controller:
     if c.type == "lqg":
         law = LQGLaw(design_lqr(design, period, c.state_weights, c.input_weight, TORQUE_INPUT,
                                 floor), c.feedforward)
-        actuator = 0
     elif c.type in ("euk_pendulum", "euk_floor"):
         variant = "pendulum" if c.type == "euk_pendulum" else "floor"
         law = EUKLaw(design, variant, floor, c.hold_stiffness, c.hold_damping, c.singular_margin)
-        actuator = 0 if variant == "pendulum" else 1
     else:
         raise InputError(f"controller.type: {c.type!r} computes no command")
-    return Controller(law, actuator, period, c.start, c.limit, c.watchdog_periods)
+    return Controller(law, ACTUATOR[c.type], period, c.start, c.limit, c.watchdog_periods)

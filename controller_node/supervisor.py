@@ -40,6 +40,12 @@ class Controller:
         self.latest: Estimate | None = None
         self.counters = ControllerCounters()
 
+    def stale(self, t: float) -> bool:
+        """True when at time t the newest estimate is ``watchdog_periods`` periods old or more
+        (or there is none): the watchdog's condition."""
+        return (self.latest is None or t - self.latest.t
+                >= self.watchdog_periods * self.period - 1e-9 * self.period)
+
     def command(self, t: float, estimate: Estimate | None, force: float) -> Command:
         """The command at time t from the newest estimate and the measured excitation force."""
         c = self.counters
@@ -48,7 +54,7 @@ class Controller:
             self.latest = estimate
         latest = self.latest
         tolerance = 1e-9 * self.period
-        if latest is None or t - latest.t >= self.watchdog_periods * self.period - tolerance:
+        if self.stale(t):
             c.watchdog += 1
             return Command(t, watchdog=True)
         out = Command(latest.t)

@@ -1,0 +1,186 @@
+"""controller_node: the scene's controller on the topic contract (docs/nodes.md).
+
+A thin shell around :func:`controller_node.factory.make_controller`. For every
+``state_estimate`` stamped t_k it calls ``command(t_k, estimate, load cell at t_k)`` and
+publishes the command stamped t_k on ``pendulum/torque_cmd`` (``torque.z``) or
+``floor3/force_cmd`` (``force.x``). The load cell comes from ``excitation/wrench``: in
+lock-step the controller waits (at most ``lockstep_timeout_s``) for the reading stamped t_k;
+in real time it uses the newest one.
+
+Watchdog: once armed by a first estimate, when the newest estimate is ``watchdog_periods``
+periods old (on the node's clock: sim time with ``use_sim_time``, otherwise the estimate's
+stamp plus the wall time since it arrived), the node publishes the supervisor's zero command
+stamped with that time, once per clock value, and counts it.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from typing import Any
+
+import numpy as np
+
+from controller_node.factory import make_controller
+from estimator_node.coordinates import to_design
+from stillframe import messages, topics
+from stillframe.loop_messages import COMMAND_TOPICS, CommandMessage, SampleGrid, physical_state
+from stillframe.loop_node import (
+    OK,
+    WARN,
+    Diagnostics,
+    Durations,
+    LoopParameters,
+    RateMeter,
+    declare_loop_parameters,
+    wait_for_peers,
+)
+from stillframe.middleware import api
+from stillframe.models.identified import frame_for
+from stillframe.signals import Command, Estimate
+
+FORCES_KEPT = 256  # load-cell readings kept for matching estimates by stamp
+
+
+class ControllerNode:
+    """The controller, its subscriptions and the command publisher."""
+
+    def __init__(self, node: api.Node, params: LoopParameters) -> None:
+        self.node = node
+        self.params = params
+        scene = params.scene
+        self.design = frame_for(scene.design.model, scene.design.file, scene, "design.file")
+        self.controller = make_controller(scene, self.design)
+        self.grid = SampleGrid(params.period)
+        spec = COMMAND_TOPICS[self.controller.actuator]
+        self.pub = node.create_publisher(spec.type_name, spec.name, spec.qos)
+        self.out = CommandMessage(self.controller.actuator)
+        self.diagnostics = Diagnostics(node, params.diagnostics_period_s)
+        self.sim_time = node.get_clock().sim
+        self.forces: dict[int, float] = {}
+        self.force = 0.0
+        self.pending: list[tuple[int, np.ndarray, float]] = []   # (ns, physical, arrival)
+        self.last_ns = -1
+        self.arrival = 0.0
+        self.watchdog_ns = -1
+        self.last_command = Command(0.0)
+        self.counts = {"stale_estimates": 0, "rejected_estimates": 0, "force_waits_timed_out": 0}
+        self.compute = Durations()
+        self.rate = RateMeter()
+
+    def subscribe_inputs(self) -> None:
+        est, wrench = topics.STATE_ESTIMATE, topics.EXCITATION_WRENCH
+        self.node.create_subscription(est.type_name, est.name, self.on_estimate, est.qos)
+        self.node.create_subscription(wrench.type_name, wrench.name, self.on_force, wrench.qos)
+
+    def on_force(self, msg: Any) -> None:
+        value = float(msg.wrench.force.x)
+        if np.isfinite(value):
+            self.force = value
+            self.forces[messages.stamp_ns(msg.header.stamp)] = value
+            if len(self.forces) > FORCES_KEPT:
+                self.forces.pop(next(iter(self.forces)))
+
+    def on_estimate(self, msg: Any) -> None:
+        ns = messages.stamp_ns(msg.header.stamp)
+        physical = physical_state(msg)
+        if ns <= self.last_ns:
+            self.counts["stale_estimates"] += 1
+        elif not np.all(np.isfinite(physical)):
+            self.counts["rejected_estimates"] += 1
+        else:
+            self.pending.append((ns, physical, time.monotonic()))
+            self.last_ns = ns
+
+    def process_ready(self) -> None:
+        """Answer pending estimates in order; in lock-step each waits for its load cell."""
+        while self.pending:
+            ns, physical, arrival = self.pending[0]
+            lockstep, timeout = self.params.lockstep, self.params.lockstep_timeout_s
+            if ns not in self.forces:
+                if lockstep and time.monotonic() - arrival < timeout:
+                    return
+                self.counts["force_waits_timed_out"] += lockstep
+            self.pending.pop(0)
+            started = time.perf_counter()
+            t = self.grid.seconds(ns)
+            estimate = Estimate(t, to_design(self.design, physical), physical)
+            self.send(self.controller.command(t, estimate, self.forces.get(ns, self.force)))
+            self.arrival = arrival
+            self.forces = {k: v for k, v in self.forces.items() if k > ns}
+            self.compute.add(time.perf_counter() - started)
+            self.rate.tick()
+
+    def send(self, command: Command) -> None:
+        self.pub.publish(self.out.fill(command, self.grid.ns(command.t)))
+        self.last_command = command
+
+    def now(self) -> float | None:
+        """The current time on the estimates' time axis (None before the first estimate)."""
+        latest = self.controller.latest
+        if latest is None:
+            return None
+        if self.sim_time:
+            return self.grid.seconds(self.node.get_clock().now().nanoseconds)
+        return latest.t + time.monotonic() - self.arrival
+
+    def check_watchdog(self) -> None:
+        t = self.now()
+        if t is None or self.pending or not self.controller.stale(t):
+            return
+        ns = self.grid.ns(t)
+        if ns > self.watchdog_ns:
+            self.watchdog_ns = ns
+            if not self.last_command.watchdog:
+                self.node.get_logger().warning(f"watchdog: no fresh estimate at t = {t:.4g} s; "
+                                               "commanding zero")
+            self.send(self.controller.command(t, None, self.force))
+
+    def publish_status(self) -> None:
+        c = self.controller.counters
+        cmd = self.last_command
+        values = {"mode": self.params.mode, "rate_hz": self.rate.read(),
+                  "commands": c.commands, "saturated": c.saturated, "singular": c.singular,
+                  "watchdog": c.watchdog, "watchdog_active": cmd.watchdog,
+                  "enabled": cmd.enabled,
+                  "last_command": float(cmd.vector[self.controller.actuator]), **self.counts,
+                  **{f"compute_ms_{k}": v for k, v in self.compute.summary().items()}}
+        self.diagnostics.publish(max(self.last_ns, 0), values, WARN if cmd.watchdog else OK,
+                                 "watchdog: zero command" if cmd.watchdog else "")
+
+    def peers_ready(self) -> bool:
+        return self.pub.get_subscription_count() > 0
+
+    def run(self) -> None:
+        """Wait for the command's subscribers in lock-step, then control until shutdown."""
+        if self.params.lockstep:
+            self.node.get_logger().info("lock-step: waiting for the simulator")
+            while api.ok() and not wait_for_peers(self.node, self.peers_ready, 1.0):
+                pass
+        self.subscribe_inputs()
+        while api.ok():
+            wait = 0.05
+            if self.pending and self.params.lockstep:
+                wait = max(0.0, self.pending[0][2] + self.params.lockstep_timeout_s
+                           - time.monotonic())
+            self.node.spin_once(min(wait, 0.05))
+            self.process_ready()
+            self.check_watchdog()
+            if self.diagnostics.due():
+                self.publish_status()
+        self.publish_status()
+
+
+@api.node_main
+def main() -> int:
+    """Run the node (console script ``controller_node``); bad parameters exit 2 with one line."""
+    node = api.create_node("controller_node", namespace=topics.DEFAULT_NAMESPACE)
+    try:
+        ControllerNode(node, declare_loop_parameters(node)).run()
+    finally:
+        node.destroy_node()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,231 @@
+"""sim_node: the simulated rig on the topic contract (DESIGN.md "Topic contract", docs/nodes.md).
+
+A thin shell around :class:`sim_node.plant.Plant`. Per sample k it publishes ``/clock`` = t_k,
+the three floor IMUs, the encoder, the load cell and ``state_truth``, all stamped t_k, then
+waits for the command stamped t_k on the scene's actuator topic and advances the plant with it:
+
+- ``mode: lockstep``: waits as long as it takes, at most ``lockstep_timeout_s`` of wall time;
+  after that it counts a lock-step timeout and holds the previous command.
+- ``mode: realtime``: sample k is due at k·period of wall time after the start; a command not
+  in by the next sample's due time is a deadline miss (previous command held), and a sample
+  that starts more than a period late is an overrun.
+
+At the end of the scene's duration it writes ``result_file`` (the evaluation of
+:func:`stillframe.closed_loop.evaluate` on its own truth history plus the loop's counters) and
+an ``.npz`` of the histories beside it, then exits 0.
+"""
+
+from __future__ import annotations
+
+import functools
+import json
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from controller_node.factory import actuator_of
+from sim_node.plant import Plant
+from stillframe import messages, topics
+from stillframe.closed_loop import LoopHistory, evaluate
+from stillframe.errors import InputError
+from stillframe.loop_messages import COMMAND_TOPICS, SampleGrid, SensorMessages, command_value
+from stillframe.loop_node import (
+    OK,
+    WARN,
+    Diagnostics,
+    Durations,
+    LoopParameters,
+    declare_loop_parameters,
+    has_publisher,
+    wait_for_peers,
+)
+from stillframe.middleware import api
+from stillframe.middleware.clock import ClockPublisher
+from stillframe.signals import Sample
+
+SENSOR_TOPICS = (*topics.FLOOR_IMU, topics.PENDULUM_JOINT_STATES, topics.EXCITATION_WRENCH)
+
+
+class SimNode:
+    """The plant, its publishers and the command subscriptions of one node."""
+
+    def __init__(self, node: api.Node, params: LoopParameters, discovery_timeout_s: float) -> None:
+        self.node = node
+        self.params = params
+        self.discovery_timeout_s = discovery_timeout_s
+        scene = params.scene
+        self.plant = Plant(scene)
+        self.grid = SampleGrid(self.plant.period)
+        self.active = actuator_of(scene)
+        self.clock = ClockPublisher(node)
+        self.sensor_pubs = [node.create_publisher(s.type_name, s.name, s.qos)
+                            for s in SENSOR_TOPICS]
+        spec = topics.STATE_TRUTH
+        self.truth_pub = node.create_publisher(spec.type_name, spec.name, spec.qos)
+        self.messages = SensorMessages(scene.sensors)
+        self.diagnostics = Diagnostics(node, params.diagnostics_period_s)
+        for i, spec in enumerate(COMMAND_TOPICS):
+            node.create_subscription(spec.type_name, spec.name,
+                                     functools.partial(self.on_command, i), spec.qos)
+        self.command = np.zeros(2)          # [torque, force] held
+        self.command_ns = [-1, -1]
+        self.now_ns = 0
+        self.published_at = 0.0
+        self.latency = Durations()
+        self.counts = {"lockstep_timeouts": 0, "deadline_misses": 0, "overruns": 0,
+                       "rejected_commands": 0}
+        self.max_lateness = 0.0
+        self.k = 0
+
+    def on_command(self, actuator: int, msg: Any) -> None:
+        """Take a command stamped at or before the current sample and not older than the one
+        held; reject (and count) non-finite values and stamps from the future."""
+        ns = messages.stamp_ns(msg.header.stamp)
+        value = command_value(actuator, msg)
+        if not np.isfinite(value) or ns > self.now_ns or ns < self.command_ns[actuator]:
+            self.counts["rejected_commands"] += 1
+            return
+        if actuator == self.active and ns == self.now_ns and self.command_ns[actuator] != ns:
+            self.latency.add(time.monotonic() - self.published_at)
+        self.command[actuator], self.command_ns[actuator] = value, ns
+
+    def peers_ready(self) -> bool:
+        """The estimator reads every sensor (and the truth when it is the ``truth`` estimator),
+        and the controller publishes the scene's command topic."""
+        scene = self.params.scene
+        pubs = self.sensor_pubs if scene.estimator.type != "none" else []
+        if scene.estimator.type == "truth":
+            pubs = [*pubs, self.truth_pub]
+        return (all(p.get_subscription_count() > 0 for p in pubs)
+                and (self.active is None
+                     or has_publisher(self.node, COMMAND_TOPICS[self.active].name)))
+
+    def publish(self, sample: Sample, ns: int) -> None:
+        self.clock.publish(ns)
+        for pub, msg in zip(self.sensor_pubs, self.messages.fill(sample, ns), strict=True):
+            pub.publish(msg)
+        self.truth_pub.publish(self.messages.fill_truth(sample, ns))
+        self.published_at = time.monotonic()
+
+    def wait_command(self, deadline: float) -> bool:
+        """Spin until the command stamped now arrives (True) or the wall-clock ``deadline``."""
+        if self.active is None:
+            self.node.spin_once(0.0)
+            return True
+        while api.ok() and self.command_ns[self.active] != self.now_ns:
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
+                return False
+            self.node.spin_once(remaining)
+        return True
+
+    def sleep_until(self, when: float) -> None:
+        while api.ok() and (remaining := when - time.monotonic()) > 0:
+            self.node.spin_once(remaining)
+
+    def status(self) -> tuple[dict[str, Any], int]:
+        lat = self.latency.summary()
+        elapsed = time.monotonic() - self.started
+        values = {
+            "mode": self.params.mode, "step": self.k, "sim_time_s": self.k * self.plant.period,
+            "loop_rate_hz": self.k / max(elapsed, 1e-9),
+            "realtime_factor": self.k * self.plant.period / max(elapsed, 1e-9),
+            **{f"latency_ms_{key}": value for key, value in lat.items()},
+            **self.counts, "max_lateness_ms": 1e3 * self.max_lateness,
+            "saturated_commands": self.plant.actuators.limited,
+        }
+        bad = sum(self.counts.values()) - self.counts["rejected_commands"]
+        return values, WARN if bad else OK
+
+    def publish_status(self) -> None:
+        values, level = self.status()
+        self.diagnostics.publish(self.now_ns, values, level)
+
+    def run(self) -> LoopHistory | None:
+        """The scene's duration, lock-step or real-time; None when interrupted."""
+        p, plant = self.params, self.plant
+        log = self.node.get_logger()
+        if not wait_for_peers(self.node, self.peers_ready, self.discovery_timeout_s):
+            if not api.ok():
+                return None
+            log.warning(f"estimator/controller not matched after {self.discovery_timeout_s:g} s;"
+                        " starting anyway")
+        n = round(p.scene.duration / plant.period)
+        rows = np.full((n, 12), np.nan)   # t, truth (8), command (2), load cell
+        self.started = time.monotonic()
+        wall = time.perf_counter()
+        for k in range(n):
+            self.k = k
+            due = self.started + k * plant.period
+            if not p.lockstep:
+                self.sleep_until(due)
+                lateness = time.monotonic() - due
+                self.max_lateness = max(self.max_lateness, lateness)
+                self.counts["overruns"] += lateness > plant.period
+            if not api.ok():
+                return None
+            sample = plant.sample()
+            self.now_ns = self.grid.ns(sample.t)
+            self.publish(sample, self.now_ns)
+            deadline = (time.monotonic() + p.lockstep_timeout_s if p.lockstep
+                        else due + plant.period)
+            if not self.wait_command(deadline):
+                if not api.ok():
+                    return None
+                self.counts["lockstep_timeouts" if p.lockstep else "deadline_misses"] += 1
+            control = self.command.copy()
+            plant.advance(control)
+            rows[k, 0], rows[k, 1:9], rows[k, 9:11], rows[k, 11] = (
+                sample.t, sample.truth, control, sample.force)
+            if self.diagnostics.due():
+                self.publish_status()
+        self.k = n
+        self.publish_status()
+        fine_t, floors, velocities = plant.truth_history()
+        history = LoopHistory(rows[:, 0], rows[:, 1:9], np.full((n, 8), np.nan), rows[:, 9:11],
+                              rows[:, 11], fine_t, floors, velocities)
+        if self.active is not None:
+            history.evaluation = evaluate(history, p.scene)
+        history.evaluation.update({
+            "mode": p.mode, "steps": n, "wall_s": time.perf_counter() - wall,
+            **self.counts, "latency_ms": self.latency.summary(),
+            "max_lateness_ms": 1e3 * self.max_lateness,
+            "plant": {"model": plant.model.name, "integrator": plant.integrator.name,
+                      "dt": plant.h, "actuator_limited": plant.actuators.limited},
+        })
+        return history
+
+
+def write_result(history: LoopHistory, path: Path) -> None:
+    """The evaluation as JSON at ``path`` and the histories as ``path`` with suffix ``.npz``."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(history.evaluation, indent=2) + "\n")
+    np.savez(path.with_suffix(".npz"), t=history.t, truth=history.truth, command=history.command,
+             force=history.force, fine_t=history.fine_t, fine_floors=history.fine_floors,
+             fine_velocities=history.fine_velocities)
+
+
+@api.node_main
+def main() -> int:
+    """Run the node (console script ``sim_node``); bad parameters exit 2 with one line."""
+    node = api.create_node("sim_node", namespace=topics.DEFAULT_NAMESPACE)
+    try:
+        params = declare_loop_parameters(node)
+        result = node.declare_parameter("result_file", "").value
+        discovery = node.declare_parameter("discovery_timeout_s", 30.0).value
+        if not discovery >= 0:
+            raise InputError(f"parameter 'discovery_timeout_s': must be >= 0, got {discovery}")
+        sim = SimNode(node, params, float(discovery))
+        history = sim.run()
+        if history is not None and result:
+            write_result(history, Path(result))
+    finally:
+        node.destroy_node()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
