@@ -48,7 +48,8 @@ class NodeDiedError(RuntimeError):
     @classmethod
     def exited(cls, child: Child) -> NodeDiedError:
         code = child.proc.returncode
-        how = (f"killed by {signal.Signals(-code).name}" if code < 0 else f"exit code {code}")
+        how = (f"killed by {signal.Signals(-code).name}" if code < 0 else f"exit code {code}"
+               + (" before the end of the run" if code == 0 else ""))
         return cls(child.name, how, child.tail)
 
 
@@ -189,12 +190,20 @@ class StatusLine:
             self.text = ""
 
 
+#: the ``/diagnostics`` values the status line shows, when a node reports them
+STATUS_KEYS: tuple[str, ...] = ("sim_time_s", "step", "realtime_factor", "lockstep_timeouts",
+                                "deadline_misses", "overruns", "rejected", "saturated",
+                                "watchdog")
+
+
 def status_text(statuses: dict[str, dict[str, str]], width: int = 160) -> str:
     """One line from the latest ``/diagnostics`` status of each node: ``name: k=v k=v | ...``
-    (the name's last path component; values as the node wrote them), cut to ``width``."""
+    (the name's last path component; the values of :data:`STATUS_KEYS` it has, all of them if
+    none, as the node wrote them), cut to ``width``."""
     parts = []
     for name in sorted(statuses, key=_node_order):
-        values = " ".join(f"{k}={v}" for k, v in statuses[name].items())
+        shown = {k: v for k, v in statuses[name].items() if k in STATUS_KEYS} or statuses[name]
+        values = " ".join(f"{k}={v}" for k, v in shown.items())
         parts.append(f"{name.rsplit('/', 1)[-1].split(':')[-1].strip()}: {values}".strip())
     line = " | ".join(parts)
     return line if len(line) <= width else line[: width - 1] + "…"

@@ -109,12 +109,14 @@ def test_node_command_passes_overrides_through_the_ros_parameter_parser() -> Non
 
 
 def test_status_text_orders_nodes_and_cuts_to_width() -> None:
-    statuses = {"controller_node: loop": {"saturated": "0"},
-                "/frame/sim_node": {"sim_time": "12.5", "steps": "400", "lockstep_timeouts": "0"},
-                "estimator_node": {"rejected": "1"}}
+    statuses = {"controller_node: loop": {"saturated": "0", "compute_ms_p50": "0.1"},
+                "/frame/sim_node": {"sim_time_s": "12.5", "step": "400", "lockstep_timeouts": "0",
+                                    "latency_ms_p50": "0.2"},
+                "/frame/estimator_node": {"rejected": "1"},
+                "other": {"a": "b"}}
     line = status_text(statuses)
-    assert line == ("sim_node: sim_time=12.5 steps=400 lockstep_timeouts=0 | "
-                    "estimator_node: rejected=1 | loop: saturated=0")
+    assert line == ("sim_node: sim_time_s=12.5 step=400 lockstep_timeouts=0 | "
+                    "estimator_node: rejected=1 | loop: saturated=0 | other: a=b")
     short = status_text(statuses, width=20)
     assert len(short) == 20 and short.endswith("…")
 

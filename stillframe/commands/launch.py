@@ -74,8 +74,9 @@ def print_evaluation(evaluation: dict[str, Any], scene: Section) -> None:
     print(f"scene {scene.name}: steady-state peaks, last {ev.window:g} s with control against "
           f"{baseline}:")
     print(evaluation_table(evaluation, scene))
-    extras = [f"{key} {evaluation[key]}" for key in ("lockstep_timeouts", "overruns")
-              if key in evaluation]
+    counters = (("deadline_misses", "overruns") if evaluation.get("mode") == "realtime"
+                else ("lockstep_timeouts",))
+    extras = [f"{key} {evaluation[key]}" for key in counters if key in evaluation]
     print(f"peak command {evaluation['peak_command']:.4g}; {evaluation['steps']} steps in "
           f"{evaluation['wall_s']:.2f} s wall" + (f"; {', '.join(extras)}" if extras else ""))
 
