@@ -1,0 +1,64 @@
+"""Helpers for the loop-node tests: parameter files, node processes, a full three-node run."""
+
+from __future__ import annotations
+
+import json
+import signal
+import subprocess
+import sys
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from tests.mw_support import REPO_ROOT, child_env, finish
+
+SCENES = REPO_ROOT / "scenes"
+SHORT_LQG = ["duration=6", "controller.start=3", "evaluation.window=2"]
+
+
+def params_file(tmp_path: Path, scene: str, overrides: list[str], **params: Any) -> Path:
+    """A ROS 2 parameter file giving every node (``/**``) the scene and ``params``."""
+    path = tmp_path / "params.yaml"
+    body = {"scene": str(SCENES / f"{scene}.yaml"), "overrides": overrides, **params}
+    path.write_text(yaml.safe_dump({"/**": {"ros__parameters": body}}))
+    return path
+
+
+def start_node(package: str, params: Path, *args: str) -> subprocess.Popen:
+    """``python -m PACKAGE.node --ros-args --params-file PARAMS ARGS...`` in the background."""
+    return subprocess.Popen(
+        [sys.executable, "-m", f"{package}.node", "--ros-args", "--params-file", str(params),
+         *args],
+        env=child_env(), cwd=REPO_ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+        text=True,
+    )
+
+
+def stop(proc: subprocess.Popen, sig: int = signal.SIGINT) -> tuple[int, str]:
+    """Send ``sig``, wait; the exit code and stderr."""
+    if proc.poll() is None:
+        proc.send_signal(sig)
+    _out, err = finish(proc, timeout=20)
+    return proc.returncode, err
+
+
+def run_loop(tmp_path: Path, scene: str, overrides: list[str],
+             **params: Any) -> tuple[dict, dict[str, np.ndarray]]:
+    """The three nodes as processes; the sim's result JSON and histories. Fails unless every
+    node exits 0 (the estimator and controller on SIGINT after the sim finished)."""
+    result = tmp_path / "result.json"
+    pfile = params_file(tmp_path, scene, overrides, result_file=str(result), **params)
+    peers = [start_node(name, pfile) for name in ("estimator_node", "controller_node")]
+    sim = start_node("sim_node", pfile)
+    try:
+        _out, sim_err = finish(sim, timeout=300)
+    finally:
+        codes = [stop(p) for p in peers]
+    assert sim.returncode == 0, sim_err[-2000:]
+    for code, err in codes:
+        assert code == 0, err[-2000:]
+    with np.load(result.with_suffix(".npz")) as data:
+        histories = dict(data)
+    return json.loads(result.read_text()), histories
