@@ -27,6 +27,8 @@ from pathlib import Path
 from typing import Any
 
 from stillframe.errors import InputError
+from stillframe.scene import load_scene
+from stillframe.schema import Section
 
 NODES: tuple[str, ...] = ("sim_node", "estimator_node", "controller_node")
 MODES: tuple[str, ...] = ("lockstep", "realtime")
@@ -67,6 +69,14 @@ def node_command(package: str, scene: Path, overrides: Sequence[str], mode: str,
     for name, value in (params or {}).items():
         args += ["-p", f"{name}:={json.dumps(value) if not isinstance(value, str) else value}"]
     return args
+
+
+def nodes_for(scene: Section) -> list[str]:
+    """The nodes a scene uses: sim_node always, the estimator and the controller unless the
+    scene sets their type to ``none`` (an open-loop run such as a hammer test)."""
+    used = {"sim_node": True, "estimator_node": scene.estimator.type != "none",
+            "controller_node": scene.controller.type != "none"}
+    return [name for name in NODES if used[name]]
 
 
 def _die_with_parent() -> None:
@@ -223,6 +233,7 @@ class LaunchResult:
     evaluation: dict[str, Any]
     result_file: Path
     history_file: Path
+    diagnostics: dict[str, dict[str, str]] = field(default_factory=dict)
 
 
 @dataclass
@@ -235,6 +246,7 @@ class LaunchOptions:
     result_file: Path = Path("result.json")
     record_dir: Path | None = None
     lockstep_timeout_s: float | None = None
+    record_topics: list[str] = field(default_factory=list)
 
 
 class Launcher:
@@ -270,10 +282,11 @@ class Launcher:
         children = []
         if o.record_dir is not None:
             children.append(("recorder", [sys.executable, "-m", "stillframe", "record", "-o",
-                                          str(o.record_dir), "--all", "--use-sim-time"]))
+                                          str(o.record_dir), "--use-sim-time",
+                                          *(o.record_topics or ["--all"])]))
         children += [(name, node_command(name, scene, o.overrides, o.mode,
                                          sim_params if name == "sim_node" else None))
-                     for name in reversed(NODES)]
+                     for name in reversed(nodes_for(load_scene(scene, o.overrides)))]
         return children
 
     def run(self) -> LaunchResult:
@@ -325,18 +338,20 @@ class Launcher:
             evaluation = json.loads(path.read_text())
         except (OSError, ValueError) as exc:
             raise InputError(f"sim_node's result file {path}: cannot read it ({exc})") from None
-        return LaunchResult(evaluation, path, path.with_suffix(".npz"))
+        return LaunchResult(evaluation, path, path.with_suffix(".npz"), dict(self.statuses))
 
 
 def run_scene(scene: Path, overrides: Sequence[str], out: Path, mode: str = "lockstep",
               record: Path | None = None, lockstep_timeout_s: float | None = None,
-              prepare: Callable[[Any], None] | None = None) -> LaunchResult:
+              prepare: Callable[[Any], None] | None = None,
+              record_topics: Sequence[str] = ()) -> LaunchResult:
     """Launch ``scene`` through the three nodes to its end; sim_node's results go to ``out``
-    (``result.json``, ``result.npz``). ``prepare(node)`` may subscribe the launcher's hidden
+    (``result.json``, ``result.npz``); ``record`` records ``record_topics`` (default all) into
+    a bag. ``prepare(node)`` may subscribe the launcher's hidden
     node to more topics before the children start."""
     out.mkdir(parents=True, exist_ok=True)
     launcher = Launcher(LaunchOptions(scene, list(overrides), mode, out / "result.json", record,
-                                      lockstep_timeout_s))
+                                      lockstep_timeout_s, list(record_topics)))
     if prepare is not None:
         prepare(launcher.node)
     return launcher.run()

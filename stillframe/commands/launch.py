@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from stillframe.commands.common import add_scene_arguments, emit_json, format_table, scene_from_args
+from stillframe.errors import InputError
 from stillframe.launcher import MODES
 from stillframe.schema import Section
 
@@ -39,6 +40,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_launch_arguments(parser)
     parser.add_argument("--record", type=Path, default=None, metavar="DIR",
                         help="also record every topic into this rosbag2 directory (MCAP)")
+    parser.add_argument("--record-topic", dest="record_topics", action="append", default=[],
+                        metavar="TOPIC", help="with --record: record only this topic "
+                                              "(repeatable)")
     parser.add_argument("--out", type=Path, default=None, metavar="DIR",
                         help="keep sim_node's result.json and result.npz (histories) here")
     parser.set_defaults(func=run)
@@ -93,17 +97,20 @@ def run(args: argparse.Namespace) -> int:
     from stillframe.launcher import NodeDiedError, run_scene
 
     scene = scene_from_args(args)
+    if args.record_topics and args.record is None:
+        raise InputError("--record-topic needs --record DIR")
     with tempfile.TemporaryDirectory(prefix="stillframe-launch-") as tmp:
         try:
             result = run_scene(Path(args.scene), args.overrides, args.out or Path(tmp),
-                               args.mode, args.record, args.lockstep_timeout)
+                               args.mode, args.record, args.lockstep_timeout,
+                               record_topics=args.record_topics)
         except NodeDiedError as exc:
             return report_death("launch", exc)
         except KeyboardInterrupt:
             print("stillframe launch: interrupted; every node stopped", file=sys.stderr)
             return 130
     if args.json:
-        emit_json({"scene": scene.name, **result.evaluation})
+        emit_json({"scene": scene.name, **result.evaluation, "diagnostics": result.diagnostics})
     elif "reduction_pct" in result.evaluation:
         print_evaluation(result.evaluation, scene)
     else:
