@@ -15,6 +15,7 @@ import contextlib
 import ctypes
 import json
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -172,6 +173,10 @@ class StatusLine:
         self._last = 0.0
         self._lock = threading.Lock()
 
+    def width(self) -> int:
+        """The terminal's width for the live line; plain lines are not cut."""
+        return shutil.get_terminal_size((160, 24)).columns - 1 if self.live else 10_000
+
     def echo(self, line: str) -> None:
         with self._lock:
             self.stream.write(("\r\x1b[K" if self.live else "") + line + "\n")
@@ -304,7 +309,7 @@ class Launcher:
             while api.ok():
                 self.node.spin_once(0.1)
                 if self.statuses:
-                    self.status.update(status_text(self.statuses))
+                    self.status.update(status_text(self.statuses, self.status.width()))
                 if sim.proc.poll() == 0 and self.options.result_file.exists():
                     sim.stop_requested = True
                     break
