@@ -329,10 +329,14 @@ class Launcher:
 
     def _wait_for_recorder(self, child: Child, timeout_s: float = 20.0) -> None:
         """Nodes start only once the recorder is recording (its 'Recording to' log line)."""
+        from stillframe.middleware import api
+
         deadline = time.monotonic() + timeout_s
         while not any("Recording to" in line for line in child.tail):
             if child.proc.poll() is not None:
                 raise NodeDiedError.exited(child)
+            if not api.ok():
+                raise KeyboardInterrupt
             if time.monotonic() > deadline:
                 raise NodeDiedError(child.name, f"not recording after {timeout_s:g} s", child.tail)
             time.sleep(0.05)

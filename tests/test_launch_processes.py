@@ -19,7 +19,7 @@ import pytest
 
 from stillframe.launcher import node_command, status_text
 from stillframe.middleware.params import node_overrides, parse_ros_args
-from tests.mw_support import REPO_ROOT, ros_domain  # noqa: F401
+from tests.mw_support import REPO_ROOT, ros_domain, run_stillframe  # noqa: F401
 
 SCENE = REPO_ROOT / "scenes" / "thesis_lqg.yaml"
 
@@ -128,7 +128,7 @@ def test_launch_passes_sim_nodes_result_through_and_stops_the_others(
     pids, lines = wait_for_children(proc)
     out, err = proc.communicate(timeout=60)
     assert proc.returncode == 0, err
-    assert json.loads(out) == {"scene": "thesis_lqg", **RESULT}
+    assert json.loads(out) == {"scene": "thesis_lqg", **RESULT, "diagnostics": {}}
     err = "".join(lines) + err
     sim_argv = json.loads(next(line for line in err.splitlines() if "sim argv" in line)
                           .split("sim argv ", 1)[1])
@@ -174,3 +174,21 @@ def test_killed_launcher_leaves_no_orphans(tmp_path: Path, ros_domain: int) -> N
     while any(alive(pid) for pid in pids.values()) and time.monotonic() < deadline:
         time.sleep(0.1)
     assert not any(alive(pid) for pid in pids.values())
+
+
+@pytest.mark.parametrize(("args", "message"), [
+    (["launch", str(SCENE), "--record-topic", "/frame/floor1/imu"],
+     "stillframe launch: error: --record-topic needs --record DIR"),
+    (["launch", str(SCENE), "--record", str(REPO_ROOT / "bags" / "hammer")],
+     f"stillframe launch: error: --record {REPO_ROOT / 'bags' / 'hammer'}: already exists"),
+    (["launch", str(SCENE), "--set", "duration=-1"],
+     "stillframe launch: error: duration: must be > 0 (got -1.0)"),
+    (["reproduce", str(REPO_ROOT / "scenes" / "hammer_test.yaml")],
+     f"stillframe reproduce: error: {REPO_ROOT / 'scenes' / 'hammer_test.yaml'}: "
+     "controller.type: the scene has no controller to evaluate"),
+])
+def test_bad_input_is_one_line_and_exit_2_before_any_process(
+        args: list[str], message: str, ros_domain: int) -> None:  # noqa: F811
+    done = run_stillframe(*args)
+    assert done.returncode == 2
+    assert done.stderr.strip() == message

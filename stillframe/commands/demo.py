@@ -32,7 +32,6 @@ def register(sub: argparse._SubParsersAction) -> None:
     parser.add_argument("--out", type=Path, default=Path("out/demo"), metavar="DIR",
                         help="output directory (default out/demo): bag/, result.json, "
                              "result.npz, floors.png")
-    parser.add_argument("--scene", type=Path, default=DEMO_SCENE, help=argparse.SUPPRESS)
     parser.add_argument("--set", dest="overrides", action="append", default=[],
                         metavar="KEY=VALUE", help="override a scene value (repeatable)")
     add_launch_arguments(parser)
@@ -84,13 +83,13 @@ def run(args: argparse.Namespace) -> int:
     from stillframe.launcher import NodeDiedError, run_scene
     from stillframe.scene import load_scene
 
-    scene = load_scene(args.scene, args.overrides)
+    scene = load_scene(DEMO_SCENE, args.overrides)
     out: Path = args.out
     clear_previous(out)
     print(f"demo: {scene.name} through sim_node, estimator_node and controller_node "
           f"({args.mode}), recording to {out / 'bag'}", file=sys.stderr)
     try:
-        result = run_scene(args.scene, args.overrides, out, args.mode, out / "bag",
+        result = run_scene(DEMO_SCENE, args.overrides, out, args.mode, out / "bag",
                            args.lockstep_timeout)
     except NodeDiedError as exc:
         return report_death("demo", exc)

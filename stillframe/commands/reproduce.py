@@ -17,6 +17,7 @@ from pathlib import Path
 
 from stillframe.commands.common import add_json_argument, emit_json
 from stillframe.commands.launch import add_launch_arguments, print_evaluation, report_death
+from stillframe.errors import InputError
 from stillframe.launcher import REPO_ROOT
 from stillframe.scene import load_scene
 
@@ -68,6 +69,9 @@ def run(args: argparse.Namespace) -> int:
     paths = [Path(p) for p in args.scenes] or [REPO_ROOT / "scenes" / f"{name}.yaml"
                                                for name in THESIS_SCENES]
     scenes = [load_scene(path, args.overrides) for path in paths]  # all checked before running
+    for path, scene in zip(paths, scenes, strict=True):
+        if scene.controller.type == "none":
+            raise InputError(f"{path}: controller.type: the scene has no controller to evaluate")
     results = []
     with tempfile.TemporaryDirectory(prefix="stillframe-reproduce-") as tmp:
         for i, (path, scene) in enumerate(zip(paths, scenes, strict=True)):
