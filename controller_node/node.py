@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 
 from controller_node.factory import make_controller
-from estimator_node.coordinates import to_design
+from estimator_node.coordinates import design_map
 from stillframe import messages, topics
 from stillframe.loop_messages import COMMAND_TOPICS, CommandMessage, SampleGrid, physical_state
 from stillframe.loop_node import (
@@ -49,8 +49,9 @@ class ControllerNode:
         self.node = node
         self.params = params
         scene = params.scene
-        self.design = frame_for(scene.design.model, scene.design.file, scene, "design.file")
-        self.controller = make_controller(scene, self.design)
+        design = frame_for(scene.design.model, scene.design.file, scene, "design.file")
+        self.controller = make_controller(scene, design)
+        self.to_design = design_map(design)    # z = T · physical, built once
         self.grid = SampleGrid(params.period)
         spec = COMMAND_TOPICS[self.controller.actuator]
         self.pub = node.create_publisher(spec.type_name, spec.name, spec.qos)
@@ -104,7 +105,7 @@ class ControllerNode:
             self.pending.pop(0)
             started = time.perf_counter()
             t = self.grid.seconds(ns)
-            estimate = Estimate(t, to_design(self.design, physical), physical)
+            estimate = Estimate(t, self.to_design @ physical, physical)
             self.send(self.controller.command(t, estimate, self.forces.get(ns, self.force)))
             self.arrival = arrival
             self.forces = {k: v for k, v in self.forces.items() if k > ns}

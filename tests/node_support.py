@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import json
+import select
 import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 from typing import Any
 
@@ -21,7 +23,9 @@ SHORT_LQG = ["duration=6", "controller.start=3", "evaluation.window=2"]
 def params_file(tmp_path: Path, scene: str, overrides: list[str], **params: Any) -> Path:
     """A ROS 2 parameter file giving every node (``/**``) the scene and ``params``."""
     path = tmp_path / "params.yaml"
-    body = {"scene": str(SCENES / f"{scene}.yaml"), "overrides": overrides, **params}
+    body = {"scene": str(SCENES / f"{scene}.yaml"), **params}
+    if overrides:   # a ROS parameter cannot be an empty list
+        body["overrides"] = overrides
     path.write_text(yaml.safe_dump({"/**": {"ros__parameters": body}}))
     return path
 
@@ -34,6 +38,21 @@ def start_node(package: str, params: Path, *args: str) -> subprocess.Popen:
         env=child_env(), cwd=REPO_ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
         text=True,
     )
+
+
+def wait_for_log(proc: subprocess.Popen, text: str, timeout: float = 30) -> str:
+    """Read the node's log (stderr) until a line containing ``text``."""
+    deadline = time.monotonic() + timeout
+    while (remaining := deadline - time.monotonic()) > 0:
+        if not select.select([proc.stderr], [], [], remaining)[0]:
+            break
+        line = proc.stderr.readline()
+        if text in line:
+            return line
+        if not line and proc.poll() is not None:
+            break
+    proc.kill()
+    raise AssertionError(f"no log line with {text!r}")
 
 
 def stop(proc: subprocess.Popen, sig: int = signal.SIGINT) -> tuple[int, str]:

@@ -21,6 +21,7 @@ __all__ = ["ros_domain"]
 
 OVERRIDES = ["duration=1", "controller.start=0.5", "evaluation.window=0.25"]  # 32 samples
 STEPS = 32
+RATE_HZ = 32
 SENSORS = (*topics.FLOOR_IMU, topics.PENDULUM_JOINT_STATES, topics.EXCITATION_WRENCH,
            topics.STATE_TRUTH, topics.CLOCK, topics.DIAGNOSTICS)
 
@@ -50,7 +51,7 @@ class Probe:
                                       self.answer, topics.STATE_TRUTH.qos)
 
     def answer(self, truth: object) -> None:
-        k = len(self.received[topics.STATE_TRUTH.name]) - 1
+        k = round(messages.stamp_ns(truth.header.stamp) * 1e-9 * RATE_HZ)
         if k < self.answers:
             msg = messages.new("geometry_msgs/msg/WrenchStamped")
             msg.header.stamp = truth.header.stamp

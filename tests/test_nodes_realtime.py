@@ -1,0 +1,106 @@
+"""Real-time mode: the simulator is paced by the wall clock, counts overruns when it cannot keep
+up, and the three nodes close the loop; and the nodes' parameter errors and signals."""
+
+from __future__ import annotations
+
+import json
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from sim_node.plant import Plant
+from stillframe.closed_loop import run_closed_loop
+from tests.loop_helpers import thesis_scene
+from tests.mw_support import REPO_ROOT, child_env, finish, ros_domain
+from tests.node_support import params_file, run_loop, start_node, stop, wait_for_log
+
+__all__ = ["ros_domain"]
+
+OPEN_LOOP = ["controller.type=none", "estimator.type=none"]
+
+
+def _sim_alone(tmp_path: Path, overrides: list[str]) -> tuple[dict, dict]:
+    result = tmp_path / "result.json"
+    sim = start_node("sim_node", params_file(tmp_path, "thesis_lqg", overrides, mode="realtime",
+                                             result_file=str(result)))
+    _out, err = finish(sim, timeout=120)
+    assert sim.returncode == 0, err[-2000:]
+    with np.load(result.with_suffix(".npz")) as data:
+        return json.loads(result.read_text()), dict(data)
+
+
+def test_realtime_sim_is_paced_by_the_wall_clock(ros_domain: int, tmp_path: Path) -> None:
+    overrides = [*OPEN_LOOP, "duration=1"]
+    result, hist = _sim_alone(tmp_path, overrides)
+    scene = thesis_scene("thesis_lqg", overrides)
+    period = 1.0 / scene.sensors.rate_hz
+    assert result["steps"] == 32 and result["mode"] == "realtime"
+    # Sample k is not taken before k periods of wall time: 31 periods at least (no upper bound
+    # is asserted, the machine is shared).
+    assert result["wall_s"] >= 31 * period
+    plant = Plant(scene)
+    truth = []
+    for _ in range(32):
+        truth.append(plant.sample().truth)
+        plant.advance(np.zeros(2))
+    np.testing.assert_array_equal(hist["truth"], truth)
+
+
+def test_realtime_sim_counts_overruns_when_it_cannot_keep_up(ros_domain: int,
+                                                             tmp_path: Path) -> None:
+    """At 10 kHz, publishing a sample's seven messages alone takes longer than the 100 µs
+    period, so the simulator falls behind: most samples start more than a period late."""
+    result, _ = _sim_alone(tmp_path, [*OPEN_LOOP, "duration=0.02", "sensors.rate_hz=10000",
+                                      "integrator.dt=1e-4"])
+    assert result["steps"] == 200
+    assert result["overruns"] > 100
+    assert result["max_lateness_ms"] > 0.1
+
+
+@pytest.mark.slow
+def test_realtime_three_nodes_close_the_loop(ros_domain: int, tmp_path: Path) -> None:
+    """LQG at 32 Hz in real time: the commands arrive within their period nearly always (the
+    loop's latency is ~2 ms); a run without deadline misses is the lock-step run exactly."""
+    overrides = ["duration=3", "controller.start=1.5", "evaluation.window=1"]
+    result, hist = run_loop(tmp_path, "thesis_lqg", overrides, mode="realtime")
+    assert result["steps"] == 96 and result["wall_s"] >= 95 / 32
+    assert result["deadline_misses"] < 24
+    assert np.isfinite(result["latency_ms"]["p50"])
+    assert np.count_nonzero(hist["command"][:, 0]) > 24   # commands applied after the start
+    if result["deadline_misses"] == 0:
+        reference = run_closed_loop(thesis_scene("thesis_lqg", overrides))
+        np.testing.assert_array_equal(hist["command"], reference.command)
+
+
+@pytest.mark.parametrize("package", ["sim_node", "estimator_node", "controller_node"])
+@pytest.mark.parametrize(("args", "message"), [
+    ((), "parameter 'scene'"),
+    (("-p", "mode:=fast"), "parameter 'mode'"),
+    (("-p", "overrides:=[nokey]"), "--set nokey"),
+])
+def test_bad_parameters_exit_2_with_one_line(ros_domain: int, package: str, args: tuple,
+                                             message: str) -> None:
+    scene = () if message == "parameter 'scene'" else (
+        "-p", f"scene:={REPO_ROOT / 'scenes' / 'thesis_lqg.yaml'}")
+    proc = subprocess.run([sys.executable, "-m", f"{package}.node", "--ros-args", *scene, *args],
+                          env=child_env(), cwd=REPO_ROOT, capture_output=True, text=True,
+                          timeout=60)
+    assert proc.returncode == 2
+    errors = [line for line in proc.stderr.splitlines() if "error" in line]
+    assert len(errors) == 1 and message in errors[0] and "Traceback" not in proc.stderr
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+def test_sim_waiting_for_its_peers_stops_cleanly(ros_domain: int, tmp_path: Path,
+                                                 sig: int) -> None:
+    result = tmp_path / "result.json"
+    sim = start_node("sim_node", params_file(tmp_path, "thesis_lqg", [],
+                                             result_file=str(result)))
+    wait_for_log(sim, "waiting for the estimator")
+    code, err = stop(sim, sig)
+    assert code == 0 and "Traceback" not in err
+    assert not result.exists()
