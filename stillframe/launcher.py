@@ -207,7 +207,8 @@ class StatusLine:
 
 #: the ``/diagnostics`` values the status line shows, when a node reports them
 STATUS_KEYS: tuple[str, ...] = ("sim_time_s", "step", "realtime_factor", "lockstep_timeouts",
-                                "deadline_misses", "overruns", "rejected", "saturated",
+                                "deadline_misses", "overruns", "rejected", "partial_updates",
+                                "saturated",
                                 "watchdog")
 
 
