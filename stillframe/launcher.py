@@ -208,8 +208,7 @@ class StatusLine:
 #: the ``/diagnostics`` values the status line shows, when a node reports them
 STATUS_KEYS: tuple[str, ...] = ("sim_time_s", "step", "realtime_factor", "lockstep_timeouts",
                                 "deadline_misses", "overruns", "rejected", "partial_updates",
-                                "saturated",
-                                "watchdog")
+                                "saturated", "watchdog")
 
 
 def status_text(statuses: dict[str, dict[str, str]], width: int = 160) -> str:
