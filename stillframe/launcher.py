@@ -258,7 +258,7 @@ class Launcher:
     """Runs one :class:`LaunchOptions` to its end; ``node`` (a hidden DDS node on the same
     domain) may be given more subscriptions before :meth:`run` (the loop benchmark does)."""
 
-    def __init__(self, options: LaunchOptions, status: StatusLine | None = None) -> None:
+    def __init__(self, options: LaunchOptions) -> None:
         from stillframe.middleware import api
 
         if options.mode not in MODES:
@@ -266,7 +266,7 @@ class Launcher:
         if options.record_dir is not None and options.record_dir.exists():
             raise InputError(f"--record {options.record_dir}: already exists")
         self.options = options
-        self.status = status or StatusLine()
+        self.status = StatusLine()
         self.processes = ProcessSet(self.status.echo)
         self.node = api.create_node(f"_stillframe_launch_{os.getpid()}", argv=["stillframe"])
         self.statuses: dict[str, dict[str, str]] = {}

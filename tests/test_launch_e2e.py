@@ -43,9 +43,12 @@ def test_launch_equals_one_process_run(scene: str, ros_domain: int) -> None:  # 
     assert nodes["lockstep_timeouts"] == 0
     reference = one_process(scene, *SHORT)
     assert nodes["steps"] == reference["steps"] == 6 * 32
+    # on a mismatch, show what the nodes counted (lost samples, partial updates, timeouts)
+    counters = {"sim": {k: nodes.get(k) for k in ("lockstep_timeouts", "rejected_commands")},
+                **nodes["diagnostics"]}
     for quantity in ("displacement", "velocity"):
         assert nodes["reduction_pct"][quantity] == pytest.approx(
-            reference["reduction_pct"][quantity], abs=1e-9)
+            reference["reduction_pct"][quantity], abs=1e-9), counters
         assert nodes["peak_uncontrolled"][quantity] == pytest.approx(
             reference["peak_uncontrolled"][quantity], rel=1e-12)
     assert nodes["peak_command"] == pytest.approx(reference["peak_command"], rel=1e-9)
