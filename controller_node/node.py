@@ -4,13 +4,16 @@ A thin shell around :func:`controller_node.factory.make_controller`. For every
 ``state_estimate`` stamped t_k it calls ``command(t_k, estimate, load cell at t_k)`` and
 publishes the command stamped t_k on ``pendulum/torque_cmd`` (``torque.z``) or
 ``floor3/force_cmd`` (``force.x``). The load cell comes from ``excitation/wrench``: in
-lock-step the controller waits (at most ``lockstep_timeout_s``) for the reading stamped t_k;
+lock-step the controller waits (at most a quarter of ``lockstep_timeout_s``, so that the command
+still reaches the simulator before its timeout) for the reading stamped t_k;
 in real time it uses the newest one.
 
 Watchdog: once armed by a first estimate, when the newest estimate is ``watchdog_periods``
-periods old (on the node's clock: sim time with ``use_sim_time``, otherwise the estimate's
-stamp plus the wall time since it arrived), the node publishes the supervisor's zero command
-stamped with that time, once per clock value, and counts it.
+periods older than the newest sample time the node has seen (the load cell's stamp, which every
+sample carries, or ``/clock`` with ``use_sim_time`` if newer), the node publishes the
+supervisor's zero command stamped with that time, once per sample time, and counts it. Sample
+time rather than wall time: in lock-step the simulator then applies the zero command instead of
+timing out, and it needs no ``/clock``.
 """
 
 from __future__ import annotations
@@ -57,12 +60,13 @@ class ControllerNode:
         self.pub = node.create_publisher(spec.type_name, spec.name, spec.qos)
         self.out = CommandMessage(self.controller.actuator)
         self.diagnostics = Diagnostics(node, params.diagnostics_period_s)
-        self.sim_time = node.get_clock().sim
+        self.force_wait_s = params.lockstep_timeout_s / 4
+        self.sim_time = bool(node.get_parameter("use_sim_time").value)
         self.forces: dict[int, float] = {}
         self.force = 0.0
         self.pending: list[tuple[int, np.ndarray, float]] = []   # (ns, physical, arrival)
+        self.sample_ns = -1     # newest load-cell stamp
         self.last_ns = -1
-        self.arrival = 0.0
         self.watchdog_ns = -1
         self.last_command = Command(0.0)
         self.counts = {"stale_estimates": 0, "rejected_estimates": 0, "force_waits_timed_out": 0}
@@ -78,7 +82,9 @@ class ControllerNode:
         value = float(msg.wrench.force.x)
         if np.isfinite(value):
             self.force = value
-            self.forces[messages.stamp_ns(msg.header.stamp)] = value
+            ns = messages.stamp_ns(msg.header.stamp)
+            self.forces[ns] = value
+            self.sample_ns = max(self.sample_ns, ns)
             if len(self.forces) > FORCES_KEPT:
                 self.forces.pop(next(iter(self.forces)))
 
@@ -97,7 +103,7 @@ class ControllerNode:
         """Answer pending estimates in order; in lock-step each waits for its load cell."""
         while self.pending:
             ns, physical, arrival = self.pending[0]
-            lockstep, timeout = self.params.lockstep, self.params.lockstep_timeout_s
+            lockstep, timeout = self.params.lockstep, self.force_wait_s
             if ns not in self.forces:
                 if lockstep and time.monotonic() - arrival < timeout:
                     return
@@ -107,7 +113,6 @@ class ControllerNode:
             t = self.grid.seconds(ns)
             estimate = Estimate(t, self.to_design @ physical, physical)
             self.send(self.controller.command(t, estimate, self.forces.get(ns, self.force)))
-            self.arrival = arrival
             self.forces = {k: v for k, v in self.forces.items() if k > ns}
             self.compute.add(time.perf_counter() - started)
             self.rate.tick()
@@ -117,13 +122,13 @@ class ControllerNode:
         self.last_command = command
 
     def now(self) -> float | None:
-        """The current time on the estimates' time axis (None before the first estimate)."""
-        latest = self.controller.latest
-        if latest is None:
-            return None
+        """The newest sample time seen (None before the first estimate or sample)."""
+        ns = self.sample_ns
         if self.sim_time:
-            return self.grid.seconds(self.node.get_clock().now().nanoseconds)
-        return latest.t + time.monotonic() - self.arrival
+            ns = max(ns, self.node.get_clock().now().nanoseconds)
+        if self.controller.latest is None or ns < 0:
+            return None
+        return self.grid.seconds(ns)
 
     def check_watchdog(self) -> None:
         t = self.now()
@@ -162,7 +167,7 @@ class ControllerNode:
         while api.ok():
             wait = 0.05
             if self.pending and self.params.lockstep:
-                wait = max(0.0, self.pending[0][2] + self.params.lockstep_timeout_s
+                wait = max(0.0, self.pending[0][2] + self.force_wait_s
                            - time.monotonic())
             self.node.spin_once(min(wait, 0.05))
             self.process_ready()

@@ -7,7 +7,8 @@ one stamp t_k from the floor IMUs, the encoder and the load cell (and ``state_tr
 newest command received on ``pendulum/torque_cmd`` and ``floor3/force_cmd``.
 
 - ``mode: lockstep``: a stamp is used once all its channels arrived and the command stamped
-  t_k−1 did (the previous step's answer); after ``lockstep_timeout_s`` without them, or when a
+  t_k−1 did (the previous step's answer); after half of ``lockstep_timeout_s`` without them
+  (so that the loop still answers before the simulator's own timeout), or when a
   newer stamp arrives first, it is used with what arrived (a partial update).
 - ``mode: realtime``: a stamp is used when complete, when a newer one arrives, or
   ``partial_after_s`` after its first message, with what arrived.
@@ -78,7 +79,7 @@ class EstimatorNode:
         self.needs_truth = scene.estimator.type == "truth"
         self.active = actuator_of(scene)
         self.grid = SampleGrid(params.period)
-        self.wait_s = params.lockstep_timeout_s if params.lockstep else partial_after_s
+        self.wait_s = params.lockstep_timeout_s / 2 if params.lockstep else partial_after_s
         spec, cov = topics.STATE_ESTIMATE, topics.STATE_COVARIANCE
         self.state_pub = node.create_publisher(spec.type_name, spec.name, spec.qos)
         self.cov_pub = node.create_publisher(cov.type_name, cov.name, cov.qos)

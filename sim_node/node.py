@@ -80,6 +80,7 @@ class SimNode:
                        "rejected_commands": 0}
         self.max_lateness = 0.0
         self.k = 0
+        self.started = time.monotonic()   # reset when the first sample is due
 
     def on_command(self, actuator: int, msg: Any) -> None:
         """Take a command stamped at or before the current sample and not older than the one
@@ -148,6 +149,33 @@ class SimNode:
         values, level = self.status()
         self.diagnostics.publish(self.now_ns, values, level)
 
+    def step(self, k: int) -> np.ndarray | None:
+        """Sample k: publish, wait for its command, advance. The row [t, truth (8), command
+        (2), load cell], or None on shutdown."""
+        p, plant = self.params, self.plant
+        self.k = k
+        due = self.started + k * plant.period
+        if not p.lockstep:
+            self.sleep_until(due)
+            lateness = time.monotonic() - due
+            self.max_lateness = max(self.max_lateness, lateness)
+            self.counts["overruns"] += lateness > plant.period
+        if not api.ok():
+            return None
+        sample = plant.sample()
+        self.now_ns = self.grid.ns(sample.t)
+        self.publish(sample, self.now_ns)
+        deadline = time.monotonic() + p.lockstep_timeout_s if p.lockstep else due + plant.period
+        if not self.wait_command(deadline):
+            if not api.ok():
+                return None
+            self.counts["lockstep_timeouts" if p.lockstep else "deadline_misses"] += 1
+        control = self.command.copy()
+        plant.advance(control)
+        if self.diagnostics.due():
+            self.publish_status()
+        return np.concatenate([[sample.t], sample.truth, control, [sample.force]])
+
     def run(self) -> LoopHistory | None:
         """The scene's duration, lock-step or real-time; None when interrupted."""
         p, plant = self.params, self.plant
@@ -159,34 +187,14 @@ class SimNode:
             log.warning(f"estimator/controller not matched after {self.discovery_timeout_s:g} s;"
                         " starting anyway")
         n = round(p.scene.duration / plant.period)
-        rows = np.full((n, 12), np.nan)   # t, truth (8), command (2), load cell
+        rows = np.empty((n, 12))
         self.started = time.monotonic()
         wall = time.perf_counter()
         for k in range(n):
-            self.k = k
-            due = self.started + k * plant.period
-            if not p.lockstep:
-                self.sleep_until(due)
-                lateness = time.monotonic() - due
-                self.max_lateness = max(self.max_lateness, lateness)
-                self.counts["overruns"] += lateness > plant.period
-            if not api.ok():
+            row = self.step(k)
+            if row is None:
                 return None
-            sample = plant.sample()
-            self.now_ns = self.grid.ns(sample.t)
-            self.publish(sample, self.now_ns)
-            deadline = (time.monotonic() + p.lockstep_timeout_s if p.lockstep
-                        else due + plant.period)
-            if not self.wait_command(deadline):
-                if not api.ok():
-                    return None
-                self.counts["lockstep_timeouts" if p.lockstep else "deadline_misses"] += 1
-            control = self.command.copy()
-            plant.advance(control)
-            rows[k, 0], rows[k, 1:9], rows[k, 9:11], rows[k, 11] = (
-                sample.t, sample.truth, control, sample.force)
-            if self.diagnostics.due():
-                self.publish_status()
+            rows[k] = row
         self.k = n
         self.publish_status()
         fine_t, floors, velocities = plant.truth_history()

@@ -47,12 +47,8 @@ class LoopParameters:
 
 
 def _overrides(value: Any) -> list[str]:
-    if value is None:
-        return []
-    if isinstance(value, str):
-        return [value]
     if isinstance(value, list) and all(isinstance(v, str) for v in value):
-        return value
+        return [v for v in value if v]
     raise InputError(f"parameter 'overrides': expected a list of 'dotted.key=value' strings, "
                      f"got {value!r}")
 
@@ -61,7 +57,8 @@ def declare_loop_parameters(node: api.Node) -> LoopParameters:
     """``scene`` (path), ``overrides`` (``--set`` strings), ``mode``, ``lockstep_timeout_s``,
     ``diagnostics_period_s``; InputError naming the parameter when one is wrong."""
     path = node.declare_parameter("scene", "").value
-    overrides = _overrides(node.declare_parameter("overrides", None).value)
+    # a string list; the default [""] because a ROS parameter cannot be an empty list
+    overrides = _overrides(node.declare_parameter("overrides", [""]).value)
     mode = node.declare_parameter("mode", "lockstep").value
     timeout = node.declare_parameter("lockstep_timeout_s", 1.0).value
     diag = node.declare_parameter("diagnostics_period_s", 1.0).value

@@ -1,13 +1,14 @@
-"""controller_node as a process on sim time, fed by a probe playing simulator and estimator:
-its commands equal the in-process controller's, and when the estimates stop while ``/clock``
-goes on, the watchdog zeroes the command after ``watchdog_periods`` periods and says so on
-``/diagnostics``."""
+"""controller_node as a process, fed by a probe playing simulator and estimator: its commands
+equal the in-process controller's, and when the estimates stop while the samples go on (seen
+through the load cell's stamps, or through ``/clock`` with ``use_sim_time``), the watchdog
+zeroes the command after ``watchdog_periods`` periods and says so on ``/diagnostics``."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from controller_node.factory import make_controller
 from estimator_node.coordinates import to_design
@@ -30,14 +31,18 @@ ESTIMATED = 8          # samples with an estimate; then only /clock and the load
 STEPS = 13
 
 
-def test_commands_and_watchdog(ros_domain: int, tmp_path: Path) -> None:
+@pytest.mark.parametrize("time_source", ["load_cell", "clock"])
+def test_commands_and_watchdog(ros_domain: int, tmp_path: Path, time_source: str) -> None:
+    """After the estimates stop, only the load cell (no sim time) or only ``/clock`` (with
+    ``use_sim_time``) goes on."""
     scene = thesis_scene("thesis_lqg", OVERRIDES)
     period = 1.0 / scene.sensors.rate_hz
     rng = np.random.default_rng(3)
     states = 1e-3 * rng.standard_normal((ESTIMATED, 8))
     forces = 0.1 * rng.standard_normal(STEPS)
     proc = start_node("controller_node", params_file(tmp_path, "thesis_lqg", OVERRIDES,
-                                                     use_sim_time=True, diagnostics_period_s=0.2))
+                                                     use_sim_time=time_source == "clock",
+                                                     diagnostics_period_s=0.2))
     probe = create_node("probe", namespace=topics.DEFAULT_NAMESPACE, argv=["test"])
     try:
         clock = ClockPublisher(probe)
@@ -56,10 +61,12 @@ def test_commands_and_watchdog(ros_domain: int, tmp_path: Path) -> None:
         load = messages.new("geometry_msgs/msg/WrenchStamped")
         for k in range(STEPS):
             ns = round(k * period * 1e9)
-            clock.publish(ns)
             load.header.stamp = messages.time_msg(ns)
             load.wrench.force.x = forces[k]
-            wrench.publish(load)
+            if k < ESTIMATED or time_source == "clock":
+                clock.publish(ns)
+            if k < ESTIMATED or time_source == "load_cell":
+                wrench.publish(load)
             if k < ESTIMATED:
                 est.publish(out.fill(Estimate(k * period, states[k], states[k]), ns)[0])
                 assert spin_until(probe, lambda k=k: len(commands) == k + 1, 10), k
@@ -69,8 +76,8 @@ def test_commands_and_watchdog(ros_domain: int, tmp_path: Path) -> None:
         trips = STEPS - (ESTIMATED - 1 + scene.controller.watchdog_periods)
 
         def tripped() -> bool:
-            return bool(diagnostics) and diagnostic_values(diagnostics[-1])["watchdog"] == str(
-                trips)
+            return len(commands) == ESTIMATED + trips and bool(diagnostics) and (
+                diagnostic_values(diagnostics[-1])["watchdog"] == str(trips))
 
         assert spin_until(probe, tripped, 5)
     finally:

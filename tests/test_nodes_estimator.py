@@ -76,8 +76,8 @@ def test_estimates_nan_stale_and_missing_channels(ros_domain: int, tmp_path: Pat
             cmd.publish(answer)
 
         def counted() -> bool:
-            return bool(diagnostics) and diagnostic_values(diagnostics[-1]).get(
-                "partial_updates") == "1"
+            return len(covariances) == STEPS and bool(diagnostics) and diagnostic_values(
+                diagnostics[-1]).get("estimates") == str(STEPS)
 
         assert spin_until(probe, counted, 5)
     finally:

@@ -76,14 +76,14 @@ def test_realtime_three_nodes_close_the_loop(ros_domain: int, tmp_path: Path) ->
         np.testing.assert_array_equal(hist["command"], reference.command)
 
 
-@pytest.mark.parametrize("package", ["sim_node", "estimator_node", "controller_node"])
-@pytest.mark.parametrize(("args", "message"), [
-    ((), "parameter 'scene'"),
-    (("-p", "mode:=fast"), "parameter 'mode'"),
-    (("-p", "overrides:=[nokey]"), "--set nokey"),
+@pytest.mark.parametrize(("package", "args", "message"), [
+    ("sim_node", (), "parameter 'scene'"),
+    ("estimator_node", ("-p", "mode:=fast"), "parameter 'mode'"),
+    ("controller_node", ("-p", "overrides:=[nokey]"), "--set nokey"),
 ])
 def test_bad_parameters_exit_2_with_one_line(ros_domain: int, package: str, args: tuple,
                                              message: str) -> None:
+    """The three share the parameter code; one wrong parameter each."""
     scene = () if message == "parameter 'scene'" else (
         "-p", f"scene:={REPO_ROOT / 'scenes' / 'thesis_lqg.yaml'}")
     proc = subprocess.run([sys.executable, "-m", f"{package}.node", "--ros-args", *scene, *args],
