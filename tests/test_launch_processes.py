@@ -6,6 +6,7 @@ JSON passed through, Ctrl-C and a killed node stopping every child (no orphans, 
 
 from __future__ import annotations
 
+import io
 import json
 import os
 import re
@@ -17,7 +18,7 @@ from pathlib import Path
 
 import pytest
 
-from stillframe.launcher import node_command, status_text
+from stillframe.launcher import StatusLine, node_command, status_text
 from stillframe.middleware.params import node_overrides, parse_ros_args
 from tests.mw_support import REPO_ROOT, ros_domain, run_stillframe  # noqa: F401
 
@@ -192,3 +193,23 @@ def test_bad_input_is_one_line_and_exit_2_before_any_process(
     done = run_stillframe(*args)
     assert done.returncode == 2
     assert done.stderr.strip() == message
+
+
+class FakeTerminal(io.StringIO):
+    def isatty(self) -> bool:
+        return True
+
+
+def test_status_line_plain_every_period_and_live_in_place() -> None:
+    plain = io.StringIO()
+    status = StatusLine(plain, every_s=3600)
+    status.update("sim_node: step=1")
+    status.update("sim_node: step=2")          # within the period: not printed
+    status.echo("[sim_node] hello")
+    assert plain.getvalue() == "sim_node: step=1\n[sim_node] hello\n"
+    live = FakeTerminal()
+    status = StatusLine(live)
+    status.update("step=1")
+    status.echo("[x] line")                     # printed above, the status line redrawn
+    status.close()
+    assert live.getvalue() == "\r\x1b[Kstep=1\r\x1b[K[x] line\nstep=1\r\x1b[K"
