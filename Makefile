@@ -15,7 +15,7 @@ $(BIN)/stillframe: pyproject.toml
 setup: $(BIN)/stillframe
 
 demo: setup
-	$(BIN)/stillframe simulate scenes/thesis_lumped.yaml --out out/thesis_lumped.npz
+	$(BIN)/stillframe demo --out out/demo
 
 test: setup
 	$(BIN)/ruff check .

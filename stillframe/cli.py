@@ -24,6 +24,9 @@ COMMANDS: tuple[str, ...] = (
     "stillframe.commands.identify",
     "stillframe.commands.identify_daisy",
     "stillframe.commands.closed_loop",
+    "stillframe.commands.launch",
+    "stillframe.commands.reproduce",
+    "stillframe.commands.demo",
 )
 
 
