@@ -76,7 +76,8 @@ class ControllerNode:
     def subscribe_inputs(self) -> None:
         est, wrench = topics.STATE_ESTIMATE, topics.EXCITATION_WRENCH
         self.node.create_subscription(est.type_name, est.name, self.on_estimate, est.qos)
-        self.node.create_subscription(wrench.type_name, wrench.name, self.on_force, wrench.qos)
+        self.node.create_subscription(wrench.type_name, wrench.name, self.on_force,
+                                      self.params.qos(wrench))
 
     def on_force(self, msg: Any) -> None:
         value = float(msg.wrench.force.x)

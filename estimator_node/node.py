@@ -101,7 +101,8 @@ class EstimatorNode:
     def subscribe_sensors(self) -> None:
         for channel, spec in enumerate(SENSOR_TOPICS):
             self.node.create_subscription(spec.type_name, spec.name,
-                                          functools.partial(self.on_sensor, channel), spec.qos)
+                                          functools.partial(self.on_sensor, channel),
+                                          self.params.qos(spec))
         if self.needs_truth:
             spec = topics.STATE_TRUTH
             self.node.create_subscription(spec.type_name, spec.name, self.on_truth, spec.qos)

@@ -61,7 +61,7 @@ class SimNode:
         self.grid = SampleGrid(self.plant.period)
         self.active = actuator_of(scene)
         self.clock = ClockPublisher(node)
-        self.sensor_pubs = [node.create_publisher(s.type_name, s.name, s.qos)
+        self.sensor_pubs = [node.create_publisher(s.type_name, s.name, params.qos(s))
                             for s in SENSOR_TOPICS]
         spec = topics.STATE_TRUTH
         self.truth_pub = node.create_publisher(spec.type_name, spec.name, spec.qos)

@@ -10,7 +10,7 @@ from __future__ import annotations
 import time
 from collections import deque
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -18,6 +18,7 @@ import numpy as np
 from stillframe import messages, topics
 from stillframe.errors import InputError
 from stillframe.middleware import api
+from stillframe.middleware.qos import PROFILES, QoSProfile, Reliability
 from stillframe.scene import load_scene
 from stillframe.schema import Section
 
@@ -44,6 +45,18 @@ class LoopParameters:
     @property
     def lockstep(self) -> bool:
         return self.mode == "lockstep"
+
+    def qos(self, spec: topics.TopicSpec) -> QoSProfile | str:
+        """The contract's QoS, except that sensor topics are RELIABLE in lock-step.
+
+        Lock-step promises the same numbers as the one-process loop; a best-effort sample lost
+        under load would silently turn into a partial update. A reliable writer still matches
+        the contract's best-effort readers (``ros2 topic echo``, the recorder), so only the
+        loop's own readers ask for more than the contract.
+        """
+        if self.lockstep and spec.qos == "sensor_data":
+            return replace(PROFILES["sensor_data"], reliability=Reliability.RELIABLE)
+        return spec.qos
 
 
 def _overrides(value: Any) -> list[str]:

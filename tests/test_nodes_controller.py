@@ -14,7 +14,7 @@ from controller_node.factory import make_controller
 from estimator_node.coordinates import to_design
 from stillframe import messages, topics
 from stillframe.loop_messages import EstimateMessages
-from stillframe.loop_node import diagnostic_values
+from stillframe.loop_node import LoopParameters, diagnostic_values
 from stillframe.middleware.api import create_node, spin_until
 from stillframe.middleware.clock import ClockPublisher
 from stillframe.models.identified import frame_for
@@ -48,8 +48,9 @@ def test_commands_and_watchdog(ros_domain: int, tmp_path: Path, time_source: str
         clock = ClockPublisher(probe)
         est = probe.create_publisher(topics.STATE_ESTIMATE.type_name, topics.STATE_ESTIMATE.name,
                                      topics.STATE_ESTIMATE.qos)
+        sim_qos = LoopParameters(scene, "lockstep", 1.0, 0.2).qos(topics.EXCITATION_WRENCH)
         wrench = probe.create_publisher(topics.EXCITATION_WRENCH.type_name,
-                                        topics.EXCITATION_WRENCH.name, topics.EXCITATION_WRENCH.qos)
+                                        topics.EXCITATION_WRENCH.name, sim_qos)
         commands, diagnostics = [], []
         probe.create_subscription(topics.TORQUE_CMD.type_name, topics.TORQUE_CMD.name,
                                   commands.append, topics.TORQUE_CMD.qos)

@@ -14,7 +14,7 @@ from estimator_node.factory import make_estimator
 from sim_node.plant import Plant
 from stillframe import messages, topics
 from stillframe.loop_messages import SensorMessages
-from stillframe.loop_node import diagnostic_values
+from stillframe.loop_node import LoopParameters, diagnostic_values
 from stillframe.middleware.api import create_node, spin_until
 from stillframe.models.identified import frame_for
 from stillframe.signals import Sample
@@ -49,7 +49,8 @@ def test_estimates_nan_stale_and_missing_channels(ros_domain: int, tmp_path: Pat
                                                     diagnostics_period_s=0.2))
     probe = create_node("probe", namespace=topics.DEFAULT_NAMESPACE, argv=["test"])
     try:
-        sensors = [probe.create_publisher(s.type_name, s.name, s.qos) for s in
+        loop = LoopParameters(scene, "lockstep", 1.0, 0.2)   # the sim's sensor QoS
+        sensors = [probe.create_publisher(s.type_name, s.name, loop.qos(s)) for s in
                    (*topics.FLOOR_IMU, topics.PENDULUM_JOINT_STATES, topics.EXCITATION_WRENCH)]
         cmd = probe.create_publisher(topics.TORQUE_CMD.type_name, topics.TORQUE_CMD.name,
                                      topics.TORQUE_CMD.qos)

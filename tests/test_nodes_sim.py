@@ -133,3 +133,19 @@ def test_missing_command_times_out_and_the_previous_one_is_held(ros_domain: int,
     assert diagnostic_values(probe.received["/diagnostics"][-1])["lockstep_timeouts"] == str(
         STEPS - answered)
     assert status.level == 1  # WARN
+
+
+def test_sensor_topics_are_reliable_in_lockstep_only() -> None:
+    """A lost best-effort sample would break lock-step's promise of identical numbers."""
+    from stillframe.loop_node import LoopParameters
+    from stillframe.middleware.qos import PROFILES, Reliability
+
+    scene = thesis_scene("thesis_lqg")
+    lockstep = LoopParameters(scene, "lockstep", 1.0, 1.0)
+    realtime = LoopParameters(scene, "realtime", 1.0, 1.0)
+    for spec in (*topics.FLOOR_IMU, topics.PENDULUM_JOINT_STATES, topics.EXCITATION_WRENCH):
+        qos = lockstep.qos(spec)
+        assert qos.reliability == Reliability.RELIABLE
+        assert qos.depth == PROFILES["sensor_data"].depth
+        assert realtime.qos(spec) == "sensor_data"
+    assert lockstep.qos(topics.STATE_ESTIMATE) == "default"
