@@ -75,10 +75,16 @@ def test_ctrl_c_stops_the_real_nodes_and_the_recorder(tmp_path: Path,
                                                       ros_domain: int) -> None:  # noqa: F811
     """The recorder closes its bag on the forwarded SIGINT: the partial bag is readable."""
     proc = start_launch("--record", str(tmp_path / "bag"))
-    pids, _ = wait_for_children(proc, count=4, timeout=120)
+    pids, lines = wait_for_children(proc, count=4, timeout=120)
+    # Ctrl-C only once the recorder has discovered the sensor topic (discovery takes a moment)
+    wanted = "Subscribed to topic '/frame/floor1/imu'"
+    while not any(wanted in line for line in lines):
+        line = proc.stderr.readline()
+        assert line, f"the recorder never subscribed to the IMU topic: {lines[-20:]}"
+        lines.append(line)
     proc.send_signal(signal.SIGINT)
     _out, err = proc.communicate(timeout=120)
-    assert proc.returncode == 130, err[-3000:]
+    assert proc.returncode == 130, "".join(lines[-30:]) + err[-3000:]
     assert not any(alive(pid) for pid in pids.values())
     with AnyReader([tmp_path / "bag"]) as reader:
         assert {c.topic for c in reader.connections} >= {"/frame/floor1/imu", "/clock"}
