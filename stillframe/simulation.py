@@ -10,6 +10,7 @@ import numpy as np
 
 from stillframe.excitation import floor_load
 from stillframe.integrators import ADAPTIVE, integrate, make_integrator, reference_solution
+from stillframe.kernels import compiled_integrate, compiles
 from stillframe.models import FrameModel, build_model
 from stillframe.schema import Section
 from stillframe.systems import MechanicalSystem
@@ -98,8 +99,12 @@ def simulate(scene: Section, duration: float | None = None,
             if progress and k % every == 0:
                 progress(k / n_steps)
 
-        integrate(system, x0, dt, n_steps, make_integrator(method), observer=observe)
+        if compiles(system.load, method):
+            compiled_integrate(model, system.load, method, x0, dt, n_steps, observer=observe)
+        else:
+            integrate(system, x0, dt, n_steps, make_integrator(method), observer=observe)
     wall = time.perf_counter() - start
     meta = {"model": model.name, "dofs": model.n_dof, "integrator": method, "dt": dt,
+            "compiled": method not in ADAPTIVE and compiles(system.load, method),
             "steps": n_steps, "wall_s": wall, "steps_per_s": n_steps / wall}
     return recorder.history(meta)
