@@ -104,15 +104,14 @@ def _accelerations(q, v, u, f_ext, floor_index, i3, K, C, Minv, w, p, out):
     Q[i3] += m4 * l4 * sin_phi * dphi * dphi
     q_phi = u[3] - m4 * g * l4 * sin_phi - r4 * dphi
     c = m4 * l4 * math.cos(phi)
-    y3 = 0.0
-    for j in range(n):
-        y3 += Minv[i3, j] * Q[j]
-    a_phi = (q_phi - c * y3) / (J - c * c * w[i3])
     for i in range(n):
         s = 0.0
         for j in range(n):
             s += Minv[i, j] * Q[j]
-        out[i] = s - c * a_phi * w[i]
+        out[i] = s
+    a_phi = (q_phi - c * out[i3]) / (J - c * c * w[i3])
+    for i in range(n):
+        out[i] -= c * a_phi * w[i]
     out[n] = a_phi
 
 
@@ -134,21 +133,25 @@ def _rk4_run(x, t0, h, n_steps, stride, out, floor_index, i3, K, C, Minv, w, p, 
     f_ext = np.zeros(3)
     out[0, :] = x
     row = 1
+    f_end = _force(t0, load_kind, amps, omegas, phases, pulse)
     for k in range(n_steps):
         t = t0 + k * h
+        # the load at t, t + h/2 (stages 2 and 3) and t + h (reused as the next step's start)
+        f_start = f_end
+        f_mid = _force(t + 0.5 * h, load_kind, amps, omegas, phases, pulse)
+        f_end = _force(t + h, load_kind, amps, omegas, phases, pulse)
         for stage in range(4):
             kk = k1 if stage == 0 else k2 if stage == 1 else k3 if stage == 2 else k4
             if stage == 0:
-                ts = t
+                f_ext[load_floor] = f_start
                 for i in range(m):
                     xs[i] = x[i]
             else:
                 prev = k1 if stage == 1 else k2 if stage == 2 else k3
                 a = h if stage == 3 else 0.5 * h
-                ts = t + a
+                f_ext[load_floor] = f_end if stage == 3 else f_mid
                 for i in range(m):
                     xs[i] = x[i] + a * prev[i]
-            f_ext[load_floor] = _force(ts, load_kind, amps, omegas, phases, pulse)
             for i in range(nd):
                 kk[i] = xs[nd + i]
             _accelerations(xs[:nd], xs[nd:], u, f_ext, floor_index, i3, K, C, Minv, w, p,

@@ -8,7 +8,10 @@ from __future__ import annotations
 import argparse
 import importlib
 
-BENCHES: tuple[str, ...] = ()
+BENCHES: tuple[str, ...] = (
+    "stillframe.commands.bench_fidelity",
+    "stillframe.commands.bench_speed",
+)
 
 
 def register(sub: argparse._SubParsersAction) -> None:
