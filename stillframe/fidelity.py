@@ -22,11 +22,11 @@ from stillframe.models import FrameModel, build_model
 from stillframe.scene import scene_from_dict
 from stillframe.schema import Section
 from stillframe.simulation import initial_state
+from stillframe.stability import rk4_stable_step
 
 REFERENCE_MODEL = ("fe", 40)
 REFERENCE_DT = 1e-5
 GRID_DT = 1e-2
-RK4_STABILITY_RADIUS = 2.785  # |R(iy)| ≤ 1 for |y| ≤ 2√2 ≈ 2.83, on the real axis −2.785
 STEPS = (1e-2, 5e-3, 2e-3, 1e-3, 5e-4, 2e-4, 1e-4)
 QUICK_STEPS = (5e-3, 1e-3, 2e-4)
 
@@ -118,24 +118,6 @@ def reference(scene: str, duration: float) -> Reference:
     _, fine, cpu = run_outputs(s, "midpoint", REFERENCE_DT)
     _, coarse, _ = run_outputs(s, "midpoint", 2 * REFERENCE_DT)
     return Reference(scene, fine, relative_error(coarse, fine) / 3.0, cpu)
-
-
-def rk4_stable_step(model: FrameModel) -> float:
-    """Largest h with |R(hλ)| ≤ 1 for every eigenvalue λ of the model linearised at rest."""
-    A, _ = model.linearized().state_space()
-    lam = np.linalg.eigvals(A)
-    lam = lam[np.abs(lam) > 0]
-
-    def stable(h: float) -> bool:
-        z = h * lam
-        r = 1 + z + z**2 / 2 + z**3 / 6 + z**4 / 24
-        return bool(np.all(np.abs(r) <= 1 + 1e-12))
-
-    lo, hi = 0.0, RK4_STABILITY_RADIUS * 2 / np.max(np.abs(lam))
-    for _ in range(60):
-        mid = 0.5 * (lo + hi)
-        lo, hi = (mid, hi) if stable(mid) else (lo, mid)
-    return lo
 
 
 def sweep(quick: bool = False, duration: float | None = None,

@@ -47,10 +47,12 @@ def plot(result: dict, directory: Path) -> list[Path]:
             if p["scene"] == scene and p["error"] is not None:
                 curves.setdefault((p["model"], p["method"]), []).append(
                     (p["cpu_per_s"], max(p["error"], 1e-16), p["dt"]))
+        models = list(dict.fromkeys(m for m, _ in curves))
         for (model, method), pts in curves.items():
             pts.sort(key=lambda x: -x[2])
             ax.loglog([c for c, _, _ in pts], [e for _, e, _ in pts],
-                      "o-" if method == "midpoint" else "s--", label=f"{model} {method}", ms=4)
+                      "o-" if method == "midpoint" else "s--", color=f"C{models.index(model)}",
+                      label=f"{model} {method}", ms=4)
         front = result["pareto"][scene]
         ax.loglog([p["cpu_per_s"] for p in front], [p["error"] for p in front], "k:", lw=2,
                   label="Pareto front")
