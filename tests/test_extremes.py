@@ -45,7 +45,7 @@ def _grows(frame: CompiledFrame, x0: np.ndarray, h: float, steps: int = 20_000) 
      "initial.floors=[1e-4, -1e-4, 1e-4]"],
 ])
 def test_rk4_blows_up_just_beyond_the_predicted_limit_and_not_just_below(overrides) -> None:
-    scene, model, frame, x0 = _setup(overrides)
+    _, model, frame, x0 = _setup(overrides)
     x0[model.n_dof:] = 1e-3  # excite every mode, the fastest included
     limit = rk4_stable_step(model)
     assert not _grows(frame, x0, 0.99 * limit)
@@ -77,7 +77,7 @@ def test_fine_meshes_up_to_200_elements_stiffen_as_n_squared_and_stay_accurate()
     # FE 200 (1198 DOFs), implicit midpoint at 1 ms agrees with FE 40 on the floors
     runs = {}
     for n in (40, 200):
-        scene, model, frame, x0 = _setup([
+        scene, _, frame, x0 = _setup([
             "model.type=fe", f"model.elements_per_column={n}", "damping.model=modal",
             "excitation.type=harmonics"])
         states = frame.run("midpoint", x0, 1e-3, 2000, floor_load(scene.excitation, 2.0),
@@ -92,7 +92,7 @@ def test_energy_drift_over_a_million_steps_matches_rk4_damping_and_midpoint_stay
 ) -> None:
     """Undamped lumped model, 1e6 steps of 1 ms. RK4 loses the energy of mode j as
     |R(i ω_j h)|^(2N) (closed form on the linearised modes); midpoint keeps it bounded."""
-    scene, model, frame, x0 = _setup([*UNDAMPED, "initial.floors=[1e-5, 2e-5, 3e-5]"])
+    _, model, frame, x0 = _setup([*UNDAMPED, "initial.floors=[1e-5, 2e-5, 3e-5]"])
     h, n = 1e-3, 1_000_000
     lin = model.linearized()
     w2, phi = sla.eigh(lin.stiffness, lin.mass)
@@ -114,7 +114,7 @@ def test_energy_drift_over_a_million_steps_matches_rk4_damping_and_midpoint_stay
 # --- large motion --------------------------------------------------------------------------------
 def test_pendulum_full_rotations_agree_with_the_adaptive_reference() -> None:
     """φ̇(0) = 20 rad/s carries the pendulum over the top (needs 13.9 rad/s) several times."""
-    scene, model, frame, x0 = _setup([*UNDAMPED, "initial.phi_rate=20"])
+    _, model, frame, x0 = _setup([*UNDAMPED, "initial.phi_rate=20"])
     states = frame.run("midpoint", x0, 1e-4, 20_000, stride=100)
     system = MechanicalSystem(model)
     t = np.arange(0, 201) * 1e-2

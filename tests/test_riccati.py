@@ -1,4 +1,4 @@
-"""DARE with nearly uncontrollable / unobservable modes: scipy vs python-control and closed forms."""
+"""DARE with nearly uncontrollable or unobservable modes: scipy, python-control, closed forms."""
 
 from __future__ import annotations
 
@@ -52,7 +52,7 @@ def test_uncontrollable_unstable_mode_is_refused_by_name() -> None:
     A, B, Q, R = plant(0.0)
     with pytest.raises(InputError, match=r"mode λ = \(?1\.05.*uncontrollable .*not stabilisable"):
         solve_dare(A, B, Q, R)
-    with pytest.raises(Exception):  # noqa: B017, PT011 - python-control fails too, less clearly
+    with pytest.raises(Exception):  # noqa: B017 - python-control fails too, less clearly
         control.dare(A, B, Q, R)
 
 
