@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -67,16 +68,24 @@ def excitation_force(excitation: Section, duration: float) -> Force | None:
     return None
 
 
-def floor_load(excitation: Section, duration: float) -> Callable[[float], np.ndarray] | None:
-    """Floor forces (f1, f2, f3) at time t: the excitation on ``excitation.floor``."""
-    force = excitation_force(excitation, duration)
-    if force is None:
-        return None
-    index = excitation.floor - 1
+@dataclass(frozen=True)
+class FloorLoad:
+    """Floor forces (f1, f2, f3) at time t: the excitation's force on ``excitation.floor``.
 
-    def load(t: float) -> np.ndarray:
+    Keeps the ``excitation`` section so that compiled integrators (:mod:`stillframe.kernels`)
+    can evaluate the same force without calling back into Python.
+    """
+
+    excitation: Section
+    force: Force
+
+    def __call__(self, t: float) -> np.ndarray:
         f = np.zeros(3)
-        f[index] = force(t)
+        f[self.excitation.floor - 1] = self.force(t)
         return f
 
-    return load
+
+def floor_load(excitation: Section, duration: float) -> FloorLoad | None:
+    """The scene's floor load, or None for ``type: none``."""
+    force = excitation_force(excitation, duration)
+    return None if force is None else FloorLoad(excitation, force)

@@ -6,6 +6,7 @@ A scene is YAML validated against :data:`SCENE_SCHEMA`; every value can be overr
 
 from __future__ import annotations
 
+import copy
 import math
 from pathlib import Path
 from typing import Any
@@ -71,9 +72,14 @@ SCENE_SCHEMA: dict[str, Any] = {
     "rig": RIG_SCHEMA,
     "damping": DAMPING_SCHEMA,
     "model": {
-        "type": Field(str, "lumped", choices=("lumped", "fe", "modal")),
+        "type": Field(str, "lumped", choices=("lumped", "fe", "modal", "auto")),
         "elements_per_column": Field(int, 3, positive),
         "modes": Field(int, 3, positive, doc="modal: retained fixed-interface column modes"),
+        "band_hz": Field("floats", [0.0, 15.0], non_negative, length=2,
+                         doc="auto: frequency band the scene must reproduce [Hz]"),
+        "tolerance": Field(float, 0.01, in_range(1e-12, 1.0),
+                           doc="auto: relative error allowed in the band"),
+        "reason": Field(str, "", doc="set by type auto: the model chosen and why"),
     },
     "integrator": {
         "method": Field(str, "rk4", choices=("rk4", "midpoint", "dop853", "radau")),
@@ -140,10 +146,26 @@ def _check_consistency(scene: Section) -> None:
     check_loop(scene)
 
 
+def _resolve_auto(data: dict[str, Any], scene: Section) -> Section:
+    """``model.type: auto``: fill model and integrator from the measured fidelity table."""
+    from stillframe.auto_model import choose
+
+    band = scene.model.band_hz
+    if band[0] >= band[1]:
+        raise InputError(f"model.band_hz: the lower edge must be below the upper (got {band})")
+    choice = choose(copy.deepcopy(data), band, scene.model.tolerance)
+    resolved = copy.deepcopy(data)
+    apply_overrides(resolved, choice.overrides)
+    resolved["model"]["reason"] = f"auto: {choice.reason}"
+    return validate(SCENE_SCHEMA, resolved)
+
+
 def scene_from_dict(data: dict[str, Any], overrides: list[str] | None = None) -> Section:
     """Validate a scene given as a dict (after applying ``--set`` overrides)."""
     apply_overrides(data, overrides or [])
     scene = validate(SCENE_SCHEMA, data)
+    if scene.model.type == "auto":
+        scene = _resolve_auto(data, scene)
     _check_consistency(scene)
     return scene
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -10,9 +11,13 @@ import numpy as np
 
 from stillframe.excitation import floor_load
 from stillframe.integrators import ADAPTIVE, integrate, make_integrator, reference_solution
+from stillframe.kernels import compiled_integrate, compiles
 from stillframe.models import FrameModel, build_model
 from stillframe.schema import Section
+from stillframe.stability import check_rk4_step, drift_warning
 from stillframe.systems import MechanicalSystem
+
+log = logging.getLogger("stillframe.simulation")
 
 Progress = Callable[[float], None]
 
@@ -83,6 +88,8 @@ def simulate(scene: Section, duration: float | None = None,
     n_steps = max(1, round(duration / dt))
     recorder = _Recorder(system, n_steps + 1)
     method = scene.integrator.method
+    if method == "rk4":
+        check_rk4_step(model, dt)
     start = time.perf_counter()
     if method in ADAPTIVE:
         t_eval = np.arange(n_steps + 1) * dt
@@ -98,8 +105,17 @@ def simulate(scene: Section, duration: float | None = None,
             if progress and k % every == 0:
                 progress(k / n_steps)
 
-        integrate(system, x0, dt, n_steps, make_integrator(method), observer=observe)
+        if compiles(system.load, method):
+            compiled_integrate(model, system.load, method, x0, dt, n_steps, observer=observe)
+        else:
+            integrate(system, x0, dt, n_steps, make_integrator(method), observer=observe)
     wall = time.perf_counter() - start
     meta = {"model": model.name, "dofs": model.n_dof, "integrator": method, "dt": dt,
+            "compiled": method not in ADAPTIVE and compiles(system.load, method),
             "steps": n_steps, "wall_s": wall, "steps_per_s": n_steps / wall}
-    return recorder.history(meta)
+    history = recorder.history(meta)
+    warning = drift_warning(model, history.floors, scene.rig.columns.lengths)
+    if warning:
+        log.warning("%s: %s", scene.name, warning)
+        meta["warnings"] = [warning]
+    return history

@@ -61,6 +61,8 @@ def run(args: argparse.Namespace) -> int:
     if show:
         print(file=sys.stderr)
     summary = history.summary()
+    if scene.model.reason:
+        summary["model_choice"] = scene.model.reason
     if args.out:
         write_history(history, args.out, json.dumps(scene.to_dict()))
         summary["out"] = str(args.out)
@@ -74,6 +76,10 @@ def run(args: argparse.Namespace) -> int:
     print(format_table(["", "peak |x| [m]", "peak |a| [m/s^2]"], rows))
     print(f"peak |phi| {summary['peak_phi_rad']:.6g} rad; final energy "
           f"{summary['final_energy_j']:.6g} J")
+    if scene.model.reason:
+        print(f"model choice: {scene.model.reason}")
+    for warning in summary.get("warnings", []):
+        print(f"warning: {warning}")
     print(f"wall time {summary['wall_s']:.3f} s, {summary['steps_per_s']:.0f} steps/s "
           "(with recording)")
     if args.out:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from stillframe.errors import InputError
-from stillframe.models.damping import damping_matrix
+from stillframe.models.damping import damping_parts
 from stillframe.models.frame import INPUT_NAMES, FrameModel, LinearModel
 from stillframe.models.structure import (
     Structure,
@@ -42,4 +42,6 @@ def build_model(scene: Section) -> FrameModel:
             f"mass matrix singular or nearly so (condition number {condition:.2g}); use "
             "model.type: lumped for massless columns, or a larger density"
         )
-    return FrameModel(structure.with_damping(damping_matrix(structure, scene.damping)), scene.rig)
+    parts = damping_parts(structure, scene.damping)
+    damped = structure.with_damping(parts.matrix(structure.mass, structure.stiffness), parts)
+    return FrameModel(damped, scene.rig)

@@ -12,6 +12,8 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 import scipy.linalg as sla
 
@@ -30,11 +32,29 @@ def rayleigh_ratio(omega: np.ndarray, alpha: float, beta: float) -> np.ndarray:
     return alpha / (2.0 * omega) + beta * omega / 2.0
 
 
-def damping_matrix(structure: Structure, damping: Section) -> np.ndarray:
-    """The structure's damping matrix under the scene's ``damping`` section."""
-    M, K = structure.mass, structure.stiffness
+@dataclass(frozen=True)
+class DampingParts:
+    """C = a M + b K + U diag(g) Uᵀ: a banded part plus a low-rank modal correction.
+
+    Kept apart so that fast solvers can keep the banded structure of M and K (FE DOFs ordered
+    by height) and handle the rank-r part by the Woodbury identity.
+    """
+
+    mass_coefficient: float
+    stiffness_coefficient: float
+    shapes: np.ndarray  # U, n × r
+    gains: np.ndarray  # g, r
+
+    def matrix(self, mass: np.ndarray, stiffness: np.ndarray) -> np.ndarray:
+        low_rank = (self.shapes * self.gains) @ self.shapes.T
+        return self.mass_coefficient * mass + self.stiffness_coefficient * stiffness + low_rank
+
+
+def damping_parts(structure: Structure, damping: Section) -> DampingParts:
+    """The scene's ``damping`` section as :class:`DampingParts` of the structure."""
+    n = structure.n_dof
     if damping.model == "none":
-        return np.zeros_like(K)
+        return DampingParts(0.0, 0.0, np.zeros((n, 0)), np.zeros(0))
     omega, phi = undamped_modes(structure)
     if damping.model == "rayleigh":
         zeta = rayleigh_ratio(omega, damping.alpha, damping.beta)
@@ -47,12 +67,16 @@ def damping_matrix(structure: Structure, damping: Section) -> np.ndarray:
                 f"damping ratio {zeta[j]:.3g}; use damping.model: modal for the {structure.name} "
                 "model"
             )
-        return damping.alpha * M + damping.beta * K
+        return DampingParts(damping.alpha, damping.beta, np.zeros((n, 0)), np.zeros(0))
     ratios = np.asarray(damping.modal_ratios, dtype=float)
     r = min(ratios.size, omega.size)
     beta_high = 0.0
     if r < omega.size:
         beta_high = 2.0 * damping.high_mode_ratio / omega[r]
-    Mphi = M @ phi[:, :r]
     extra = 2.0 * ratios[:r] * omega[:r] - beta_high * omega[:r] ** 2
-    return beta_high * K + (Mphi * extra) @ Mphi.T
+    return DampingParts(0.0, beta_high, structure.mass @ phi[:, :r], extra)
+
+
+def damping_matrix(structure: Structure, damping: Section) -> np.ndarray:
+    """The structure's damping matrix under the scene's ``damping`` section."""
+    return damping_parts(structure, damping).matrix(structure.mass, structure.stiffness)

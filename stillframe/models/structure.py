@@ -9,12 +9,16 @@ models of the rig differ only in how this structure is built; the nonlinear pend
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 import scipy.linalg as sla
 
 from stillframe.errors import InputError
 from stillframe.schema import Section
+
+if TYPE_CHECKING:
+    from stillframe.models.damping import DampingParts
 
 
 @dataclass(frozen=True)
@@ -27,14 +31,15 @@ class Structure:
     floor_index: tuple[int, int, int]
     dof_names: tuple[str, ...]
     damping: np.ndarray | None = None
+    damping_parts: DampingParts | None = None  # the same C split into banded + low rank
 
     @property
     def n_dof(self) -> int:
         return self.mass.shape[0]
 
-    def with_damping(self, damping: np.ndarray) -> Structure:
+    def with_damping(self, damping: np.ndarray, parts: DampingParts | None = None) -> Structure:
         return Structure(self.name, self.mass, self.stiffness, self.floor_index,
-                         self.dof_names, damping)
+                         self.dof_names, damping, parts)
 
 
 def story_stiffness(rig: Section) -> np.ndarray:

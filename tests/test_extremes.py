@@ -1,0 +1,143 @@
+"""Stability at the extremes (docs/extremes.md): each row works within a stated accuracy or fails
+early with a clear error or warning."""
+
+from __future__ import annotations
+
+import logging
+import re
+
+import numpy as np
+import pytest
+import scipy.linalg as sla
+
+from stillframe.errors import InputError
+from stillframe.excitation import floor_load
+from stillframe.integrators import IntegrationError, reference_solution
+from stillframe.kernels import CompiledFrame
+from stillframe.models import build_model, build_structure
+from stillframe.models.damping import undamped_modes
+from stillframe.scene import scene_from_dict
+from stillframe.simulation import initial_state, simulate
+from stillframe.stability import RK4_IMAGINARY_LIMIT, rk4_growth, rk4_stable_step
+from stillframe.systems import MechanicalSystem
+
+UNDAMPED = ["damping.model=none", "rig.pendulum.hinge_damping=0"]
+
+
+def _setup(overrides: list[str]):
+    scene = scene_from_dict({"name": "t"}, overrides)
+    model = build_model(scene)
+    return scene, model, CompiledFrame(model), initial_state(model, scene.initial)
+
+
+# --- step size up to the explicit stability limit ------------------------------------------------
+def _grows(frame: CompiledFrame, x0: np.ndarray, h: float, steps: int = 20_000) -> bool:
+    try:
+        states = frame.run("rk4", x0, h, steps, stride=steps // 10)
+    except IntegrationError:
+        return True
+    return bool(np.max(np.abs(states[-1])) > 10 * np.max(np.abs(x0)))
+
+
+@pytest.mark.parametrize("overrides", [
+    ["initial.floors=[1e-4, -1e-4, 1e-4]", *UNDAMPED],
+    ["model.type=fe", "model.elements_per_column=2", "damping.model=modal",
+     "initial.floors=[1e-4, -1e-4, 1e-4]"],
+])
+def test_rk4_blows_up_just_beyond_the_predicted_limit_and_not_just_below(overrides) -> None:
+    _, model, frame, x0 = _setup(overrides)
+    x0[model.n_dof:] = 1e-3  # excite every mode, the fastest included
+    limit = rk4_stable_step(model)
+    assert not _grows(frame, x0, 0.99 * limit)
+    assert _grows(frame, x0, 1.01 * limit)
+    if "damping.model=none" in overrides:
+        # undamped: the limit is the imaginary-axis bound h ω_max = 2√2 (closed form)
+        omega_max = np.max(np.abs(np.linalg.eigvals(model.linearized().state_space()[0])))
+        assert limit * omega_max == pytest.approx(RK4_IMAGINARY_LIMIT, rel=1e-6)
+
+
+def test_simulate_refuses_an_rk4_step_beyond_the_limit_before_integrating() -> None:
+    scene = scene_from_dict({"name": "t"}, ["model.type=fe", "damping.model=modal",
+                                            "integrator.method=rk4", "integrator.dt=1e-3"])
+    with pytest.raises(InputError, match=r"integrator\.dt: 0\.001 s is beyond RK4's stability "
+                                         r"limit 0\.000361 s for the fe3 model"):
+        simulate(scene, duration=1.0)
+
+
+# --- fine meshes ---------------------------------------------------------------------------------
+def test_fine_meshes_up_to_200_elements_stiffen_as_n_squared_and_stay_accurate() -> None:
+    meshes = [10, 25, 50, 100, 200]
+    top = []
+    for n in meshes:
+        s = scene_from_dict({"name": "t"}, ["model.type=fe", f"model.elements_per_column={n}",
+                                            "damping.model=modal"])
+        top.append(undamped_modes(build_structure(s))[0][-1])
+    # the highest FE frequency of a beam grows as 1/le² = n² (so cond(K) ∝ n⁴)
+    assert np.polyfit(np.log(meshes), np.log(top), 1)[0] == pytest.approx(2.0, abs=0.02)
+    # FE 200 (1198 DOFs), implicit midpoint at 1 ms agrees with FE 40 on the floors
+    runs = {}
+    for n in (40, 200):
+        scene, _, frame, x0 = _setup([
+            "model.type=fe", f"model.elements_per_column={n}", "damping.model=modal",
+            "excitation.type=harmonics"])
+        states = frame.run("midpoint", x0, 1e-3, 2000, floor_load(scene.excitation, 2.0),
+                           stride=10)
+        runs[n] = states[:, :3]
+    error = np.max(np.abs(runs[200] - runs[40])) / np.max(np.abs(runs[40]))
+    assert error < 1e-4, error
+
+
+# --- long undamped runs --------------------------------------------------------------------------
+def test_energy_drift_over_a_million_steps_matches_rk4_damping_and_midpoint_stays_bounded(
+) -> None:
+    """Undamped lumped model, 1e6 steps of 1 ms. RK4 loses the energy of mode j as
+    |R(i ω_j h)|^(2N) (closed form on the linearised modes); midpoint keeps it bounded."""
+    _, model, frame, x0 = _setup([*UNDAMPED, "initial.floors=[1e-5, 2e-5, 3e-5]"])
+    h, n = 1e-3, 1_000_000
+    lin = model.linearized()
+    w2, phi = sla.eigh(lin.stiffness, lin.mass)
+    q0, v0 = x0[:model.n_dof], x0[model.n_dof:]
+    modal_energy = 0.5 * w2 * (phi.T @ lin.mass @ q0) ** 2 + 0.5 * (phi.T @ lin.mass @ v0) ** 2
+    factor = rk4_growth(1j * np.sqrt(w2) * h) ** (2 * n)
+    predicted = float(modal_energy @ factor / modal_energy.sum())
+    e0 = model.energy(q0, v0)
+    drift = {}
+    for method in ("rk4", "midpoint"):
+        states = frame.run(method, x0, h, n, stride=10_000)
+        energy = np.array([model.energy(x[:model.n_dof], x[model.n_dof:]) for x in states])
+        drift[method] = energy / e0
+    assert 1 - predicted > 1e-5  # a measurable loss
+    assert drift["rk4"][-1] == pytest.approx(predicted, rel=1e-6)
+    assert np.max(np.abs(drift["midpoint"] - 1)) < 1e-9
+
+
+# --- large motion --------------------------------------------------------------------------------
+def test_pendulum_full_rotations_agree_with_the_adaptive_reference() -> None:
+    """φ̇(0) = 20 rad/s carries the pendulum over the top (needs 13.9 rad/s) several times."""
+    _, model, frame, x0 = _setup([*UNDAMPED, "initial.phi_rate=20"])
+    states = frame.run("midpoint", x0, 1e-4, 20_000, stride=100)
+    system = MechanicalSystem(model)
+    t = np.arange(0, 201) * 1e-2
+    exact = reference_solution(system, x0, t, "dop853", 1e-12, 1e-14)
+    assert exact[-1, model.phi_index] > 4 * np.pi  # at least two full turns
+    assert np.max(np.abs(states[:, model.phi_index] - exact[:, model.phi_index])) < 1e-3
+    floors = np.max(np.abs(states[:, :3] - exact[:, :3])) / np.max(np.abs(exact[:, :3]))
+    assert floors < 1e-3
+    e0 = system.energy(x0)
+    energy = [system.energy(x) for x in states]
+    assert np.max(np.abs(np.array(energy) / e0 - 1)) < 1e-4
+
+
+def test_large_floor_amplitudes_warn_that_the_columns_leave_linear_theory(caplog) -> None:
+    small = simulate(scene_from_dict({"name": "t"}, ["initial.floors=[0.001, 0.002, 0.003]",
+                                                     "duration=0.2"]))
+    assert "warnings" not in small.meta
+    with caplog.at_level(logging.WARNING, logger="stillframe.simulation"):
+        large = simulate(scene_from_dict({"name": "t"}, ["initial.floors=[0.05, 0.1, 0.15]",
+                                                         "duration=0.2"]))
+    assert re.match(r"story \d drifts \d+\.\d% of its height \(> 2%\)", large.meta["warnings"][0])
+    assert "outside the linear column theory" in caplog.text
+    # the linear structure still scales exactly: 50x the amplitude, 50x the floor motion
+    # (the pendulum is a small nonlinear load at these amplitudes)
+    ratio = np.max(np.abs(large.floors), axis=0) / np.max(np.abs(small.floors), axis=0)
+    np.testing.assert_allclose(ratio, 50, rtol=5e-3)
