@@ -16,11 +16,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.linalg as sla
 
 from estimator_node.coordinates import physical_selector
 from estimator_node.discrete import first_order_hold
 from stillframe.models import FrameModel
+from stillframe.riccati import solve_dare
 
 
 @dataclass(frozen=True)
@@ -44,7 +44,7 @@ def design_lqr(model: FrameModel, period: float, state_weights: list[float],
     S = physical_selector(model)
     Q = S.T @ np.diag(state_weights) @ S
     R = np.array([[input_weight]])
-    P = sla.solve_discrete_are(A, B, Q, R)
+    P = solve_dare(A, B, Q, R, what="LQR design")
     BtP = B.T @ P
     K = np.linalg.solve(R + BtP @ B, BtP @ A)
     A_cl = A - B @ K

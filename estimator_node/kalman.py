@@ -7,10 +7,11 @@ measurements are the floor accelerations and φ (eq. 5.209–5.212): y = C z + D
 acceleration rows of the continuous state equation. Process noise: discrete, per sample.
 
 - :class:`SteadyStateKalman`: the stationary filter. Its a-priori covariance P∞ solves the
-  discrete Riccati equation (scipy ``solve_discrete_are``; filterpy has no stationary filter);
-  the gain for the channels present is P∞ Cₛᵀ (Cₛ P∞ Cₛᵀ + Rₛ)⁻¹, the stationary gain when all
-  arrive. After a gap (an interval longer than the period) the mean is propagated over the true
-  interval but the covariance stays P∞.
+  discrete Riccati equation (:func:`stillframe.riccati.solve_dare`: scipy's solver after PBH
+  checks; filterpy has no stationary filter); the gain for the channels present is
+  P∞ Cₛᵀ (Cₛ P∞ Cₛᵀ + Rₛ)⁻¹, the stationary gain when all arrive. After a gap (an interval
+  longer than the period) the mean is propagated over the true interval but the covariance
+  stays P∞.
 - :class:`TimeVaryingKalman`: filterpy's ``KalmanFilter`` (predict with our input matrices,
   update with the rows present).
 """
@@ -24,6 +25,7 @@ from filterpy.kalman import KalmanFilter
 from estimator_node.base import Filter
 from estimator_node.discrete import Discrete, first_order_hold
 from stillframe.models import FrameModel
+from stillframe.riccati import solve_dare
 from stillframe.schema import Section
 from stillframe.signals import full_inputs
 
@@ -70,7 +72,8 @@ class SteadyStateKalman(LinearFilter):
                  initial_physical: np.ndarray, period: float) -> None:
         super().__init__(model, config, excited_floor, initial_physical, period)
         d = self.discrete(period)
-        self.prior = sla.solve_discrete_are(d.phi.T, self.C.T, self.Q, self.R)
+        self.prior = solve_dare(d.phi.T, self.C.T, self.Q, self.R,
+                                what="stationary Kalman filter (dual Riccati equation)")
         self.gain = self.gain_for(np.ones(4, dtype=bool))
         self.P = self.prior
 

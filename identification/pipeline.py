@@ -28,6 +28,7 @@ from numpy.typing import NDArray
 from identification.era import EraDimensions, HankelFactorization, auto_order, factorize, order_gap
 from identification.modal import ModalTable, modal_parameters
 from identification.okid import minimum_samples, observer_gain, okid
+from identification.quality import mode_consistency, quality_warnings
 from stillframe.errors import InputError
 
 Array = NDArray[np.float64]
@@ -62,6 +63,10 @@ class Identification:
     dimensions: EraDimensions
     factorization: HankelFactorization = field(repr=False)
     """The Hankel SVD, reusable for other orders (e.g. a stabilization diagram)."""
+    consistent: NDArray[np.bool_]
+    """Per mode: persists at orders n + 2 and n + 4 (:mod:`identification.quality`)."""
+    warnings: tuple[str, ...]
+    """The quality checks that failed (weak order gap, inconsistent or unstable modes)."""
 
 
 def _as_record(name: str, values: Array) -> Array:
@@ -203,9 +208,12 @@ def identify(
         B, G = real.B[:, :r], real.B[:, r:]  # eqs. 3.198, 3.199
     else:
         B, G = real.B, observer_gain(real.A, real.C, gain_markov[: p + 1])
+    modes = modal_parameters(real.A, real.C, float(dt), reference=reference_sensor)
+    consistent = mode_consistency(fac, modes, chosen, float(dt))
     return Identification(
         A=real.A, B=B, C=real.C, D=real.D[:, :r],  # the combined Gamma_0 is [D, 0]
         G=G, dt=float(dt), order=chosen, order_gap=gap, hankel_singular_values=s,
         markov=markov, method=method, observer_order=p, dimensions=dims, factorization=fac,
-        modes=modal_parameters(real.A, real.C, float(dt), reference=reference_sensor),
+        modes=modes, consistent=consistent,
+        warnings=tuple(quality_warnings(modes, consistent, chosen, gap)),
     )

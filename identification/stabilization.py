@@ -53,13 +53,25 @@ def stabilization_diagram(
         stable_f = np.zeros(len(modes), dtype=bool)
         stable = np.zeros(len(modes), dtype=bool)
         if previous is not None and len(previous):
-            f, f0 = modes.frequency_hz[:, None], previous.frequency_hz[None, :]
-            z, z0 = modes.damping_ratio[:, None], previous.damping_ratio[None, :]
-            close_f = np.abs(f - f0) <= frequency_tol * np.abs(f0)
-            close_z = np.abs(z - z0) <= damping_tol * np.abs(z0)
-            close = close_f & close_z & (mac(modes.shapes, previous.shapes) >= mac_min)
-            stable_f, stable = close_f.any(axis=1), close.any(axis=1)
+            stable_f, stable = matching_modes(modes, previous, frequency_tol, damping_tol,
+                                              mac_min)
         rows.append(StabilizationRow(order=n, modes=modes, stable_frequency=stable_f,
                                      stable=stable))
         previous = modes
     return rows
+
+
+def matching_modes(modes: ModalTable, other: ModalTable, frequency_tol: float,
+                   damping_tol: float, mac_min: float,
+                   ) -> tuple[NDArray[np.bool_], NDArray[np.bool_]]:
+    """For each mode of ``modes``: whether ``other`` has one within ``frequency_tol`` in
+    frequency, and whether it has one within all three tolerances (frequency, damping, MAC)."""
+    if not len(modes) or not len(other):
+        none = np.zeros(len(modes), dtype=bool)
+        return none, none.copy()
+    f, f0 = modes.frequency_hz[:, None], other.frequency_hz[None, :]
+    z, z0 = modes.damping_ratio[:, None], other.damping_ratio[None, :]
+    close_f = np.abs(f - f0) <= frequency_tol * np.abs(f0)
+    close_z = np.abs(z - z0) <= damping_tol * np.abs(z0)
+    close = close_f & close_z & (mac(modes.shapes, other.shapes) >= mac_min)
+    return close_f.any(axis=1), close.any(axis=1)

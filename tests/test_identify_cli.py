@@ -122,10 +122,12 @@ def test_json_schema_and_auto_order(noisy_bag: Path, method: str) -> None:
     s = np.array(doc["hankel_singular_values"])
     assert np.all(np.diff(s) <= 0) and s[-1] >= 0
     assert doc["order_selection"]["gap"] == pytest.approx(s[5] / s[6], rel=1e-9)
+    assert doc["warnings"] == []
     freqs = [m["frequency_hz"] for m in doc["modes"]]
     assert freqs == sorted(freqs) and len(freqs) == 3
     for mode in doc["modes"]:
-        assert set(mode) == {"frequency_hz", "damping_ratio", "shape"}
+        assert set(mode) == {"frequency_hz", "damping_ratio", "shape", "consistent"}
+        assert mode["consistent"] is True  # three physical modes, clearly in the record
         shape = np.array(mode["shape"])
         assert shape.shape == (3, 2)  # [magnitude, phase_rad] per output
         assert shape[:, 0].max() == pytest.approx(1.0)  # normalised to the largest component

@@ -135,6 +135,8 @@ def run(args: argparse.Namespace) -> int:
                      observer_order=args.observer_order, max_order=args.max_order,
                      combined=args.combined)
     progress(f"order {ident.order}, {len(ident.modes)} modes")
+    for warning in ident.warnings:
+        print(f"stillframe identify: warning: {warning}", file=sys.stderr)
     if args.plots:
         from identification.plots import identification_plots
 
@@ -163,7 +165,7 @@ def run(args: argparse.Namespace) -> int:
           + (f" (auto: gap sigma_n/sigma_n+1 = {ident.order_gap:.4g})" if args.order == "auto"
              else ""))
     print("outputs: " + ", ".join(f"y{i + 1} = {n}" for i, n in enumerate(names)))
-    print(modes_table(ident.modes, [f"y{i + 1}" for i in range(len(names))]))
+    print(modes_table(ident.modes, ident.consistent, [f"y{i + 1}" for i in range(len(names))]))
     if physical is not None:
         for key in ("M", "K", "R"):
             print(f"{key} =\n{format_matrix(physical_doc[key])}")

@@ -1,0 +1,113 @@
+"""Identification at the extremes (docs/extremes.md): short records, low SNR, an over-estimated
+order. The reference is the simulated hammer test's own model (identification.hammer): its
+three floor modes. Contract: every run is refused with a clear error, warns, or gives the modes
+within the stated accuracy; a silent wrong model is the failure."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from identification.hammer import SCENE, HammerRecord, hammer_test
+from identification.pipeline import Identification, identify
+from stillframe.errors import InputError
+from stillframe.models import build_model
+from stillframe.scene import load_scene
+
+SEEDS = range(10)
+#: the accuracy a silent (warning-free) result is held to: frequency, damping ratio (relative)
+FREQUENCY_TOL, DAMPING_TOL = 3e-3, 0.15
+
+
+@pytest.fixture(scope="module")
+def lin():
+    return build_model(load_scene(SCENE)).linearized()
+
+
+def floor_mode_errors(ident: Identification, rec: HammerRecord,
+                     only_consistent: bool = False) -> tuple[float, float]:
+    """Worst relative frequency and damping error of the three floor modes (the pendulum mode,
+    the model's first, is not observable in the floor accelerations at this excitation)."""
+    keep = ident.consistent if only_consistent else np.ones(len(ident.modes), dtype=bool)
+    f, z = ident.modes.frequency_hz[keep], ident.modes.damping_ratio[keep]
+    worst_f = worst_z = 0.0
+    for f0, z0 in zip(rec.frequency_hz[1:], rec.damping_ratio[1:], strict=True):
+        k = int(np.argmin(np.abs(f - f0)))
+        worst_f, worst_z = max(worst_f, abs(f[k] / f0 - 1)), max(worst_z, abs(z[k] / z0 - 1))
+    return worst_f, worst_z
+
+
+def outcome(rec: HammerRecord, order: int = 6) -> str:
+    """'refused', 'warned', 'accurate' or 'SILENTLY WRONG'."""
+    try:
+        ident = identify(rec.u, rec.y, rec.dt, "okid-eradc", order)
+    except InputError:
+        return "refused"
+    if ident.warnings:
+        return "warned"
+    worst_f, worst_z = floor_mode_errors(ident, rec)
+    if len(ident.modes) == 3 and worst_f <= FREQUENCY_TOL and worst_z <= DAMPING_TOL:
+        return "accurate"
+    return "SILENTLY WRONG"
+
+
+@pytest.mark.parametrize(("samples", "least_accurate"), [(2048, 10), (128, 8), (96, 0),
+                                                         (64, 0), (48, 0)])
+def test_short_records_are_accurate_or_flagged(lin, samples: int, least_accurate: int) -> None:
+    """4 s (128 samples at 32 Hz, 3 s after the blow) still gives the modes; shorter records
+    are refused or warned about, never silently wrong."""
+    outcomes = [outcome(hammer_test(lin, seed, samples=samples)) for seed in SEEDS]
+    assert "SILENTLY WRONG" not in outcomes, outcomes
+    assert outcomes.count("accurate") >= least_accurate, outcomes
+
+
+def test_a_record_below_okids_minimum_is_refused_by_name(lin) -> None:
+    rec = hammer_test(lin, 0, samples=40)
+    with pytest.raises(InputError, match="too short"):
+        identify(rec.u, rec.y, rec.dt, "okid-eradc", 6, observer_order=20)
+
+
+@pytest.mark.parametrize(("noise", "least_accurate", "least_flagged"),
+                         [(1e-3, 10, 0), (3e-3, 10, 0), (1e-2, 0, 8), (3e-2, 0, 10)])
+def test_low_snr_is_accurate_or_flagged(lin, noise: float, least_accurate: int,
+                                        least_flagged: int) -> None:
+    """Accelerometer and load-cell noise of 1e-3 and 3e-3 m/s² (44 and 34 dB below the
+    response's RMS) gives the modes; from 1e-2 (24 dB) the damping ratios are not resolved and
+    the order gap drops below the warning threshold."""
+    outcomes = [outcome(hammer_test(lin, seed, acceleration_noise=noise, force_noise=noise))
+                for seed in SEEDS]
+    assert "SILENTLY WRONG" not in outcomes, outcomes
+    assert outcomes.count("accurate") >= least_accurate, outcomes
+    assert outcomes.count("warned") + outcomes.count("refused") >= least_flagged, outcomes
+
+
+@pytest.mark.parametrize("order", [10, 16, 24])
+def test_an_over_estimated_order_keeps_the_physical_modes_consistent(lin, order: int) -> None:
+    """Spurious modes are added and flagged; the three physical modes stay, consistent, to 0.1 %
+    in frequency and 5 % in damping."""
+    spurious_flagged = spurious = 0
+    for seed in SEEDS:
+        rec = hammer_test(lin, seed)
+        ident = identify(rec.u, rec.y, rec.dt, "okid-eradc", order)
+        assert ident.warnings, "an over-estimated order must warn"
+        worst_f, worst_z = floor_mode_errors(ident, rec, only_consistent=True)
+        assert worst_f < 1e-3 and worst_z < 0.05, (seed, worst_f, worst_z)
+        physical = np.zeros(len(ident.modes), dtype=bool)
+        for f0 in rec.frequency_hz[1:]:
+            physical[np.argmin(np.abs(ident.modes.frequency_hz - f0))] = True
+        spurious += int((~physical).sum())
+        spurious_flagged += int((~physical & ~ident.consistent).sum())
+    print(f"order {order}: {spurious_flagged} of {spurious} spurious modes flagged")
+    assert spurious > 0
+    assert spurious_flagged >= 0.7 * spurious, (spurious_flagged, spurious)
+
+
+def test_unstable_identified_modes_are_named(lin) -> None:
+    """A mode with negative damping is reported: a passive structure has none."""
+    from identification.modal import ModalTable
+    from identification.quality import quality_warnings
+
+    modes = ModalTable(frequency_hz=np.array([2.0, 14.9]), damping_ratio=np.array([0.04, -0.04]),
+                       eigenvalues=np.zeros(2, complex), shapes=np.ones((3, 2), complex))
+    (warning,) = quality_warnings(modes, np.ones(2, dtype=bool), order=4, gap=100.0)
+    assert warning.startswith("unstable modes: 14.9 Hz (zeta -0.04)")
