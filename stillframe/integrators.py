@@ -53,8 +53,9 @@ class ImplicitMidpoint:
     order = 2
     explicit = False
 
-    def __init__(self, tol: float = 1e-12, max_iter: int = 25) -> None:
+    def __init__(self, tol: float = 1e-12, max_iter: int = 25, stall_tol: float = 1e-9) -> None:
         self.tol = tol
+        self.stall_tol = stall_tol
         self.max_iter = max_iter
         self._factor: _Factor | None = None
         self._last_increment: np.ndarray | None = None
@@ -95,7 +96,10 @@ class ImplicitMidpoint:
             size = np.max(np.abs(delta)) / (1.0 + np.max(np.abs(x1)))
             if not np.isfinite(size):
                 break
-            if size <= self.tol:
+            # converged, or stalled at the residual's round-off level with a fresh matrix (a fine
+            # FE mesh has h‖K‖ ≫ 1: its residual cannot resolve a relative 1e-12)
+            stalled = fresh and size > 0.5 * previous and size <= self.stall_tol
+            if size <= self.tol or stalled:
                 self._last_increment = x1 - x
                 return x1
             if size > 0.1 * previous and not fresh:
