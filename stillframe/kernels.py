@@ -87,17 +87,21 @@ def load_arrays(load: FloorLoad | None) -> tuple | None:
 
 # --- RK4 on the dense model ----------------------------------------------------------------------
 @numba.njit(cache=True)
-def _accelerations(q, v, u, f_ext, floor_index, i3, K, C, Minv, w, p, out):
-    """FrameModel.accelerations: q̈ = M(q)⁻¹Q by the Schur complement of the pendulum row."""
+def _accelerations(x, u, f_ext, floor_index, i3, K, C, Minv, w, p, Q, out):
+    """FrameModel.accelerations: q̈ = M(q)⁻¹Q by the Schur complement of the pendulum row.
+
+    ``x = [q, v]`` (q and v of length n + 1, the pendulum last); q̈ goes to ``out[n + 1:]`` and
+    ``Q`` is scratch space of length n (no allocation in the hot loop).
+    """
     n = K.shape[0]
+    nd = n + 1
     m4, l4, g, r4, J = p[0], p[1], p[2], p[3], p[4]
-    phi, dphi = q[n], v[n]
+    phi, dphi = x[n], x[nd + n]
     sin_phi = math.sin(phi)
-    Q = np.empty(n)
     for i in range(n):
         s = 0.0
         for j in range(n):
-            s -= K[i, j] * q[j] + C[i, j] * v[j]
+            s -= K[i, j] * x[j] + C[i, j] * x[nd + j]
         Q[i] = s
     for k in range(3):
         Q[floor_index[k]] += u[k] + f_ext[k]
@@ -108,11 +112,27 @@ def _accelerations(q, v, u, f_ext, floor_index, i3, K, C, Minv, w, p, out):
         s = 0.0
         for j in range(n):
             s += Minv[i, j] * Q[j]
-        out[i] = s
-    a_phi = (q_phi - c * out[i3]) / (J - c * c * w[i3])
+        out[nd + i] = s
+    a_phi = (q_phi - c * out[nd + i3]) / (J - c * c * w[i3])
     for i in range(n):
-        out[i] -= c * a_phi * w[i]
-    out[n] = a_phi
+        out[nd + i] -= c * a_phi * w[i]
+    out[nd + n] = a_phi
+
+
+@numba.njit(cache=True, inline="always")
+def _stage(x, a, k, out):
+    """out = x + a k."""
+    for i in range(x.size):
+        out[i] = x[i] + a * k[i]
+
+
+@numba.njit(cache=True, inline="always")
+def _derivative(x, u, f_ext, floor_index, i3, K, C, Minv, w, p, Q, out):
+    """ẋ = [v, q̈] of the state x = [q, v]."""
+    nd = K.shape[0] + 1
+    for i in range(nd):
+        out[i] = x[nd + i]
+    _accelerations(x, u, f_ext, floor_index, i3, K, C, Minv, w, p, Q, out)
 
 
 @numba.njit(cache=True)
@@ -130,32 +150,28 @@ def _rk4_run(x, t0, h, n_steps, stride, out, floor_index, i3, K, C, Minv, w, p, 
     k3 = np.empty(m)
     k4 = np.empty(m)
     xs = np.empty(m)
+    scratch = np.empty(K.shape[0])
     f_ext = np.zeros(3)
     out[0, :] = x
     row = 1
     f_end = _force(t0, load_kind, amps, omegas, phases, pulse)
+    half = 0.5 * h
     for k in range(n_steps):
         t = t0 + k * h
         # the load at t, t + h/2 (stages 2 and 3) and t + h (reused as the next step's start)
         f_start = f_end
-        f_mid = _force(t + 0.5 * h, load_kind, amps, omegas, phases, pulse)
+        f_mid = _force(t + half, load_kind, amps, omegas, phases, pulse)
         f_end = _force(t + h, load_kind, amps, omegas, phases, pulse)
-        for stage in range(4):
-            kk = k1 if stage == 0 else k2 if stage == 1 else k3 if stage == 2 else k4
-            if stage == 0:
-                f_ext[load_floor] = f_start
-                for i in range(m):
-                    xs[i] = x[i]
-            else:
-                prev = k1 if stage == 1 else k2 if stage == 2 else k3
-                a = h if stage == 3 else 0.5 * h
-                f_ext[load_floor] = f_end if stage == 3 else f_mid
-                for i in range(m):
-                    xs[i] = x[i] + a * prev[i]
-            for i in range(nd):
-                kk[i] = xs[nd + i]
-            _accelerations(xs[:nd], xs[nd:], u, f_ext, floor_index, i3, K, C, Minv, w, p,
-                           kk[nd:])
+        f_ext[load_floor] = f_start
+        _derivative(x, u, f_ext, floor_index, i3, K, C, Minv, w, p, scratch, k1)
+        f_ext[load_floor] = f_mid
+        _stage(x, half, k1, xs)
+        _derivative(xs, u, f_ext, floor_index, i3, K, C, Minv, w, p, scratch, k2)
+        _stage(x, half, k2, xs)
+        _derivative(xs, u, f_ext, floor_index, i3, K, C, Minv, w, p, scratch, k3)
+        f_ext[load_floor] = f_end
+        _stage(x, h, k3, xs)
+        _derivative(xs, u, f_ext, floor_index, i3, K, C, Minv, w, p, scratch, k4)
         finite = True
         for i in range(m):
             x[i] += (h / 6.0) * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
