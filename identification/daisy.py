@@ -23,6 +23,7 @@ FRF), among modes with damping ratio below 0.2.
 from __future__ import annotations
 
 import math
+import os
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -39,8 +40,12 @@ from identification.pipeline import identify
 from identification.validation import fit_percent, simulate_fitted
 from stillframe.errors import InputError
 
-DEFAULT_PATH = (Path(__file__).resolve().parents[2] / "shared" / "datasets" / "daisy"
-                / "flexible_structure_dat.mat")
+DATASETS_VARIABLE = "STILLFRAME_DATASETS"
+"""Environment variable naming the datasets folder (default: ``../shared/datasets`` beside the
+checkout)."""
+DEFAULT_PATH = (Path(os.environ.get(DATASETS_VARIABLE)
+                     or Path(__file__).resolve().parents[2] / "shared" / "datasets")
+                / "daisy" / "flexible_structure_dat.mat")
 DT = 1 / 1024
 ORDER = 20
 BLOCK_ROWS = 21
@@ -61,6 +66,8 @@ class Model:
     D: np.ndarray
     seconds: float
     observer_order: int | None = None
+    warnings: tuple[str, ...] = ()
+    """The quality checks of :mod:`identification.quality` that failed (OKID methods only)."""
 
 
 def load(path: str | Path = DEFAULT_PATH) -> tuple[np.ndarray, np.ndarray]:
@@ -98,7 +105,7 @@ def okid_model(u: np.ndarray, y: np.ndarray, method: str, observer_order: int) -
     start = time.perf_counter()
     ident = identify(u, y, DT, method, ORDER, observer_order=observer_order)
     return Model(method, ident.A, ident.B, ident.C, ident.D, time.perf_counter() - start,
-                 observer_order)
+                 observer_order, ident.warnings)
 
 
 def choose_observer_order(u: np.ndarray, y: np.ndarray, method: str) -> int:
@@ -167,6 +174,7 @@ def report(path: str | Path = DEFAULT_PATH,
             "fit_percent": fit, "mean_fit_percent": float(np.mean(fit)) if fit else None,
             "seconds": model.seconds, "observer_order": model.observer_order,
             "modes": dominant_modes(model), "simulated": simulated,
+            "warnings": list(model.warnings),
         }
     return {
         "dataset": "DaISy 96-013 steel subframe (flexible_structure_dat.mat)",

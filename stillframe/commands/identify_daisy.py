@@ -16,8 +16,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "with OKID + ERA, OKID + ERA/DC and N4SID (nfoursid); validate on the second "
                     "half.")
     parser.add_argument("--data", metavar="FILE", default=None,
-                        help="flexible_structure_dat.mat (default: ../shared/datasets/daisy/ "
-                             "beside the repository)")
+                        help="flexible_structure_dat.mat (default: daisy/ in $STILLFRAME_DATASETS "
+                             "or in ../shared/datasets beside the repository)")
     add_json_argument(parser)
     parser.add_argument("--plots", metavar="DIR", default=None, help="write PNG figures here")
     parser.add_argument("--progress", action="store_true",
@@ -50,8 +50,10 @@ def run(args: argparse.Namespace) -> int:
         plots.mode_comparison({k: v["modes"] for k, v in methods.items()},
                               out / "daisy_modes.png")
         progress(f"plots written to {out}")
-    for entry in methods.values():
+    for name, entry in methods.items():
         del entry["simulated"]
+        for warning in entry["warnings"]:
+            print(f"stillframe identify-daisy: warning: {name}: {warning}", file=sys.stderr)
     del result["measured"]
     result["dominant_mode_agreement"] = agreement
     if args.json:
