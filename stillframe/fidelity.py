@@ -79,11 +79,11 @@ def outputs(model: FrameModel, states: np.ndarray) -> np.ndarray:
     return states[:, [*model.floor_index, model.phi_index]]
 
 
-def run_outputs(scene: Section, method: str, dt: float,
-                repeat_until: float = 0.0) -> tuple[FrameModel, np.ndarray, float]:
-    """Outputs on the 10 ms grid and the CPU time per run (repeated to ``repeat_until`` s)."""
-    model = build_model(scene)
-    frame = CompiledFrame(model)
+def run_outputs(frame: CompiledFrame, scene: Section, method: str, dt: float,
+                repeat_until: float = 0.0) -> tuple[np.ndarray, float]:
+    """Outputs on the 10 ms grid and the CPU time per run (repeated to ``repeat_until`` s) of
+    ``frame`` (built from ``scene``'s model)."""
+    model = frame.model
     load = floor_load(scene.excitation, scene.duration)
     x0 = initial_state(model, scene.initial)
     stride = round(GRID_DT / dt)
@@ -96,7 +96,7 @@ def run_outputs(scene: Section, method: str, dt: float,
         spent = time.process_time() - start
         if spent >= repeat_until:
             break
-    return model, outputs(model, states), spent / runs
+    return outputs(model, states), spent / runs
 
 
 def relative_error(y: np.ndarray, reference: np.ndarray) -> float:
@@ -115,8 +115,9 @@ class Reference:
 def reference(scene: str, duration: float) -> Reference:
     """FE 40 by the implicit midpoint at REFERENCE_DT, Richardson-checked against 2·REFERENCE_DT."""
     s = scene_for(scene, f"fe{REFERENCE_MODEL[1]}", duration)
-    _, fine, cpu = run_outputs(s, "midpoint", REFERENCE_DT)
-    _, coarse, _ = run_outputs(s, "midpoint", 2 * REFERENCE_DT)
+    frame = CompiledFrame(build_model(s))
+    fine, cpu = run_outputs(frame, s, "midpoint", REFERENCE_DT)
+    coarse, _ = run_outputs(frame, s, "midpoint", 2 * REFERENCE_DT)
     return Reference(scene, fine, relative_error(coarse, fine) / 3.0, cpu)
 
 
@@ -136,6 +137,7 @@ def sweep(quick: bool = False, duration: float | None = None,
         for name in models:
             s = scene_for(scene, name, duration)
             model = build_model(s)
+            frame = CompiledFrame(model)
             limit = rk4_stable_step(model)
             for method in METHODS:
                 for dt in steps:
@@ -144,7 +146,7 @@ def sweep(quick: bool = False, duration: float | None = None,
                                             f"beyond RK4 stability limit {limit:.3g} s"))
                         continue
                     say(f"{scene}: {name} {method} dt={dt:g}")
-                    _, y, cpu = run_outputs(s, method, dt, repeat_until=0.02)
+                    y, cpu = run_outputs(frame, s, method, dt, repeat_until=0.02)
                     points.append(Point(scene, name, model.n_dof, method, dt,
                                         relative_error(y, ref.outputs), cpu / duration))
     return {
@@ -155,7 +157,7 @@ def sweep(quick: bool = False, duration: float | None = None,
         },
         "duration_s": duration,
         "grid_dt": GRID_DT,
-        "scenes": {name: SCENES[name] for name in SCENES},
+        "scenes": dict(SCENES),
         "points": [asdict(p) for p in points],
         "pareto": {scene: [asdict(p) for p in pareto(points, scene)] for scene in SCENES},
     }

@@ -27,6 +27,21 @@ class IntegrationError(InputError):
     fault, so it is reported like bad input."""
 
 
+def not_converged(t: float, h: float) -> IntegrationError:
+    """The implicit midpoint's Newton iteration failed at t."""
+    return IntegrationError(
+        f"integrator.dt: implicit midpoint did not converge at t = {t:.6g} s with dt = {h:g} s "
+        "(the motion is too fast for this step; reduce integrator.dt)")
+
+
+def non_finite(t: float, h: float, method: str) -> IntegrationError:
+    """The state became NaN or inf at t."""
+    return IntegrationError(
+        f"integrator.dt: the state became non-finite at t = {t:.6g} s with {method} at "
+        f"dt = {h:g} s (beyond the method's stability limit; reduce integrator.dt or use "
+        "integrator.method: midpoint)")
+
+
 class RK4:
     name = "rk4"
     order = 4
@@ -107,10 +122,7 @@ class ImplicitMidpoint:
                 self._refactor(system, tm, 0.5 * (x + x1), (x1 - x) / h, h)
                 fresh = True
             previous = size
-        raise IntegrationError(
-            f"integrator.dt: implicit midpoint did not converge at t = {t:.6g} s with dt = {h:g} s "
-            "(the motion is too fast for this step; reduce integrator.dt)"
-        )
+        raise not_converged(t, h)
 
 
 FIXED_STEP = {"rk4": RK4, "midpoint": ImplicitMidpoint}
@@ -128,11 +140,7 @@ def make_integrator(method: str) -> RK4 | ImplicitMidpoint:
 
 def check_finite(x: np.ndarray, t: float, h: float, method: str) -> None:
     if not np.all(np.isfinite(x)):
-        raise IntegrationError(
-            f"integrator.dt: the state became non-finite at t = {t:.6g} s with {method} at "
-            f"dt = {h:g} s (beyond the method's stability limit; reduce integrator.dt or use "
-            "integrator.method: midpoint)"
-        )
+        raise non_finite(t, h, method)
 
 
 Observer = Callable[[int, float, np.ndarray], None]

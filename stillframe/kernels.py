@@ -32,7 +32,7 @@ from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import reverse_cuthill_mckee
 
 from stillframe.excitation import FloorLoad
-from stillframe.integrators import IntegrationError
+from stillframe.integrators import IntegrationError, non_finite, not_converged
 from stillframe.models.damping import DampingParts
 from stillframe.models.frame import FrameModel
 
@@ -437,17 +437,10 @@ class CompiledFrame:
         x = self._to_banded_state(np.asarray(x0, float)) if banded else np.array(x0, float)
         kernel = self._midpoint if banded else self._rk4
         done = kernel(x, t0, h, n_steps, stride, out, u, arrays)
+        if done < 0:
+            raise not_converged(t0 - done * h, h)
         if done != n_steps:
-            k = abs(done)
-            if done < 0:
-                raise IntegrationError(
-                    f"integrator.dt: implicit midpoint did not converge at t = {t0 + k * h:.6g} s "
-                    f"with dt = {h:g} s (the motion is too fast for this step; reduce "
-                    "integrator.dt)")
-            raise IntegrationError(
-                f"integrator.dt: the state became non-finite at t = {t0 + k * h:.6g} s with "
-                f"{method} at dt = {h:g} s (beyond the method's stability limit; reduce "
-                "integrator.dt or use integrator.method: midpoint)")
+            raise non_finite(t0 + done * h, h, method)
         return self._from_banded_states(out) if banded else out
 
 
@@ -483,5 +476,4 @@ def compiled_integrate(model: FrameModel, load: FloorLoad | None, method: str, x
 
 def compiles(load: object, method: str) -> bool:
     """Whether :func:`compiled_integrate` handles this load and method."""
-    return method in COMPILED_METHODS and (load is None or (
-        isinstance(load, FloorLoad) and load.excitation.type in _LOAD_KIND))
+    return method in COMPILED_METHODS and load_arrays(load) is not None

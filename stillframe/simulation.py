@@ -88,6 +88,7 @@ def simulate(scene: Section, duration: float | None = None,
     n_steps = max(1, round(duration / dt))
     recorder = _Recorder(system, n_steps + 1)
     method = scene.integrator.method
+    compiled = compiles(system.load, method)  # False for the adaptive methods
     if method == "rk4":
         check_rk4_step(model, dt)
     start = time.perf_counter()
@@ -105,13 +106,13 @@ def simulate(scene: Section, duration: float | None = None,
             if progress and k % every == 0:
                 progress(k / n_steps)
 
-        if compiles(system.load, method):
+        if compiled:
             compiled_integrate(model, system.load, method, x0, dt, n_steps, observer=observe)
         else:
             integrate(system, x0, dt, n_steps, make_integrator(method), observer=observe)
     wall = time.perf_counter() - start
     meta = {"model": model.name, "dofs": model.n_dof, "integrator": method, "dt": dt,
-            "compiled": method not in ADAPTIVE and compiles(system.load, method),
+            "compiled": compiled,
             "steps": n_steps, "wall_s": wall, "steps_per_s": n_steps / wall}
     history = recorder.history(meta)
     warning = drift_warning(model, history.floors, scene.rig.columns.lengths)

@@ -95,3 +95,10 @@ def test_bench_speed_reports_ratios_of_one_run() -> None:
     assert doc["implicit_step_cost"]["exponent"] == pytest.approx(
         np.polyfit(np.log(dofs), np.log(cost), 1)[0])
     assert all(r["bandwidth"] <= 4 for r in rows)  # banded solves: constant half-bandwidth
+
+
+@pytest.mark.parametrize("duration", ["-1", "0.015"])
+def test_a_duration_off_the_output_grid_is_refused(duration: str) -> None:
+    done = run_stillframe("bench", "fidelity", "--duration", duration, timeout=120)
+    assert done.returncode == 2
+    assert "--duration: must be a positive multiple of 0.01 s" in done.stderr

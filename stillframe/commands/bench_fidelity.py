@@ -72,12 +72,13 @@ def plot(result: dict, directory: Path) -> list[Path]:
 
 def run(args: argparse.Namespace) -> int:
     from stillframe.auto_model import write_table
-    from stillframe.fidelity import sweep
+    from stillframe.fidelity import GRID_DT, sweep
 
-    if args.duration is not None and args.duration <= 0:
-        raise InputError(f"--duration: must be > 0 (got {args.duration:g})")
-    if args.duration is not None and abs(args.duration / 1e-2 - round(args.duration / 1e-2)) > 1e-9:
-        raise InputError(f"--duration: must be a multiple of 0.01 s (got {args.duration:g})")
+    if args.duration is not None:
+        grid_steps = args.duration / GRID_DT
+        if args.duration <= 0 or abs(grid_steps - round(grid_steps)) > 1e-9:
+            raise InputError(f"--duration: must be a positive multiple of {GRID_DT:g} s "
+                             f"(got {args.duration:g})")
     result = sweep(quick=args.quick, duration=args.duration, progress=_progress)
     if args.plots:
         result["plots"] = [str(p) for p in plot(result, args.plots)]

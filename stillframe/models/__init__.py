@@ -42,6 +42,4 @@ def build_model(scene: Section) -> FrameModel:
             f"mass matrix singular or nearly so (condition number {condition:.2g}); use "
             "model.type: lumped for massless columns, or a larger density"
         )
-    parts = damping_parts(structure, scene.damping)
-    damped = structure.with_damping(parts.matrix(structure.mass, structure.stiffness), parts)
-    return FrameModel(damped, scene.rig)
+    return FrameModel(structure.with_damping(damping_parts(structure, scene.damping)), scene.rig)

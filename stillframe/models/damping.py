@@ -75,8 +75,3 @@ def damping_parts(structure: Structure, damping: Section) -> DampingParts:
         beta_high = 2.0 * damping.high_mode_ratio / omega[r]
     extra = 2.0 * ratios[:r] * omega[:r] - beta_high * omega[:r] ** 2
     return DampingParts(0.0, beta_high, structure.mass @ phi[:, :r], extra)
-
-
-def damping_matrix(structure: Structure, damping: Section) -> np.ndarray:
-    """The structure's damping matrix under the scene's ``damping`` section."""
-    return damping_parts(structure, damping).matrix(structure.mass, structure.stiffness)

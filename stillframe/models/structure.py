@@ -37,9 +37,10 @@ class Structure:
     def n_dof(self) -> int:
         return self.mass.shape[0]
 
-    def with_damping(self, damping: np.ndarray, parts: DampingParts | None = None) -> Structure:
+    def with_damping(self, parts: DampingParts) -> Structure:
+        """This structure with the damping C = ``parts.matrix(M, K)``, its parts kept."""
         return Structure(self.name, self.mass, self.stiffness, self.floor_index,
-                         self.dof_names, damping, parts)
+                         self.dof_names, parts.matrix(self.mass, self.stiffness), parts)
 
 
 def story_stiffness(rig: Section) -> np.ndarray:
