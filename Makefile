@@ -10,6 +10,8 @@ $(BIN)/stillframe: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/pip install --quiet --upgrade pip
 	$(BIN)/pip install --quiet -e '.[test]'
+	$(BIN)/pip install --quiet -e '.[test,ros]' 2>/dev/null \
+	  || echo "make: real ROS 2 (rclpy) has no wheels for this platform; nodes run on the dds backend"
 	touch $@
 
 setup: $(BIN)/stillframe

@@ -14,7 +14,7 @@ rclpy = pytest.importorskip(
 
 from stillframe import messages  # noqa: E402
 from stillframe.middleware.api import create_node, spin_until  # noqa: E402
-from stillframe.middleware.qos import SENSOR_DATA  # noqa: E402
+from stillframe.middleware.qos import SENSOR_DATA, Durability, Reliability  # noqa: E402
 from tests.mw_support import ros_domain  # noqa: E402
 
 __all__ = ["ros_domain"]
@@ -43,6 +43,8 @@ def test_round_trip_over_rclpy(ros_domain: int, monkeypatch: pytest.MonkeyPatch)
         assert topics["/frame/js"] == ["sensor_msgs/msg/JointState"]
         info = node.get_publishers_info_by_topic("/frame/js")[0]
         assert info.node_name == "rclpy_check"
-        assert info.qos_profile.depth == 10
+        # DDS discovery does not carry history or depth: rmw reports them UNKNOWN / 0
+        assert info.qos_profile.reliability == Reliability.RELIABLE
+        assert info.qos_profile.durability == Durability.VOLATILE
     finally:
         node.destroy_node()

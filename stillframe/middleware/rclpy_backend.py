@@ -10,6 +10,7 @@ carry the DDS sample info.
 
 from __future__ import annotations
 
+import importlib
 from collections.abc import Callable
 from typing import Any
 
@@ -25,9 +26,9 @@ from rclpy.qos import (
 )
 from rclpy.qos import QoSProfile as RclpyQoS
 from rclpy.signals import SignalHandlerOptions
-from rosidl_runtime_py.utilities import get_message
 
 from stillframe import messages
+from stillframe.errors import InputError
 from stillframe.middleware import api
 from stillframe.middleware.clock import SYSTEM_CLOCK, Clock, Time
 from stillframe.middleware.qos import (
@@ -41,6 +42,19 @@ from stillframe.middleware.qos import (
 )
 
 MAX_WAIT_S = 0.1
+
+
+def ros_message_class(name: str) -> type:
+    """rclpy's generated class of ``pkg/msg/Type``, imported from the installed message package
+    (what ``rosidl_runtime_py.utilities.get_message`` does; that package is not on PyPI)."""
+    package, kind, type_name = name.split("/")
+    try:
+        return getattr(importlib.import_module(f"{package}.{kind}"), type_name)
+    except (ImportError, AttributeError) as exc:
+        raise InputError(
+            f"message type {name!r}: not importable under rclpy "
+            f"(pip install ros-jazzy-{package.replace('_', '-')})"
+        ) from exc
 
 
 def rclpy_qos(profile: QoSProfile) -> RclpyQoS:
@@ -140,7 +154,9 @@ class RclpyNode:
         self, msg_type: str | type, topic: str, qos: QoSProfile | str | int
     ) -> RclpyPublisher:
         name = messages.type_name(msg_type)
-        pub = self._node.create_publisher(get_message(name), topic, rclpy_qos(as_profile(qos)))
+        pub = self._node.create_publisher(
+            ros_message_class(name), topic, rclpy_qos(as_profile(qos))
+        )
         return RclpyPublisher(pub, name)
 
     def create_subscription(
@@ -157,7 +173,7 @@ class RclpyNode:
                 callback(messages.deserialize(data, name))
 
         return self._node.create_subscription(
-            get_message(name), topic, on_data, rclpy_qos(as_profile(qos)), raw=True
+            ros_message_class(name), topic, on_data, rclpy_qos(as_profile(qos)), raw=True
         )
 
     def create_timer(
