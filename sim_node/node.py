@@ -47,13 +47,18 @@ from stillframe.middleware.clock import ClockPublisher
 from stillframe.signals import Sample
 
 SENSOR_TOPICS = (*topics.FLOOR_IMU, topics.PENDULUM_JOINT_STATES, topics.EXCITATION_WRENCH)
+LOOP_NODES = ("sim_node", "estimator_node", "controller_node")
+#: the node name of ``stillframe record``
+RECORDER_NODE = "stillframe_recorder"
 
 
 class SimNode:
     """The plant, its publishers and the command subscriptions of one node."""
 
-    def __init__(self, node: api.Node, params: LoopParameters, discovery_timeout_s: float) -> None:
+    def __init__(self, node: api.Node, params: LoopParameters, discovery_timeout_s: float,
+                 await_recorder: list[str] | None = None) -> None:
         self.node = node
+        self.await_recorder = [t for t in (await_recorder or []) if t]
         self.params = params
         self.discovery_timeout_s = discovery_timeout_s
         scene = params.scene
@@ -103,7 +108,23 @@ class SimNode:
             pubs = [*pubs, self.truth_pub]
         return (all(p.get_subscription_count() > 0 for p in pubs)
                 and (self.active is None
-                     or has_publisher(self.node, COMMAND_TOPICS[self.active].name)))
+                     or has_publisher(self.node, COMMAND_TOPICS[self.active].name))
+                and self.recorder_ready())
+
+    def recorder_ready(self) -> bool:
+        """Every topic of ``await_recorder`` that the loop's nodes publish is subscribed by the
+        recorder (``*``: every such topic), so that a launch's bag misses no sample."""
+        if not self.await_recorder:
+            return True
+        names = [t for t, _ in self.node.get_topic_names_and_types()]
+        wanted = names if self.await_recorder == ["*"] else self.await_recorder
+        loop_nodes = {(topics.DEFAULT_NAMESPACE, n) for n in LOOP_NODES}
+        return all(
+            any(s.node_name == RECORDER_NODE for s in self.node.get_subscriptions_info_by_topic(t))
+            for t in wanted
+            if any((p.node_namespace, p.node_name) in loop_nodes
+                   for p in self.node.get_publishers_info_by_topic(t))
+        )
 
     def publish(self, sample: Sample, ns: int) -> None:
         """/clock, then the samples serialized first and written in one burst (the readers
@@ -231,7 +252,9 @@ def main() -> int:
         discovery = node.declare_parameter("discovery_timeout_s", 30.0).value
         if not discovery >= 0:
             raise InputError(f"parameter 'discovery_timeout_s': must be >= 0, got {discovery}")
-        sim = SimNode(node, params, float(discovery))
+        # topics the launch's recorder must subscribe before lock-step starts ("*": all)
+        await_recorder = node.declare_parameter("await_recorder", [""]).value
+        sim = SimNode(node, params, float(discovery), list(await_recorder))
         history = sim.run()
         if history is not None and result:
             write_result(history, Path(result))

@@ -28,10 +28,13 @@ from pathlib import Path
 from typing import Any
 
 from stillframe.errors import InputError
+from stillframe.middleware import names
 from stillframe.scene import load_scene
 from stillframe.schema import Section
 
 NODES: tuple[str, ...] = ("sim_node", "estimator_node", "controller_node")
+#: the children whose middleware backend ``--backend NAME=BACKEND`` can choose
+BACKEND_TARGETS: tuple[str, ...] = (*NODES, "recorder")
 MODES: tuple[str, ...] = ("lockstep", "realtime")
 REPO_ROOT = Path(__file__).resolve().parents[1]
 #: seconds a child gets to exit after SIGINT, then after SIGTERM, before SIGKILL
@@ -72,6 +75,34 @@ def node_command(package: str, scene: Path, overrides: Sequence[str], mode: str,
     return args
 
 
+def parse_backends(specs: Sequence[str]) -> dict[str, str]:
+    """The backend of every child from ``--backend`` values: ``BACKEND`` for all, then
+    ``NAME=BACKEND`` for one (later values win); unset children use the process's default
+    (``STILLFRAME_RMW``, else rclpy where importable). InputError names a bad value or a
+    backend this machine lacks, before any process starts."""
+    from stillframe.middleware import api
+
+    chosen = dict.fromkeys(BACKEND_TARGETS, api.backend_name())
+    for spec in specs:
+        name, _, backend = spec.rpartition("=")
+        if name and name not in BACKEND_TARGETS:
+            raise InputError(f"--backend {spec}: unknown node {name!r} "
+                             f"(expected one of {', '.join(BACKEND_TARGETS)})")
+        api.check_backend(backend, f"--backend {spec}")
+        chosen.update({name: backend} if name else dict.fromkeys(BACKEND_TARGETS, backend))
+    return chosen
+
+
+def single_host_discovery() -> str:
+    """The discovery range of the launch: ``ROS_AUTOMATIC_DISCOVERY_RANGE`` if set (checked),
+    else ``LOCALHOST``, set in this process's environment so the children inherit it: a launch
+    runs every node on this host, and nothing beyond it needs to find them unless asked."""
+    from stillframe.middleware import discovery
+
+    os.environ.setdefault(discovery.RANGE_ENV, discovery.DiscoveryRange.LOCALHOST.value)
+    return discovery.discovery_range().value
+
+
 def nodes_for(scene: Section) -> list[str]:
     """The nodes a scene uses: sim_node always, the estimator and the controller unless the
     scene sets their type to ``none`` (an open-loop run such as a hammer test)."""
@@ -108,8 +139,8 @@ class ProcessSet:
         self.children: list[Child] = []
         self.echo = echo
 
-    def start(self, name: str, argv: list[str]) -> Child:
-        env = dict(os.environ, PYTHONUNBUFFERED="1")
+    def start(self, name: str, argv: list[str], env_extra: dict[str, str] | None = None) -> Child:
+        env = dict(os.environ, PYTHONUNBUFFERED="1", **(env_extra or {}))
         env["PYTHONPATH"] = os.pathsep.join(
             p for p in (env.get("PYTHONPATH", ""), str(REPO_ROOT)) if p)
         proc = subprocess.Popen(
@@ -252,6 +283,7 @@ class LaunchOptions:
     record_dir: Path | None = None
     lockstep_timeout_s: float | None = None
     record_topics: list[str] = field(default_factory=list)
+    backends: list[str] = field(default_factory=list)
 
 
 class Launcher:
@@ -265,6 +297,8 @@ class Launcher:
             raise InputError(f"--mode {options.mode}: expected one of {', '.join(MODES)}")
         if options.record_dir is not None and options.record_dir.exists():
             raise InputError(f"--record {options.record_dir}: already exists")
+        self.backends = parse_backends(options.backends)
+        self.discovery = single_host_discovery()
         self.options = options
         self.status = StatusLine()
         self.processes = ProcessSet(self.status.echo)
@@ -281,6 +315,9 @@ class Launcher:
         """(name, argv) of each child, in start order."""
         o = self.options
         sim_params: dict[str, Any] = {"result_file": str(o.result_file.resolve())}
+        if o.record_dir is not None and o.mode == "lockstep":
+            sim_params["await_recorder"] = [
+                names.resolve_topic(t) for t in o.record_topics] or ["*"]
         if o.lockstep_timeout_s is not None:
             sim_params["lockstep_timeout_s"] = float(o.lockstep_timeout_s)
         scene = o.scene.resolve()
@@ -301,8 +338,10 @@ class Launcher:
 
         self.options.result_file.unlink(missing_ok=True)
         try:
+            self.status.echo(f"discovery range {self.discovery}; backends " + ", ".join(
+                f"{name} {self.backends[name]}" for name, _ in self.commands()))
             for name, argv in self.commands():
-                child = self.processes.start(name, argv)
+                child = self.processes.start(name, argv, {"STILLFRAME_RMW": self.backends[name]})
                 if name == "recorder":
                     self._wait_for_recorder(child)
             sim = next(c for c in self.processes.children if c.name == "sim_node")
@@ -353,14 +392,14 @@ class Launcher:
 def run_scene(scene: Path, overrides: Sequence[str], out: Path, mode: str = "lockstep",
               record: Path | None = None, lockstep_timeout_s: float | None = None,
               prepare: Callable[[Any], None] | None = None,
-              record_topics: Sequence[str] = ()) -> LaunchResult:
+              record_topics: Sequence[str] = (), backends: Sequence[str] = ()) -> LaunchResult:
     """Launch ``scene`` through the three nodes to its end; sim_node's results go to ``out``
     (``result.json``, ``result.npz``); ``record`` records ``record_topics`` (default all) into
-    a bag. ``prepare(node)`` may subscribe the launcher's hidden
-    node to more topics before the children start."""
+    a bag; ``backends`` are ``--backend`` values (:func:`parse_backends`). ``prepare(node)`` may
+    subscribe the launcher's hidden node to more topics before the children start."""
     out.mkdir(parents=True, exist_ok=True)
     launcher = Launcher(LaunchOptions(scene, list(overrides), mode, out / "result.json", record,
-                                      lockstep_timeout_s, list(record_topics)))
+                                      lockstep_timeout_s, list(record_topics), list(backends)))
     if prepare is not None:
         prepare(launcher.node)
     return launcher.run()

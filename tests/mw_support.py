@@ -21,6 +21,7 @@ def ros_domain(monkeypatch: pytest.MonkeyPatch) -> int:
     domain = random.SystemRandom().randint(1, 200)
     monkeypatch.setenv("ROS_DOMAIN_ID", str(domain))
     monkeypatch.delenv("CYCLONEDDS_URI", raising=False)
+    monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     monkeypatch.setenv("STILLFRAME_RMW", "dds")
     return domain
 

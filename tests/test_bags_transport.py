@@ -29,6 +29,7 @@ from rosbags.interfaces import QosTime as T
 from rosbags.rosbag2 import Reader, StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
 
+from stillframe.middleware.discovery import cyclone_config
 from tests.mw_support import REPO_ROOT as ROOT
 from tests.mw_support import child_env, ros_domain
 
@@ -305,8 +306,7 @@ def test_records_a_foreign_publisher_and_skips_a_different_type_hash(
     """Two raw Cyclone DDS writers (not stillframe) named the ROS 2 way: the one announcing
     Jazzy's type hash of std_msgs/msg/String is recorded message for message; the one announcing
     another hash is not recorded (its bytes would not match the definition in the bag)."""
-    config = (ROOT / "stillframe/middleware/cyclonedds_loopback.xml").read_text()
-    domain = Domain(ros_domain, config)
+    domain = Domain(ros_domain, cyclone_config())
     participant = DomainParticipant(ros_domain, qos=DdsQos(Policy.Userdata(data=b"enclave=/;")))
     recorder = Proc(env, "record", "-o", str(tmp_path / "B"), "--all")
     writers = {}

@@ -30,14 +30,14 @@ from rosbags.typesys.base import Nodetype
 from cyclonedds._clayer import ddspy_take  # isort: skip
 from stillframe.middleware.api import create_node, spin_until
 from stillframe.middleware.dds_types import idl_struct
+from stillframe.middleware.discovery import cyclone_config
 from stillframe.topics import CONTRACT
-from tests.mw_support import REPO_ROOT, finish, ros_domain, start_python, wait_for_line
+from tests.mw_support import finish, ros_domain, start_python, wait_for_line
 
 __all__ = ["ros_domain"]
 
 STORE = get_typestore(Stores.ROS2_JAZZY)
 ANY = SampleState.Any | ViewState.Any | InstanceState.Any
-CONFIG = (REPO_ROOT / "stillframe/middleware/cyclonedds_loopback.xml").read_text()
 DTYPES = {"bool": np.bool_, "byte": np.uint8, "char": np.uint8, "int8": np.int8,
           "uint8": np.uint8, "int16": np.int16, "uint16": np.uint16, "int32": np.int32,
           "uint32": np.uint32, "int64": np.int64, "uint64": np.uint64,
@@ -211,7 +211,7 @@ def test_independent_reader_decodes_a_node_and_finds_it_in_ros_discovery_info(
     ros_domain: int,
 ) -> None:
     proc = start_python(IMU_NODE)
-    domain = Domain(ros_domain, CONFIG)
+    domain = Domain(ros_domain, cyclone_config())
     participant = DomainParticipant(ros_domain)
     try:
         wait_for_line(proc, "ready")

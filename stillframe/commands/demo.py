@@ -90,7 +90,7 @@ def run(args: argparse.Namespace) -> int:
           f"({args.mode}), recording to {out / 'bag'}", file=sys.stderr)
     try:
         result = run_scene(DEMO_SCENE, args.overrides, out, args.mode, out / "bag",
-                           args.lockstep_timeout)
+                           args.lockstep_timeout, backends=args.backends)
     except NodeDiedError as exc:
         return report_death("demo", exc)
     except KeyboardInterrupt:

@@ -29,6 +29,11 @@ def add_launch_arguments(parser: argparse.ArgumentParser) -> None:
                              "realtime: paced by the wall clock")
     parser.add_argument("--lockstep-timeout", type=float, default=None, metavar="S",
                         help="sim_node's wait for a command before it holds the previous one")
+    parser.add_argument("--backend", dest="backends", action="append", default=[],
+                        metavar="[NODE=]BACKEND",
+                        help="middleware of every node (dds or rclpy; default: STILLFRAME_RMW, "
+                             "else rclpy where installed), or of one node: sim_node=dds "
+                             "(repeatable; also estimator_node, controller_node, recorder)")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -103,7 +108,7 @@ def run(args: argparse.Namespace) -> int:
         try:
             result = run_scene(Path(args.scene), args.overrides, args.out or Path(tmp),
                                args.mode, args.record, args.lockstep_timeout,
-                               record_topics=args.record_topics)
+                               record_topics=args.record_topics, backends=args.backends)
         except NodeDiedError as exc:
             return report_death("launch", exc)
         except KeyboardInterrupt:

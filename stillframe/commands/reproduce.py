@@ -79,7 +79,8 @@ def run(args: argparse.Namespace) -> int:
                   file=sys.stderr)
             try:
                 result = run_scene(path, args.overrides, Path(tmp) / str(i), args.mode,
-                                   lockstep_timeout_s=args.lockstep_timeout)
+                                   lockstep_timeout_s=args.lockstep_timeout,
+                                   backends=args.backends)
             except NodeDiedError as exc:
                 return report_death("reproduce", exc)
             except KeyboardInterrupt:

@@ -147,17 +147,28 @@ def install_signal_handlers() -> None:
     _handlers_installed = True
 
 
+def has_rclpy() -> bool:
+    """Whether real rclpy is importable (installed from PyPI by ``stillframe[ros]``)."""
+    return importlib.util.find_spec("rclpy") is not None
+
+
+def check_backend(backend: str, what: str) -> str:
+    """``backend`` if it is one of :data:`BACKENDS` and usable here; InputError naming ``what``."""
+    if backend not in BACKENDS:
+        raise InputError(f"{what}: unknown backend {backend!r} (expected one of "
+                         f"{', '.join(BACKENDS)})")
+    if backend == "rclpy" and not has_rclpy():
+        raise InputError(f"{what}: rclpy cannot be imported here (pip install 'stillframe[ros]', "
+                         "or source a ROS 2 Jazzy install)")
+    return backend
+
+
 def backend_name() -> str:
     """``STILLFRAME_RMW`` if set, else ``rclpy`` when importable, else ``dds``."""
     chosen = os.environ.get(BACKEND_ENV, "").strip()
-    has_rclpy = importlib.util.find_spec("rclpy") is not None
     if not chosen:
-        return "rclpy" if has_rclpy else "dds"
-    if chosen not in BACKENDS:
-        raise InputError(f"{BACKEND_ENV}={chosen!r}: expected one of {', '.join(BACKENDS)}")
-    if chosen == "rclpy" and not has_rclpy:
-        raise InputError(f"{BACKEND_ENV}=rclpy, but rclpy cannot be imported (source ROS 2 first)")
-    return chosen
+        return "rclpy" if has_rclpy() else "dds"
+    return check_backend(chosen, f"{BACKEND_ENV}={chosen}")
 
 
 def create_node(name: str, namespace: str | None = None, argv: list[str] | None = None) -> Node:

@@ -8,15 +8,15 @@ GUIDs). Samples are CDR from ``rosbags`` written as-is (padded to 4 bytes, as Cy
 the registered struct type describes exactly those bytes (checked by the tests).
 
 One DDS participant per process and domain (as rmw does per context) carries every node of
-the process. ``ROS_DOMAIN_ID`` selects the domain. When ``CYCLONEDDS_URI`` is unset the
-shipped single-machine configuration ``cyclonedds_loopback.xml`` is applied.
+the process. ``ROS_DOMAIN_ID`` selects the domain; ``ROS_AUTOMATIC_DISCOVERY_RANGE``,
+``ROS_STATIC_PEERS`` and ``CYCLONEDDS_URI`` configure discovery as for rmw_cyclonedds_cpp
+(:mod:`.discovery`).
 """
 
 from __future__ import annotations
 
 import os
 from collections.abc import Callable
-from pathlib import Path
 from typing import Any, ClassVar
 
 import numpy as np
@@ -43,7 +43,7 @@ from cyclonedds.topic import Topic
 from cyclonedds._clayer import ddspy_take, ddspy_write, ddspy_write_ts  # isort: skip
 from stillframe import messages
 from stillframe.errors import InputError
-from stillframe.middleware import api, dds_types, names, params
+from stillframe.middleware import api, dds_types, discovery, names, params
 from stillframe.middleware.clock import Clock
 from stillframe.middleware.logger import Logger
 from stillframe.middleware.qos import (
@@ -57,7 +57,6 @@ from stillframe.middleware.qos import (
     as_profile,
 )
 
-CONFIG_FILE = Path(__file__).with_name("cyclonedds_loopback.xml")
 DISCOVERY_TOPIC = "ros_discovery_info"
 DISCOVERY_TYPE = "rmw_dds_common/msg/ParticipantEntitiesInfo"
 #: Longest single wait inside ``spin_once``, so that signals are handled promptly.
@@ -171,9 +170,8 @@ class Context:
 
     def __init__(self, domain: int) -> None:
         self.domain_id = domain
-        self.domain = None if os.environ.get("CYCLONEDDS_URI") else Domain(
-            domain, CONFIG_FILE.read_text()
-        )
+        config = discovery.cyclone_config()
+        self.domain = Domain(domain, config) if config else None
         self.participant = DomainParticipant(domain, qos=Qos(Policy.Userdata(data=b"enclave=/;")))
         self.gid = self.participant.guid.bytes
         self.nodes: list[DdsNode] = []

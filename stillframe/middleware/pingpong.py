@@ -39,7 +39,7 @@ from cyclonedds.topic import Topic
 from cyclonedds._clayer import ddspy_take, ddspy_write  # isort: skip
 from stillframe import messages
 from stillframe.errors import InputError
-from stillframe.middleware import api, dds_backend, dds_types
+from stillframe.middleware import api, dds_backend, dds_types, discovery
 from stillframe.middleware.qos import SENSOR_DATA
 
 IMU = "sensor_msgs/msg/Imu"
@@ -66,7 +66,7 @@ class CycloneEnd:
 
     def __init__(self, out: str, inp: str, own_domain: bool) -> None:
         domain = dds_backend.domain_id()
-        config = None if os.environ.get("CYCLONEDDS_URI") else dds_backend.CONFIG_FILE.read_text()
+        config = discovery.cyclone_config()
         self.domain = Domain(domain, config) if own_domain and config else None
         self.participant = DomainParticipant(domain)
         self.struct = dds_types.idl_struct(IMU)

@@ -1,0 +1,89 @@
+"""Discovery settings from ROS 2's environment, with the meaning ``rmw_cyclonedds_cpp`` gives them
+in Jazzy (``check_create_domain`` in its ``rmw_node.cpp``).
+
+- ``ROS_AUTOMATIC_DISCOVERY_RANGE``: ``SUBNET`` (the default: multicast on the chosen interface,
+  plus the static peers), ``LOCALHOST`` (no multicast; unicast discovery of ``localhost`` and the
+  static peers; without static peers, on the loopback interface only), ``OFF`` (no multicast,
+  no peers, and a domain tag private to the process, so nothing outside it is discovered) or
+  ``SYSTEM_DEFAULT`` (Cyclone's own settings untouched).
+- ``ROS_STATIC_PEERS``: semicolon-separated hosts, used with ``SUBNET`` and ``LOCALHOST``.
+- ``ROS_LOCALHOST_ONLY=1`` (deprecated in Jazzy, still honoured by rcl) means ``LOCALHOST``.
+- ``CYCLONEDDS_URI``: appended after these settings, so a user's own configuration wins.
+
+An unknown range is bad input (rcl only warns and assumes ``LOCALHOST``; we refuse to guess).
+"""
+
+from __future__ import annotations
+
+import os
+from enum import Enum
+
+from stillframe.errors import InputError
+
+RANGE_ENV = "ROS_AUTOMATIC_DISCOVERY_RANGE"
+PEERS_ENV = "ROS_STATIC_PEERS"
+#: Participants rmw_cyclonedds_cpp probes per host with unicast discovery.
+MAX_AUTO_PARTICIPANT_INDEX = 32
+#: LOCALHOST without static peers also binds Cyclone to the loopback interface. rmw_cyclonedds_cpp
+#: leaves the interface to Cyclone (the host's first multicast-capable one), but then Cyclone does
+#: not talk to Fast DDS nodes under LOCALHOST, which restrict themselves to loopback (measured:
+#: no Fast DDS → Cyclone sample in 3 of 4 start orders; every order works with this).
+LOOPBACK_INTERFACE = '<Interfaces><NetworkInterface address="127.0.0.1"/></Interfaces>'
+
+
+class DiscoveryRange(Enum):
+    SUBNET = "SUBNET"
+    LOCALHOST = "LOCALHOST"
+    OFF = "OFF"
+    SYSTEM_DEFAULT = "SYSTEM_DEFAULT"
+
+
+def discovery_range() -> DiscoveryRange:
+    """The range the environment asks for (``SUBNET`` when unset)."""
+    text = os.environ.get(RANGE_ENV, "").strip()
+    if not text:
+        localhost_only = os.environ.get("ROS_LOCALHOST_ONLY", "").strip() == "1"
+        return DiscoveryRange.LOCALHOST if localhost_only else DiscoveryRange.SUBNET
+    try:
+        return DiscoveryRange(text)
+    except ValueError:
+        choices = ", ".join(r.value for r in DiscoveryRange)
+        raise InputError(f"{RANGE_ENV}={text!r}: expected one of {choices}") from None
+
+
+def static_peers() -> list[str]:
+    """``ROS_STATIC_PEERS`` as a list of hosts."""
+    return [p.strip() for p in os.environ.get(PEERS_ENV, "").split(";") if p.strip()]
+
+
+def cyclone_config() -> str:
+    """The configuration for ``cyclonedds.domain.Domain``: rmw's fragment for the discovery
+    range, then ``CYCLONEDDS_URI`` (Cyclone reads a comma-separated list; later entries win)."""
+    chosen = discovery_range()
+    peers = static_peers()
+    fragment = ""
+    if chosen is DiscoveryRange.OFF:
+        fragment = (
+            "<General><AllowMulticast>false</AllowMulticast></General>"
+            "<Discovery><ParticipantIndex>none</ParticipantIndex>"
+            f"<Tag>ros_discovery_off_{os.getpid()}</Tag></Discovery>"
+        )
+    elif chosen is DiscoveryRange.LOCALHOST or (chosen is DiscoveryRange.SUBNET and peers):
+        localhost = chosen is DiscoveryRange.LOCALHOST
+        addresses = (["localhost"] if localhost else []) + peers
+        general = ""
+        if localhost:
+            general = "<General>" + (LOOPBACK_INTERFACE if not peers else "") + (
+                "<AllowMulticast>false</AllowMulticast></General>")
+        fragment = (
+            general
+            + "<Discovery><ParticipantIndex>auto</ParticipantIndex>"
+            f"<MaxAutoParticipantIndex>{MAX_AUTO_PARTICIPANT_INDEX}</MaxAutoParticipantIndex>"
+            "<Peers>" + "".join(f'<Peer address="{a}"/>' for a in addresses) + "</Peers>"
+            "</Discovery>"
+        )
+    parts = [f"<CycloneDDS><Domain>{fragment}</Domain></CycloneDDS>"] if fragment else []
+    user = os.environ.get("CYCLONEDDS_URI", "").strip()
+    if user:
+        parts.append(user)
+    return ",".join(parts)
