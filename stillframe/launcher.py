@@ -340,10 +340,14 @@ class Launcher:
         try:
             self.status.echo(f"discovery range {self.discovery}; backends " + ", ".join(
                 f"{name} {self.backends[name]}" for name, _ in self.commands()))
-            for name, argv in self.commands():
+            commands = self.commands()
+            mixed = len({self.backends[name] for name, _ in commands}) > 1
+            for name, argv in commands:
                 child = self.processes.start(name, argv, {"STILLFRAME_RMW": self.backends[name]})
                 if name == "recorder":
-                    self._wait_for_recorder(child)
+                    self._wait_for_line(child, "Recording to")
+                elif mixed:
+                    self._wait_for_line(child, "middleware backend")
             sim = next(c for c in self.processes.children if c.name == "sim_node")
             while api.ok():
                 self.node.spin_once(0.1)
@@ -366,18 +370,22 @@ class Launcher:
             self.node.destroy_node()
         return self._result()
 
-    def _wait_for_recorder(self, child: Child, timeout_s: float = 20.0) -> None:
-        """Nodes start only once the recorder is recording (its 'Recording to' log line)."""
+    def _wait_for_line(self, child: Child, text: str, timeout_s: float = 20.0) -> None:
+        """Wait for ``child`` to log ``text`` before starting the next: nodes start once the
+        recorder is recording ('Recording to'); with mixed vendors, a node starts once the
+        previous one has its participant ('middleware backend'), because a Cyclone and a Fast
+        DDS participant created in the same instant can take the same participant index and
+        then never discover each other (measured: 3 of 4 simultaneous starts)."""
         from stillframe.middleware import api
 
         deadline = time.monotonic() + timeout_s
-        while not any("Recording to" in line for line in child.tail):
+        while not any(text in line for line in child.tail):
             if child.proc.poll() is not None:
                 raise NodeDiedError.exited(child)
             if not api.ok():
                 raise KeyboardInterrupt
             if time.monotonic() > deadline:
-                raise NodeDiedError(child.name, f"not recording after {timeout_s:g} s", child.tail)
+                raise NodeDiedError(child.name, f"no {text!r} after {timeout_s:g} s", child.tail)
             time.sleep(0.05)
 
     def _result(self) -> LaunchResult:

@@ -28,7 +28,8 @@ MAX_AUTO_PARTICIPANT_INDEX = 32
 #: leaves the interface to Cyclone (the host's first multicast-capable one), but then Cyclone does
 #: not talk to Fast DDS nodes under LOCALHOST, which restrict themselves to loopback (measured:
 #: no Fast DDS → Cyclone sample in 3 of 4 start orders; every order works with this).
-LOOPBACK_INTERFACE = '<Interfaces><NetworkInterface address="127.0.0.1"/></Interfaces>'
+LOOPBACK_INTERFACE = ('<Interfaces><NetworkInterface address="127.0.0.1"/>'
+                      '<NetworkInterface autodetermine="true" multicast="false"/></Interfaces>')
 
 
 class DiscoveryRange(Enum):
