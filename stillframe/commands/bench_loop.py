@@ -5,6 +5,9 @@
    by an observer in this process (:mod:`stillframe.loop_latency`), beside sim_node's overruns.
 2. Lock-step: the full LQG scene through the three nodes, steps per second and the ratio of
    simulated to wall time, against the same scene in one process (``closed-loop``) in this run.
+
+Both run once per middleware backend (``dds``: Cyclone; ``rclpy``: real rclpy on Fast DDS), all
+three nodes on it, so the backends are compared in the same run.
 """
 
 from __future__ import annotations
@@ -16,10 +19,13 @@ import time
 from pathlib import Path
 from typing import Any
 
+from stillframe.closed_loop import run_closed_loop
 from stillframe.commands.common import add_json_argument, emit_json, format_table
 from stillframe.errors import InputError
-from stillframe.launcher import REPO_ROOT
+from stillframe.launcher import REPO_ROOT, run_scene
 from stillframe.loop_latency import LatencyLog
+from stillframe.middleware import api
+from stillframe.scene import load_scene
 from stillframe.topics import DEFAULT_NAMESPACE, FLOOR_IMU, FORCE_CMD, TORQUE_CMD
 
 SCENE = REPO_ROOT / "scenes" / "thesis_lqg.yaml"
@@ -31,6 +37,9 @@ def register(benches: argparse._SubParsersAction) -> None:
                                 description=__doc__.split("\n\n", 1)[1])
     parser.add_argument("--duration", type=float, default=10.0, metavar="S",
                         help="seconds of each real-time run (default 10)")
+    parser.add_argument("--backend", dest="backends", action="append", default=[],
+                        choices=api.BACKENDS,
+                        help="measure this backend (repeatable; default: every one installed)")
     add_json_argument(parser)
     parser.set_defaults(func=run)
 
@@ -67,29 +76,23 @@ def observe(log: LatencyLog) -> Any:
     return prepare
 
 
-def realtime(rate_hz: float, duration: float, out: Path) -> dict[str, Any]:
-    from stillframe.launcher import run_scene
-
+def realtime(rate_hz: float, duration: float, out: Path, backend: str) -> dict[str, Any]:
     log = LatencyLog(round(1e9 / rate_hz))
     result = run_scene(SCENE, realtime_overrides(rate_hz, duration), out, "realtime",
-                       prepare=observe(log))
+                       prepare=observe(log), backends=[backend])
     e = result.evaluation
-    return {"rate_hz": rate_hz, **log.summary(),
+    return {"backend": backend, "rate_hz": rate_hz, **log.summary(),
             "sim_overruns": e.get("overruns"), "steps": e["steps"]}
 
 
-def lockstep(out: Path) -> dict[str, Any]:
-    from stillframe.closed_loop import run_closed_loop
-    from stillframe.launcher import run_scene
-    from stillframe.scene import load_scene
-
+def lockstep(out: Path, backend: str, one: dict[str, Any]) -> dict[str, Any]:
+    """The full LQG scene through the nodes on ``backend`` against ``one`` (one process)."""
     scene = load_scene(SCENE)
     started = time.perf_counter()
-    nodes = run_scene(SCENE, [], out, "lockstep").evaluation
+    nodes = run_scene(SCENE, [], out, "lockstep", backends=[backend]).evaluation
     launch_wall = time.perf_counter() - started
-    one = run_closed_loop(scene).evaluation
     return {
-        "scene": scene.name, "steps": nodes["steps"], "sim_s": scene.duration,
+        "backend": backend, "scene": scene.name, "steps": nodes["steps"], "sim_s": scene.duration,
         "nodes_wall_s": nodes["wall_s"], "launch_wall_s": launch_wall,
         "nodes_steps_per_s": nodes["steps"] / nodes["wall_s"],
         "nodes_realtime_ratio": scene.duration / nodes["wall_s"],
@@ -97,33 +100,42 @@ def lockstep(out: Path) -> dict[str, Any]:
         "one_process_steps_per_s": one["steps"] / one["wall_s"],
         "nodes_over_one_process": one["wall_s"] / nodes["wall_s"],
         "lockstep_timeouts": nodes.get("lockstep_timeouts"),
+        "reduction_pct": nodes["reduction_pct"],
     }
 
 
 def run(args: argparse.Namespace) -> int:
     if not args.duration >= 1.0:
         raise InputError("bench loop: --duration must be >= 1 s")
+    backends = args.backends or [b for b in api.BACKENDS if b == "dds" or api.has_rclpy()]
+    for backend in backends:
+        api.check_backend(backend, f"bench loop --backend {backend}")
+    one = run_closed_loop(load_scene(SCENE)).evaluation
+    rows, speeds = [], []
     with tempfile.TemporaryDirectory(prefix="stillframe-bench-loop-") as tmp:
-        rows = []
-        for rate in RATES_HZ:
-            print(f"real time at {rate:g} Hz for {args.duration:g} s", file=sys.stderr)
-            rows.append(realtime(rate, args.duration, Path(tmp) / f"rt{rate:g}"))
-        print("lock-step, the full LQG scene", file=sys.stderr)
-        speed = lockstep(Path(tmp) / "lockstep")
+        for backend in backends:
+            for rate in RATES_HZ:
+                print(f"{backend}: real time at {rate:g} Hz for {args.duration:g} s",
+                      file=sys.stderr)
+                rows.append(realtime(rate, args.duration, Path(tmp) / f"{backend}{rate:g}",
+                                     backend))
+            print(f"{backend}: lock-step, the full LQG scene", file=sys.stderr)
+            speeds.append(lockstep(Path(tmp) / f"{backend}-lockstep", backend, one))
     if args.json:
-        emit_json({"realtime": rows, "lockstep": speed})
+        emit_json({"realtime": rows, "lockstep": speeds})
         return 0
     print(format_table(
-        ["rate [Hz]", "samples", "answered", "p50 [us]", "p99 [us]", "max [us]",
+        ["backend", "rate [Hz]", "samples", "answered", "p50 [us]", "p99 [us]", "max [us]",
          "deadline misses", "unanswered", "sim overruns"],
-        [[f"{r['rate_hz']:g}", r["samples"], r["answered"], f"{r['p50_us']:.0f}",
+        [[r["backend"], f"{r['rate_hz']:g}", r["samples"], r["answered"], f"{r['p50_us']:.0f}",
           f"{r['p99_us']:.0f}", f"{r['max_us']:.0f}", r["deadline_misses"], r["unanswered"],
           r["sim_overruns"] if r["sim_overruns"] is not None else "-"] for r in rows]))
-    s = speed
-    print(f"lock-step {s['scene']}: {s['steps']} steps ({s['sim_s']:g} s simulated) in "
-          f"{s['nodes_wall_s']:.2f} s: {s['nodes_steps_per_s']:.0f} steps/s, "
-          f"{s['nodes_realtime_ratio']:.2f}x real time; one process "
-          f"{s['one_process_wall_s']:.2f} s "
-          f"({s['one_process_steps_per_s']:.0f} steps/s): nodes at "
-          f"{s['nodes_over_one_process']:.2f}x its speed; timeouts {s['lockstep_timeouts']}")
+    print(format_table(
+        ["lock-step", "steps", "wall [s]", "steps/s", "x real time", "/ one process",
+         "timeouts"],
+        [[s["backend"], s["steps"], f"{s['nodes_wall_s']:.2f}", f"{s['nodes_steps_per_s']:.0f}",
+          f"{s['nodes_realtime_ratio']:.2f}", f"{s['nodes_over_one_process']:.2f}",
+          s["lockstep_timeouts"]] for s in speeds]
+        + [["one process", one["steps"], f"{one['wall_s']:.2f}",
+            f"{one['steps'] / one['wall_s']:.0f}", "", "1.00", ""]]))
     return 0

@@ -171,13 +171,15 @@ def backend_name() -> str:
     return check_backend(chosen, f"{BACKEND_ENV}={chosen}")
 
 
-def create_node(name: str, namespace: str | None = None, argv: list[str] | None = None) -> Node:
-    """A node on the chosen backend; ``argv`` (default ``sys.argv``) may carry ``--ros-args``.
+def create_node(name: str, namespace: str | None = None, argv: list[str] | None = None,
+                backend: str | None = None) -> Node:
+    """A node on ``backend`` (default :func:`backend_name`); ``argv`` (default ``sys.argv``)
+    may carry ``--ros-args``.
 
     ``namespace`` is the default namespace (``-r __ns:=`` overrides it, as does ``__node``
     the name). Logs the backend in use.
     """
-    backend = backend_name()
+    backend = check_backend(backend, "backend") if backend else backend_name()
     args = list(sys.argv if argv is None else argv)[1:]
     if backend == "dds":
         from stillframe.middleware.dds_backend import DdsNode as NodeClass

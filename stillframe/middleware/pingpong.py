@@ -19,6 +19,7 @@ pings, and the API/raw ratios (target: p99 <= 1.5).
 
 from __future__ import annotations
 
+import functools
 import math
 import os
 import struct
@@ -43,7 +44,8 @@ from stillframe.middleware import api, dds_backend, dds_types, discovery
 from stillframe.middleware.qos import SENSOR_DATA
 
 IMU = "sensor_msgs/msg/Imu"
-VARIANTS = ("raw", "typed", "api")
+#: raw and typed Cyclone, then the node API on each backend installed here
+VARIANTS = ("raw", "typed", *(b for b in api.BACKENDS if b == "dds" or api.has_rclpy()))
 ANY_SAMPLE = SampleState.Any | ViewState.Any | InstanceState.Any
 STAMP = struct.Struct("<iI")  # header.stamp right after the 4-byte CDR encapsulation header
 BLOCK_S = 1.0
@@ -123,10 +125,12 @@ class TypedPinger:
 
 
 class ApiPinger:
+    """The node API on one backend (its variant's name)."""
+
     def __init__(self, node: api.Node) -> None:
         self.node = node
         self.rtts: list[int] = []
-        ping, pong = topics("api")
+        ping, pong = topics(node.backend)
         self.pub = node.create_publisher(IMU, ping, "sensor_data")
         self.sub = node.create_subscription(IMU, pong, self.on_pong, "sensor_data")
         self.ping = messages.new(IMU)
@@ -183,16 +187,19 @@ def typed_peer() -> None:
             end.writer.write(sample)
 
 
-def api_peer() -> None:
-    ping, pong = topics("api")
-    node = api.create_node("bench_transport_peer", argv=["bench"])
+def api_peer(backend: str) -> None:
+    ping, pong = topics(backend)
+    node = api.create_node(f"bench_transport_peer_{backend}", argv=["bench"], backend=backend)
     publisher = node.create_publisher(IMU, pong, "sensor_data")
     node.create_subscription(IMU, ping, publisher.publish, "sensor_data")
     api.spin(node)
     node.destroy_node()
 
 
-PEERS: dict[str, Callable[[], None]] = {"raw": raw_peer, "typed": typed_peer, "api": api_peer}
+PEERS: dict[str, Callable[[], None]] = {
+    "raw": raw_peer, "typed": typed_peer,
+    **{backend: functools.partial(api_peer, backend) for backend in api.BACKENDS},
+}
 
 
 # -- the command ----------------------------------------------------------------------------
@@ -225,9 +232,12 @@ def measure(rate: float, duration: float) -> dict[str, dict[str, float]]:
                           "--peer", variant], env=env, stderr=subprocess.DEVNULL)
         for variant in VARIANTS
     ]
-    node = api.create_node("bench_transport_ping", argv=["bench"])
+    nodes = {b: api.create_node(f"bench_transport_ping_{b}", argv=["bench"], backend=b)
+             for b in VARIANTS if b in api.BACKENDS}
+    node = nodes["dds"]
     try:
-        pingers = {"raw": RawPinger(), "typed": TypedPinger(), "api": ApiPinger(node)}
+        pingers = {"raw": RawPinger(), "typed": TypedPinger(),
+                   **{b: ApiPinger(n) for b, n in nodes.items()}}
         _wait_ready(node, pingers)
         sent = dict.fromkeys(VARIANTS, 0)
         blocks = math.ceil(duration / BLOCK_S)
@@ -245,7 +255,8 @@ def measure(rate: float, duration: float) -> dict[str, dict[str, float]]:
                 pinger.receive(5_000_000)
         return {v: _summary(sent[v], pingers[v].rtts) for v in VARIANTS}
     finally:
-        node.destroy_node()
+        for each in nodes.values():
+            each.destroy_node()
         for peer in peers:
             peer.terminate()
         for peer in peers:
