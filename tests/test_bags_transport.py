@@ -138,24 +138,34 @@ def env(ros_domain: int) -> dict[str, str]:
 
 
 def record_while_playing(env: dict[str, str], source: Path, out: Path, *play_args: str,
-                         topics: tuple[str, ...] = (IMU, JS)) -> tuple[Proc, Proc]:
-    recorder = Proc(env, "record", "-o", str(out), *topics)
+                         topics: tuple[str, ...] = (IMU, JS),
+                         backends: tuple[str, str] = ("dds", "dds")) -> tuple[Proc, Proc]:
+    """``record`` then ``play``, each on its backend (recorder's, player's)."""
+    recorder = Proc({**env, "STILLFRAME_RMW": backends[0]}, "record", "-o", str(out), *topics)
     recorder.wait_for("Recording to")
-    player = Proc(env, "play", str(source), "--delay", "2", *play_args)
+    player = Proc({**env, "STILLFRAME_RMW": backends[1]}, "play", str(source), "--delay", "2",
+                  *play_args)
     recorder.wait_for("Subscribed to topic", count=2)
     return recorder, player
 
 
 @pytest.mark.slow
+@pytest.mark.parametrize("backends", [("dds", "dds"), ("rclpy", "dds"), ("dds", "rclpy")],
+                         ids=["dds", "record-rclpy-play-dds", "record-dds-play-rclpy"])
 def test_record_play_record_keeps_every_message_stamp_and_order(
-        env: dict[str, str], tmp_path: Path) -> None:
+        env: dict[str, str], tmp_path: Path, backends: tuple[str, str]) -> None:
     """bag A (rosbags) -play-> record B -play-> record C: B and C hold exactly A's messages,
-    per topic in A's order, with A's header stamps (in the bytes) and A's spacing in time."""
+    per topic in A's order, with A's header stamps (in the bytes) and A's spacing in time;
+    also with the recorder on one vendor (Fast DDS through rclpy, or Cyclone) and the player
+    on the other."""
+    if "rclpy" in backends:
+        pytest.importorskip("rclpy", reason="real rclpy is installed by `make setup` ([ros])")
     source = tmp_path / "A"
     msgs = write_source(source, n_imu=100, n_js=50, period_ns=20_000_000)  # 2 s of data
     bags = [source]
     for name in ("B", "C"):
-        recorder, player = record_while_playing(env, bags[-1], tmp_path / name)
+        recorder, player = record_while_playing(env, bags[-1], tmp_path / name,
+                                                backends=backends)
         try:
             assert player.finish() == 0, "\n".join(player.lines)
             time.sleep(0.5)
