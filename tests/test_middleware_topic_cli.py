@@ -43,7 +43,13 @@ def publisher(ros_domain: int):
 
 
 @pytest.mark.slow
-def test_list_echo_and_hz(publisher: object) -> None:
+@pytest.mark.parametrize("tool_backend", ["dds", "rclpy"])
+def test_list_echo_and_hz(publisher: object, tool_backend: str,
+                          monkeypatch: pytest.MonkeyPatch) -> None:
+    """The publisher is on the dds backend; the tools on either (rclpy: across vendors)."""
+    if tool_backend == "rclpy":
+        pytest.importorskip("rclpy", reason="real rclpy is installed by `make setup` ([ros])")
+    monkeypatch.setenv("STILLFRAME_RMW", tool_backend)
     listed = run_stillframe("topic", "list", "-t", "--spin-time", "2")
     assert listed.returncode == 0, listed.stderr
     lines = listed.stdout.splitlines()
