@@ -211,7 +211,8 @@ def main() -> int:
     node = api.create_node("estimator_node", namespace=topics.DEFAULT_NAMESPACE)
     try:
         params = declare_loop_parameters(node)
-        partial = node.declare_parameter("partial_after_s", 0.5 * params.period).value
+        partial = node.declare_parameter("partial_after_s", 0.5 * params.period,
+                                         read_only=True).value
         if not partial > 0:
             raise InputError(f"parameter 'partial_after_s': must be > 0, got {partial}")
         EstimatorNode(node, params, float(partial)).run()

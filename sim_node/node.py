@@ -227,8 +227,8 @@ def main() -> int:
     node = api.create_node("sim_node", namespace=topics.DEFAULT_NAMESPACE)
     try:
         params = declare_loop_parameters(node)
-        result = node.declare_parameter("result_file", "").value
-        discovery = node.declare_parameter("discovery_timeout_s", 30.0).value
+        result = node.declare_parameter("result_file", "", read_only=True).value
+        discovery = node.declare_parameter("discovery_timeout_s", 30.0, read_only=True).value
         if not discovery >= 0:
             raise InputError(f"parameter 'discovery_timeout_s': must be >= 0, got {discovery}")
         sim = SimNode(node, params, float(discovery))

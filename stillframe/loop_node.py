@@ -69,12 +69,12 @@ def _overrides(value: Any) -> list[str]:
 def declare_loop_parameters(node: api.Node) -> LoopParameters:
     """``scene`` (path), ``overrides`` (``--set`` strings), ``mode``, ``lockstep_timeout_s``,
     ``diagnostics_period_s``; InputError naming the parameter when one is wrong."""
-    path = node.declare_parameter("scene", "").value
+    path = node.declare_parameter("scene", "", read_only=True).value
     # a string list; the default [""] because a ROS parameter cannot be an empty list
-    overrides = _overrides(node.declare_parameter("overrides", [""]).value)
-    mode = node.declare_parameter("mode", "lockstep").value
-    timeout = node.declare_parameter("lockstep_timeout_s", 1.0).value
-    diag = node.declare_parameter("diagnostics_period_s", 1.0).value
+    overrides = _overrides(node.declare_parameter("overrides", [""], read_only=True).value)
+    mode = node.declare_parameter("mode", "lockstep", read_only=True).value
+    timeout = node.declare_parameter("lockstep_timeout_s", 1.0, read_only=True).value
+    diag = node.declare_parameter("diagnostics_period_s", 1.0, read_only=True).value
     if not path:
         raise InputError("parameter 'scene': give the scene file (--ros-args -p scene:=FILE)")
     if mode not in MODES:

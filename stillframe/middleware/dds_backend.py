@@ -186,10 +186,11 @@ class Context:
         self._discovery_reader: DataReader | None = None
         self._participant_nodes: dict[bytes, list[Any]] = {}
 
-    def topic(self, dds_name: str, ros_type: str) -> Topic:
-        """The Cyclone topic ``dds_name`` of type ``ros_type`` (one per name and participant)."""
+    def topic(self, dds_name: str, ros_type: str, request_header: bool = False) -> Topic:
+        """The Cyclone topic ``dds_name`` of type ``ros_type`` (one per name and participant;
+        ``request_header``: a service's request or reply topic)."""
         existing = self.topics.get(dds_name)
-        struct = dds_types.idl_struct(ros_type)
+        struct = dds_types.idl_struct(ros_type, request_header)
         if existing is not None:
             if existing.data_type is not struct:
                 raise InputError(
@@ -440,7 +441,8 @@ class DdsNode:
         self._subscriptions: list[DdsSubscription] = []
         self._timers: list[DdsTimer] = []
         self._waitset = WaitSet(self.context.participant)
-        self._clock = Clock(sim=bool(self.declare_parameter("use_sim_time", False).value))
+        sim_time = self.declare_parameter("use_sim_time", False, read_only=True).value
+        self._clock = Clock(sim=bool(sim_time))
         self.context.nodes.append(self)
         if self._clock.sim:
             self.create_subscription("rosgraph_msgs/msg/Clock", "/clock", self._on_clock, CLOCK)
@@ -465,11 +467,16 @@ class DdsNode:
     def _on_clock(self, msg: Any) -> None:
         self._clock.set_sim_time(messages.stamp_ns(msg.clock))
 
-    def declare_parameter(self, name: str, default: Any = None) -> api.Parameter:
-        return api.Parameter(name, self._params.declare(name, default))
+    def declare_parameter(
+        self, name: str, default: Any = None, read_only: bool = False
+    ) -> api.Parameter:
+        return api.Parameter(name, self._params.declare(name, default, read_only))
 
     def get_parameter(self, name: str) -> api.Parameter:
         return api.Parameter(name, self._params.get(name))
+
+    def add_on_set_parameters_callback(self, callback: params.SetCallback) -> None:
+        self._params.callbacks.append(callback)
 
     # -- endpoints ---------------------------------------------------------------------------
     def resolve_topic_name(self, topic: str) -> str:

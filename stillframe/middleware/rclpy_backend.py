@@ -10,11 +10,14 @@ carry the DDS sample info.
 
 from __future__ import annotations
 
+import array
 import importlib
 from collections.abc import Callable
 from typing import Any
 
 import rclpy
+from rcl_interfaces.msg import ParameterDescriptor
+from rcl_interfaces.msg import SetParametersResult as RclpySetParametersResult
 from rclpy.clock import ClockType
 from rclpy.duration import Duration
 from rclpy.executors import SingleThreadedExecutor
@@ -31,6 +34,7 @@ from stillframe import messages
 from stillframe.errors import InputError
 from stillframe.middleware import api
 from stillframe.middleware.clock import SYSTEM_CLOCK, Clock, Time
+from stillframe.middleware.params import Parameter, SetCallback
 from stillframe.middleware.qos import (
     INFINITE_NS,
     Durability,
@@ -86,6 +90,11 @@ def ros_qos(qos: RclpyQoS) -> QoSProfile:
         liveliness=Liveliness(int(qos.liveliness)),
         liveliness_lease_duration_ns=ns(qos.liveliness_lease_duration),
     )
+
+
+def plain_value(value: Any) -> Any:
+    """A parameter value as our API holds it (rclpy gives arrays as ``array.array``)."""
+    return list(value) if isinstance(value, array.array | tuple) else value
 
 
 class RclpyClock(Clock):
@@ -144,11 +153,24 @@ class RclpyNode:
     def get_clock(self) -> Clock:
         return self._clock
 
-    def declare_parameter(self, name: str, default: Any = None) -> api.Parameter:
-        return api.Parameter(name, self._node.declare_parameter(name, default).value)
+    def declare_parameter(
+        self, name: str, default: Any = None, read_only: bool = False
+    ) -> Parameter:
+        declared = self._node.declare_parameter(
+            name, default, ParameterDescriptor(read_only=read_only)
+        )
+        return Parameter(name, plain_value(declared.value))
 
-    def get_parameter(self, name: str) -> api.Parameter:
-        return api.Parameter(name, self._node.get_parameter(name).value)
+    def get_parameter(self, name: str) -> Parameter:
+        return Parameter(name, plain_value(self._node.get_parameter(name).value))
+
+    def add_on_set_parameters_callback(self, callback: SetCallback) -> None:
+        """rclpy's own callback (it checks declared, read-only and type first)."""
+        def on_set(parameters: list[Any]) -> RclpySetParametersResult:
+            result = callback([Parameter(p.name, plain_value(p.value)) for p in parameters])
+            return RclpySetParametersResult(successful=result.successful, reason=result.reason)
+
+        self._node.add_on_set_parameters_callback(on_set)
 
     def create_publisher(
         self, msg_type: str | type, topic: str, qos: QoSProfile | str | int
