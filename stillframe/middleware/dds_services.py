@@ -252,6 +252,18 @@ class ServiceNode(DdsNode):
         self.context.publish_graph()
         return client
 
+    def call_service(self, srv_type: str, service: str, request: Any,
+                     timeout_sec: float) -> Any | None:
+        """Wait for ``service`` and call it once (a client made on first use); the response,
+        or None if the service did not appear or answer within ``timeout_sec``."""
+        name = self.resolve_service_name(service)
+        client = next((c for c in self._clients if c.service_name == name), None)
+        client = client or self.create_client(srv_type, name)
+        deadline = time.monotonic() + timeout_sec
+        if not client.wait_for_service(timeout_sec):
+            return None
+        return client.call(request, max(deadline - time.monotonic(), 0.0))
+
     def reader_gids(self) -> list[bytes]:
         return [*super().reader_gids(), *(s.reader.guid.bytes for s in self._endpoints())]
 

@@ -28,7 +28,9 @@ from rclpy.qos import (
     ReliabilityPolicy,
 )
 from rclpy.qos import QoSProfile as RclpyQoS
+from rclpy.serialization import deserialize_message
 from rclpy.signals import SignalHandlerOptions
+from rosbags.typesys.base import Nodetype
 
 from stillframe import messages
 from stillframe.errors import InputError
@@ -49,8 +51,9 @@ MAX_WAIT_S = 0.1
 
 
 def ros_message_class(name: str) -> type:
-    """rclpy's generated class of ``pkg/msg/Type``, imported from the installed message package
-    (what ``rosidl_runtime_py.utilities.get_message`` does; that package is not on PyPI)."""
+    """rclpy's generated class of ``pkg/msg/Type`` or ``pkg/srv/Type``, imported from the
+    installed interface package (what ``rosidl_runtime_py.utilities.get_message`` does; that
+    package is not on PyPI)."""
     package, kind, type_name = name.split("/")
     try:
         return getattr(importlib.import_module(f"{package}.{kind}"), type_name)
@@ -95,6 +98,22 @@ def ros_qos(qos: RclpyQoS) -> QoSProfile:
 def plain_value(value: Any) -> Any:
     """A parameter value as our API holds it (rclpy gives arrays as ``array.array``)."""
     return list(value) if isinstance(value, array.array | tuple) else value
+
+
+def rosbags_message(msg: Any, name: str) -> Any:
+    """The ``rosbags`` message of an rclpy message, field by field (``serialize_message`` is
+    no way round: its buffer can be longer than the CDR, which ``rosbags`` refuses)."""
+    fields = {}
+    for field, (kind, detail) in messages.fielddefs(name):
+        value = getattr(msg, field)
+        if kind == Nodetype.NAME:
+            value = rosbags_message(value, detail)
+        elif kind in (Nodetype.ARRAY, Nodetype.SEQUENCE):
+            sub_kind, sub_detail = detail[0]
+            value = [rosbags_message(v, sub_detail) if sub_kind == Nodetype.NAME
+                     else v[0] if isinstance(v, bytes) else v for v in value]
+        fields[field] = value
+    return messages.new(name, **fields)
 
 
 class RclpyClock(Clock):
@@ -171,6 +190,24 @@ class RclpyNode:
             return RclpySetParametersResult(successful=result.successful, reason=result.reason)
 
         self._node.add_on_set_parameters_callback(on_set)
+
+    def call_service(self, srv_type: str, service: str, request: Any,
+                     timeout_sec: float) -> Any | None:
+        """Call ``service`` with rclpy's own client; the ``rosbags`` request and response
+        cross as CDR. None if the service did not appear or answer within ``timeout_sec``."""
+        srv_class = ros_message_class(srv_type)
+        client = self._node.create_client(srv_class, service)
+        try:
+            if not client.wait_for_service(timeout_sec=timeout_sec):
+                return None
+            future = client.call_async(
+                deserialize_message(messages.serialize(request), srv_class.Request))
+            RclpyNode._executor.spin_until_future_complete(future, timeout_sec=timeout_sec)
+            if not future.done():
+                return None
+            return rosbags_message(future.result(), f"{srv_type}_Response")
+        finally:
+            self._node.destroy_client(client)
 
     def create_publisher(
         self, msg_type: str | type, topic: str, qos: QoSProfile | str | int
