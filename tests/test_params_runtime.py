@@ -222,3 +222,99 @@ def test_param_command_bad_input(ros_domain: int) -> None:  # noqa: F811
         done = run_stillframe("param", *args)
         assert done.returncode == 2 and text in done.stderr, done.stderr
         assert "Traceback" not in done.stderr
+
+
+@pytest.mark.slow
+def test_rclpy_client_sets_parameters_of_rclpy_nodes(
+    ros_domain: int, tmp_path: Path, monkeypatch: pytest.MonkeyPatch  # noqa: F811
+) -> None:
+    """The nodes on the rclpy backend; this process is a plain rclpy client of the standard
+    parameter services (rclpy's AsyncParameterClient), the command is read with rclpy too."""
+    rclpy = pytest.importorskip("rclpy", reason="rclpy is not installed (the ros extra)")
+    from geometry_msgs.msg import WrenchStamped
+    from rcl_interfaces.msg import ParameterType
+    from rclpy.context import Context
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.parameter import Parameter
+    from rclpy.parameter_client import AsyncParameterClient
+    from std_msgs.msg import Float64MultiArray
+
+    monkeypatch.setenv("STILLFRAME_RMW", "rclpy")
+    procs = start_loop(tmp_path)
+    context = Context()
+    rclpy.init(context=context)
+    node = rclpy.create_node("param_test_client", context=context)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(node)
+    torques: list[float] = []
+    covariances: list[np.ndarray] = []
+    node.create_subscription(WrenchStamped, "/frame/pendulum/torque_cmd",
+                             lambda m: torques.append(m.wrench.torque.z), 10)
+    node.create_subscription(Float64MultiArray, "/frame/state_estimate/covariance",
+                             lambda m: covariances.append(np.reshape(m.data, (8, 8))), 10)
+
+    def next_torques(count: int) -> list[float]:
+        start = len(torques)
+        deadline = time.monotonic() + 60
+        while len(torques) < start + count and time.monotonic() < deadline:
+            executor.spin_once(timeout_sec=0.05)
+        assert len(torques) >= start + count, f"only {len(torques) - start} commands"
+        return torques[start:start + count]
+
+    def done(future: Any) -> Any:
+        executor.spin_until_future_complete(future, timeout_sec=30)
+        assert future.done()
+        return future.result()
+
+    try:
+        controller = AsyncParameterClient(node, "/frame/controller_node")
+        estimator = AsyncParameterClient(node, "/frame/estimator_node")
+        assert controller.wait_for_services(timeout_sec=60)
+        assert estimator.wait_for_services(timeout_sec=60)
+        names = done(controller.list_parameters()).result.names
+        assert {"scene", "enabled", "command_limit", "use_sim_time"} <= set(names)
+        values = done(estimator.get_parameters(["measurement_noise_std", "mode"])).values
+        assert values[0].type == ParameterType.PARAMETER_DOUBLE_ARRAY
+        assert list(values[0].double_array_value) == [1e-3] * 4
+        assert values[1].string_value == "lockstep"
+        assert max(map(abs, next_torques(60))) > 10 * LIMIT
+
+        results = done(controller.set_parameters([Parameter("enabled", value=False)])).results
+        assert results[0].successful
+        assert next_torques(40)[-30:] == [0.0] * 30
+        results = done(controller.set_parameters([
+            Parameter("command_limit", value=LIMIT), Parameter("enabled", value=True)])).results
+        assert all(r.successful for r in results)
+        limited = np.abs(next_torques(60)[-40:])
+        assert limited.max() == LIMIT and np.count_nonzero(limited == LIMIT) >= 5
+
+        refused = done(controller.set_parameters([
+            Parameter("command_limit", value=-1.0), Parameter("command_limit", value="a"),
+            Parameter("scene", value="x.yaml")])).results
+        assert [r.successful for r in refused] == [False] * 3
+        assert "must be >= 0" in refused[0].reason and "type" in refused[1].reason
+        assert "read-only" in refused[2].reason
+        refused = done(estimator.set_parameters([
+            Parameter("process_noise_std", value=[-1.0] * 8)])).results
+        assert not refused[0].successful and "must be >= 0" in refused[0].reason
+        assert np.abs(next_torques(20)).max() == LIMIT   # still running, still limited
+        accepted = done(estimator.set_parameters([
+            Parameter("measurement_noise_std", value=NEW_MEASUREMENT_STD)])).results
+        assert accepted[0].successful
+        values = done(estimator.get_parameters(["measurement_noise_std"])).values
+        assert list(values[0].double_array_value) == NEW_MEASUREMENT_STD
+        start = len(covariances)
+        next_torques(40)
+        assert len(covariances) >= start + 30
+        new = stationary_posterior(NEW_MEASUREMENT_STD)
+        for cov in covariances[start + 10:]:
+            np.testing.assert_allclose(cov, new, rtol=1e-6, atol=1e-18)
+
+        cli_get = run_stillframe("param", "get", "controller_node", "command_limit")
+        assert cli_get.returncode == 0 and float(cli_get.stdout) == LIMIT, cli_get.stderr
+    finally:
+        executor.shutdown()
+        node.destroy_node()
+        rclpy.try_shutdown(context=context)
+        for proc in procs:
+            stop(proc)
