@@ -28,7 +28,13 @@ from stillframe import cli, messages, topics
 from stillframe.middleware import api, dds_services, dds_types
 from stillframe.models.identified import frame_for
 from stillframe.scene import load_scene
-from tests.mw_support import ros_domain, run_stillframe  # noqa: F401
+from tests.mw_support import (  # noqa: F401
+    finish,
+    ros_domain,
+    run_stillframe,
+    start_python,
+    wait_for_line,
+)
 from tests.node_support import SCENES, params_file, start_node, stop
 
 OVERRIDES = ["duration=100000", "controller.start=1", "evaluation.window=1"]
@@ -318,3 +324,79 @@ def test_rclpy_client_sets_parameters_of_rclpy_nodes(
         rclpy.try_shutdown(context=context)
         for proc in procs:
             stop(proc)
+
+
+FAST_DDS_CLIENT = """\
+import sys, rclpy
+from rcl_interfaces.srv import GetParameters
+rclpy.init()
+node = rclpy.create_node("fast_dds_client")
+client = node.create_client(GetParameters, "/vendor_check/get_parameters")
+print("ready", client.wait_for_service(timeout_sec=30), flush=True)
+future = client.call_async(GetParameters.Request(names=["limit"]))
+rclpy.spin_until_future_complete(node, future, timeout_sec=3)
+print("answered", future.done(), flush=True)
+"""
+
+
+@pytest.mark.slow
+def test_services_do_not_cross_vendors(ros_domain: int) -> None:  # noqa: F811
+    """What docs/middleware.md reports: a Fast DDS (rclpy) client finds the dds backend's
+    parameter service and matches it, but its request, which lacks Cyclone rmw's in-payload
+    header, does not fit the DDS type and never reaches the service; no answer."""
+    pytest.importorskip("rclpy", reason="rclpy is not installed (the ros extra)")
+    node = api.create_node("vendor_check", argv=["test"])
+    node.declare_parameter("limit", 2.5)
+    service = next(s for s in node._services if s.service_name.endswith("/get_parameters"))
+    taken: list[bytes] = []
+    take = service.take
+    service.take = lambda: [*(taken.append(d) or (d, i) for d, i in take())]
+    stop_spinning = threading.Event()
+
+    def spin() -> None:
+        while not stop_spinning.is_set():
+            node.spin_once(0.05)
+
+    spinner = threading.Thread(target=spin)
+    spinner.start()
+    try:
+        out, err = finish(start_python(FAST_DDS_CLIENT), timeout=60)
+    finally:
+        stop_spinning.set()
+        spinner.join()
+        node.destroy_node()
+    assert out.splitlines() == ["ready True", "answered False"], err
+    assert taken == [] and service.rejected == 0
+
+
+FAST_DDS_SERVER = """\
+import time, rclpy
+rclpy.init()
+node = rclpy.create_node("fast_dds_server")
+node.declare_parameter("limit", 2.5)
+print("serving", flush=True)
+deadline = time.monotonic() + 30
+while time.monotonic() < deadline:
+    rclpy.spin_once(node, timeout_sec=0.1)
+"""
+
+
+@pytest.mark.slow
+def test_dds_client_gets_no_answer_from_fast_dds(ros_domain: int) -> None:  # noqa: F811
+    """The reverse: the dds backend's client matches an rclpy (Fast DDS) parameter service and
+    sends, but Fast DDS reads the in-payload header as the request's fields and does not
+    answer; the client reports no answer."""
+    pytest.importorskip("rclpy", reason="rclpy is not installed (the ros extra)")
+    server = start_python(FAST_DDS_SERVER)
+    node = api.create_node("vendor_check_client", argv=["test"])
+    try:
+        wait_for_line(server, "serving")
+        client = node.create_client("rcl_interfaces/srv/GetParameters",
+                                    "/fast_dds_server/get_parameters")
+        assert client.wait_for_service(30)
+        request = messages.new("rcl_interfaces/srv/GetParameters_Request", names=["limit"])
+        assert client.call(request, 3.0) is None
+    finally:
+        node.destroy_node()
+        server.kill()
+        finish(server)

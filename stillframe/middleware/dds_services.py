@@ -189,11 +189,15 @@ class DdsClient(_Endpoints):
         self.waitset.attach(self.condition)
 
     def service_is_ready(self) -> bool:
-        """One service's request reader and reply writer are both matched (rmw's check)."""
+        """rmw_cyclonedds' check: one service's request reader and reply writer are both
+        matched; when no matched reader carries a ``serviceid`` (another rmw), any matched
+        reader and writer."""
         readers = {user_data_field(self.writer.get_matched_subscription_data(h).qos, "serviceid")
                    for h in self.writer.get_matched_subscriptions()}
         writers = {user_data_field(self.reader.get_matched_publication_data(h).qos, "serviceid")
                    for h in self.reader.get_matched_publications()}
+        if readers == {""}:
+            return bool(writers)
         return bool((readers & writers) - {""})
 
     def wait_for_service(self, timeout_sec: float) -> bool:
