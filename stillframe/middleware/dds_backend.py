@@ -64,7 +64,7 @@ DISCOVERY_TYPE = "rmw_dds_common/msg/ParticipantEntitiesInfo"
 MAX_WAIT_NS = 100_000_000
 #: Samples taken from one reader per ``spin_once``.
 TAKE_BATCH = 256
-_ANY = SampleState.Any | ViewState.Any | InstanceState.Any
+ANY_SAMPLES = SampleState.Any | ViewState.Any | InstanceState.Any
 _ALIVE = SampleState.Any | ViewState.Any | InstanceState.Alive
 _RELIABLE_BLOCKING_NS = 100_000_000  # rmw_cyclonedds' max_blocking_time
 
@@ -251,7 +251,7 @@ class Context:
             qos = QoSProfile(depth=1000, durability=Durability.TRANSIENT_LOCAL)
             topic = self.topic(DISCOVERY_TOPIC, DISCOVERY_TYPE)
             self._discovery_reader = DataReader(self.participant, topic, dds_qos(qos, writer=False))
-        for data, sample in ddspy_take(self._discovery_reader._ref, _ANY, 100_000):
+        for data, sample in ddspy_take(self._discovery_reader._ref, ANY_SAMPLES, 100_000):
             if sample.valid_data:
                 info = messages.deserialize(data, DISCOVERY_TYPE)
                 self._participant_nodes[bytes(info.gid.data)] = [
@@ -353,7 +353,7 @@ class DdsSubscription:
             node.context.topic(dds_types.dds_topic(topic), ros_type),
             dds_qos(qos, user_data, writer=False),
         )
-        self.condition = ReadCondition(self._reader, _ANY)
+        self.condition = ReadCondition(self._reader, ANY_SAMPLES)
         self.gid = self._reader.guid.bytes
         messages.prepare(ros_type)
         self._clock = node.get_clock()
@@ -363,7 +363,7 @@ class DdsSubscription:
 
     def take_and_dispatch(self) -> int:
         """Hand every waiting sample to the callback; the number handed."""
-        samples = ddspy_take(self._reader._ref, _ANY, TAKE_BATCH)
+        samples = ddspy_take(self._reader._ref, ANY_SAMPLES, TAKE_BATCH)
         count = 0
         for data, info in samples:
             if not info.valid_data:

@@ -26,14 +26,7 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-from cyclonedds.core import (
-    DDSException,
-    InstanceState,
-    ReadCondition,
-    SampleState,
-    ViewState,
-    WaitSet,
-)
+from cyclonedds.core import DDSException, ReadCondition, WaitSet
 from cyclonedds.pub import DataWriter
 from cyclonedds.sub import DataReader
 
@@ -42,6 +35,7 @@ from stillframe import messages
 from stillframe.errors import InputError
 from stillframe.middleware import names, param_messages
 from stillframe.middleware.dds_backend import (
+    ANY_SAMPLES,
     DdsNode,
     dds_qos,
     delete,
@@ -55,7 +49,6 @@ SERVICE_QOS = QoSProfile(depth=10)
 REPLY_MATCH_WAIT_S = 0.1
 HEADER_SIZE = 16
 ENCAPSULATION_SIZE = 4
-_ANY = SampleState.Any | ViewState.Any | InstanceState.Any
 _ids = itertools.count(1)
 
 
@@ -115,7 +108,7 @@ class _Endpoints:
             context.participant, context.topic(write_topic, write_type, request_header=True),
             dds_qos(SERVICE_QOS, self._user_data(write_type, role)),
         )
-        self.condition = ReadCondition(self.reader, _ANY)
+        self.condition = ReadCondition(self.reader, ANY_SAMPLES)
         messages.prepare(read_type)
         messages.prepare(write_type)
 
@@ -123,7 +116,7 @@ class _Endpoints:
         return f"typehash={messages.type_hash(ros_type)};{role}={self.id};".encode()
 
     def take(self) -> list[tuple[bytes, Any]]:
-        return [(bytes(data), info) for data, info in ddspy_take(self.reader._ref, _ANY, 256)
+        return [(bytes(data), info) for data, info in ddspy_take(self.reader._ref, ANY_SAMPLES, 256)
                 if info.valid_data]
 
     def destroy(self) -> None:
