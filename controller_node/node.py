@@ -41,6 +41,7 @@ from stillframe.loop_node import (
     Durations,
     LoopParameters,
     RateMeter,
+    check_settable,
     declare_loop_parameters,
     wait_for_peers,
 )
@@ -50,6 +51,7 @@ from stillframe.models.identified import frame_for
 from stillframe.signals import Command, Estimate
 
 FORCES_KEPT = 256  # load-cell readings kept for matching estimates by stamp
+RUN_TIME_PARAMETERS = frozenset({"enabled", "command_limit"})
 
 
 class ControllerNode:
@@ -93,6 +95,9 @@ class ControllerNode:
 
     def on_set_parameters(self, parameters: list[Parameter]) -> SetParametersResult:
         """Check every new value, then apply them all (or none)."""
+        settable = check_settable(parameters, RUN_TIME_PARAMETERS)
+        if not settable.successful:
+            return settable
         for p in parameters:
             if p.name == "command_limit":
                 reason = finite_floats(p.value, "command_limit")

@@ -53,6 +53,7 @@ from stillframe.loop_node import (
     Durations,
     LoopParameters,
     RateMeter,
+    check_settable,
     declare_loop_parameters,
     has_publisher,
     wait_for_peers,
@@ -107,6 +108,8 @@ class EstimatorNode:
         self.rate = RateMeter()
         if isinstance(self.estimator, Filter):
             self.declare_run_time_parameters()
+        else:
+            node.add_on_set_parameters_callback(check_settable)   # truth: nothing to tune
 
     # -- parameters ----------------------------------------------------------------------
     def declare_run_time_parameters(self) -> None:
@@ -124,6 +127,9 @@ class EstimatorNode:
 
     def on_set_parameters(self, parameters: list[Parameter]) -> SetParametersResult:
         """Check the new noise settings and redesign the filter with them (all or nothing)."""
+        settable = check_settable(parameters, frozenset(self.noise))
+        if not settable.successful:
+            return settable
         noise = dict(self.noise)
         for p in parameters:
             if p.name in noise:

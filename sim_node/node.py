@@ -38,6 +38,7 @@ from stillframe.loop_node import (
     Diagnostics,
     Durations,
     LoopParameters,
+    check_settable,
     declare_loop_parameters,
     has_publisher,
     wait_for_peers,
@@ -81,6 +82,7 @@ class SimNode:
         self.max_lateness = 0.0
         self.k = 0
         self.started = time.monotonic()   # reset when the first sample is due
+        node.add_on_set_parameters_callback(check_settable)   # nothing changes while it runs
 
     def on_command(self, actuator: int, msg: Any) -> None:
         """Take a command stamped at or before the current sample and not older than the one

@@ -201,6 +201,8 @@ def test_param_command_changes_the_running_dds_loop(
         code, _, err = param("set", "estimator_node", "measurement_noise_std", "[1, 1]",
                              capsys=capsys)
         assert code == 1 and "expected 4 values" in err
+        code, _, err = param("set", "sim_node", "use_sim_time", "true", capsys=capsys)
+        assert code == 1 and "read-only" in err
         assert np.abs(watcher.next_torques(20)).max() == LIMIT   # still running, still limited
 
         old = stationary_posterior([1e-3] * 4)
@@ -296,10 +298,11 @@ def test_rclpy_client_sets_parameters_of_rclpy_nodes(
 
         refused = done(controller.set_parameters([
             Parameter("command_limit", value=-1.0), Parameter("command_limit", value="a"),
-            Parameter("scene", value="x.yaml")])).results
-        assert [r.successful for r in refused] == [False] * 3
+            Parameter("scene", value="x.yaml"), Parameter("use_sim_time", value=True)])).results
+        assert [r.successful for r in refused] == [False] * 4
         assert "must be >= 0" in refused[0].reason and "type" in refused[1].reason
         assert "read-only" in refused[2].reason
+        assert "cannot change while the node runs" in refused[3].reason
         refused = done(estimator.set_parameters([
             Parameter("process_noise_std", value=[-1.0] * 8)])).results
         assert not refused[0].successful and "must be >= 0" in refused[0].reason
