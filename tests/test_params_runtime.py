@@ -298,11 +298,13 @@ def test_rclpy_client_sets_parameters_of_rclpy_nodes(
 
         refused = done(controller.set_parameters([
             Parameter("command_limit", value=-1.0), Parameter("command_limit", value="a"),
-            Parameter("scene", value="x.yaml"), Parameter("use_sim_time", value=True)])).results
-        assert [r.successful for r in refused] == [False] * 4
+            Parameter("scene", value="x.yaml"), Parameter("use_sim_time", value=True),
+            Parameter("command_limit", value=float("nan")), Parameter("gain", value=1.0)])).results
+        assert [r.successful for r in refused] == [False] * 6
         assert "must be >= 0" in refused[0].reason and "type" in refused[1].reason
         assert "read-only" in refused[2].reason
         assert "cannot change while the node runs" in refused[3].reason
+        assert "finite" in refused[4].reason and "undeclared" in refused[5].reason
         refused = done(estimator.set_parameters([
             Parameter("process_noise_std", value=[-1.0] * 8)])).results
         assert not refused[0].successful and "must be >= 0" in refused[0].reason
