@@ -8,6 +8,11 @@ lock-step the controller waits (at most a quarter of ``lockstep_timeout_s``, so 
 still reaches the simulator before its timeout) for the reading stamped t_k;
 in real time it uses the newest one.
 
+Parameters settable at run time (``stillframe param set`` or ``ros2 param set``; refused with a
+reason, and the loop goes on, when the value is wrong): ``enabled`` (bool; false: zero command
+from the next sample on) and ``command_limit`` (the saturation ±limit [N m or N], finite and
+≥ 0, 0: none; starts at ``controller.limit``). Every other parameter is read-only.
+
 Watchdog: once armed by a first estimate, when the newest estimate is ``watchdog_periods``
 periods older than the newest sample time the node has seen (the load cell's stamp, which every
 sample carries, or ``/clock`` with ``use_sim_time`` if newer), the node publishes the
@@ -27,6 +32,7 @@ import numpy as np
 from controller_node.factory import make_controller
 from estimator_node.coordinates import design_map
 from stillframe import messages, topics
+from stillframe.errors import InputError
 from stillframe.loop_messages import COMMAND_TOPICS, CommandMessage, SampleGrid, physical_state
 from stillframe.loop_node import (
     OK,
@@ -35,14 +41,17 @@ from stillframe.loop_node import (
     Durations,
     LoopParameters,
     RateMeter,
+    check_settable,
     declare_loop_parameters,
     wait_for_peers,
 )
 from stillframe.middleware import api
+from stillframe.middleware.params import Parameter, SetParametersResult, finite_floats
 from stillframe.models.identified import frame_for
 from stillframe.signals import Command, Estimate
 
 FORCES_KEPT = 256  # load-cell readings kept for matching estimates by stamp
+RUN_TIME_PARAMETERS = frozenset({"enabled", "command_limit"})
 
 
 class ControllerNode:
@@ -72,6 +81,35 @@ class ControllerNode:
         self.counts = {"stale_estimates": 0, "rejected_estimates": 0, "force_waits_timed_out": 0}
         self.compute = Durations()
         self.rate = RateMeter()
+        self.declare_run_time_parameters()
+
+    def declare_run_time_parameters(self) -> None:
+        """``enabled`` and ``command_limit`` (from the command line, else the scene), applied
+        now and on every accepted set."""
+        enabled = self.node.declare_parameter("enabled", True)
+        limit = self.node.declare_parameter("command_limit", self.controller.limit or 0.0)
+        result = self.on_set_parameters([enabled, limit])
+        if not result.successful:
+            raise InputError(f"parameter {result.reason}")
+        self.node.add_on_set_parameters_callback(self.on_set_parameters)
+
+    def on_set_parameters(self, parameters: list[Parameter]) -> SetParametersResult:
+        """Check every new value, then apply them all (or none)."""
+        settable = check_settable(parameters, RUN_TIME_PARAMETERS)
+        if not settable.successful:
+            return settable
+        for p in parameters:
+            if p.name == "command_limit":
+                reason = finite_floats(p.value, "command_limit")
+                if reason or p.value < 0:
+                    return SetParametersResult(False, reason or (
+                        f"command_limit: must be >= 0 (0: no limit), got {p.value}"))
+        for p in parameters:
+            if p.name == "enabled":
+                self.controller.enabled = p.value
+            elif p.name == "command_limit":
+                self.controller.limit = p.value or None
+        return SetParametersResult(True)
 
     def subscribe_inputs(self) -> None:
         est, wrench = topics.STATE_ESTIMATE, topics.EXCITATION_WRENCH

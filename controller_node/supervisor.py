@@ -1,9 +1,10 @@
 """Around a control law: enable time, saturation and a watchdog (DESIGN.md, controller_node).
 
 Called once per control period with the newest estimate (or None when none arrived). Zero
-command before ``start``; zero command and the ``watchdog`` flag when the newest estimate is
-``watchdog_periods`` periods old or more; a non-finite law output also gives zero (flagged
-``singular``); otherwise the law's command clipped to ±``limit``.
+command before ``start`` and while ``enabled`` is False (switched at run time); zero command
+and the ``watchdog`` flag when the newest estimate is ``watchdog_periods`` periods old or more;
+a non-finite law output also gives zero (flagged ``singular``); otherwise the law's command
+clipped to ±``limit``.
 """
 
 from __future__ import annotations
@@ -37,6 +38,7 @@ class Controller:
         self.start = start
         self.limit = limit
         self.watchdog_periods = watchdog_periods
+        self.enabled = True
         self.latest: Estimate | None = None
         self.counters = ControllerCounters()
 
@@ -58,7 +60,7 @@ class Controller:
             c.watchdog += 1
             return Command(t, watchdog=True)
         out = Command(latest.t)
-        if t < self.start - tolerance:
+        if t < self.start - tolerance or not self.enabled:
             return out
         out.enabled = True
         value, out.singular = self.law(latest.z, force)

@@ -37,14 +37,25 @@ class Filter(ABC):
         self.model = model
         self.excited_floor = excited_floor
         self.S = physical_selector(model)
-        T = design_map(model)
-        self.Q = T @ np.diag(np.square(config.process_noise_std)) @ T.T
-        self.R = np.diag(np.square(config.measurement_noise_std))
+        self.T = T = design_map(model)
+        self.Q, self.R = self.noise_covariances(config.process_noise_std,
+                                                config.measurement_noise_std)
         self.x = T @ (np.asarray(initial_physical) + np.asarray(config.initial_offset))
         self.P = T @ np.diag(np.square(config.initial_std)) @ T.T
         self.t: float | None = None
         self.force = 0.0
         self.counters = Counters()
+
+    def noise_covariances(self, process_std: list[float],
+                          measurement_std: list[float]) -> tuple[np.ndarray, np.ndarray]:
+        """Q (per sample, physical stds mapped to the design state) and R (eq. 5.221–5.222)."""
+        return (self.T @ np.diag(np.square(process_std)) @ self.T.T,
+                np.diag(np.square(measurement_std)))
+
+    def set_noise(self, process_std: list[float], measurement_std: list[float]) -> None:
+        """New noise settings at run time; what depends on them is recomputed (InputError, and
+        nothing changed, if the filter cannot be designed with them)."""
+        self.Q, self.R = self.noise_covariances(process_std, measurement_std)
 
     def step(self, sample: Sample, control: np.ndarray) -> Estimate | None:
         """Use one sample; ``control`` = [torque, force] applied since the previous sample.

@@ -71,11 +71,19 @@ class SteadyStateKalman(LinearFilter):
     def __init__(self, model: FrameModel, config: Section, excited_floor: int,
                  initial_physical: np.ndarray, period: float) -> None:
         super().__init__(model, config, excited_floor, initial_physical, period)
-        d = self.discrete(period)
-        self.prior = solve_dare(d.phi.T, self.C.T, self.Q, self.R,
-                                what="stationary Kalman filter (dual Riccati equation)")
-        self.gain = self.gain_for(np.ones(4, dtype=bool))
+        self.design(self.Q, self.R)
         self.P = self.prior
+
+    def design(self, Q: np.ndarray, R: np.ndarray) -> None:
+        """P∞ and the full gain for Q, R (InputError, nothing changed, if the DARE fails)."""
+        d = self.discrete(self.period)
+        self.prior = solve_dare(d.phi.T, self.C.T, Q, R,
+                                what="stationary Kalman filter (dual Riccati equation)")
+        self.Q, self.R = Q, R
+        self.gain = self.gain_for(np.ones(4, dtype=bool))
+
+    def set_noise(self, process_std: list[float], measurement_std: list[float]) -> None:
+        self.design(*self.noise_covariances(process_std, measurement_std))
 
     def gain_for(self, present: np.ndarray) -> np.ndarray:
         C, R = self.C[present], self.R[np.ix_(present, present)]
@@ -101,6 +109,10 @@ class TimeVaryingKalman(LinearFilter):
         super().__init__(model, config, excited_floor, initial_physical, period)
         self.kf = KalmanFilter(dim_x=self.x.size, dim_z=4)
         self.kf.x, self.kf.P, self.kf.Q, self.kf.R = self.x, self.P, self.Q, self.R
+
+    def set_noise(self, process_std: list[float], measurement_std: list[float]) -> None:
+        super().set_noise(process_std, measurement_std)
+        self.kf.Q, self.kf.R = self.Q, self.R
 
     def predict(self, dt: float, force0: float, force1: float, control: np.ndarray) -> None:
         d = self.discrete(dt)

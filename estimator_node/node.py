@@ -13,6 +13,13 @@ newest command received on ``pendulum/torque_cmd`` and ``floor3/force_cmd``.
 - ``mode: realtime``: a stamp is used when complete, when a newer one arrives, or
   ``partial_after_s`` after its first message, with what arrived.
 
+Parameters settable at run time (Kalman filters and EKF; refused with a reason, and the loop goes
+on, when the value is wrong): ``process_noise_std`` (8 finite values ≥ 0) and
+``measurement_noise_std`` (4 finite values > 0), the filter's W0 and V0 (thesis eq. 5.221–5.222),
+starting at the scene's ``estimator`` values; what depends on them (Q, R, and for ``kf`` the
+stationary covariance and gain) is recomputed before the next sample. Every other parameter is
+read-only.
+
 Messages older than the last stamp used are rejected and counted (``stale_messages``); NaN or
 Inf readings are dropped by the filter and counted (``non_finite``).
 """
@@ -27,6 +34,7 @@ from typing import Any
 import numpy as np
 
 from controller_node.factory import actuator_of
+from estimator_node.base import Filter
 from estimator_node.factory import make_estimator
 from stillframe import messages, topics
 from stillframe.errors import InputError
@@ -45,11 +53,13 @@ from stillframe.loop_node import (
     Durations,
     LoopParameters,
     RateMeter,
+    check_settable,
     declare_loop_parameters,
     has_publisher,
     wait_for_peers,
 )
 from stillframe.middleware import api
+from stillframe.middleware.params import Parameter, SetParametersResult, finite_floats
 from stillframe.models.identified import frame_for
 from stillframe.signals import Sample
 
@@ -96,6 +106,48 @@ class EstimatorNode:
                        "rejected_commands": 0, "command_waits_timed_out": 0}
         self.compute = Durations()
         self.rate = RateMeter()
+        if isinstance(self.estimator, Filter):
+            self.declare_run_time_parameters()
+        else:
+            node.add_on_set_parameters_callback(check_settable)   # truth: nothing to tune
+
+    # -- parameters ----------------------------------------------------------------------
+    def declare_run_time_parameters(self) -> None:
+        """The noise settings (from the command line, else the scene), applied now and on
+        every accepted set."""
+        config = self.params.scene.estimator
+        self.noise = {"process_noise_std": list(config.process_noise_std),
+                      "measurement_noise_std": list(config.measurement_noise_std)}
+        declared = [self.node.declare_parameter(name, value)
+                    for name, value in self.noise.items()]
+        result = self.on_set_parameters(declared)
+        if not result.successful:
+            raise InputError(f"parameter {result.reason}")
+        self.node.add_on_set_parameters_callback(self.on_set_parameters)
+
+    def on_set_parameters(self, parameters: list[Parameter]) -> SetParametersResult:
+        """Check the new noise settings and redesign the filter with them (all or nothing)."""
+        settable = check_settable(parameters, frozenset(self.noise))
+        if not settable.successful:
+            return settable
+        noise = dict(self.noise)
+        for p in parameters:
+            if p.name in noise:
+                length = len(noise[p.name])
+                reason = finite_floats(p.value, p.name, length)
+                if not reason and p.name == "process_noise_std" and min(p.value) < 0:
+                    reason = f"{p.name}: must be >= 0, got {p.value}"
+                if not reason and p.name == "measurement_noise_std" and min(p.value) <= 0:
+                    reason = f"{p.name}: must be > 0, got {p.value}"
+                if reason:
+                    return SetParametersResult(False, reason)
+                noise[p.name] = list(p.value)
+        try:
+            self.estimator.set_noise(noise["process_noise_std"], noise["measurement_noise_std"])
+        except InputError as exc:
+            return SetParametersResult(False, str(exc))
+        self.noise = noise
+        return SetParametersResult(True)
 
     # -- inputs --------------------------------------------------------------------------
     def subscribe_sensors(self) -> None:
@@ -211,7 +263,8 @@ def main() -> int:
     node = api.create_node("estimator_node", namespace=topics.DEFAULT_NAMESPACE)
     try:
         params = declare_loop_parameters(node)
-        partial = node.declare_parameter("partial_after_s", 0.5 * params.period).value
+        partial = node.declare_parameter("partial_after_s", 0.5 * params.period,
+                                         read_only=True).value
         if not partial > 0:
             raise InputError(f"parameter 'partial_after_s': must be > 0, got {partial}")
         EstimatorNode(node, params, float(partial)).run()

@@ -38,6 +38,7 @@ from stillframe.loop_node import (
     Diagnostics,
     Durations,
     LoopParameters,
+    check_settable,
     declare_loop_parameters,
     has_publisher,
     wait_for_peers,
@@ -86,6 +87,7 @@ class SimNode:
         self.max_lateness = 0.0
         self.k = 0
         self.started = time.monotonic()   # reset when the first sample is due
+        node.add_on_set_parameters_callback(check_settable)   # nothing changes while it runs
 
     def on_command(self, actuator: int, msg: Any) -> None:
         """Take a command stamped at or before the current sample and not older than the one
@@ -248,12 +250,12 @@ def main() -> int:
     node = api.create_node("sim_node", namespace=topics.DEFAULT_NAMESPACE)
     try:
         params = declare_loop_parameters(node)
-        result = node.declare_parameter("result_file", "").value
-        discovery = node.declare_parameter("discovery_timeout_s", 30.0).value
+        result = node.declare_parameter("result_file", "", read_only=True).value
+        discovery = node.declare_parameter("discovery_timeout_s", 30.0, read_only=True).value
         if not discovery >= 0:
             raise InputError(f"parameter 'discovery_timeout_s': must be >= 0, got {discovery}")
         # topics the launch's recorder must subscribe before lock-step starts ("*": all)
-        await_recorder = node.declare_parameter("await_recorder", [""]).value
+        await_recorder = node.declare_parameter("await_recorder", [""], read_only=True).value
         sim = SimNode(node, params, float(discovery), list(await_recorder))
         history = sim.run()
         if history is not None and result:

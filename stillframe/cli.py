@@ -18,6 +18,7 @@ COMMANDS: tuple[str, ...] = (
     "stillframe.commands.simulate",
     "stillframe.commands.bench",
     "stillframe.commands.topic",
+    "stillframe.commands.param",
     "stillframe.commands.bag",
     "stillframe.commands.record",
     "stillframe.commands.play",

@@ -18,6 +18,7 @@ import numpy as np
 from stillframe import messages, topics
 from stillframe.errors import InputError
 from stillframe.middleware import api
+from stillframe.middleware.params import Parameter, SetParametersResult
 from stillframe.middleware.qos import PROFILES, QoSProfile, Reliability
 from stillframe.scene import load_scene
 from stillframe.schema import Section
@@ -69,12 +70,12 @@ def _overrides(value: Any) -> list[str]:
 def declare_loop_parameters(node: api.Node) -> LoopParameters:
     """``scene`` (path), ``overrides`` (``--set`` strings), ``mode``, ``lockstep_timeout_s``,
     ``diagnostics_period_s``; InputError naming the parameter when one is wrong."""
-    path = node.declare_parameter("scene", "").value
+    path = node.declare_parameter("scene", "", read_only=True).value
     # a string list; the default [""] because a ROS parameter cannot be an empty list
-    overrides = _overrides(node.declare_parameter("overrides", [""]).value)
-    mode = node.declare_parameter("mode", "lockstep").value
-    timeout = node.declare_parameter("lockstep_timeout_s", 1.0).value
-    diag = node.declare_parameter("diagnostics_period_s", 1.0).value
+    overrides = _overrides(node.declare_parameter("overrides", [""], read_only=True).value)
+    mode = node.declare_parameter("mode", "lockstep", read_only=True).value
+    timeout = node.declare_parameter("lockstep_timeout_s", 1.0, read_only=True).value
+    diag = node.declare_parameter("diagnostics_period_s", 1.0, read_only=True).value
     if not path:
         raise InputError("parameter 'scene': give the scene file (--ros-args -p scene:=FILE)")
     if mode not in MODES:
@@ -84,6 +85,17 @@ def declare_loop_parameters(node: api.Node) -> LoopParameters:
     if not diag > 0:
         raise InputError(f"parameter 'diagnostics_period_s': must be > 0, got {diag}")
     return LoopParameters(load_scene(path, overrides), mode, float(timeout), float(diag))
+
+
+def check_settable(parameters: list[Parameter],
+                   settable: frozenset[str] = frozenset()) -> SetParametersResult:
+    """An on-set-parameters check: refuse any parameter a loop node does not change while it
+    runs (the scene, mode, timeouts, ``use_sim_time``, and anything declared later)."""
+    for p in parameters:
+        if p.name not in settable:
+            return SetParametersResult(False, f"parameter {p.name!r} cannot change while the "
+                                              "node runs")
+    return SetParametersResult(True)
 
 
 class Diagnostics:

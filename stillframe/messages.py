@@ -7,15 +7,35 @@ Jazzy typestore, ``Stores.ROS2_JAZZY``); numeric arrays and sequences are numpy 
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Any
 
 import numpy as np
-from rosbags.typesys import Stores, get_typestore
+from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from rosbags.typesys.base import Nodetype
 
 from stillframe.errors import InputError
 
 TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
+#: ``.srv`` definitions of the services the stack serves (``rcl_interfaces``' parameter
+#: services), missing from the ``rosbags`` typestore.
+SERVICE_DEFINITIONS = Path(__file__).with_name("data") / "srv"
+
+
+def register_services(package: str, directory: Path) -> None:
+    """Register ``package/srv/Name_Request`` and ``_Response`` of every ``Name.srv`` in
+    ``directory`` (fields of other types refer to ``package/msg/...``, as in ``.srv`` files)."""
+    types = {}
+    for path in sorted(directory.glob("*.srv")):
+        request, response = path.read_text().split("\n---\n")
+        for text, part in ((request, "Request"), (response, "Response")):
+            parsed = get_types_from_msg(text, f"{package}/msg/{path.stem}_{part}")
+            types.update({name.replace("/msg/", "/srv/", 1): defs
+                          for name, defs in parsed.items()})
+    TYPESTORE.register(types)
+
+
+register_services("rcl_interfaces", SERVICE_DEFINITIONS)
 
 #: numpy dtype of each ROS primitive that ``rosbags`` keeps in numpy arrays.
 NUMPY_DTYPES: dict[str, type] = {

@@ -138,3 +138,24 @@ def test_stale_sample_is_rejected_and_counted() -> None:
     assert est.step(sample(0.4, np.ones(4)), np.zeros(2)) is None
     assert est.counters.stale == 2
     np.testing.assert_array_equal(est.estimate().z, first.z)
+
+
+def test_noise_set_at_run_time_redesigns_the_filters() -> None:
+    """New W0, V0 (eq. 5.221-5.222) while running: the stationary filter's P∞ and gain are
+    python-control's dlqe for the new Q, R; the time-varying filter predicts with the new Q."""
+    process, measurement = [2e-3] * 4 + [5e-4] * 4, [0.05, 0.02, 0.05, 1e-3]
+    kf = _mkr_filter(SteadyStateKalman)
+    kf.set_noise(process, measurement)
+    T = kf.T
+    Q = T @ np.diag(np.square(process)) @ T.T
+    R = np.diag(np.square(measurement))
+    d = kf.discrete(PERIOD)
+    L, P, _ = control.dlqe(d.phi, np.eye(8), kf.C, Q, R)
+    np.testing.assert_allclose(kf.prior, P, rtol=1e-7, atol=1e-14)
+    np.testing.assert_allclose(d.phi @ kf.gain, L, rtol=1e-6, atol=1e-12)
+    tv = _mkr_filter(TimeVaryingKalman)
+    P0 = tv.P.copy()
+    tv.set_noise(process, measurement)
+    tv.predict(PERIOD, 0.0, 0.0, np.zeros(2))
+    np.testing.assert_allclose(tv.P, d.phi @ P0 @ d.phi.T + Q, rtol=1e-12, atol=1e-20)
+    np.testing.assert_array_equal(tv.kf.R, R)

@@ -34,6 +34,8 @@ from typing import Any, Protocol
 from stillframe.errors import InputError
 from stillframe.middleware.clock import Clock, Time
 from stillframe.middleware.logger import Logger
+from stillframe.middleware.params import Parameter, SetCallback
+from stillframe.middleware.params import SetParametersResult as SetParametersResult
 from stillframe.middleware.qos import QoSProfile
 
 BACKEND_ENV = "STILLFRAME_RMW"
@@ -60,14 +62,6 @@ class TopicEndpointInfo:
     qos_profile: QoSProfile
     node_name: str = ""
     node_namespace: str = ""
-
-
-@dataclass(frozen=True)
-class Parameter:
-    """A declared parameter (``.value`` as in rclpy)."""
-
-    name: str
-    value: Any
 
 
 class Publisher(Protocol):
@@ -106,8 +100,14 @@ class Node(Protocol):
     def create_timer(
         self, period_s: float, callback: Callable[[], None], clock: Clock | None = None
     ) -> Timer: ...
-    def declare_parameter(self, name: str, default: Any = None) -> Parameter: ...
+    def declare_parameter(
+        self, name: str, default: Any = None, read_only: bool = False
+    ) -> Parameter: ...
     def get_parameter(self, name: str) -> Parameter: ...
+    def add_on_set_parameters_callback(self, callback: SetCallback) -> None: ...
+    def call_service(
+        self, srv_type: str, service: str, request: Any, timeout_sec: float
+    ) -> Any | None: ...
     def get_topic_names_and_types(self) -> list[tuple[str, list[str]]]: ...
     def get_publishers_info_by_topic(self, topic: str) -> list[TopicEndpointInfo]: ...
     def get_subscriptions_info_by_topic(self, topic: str) -> list[TopicEndpointInfo]: ...
@@ -182,7 +182,7 @@ def create_node(name: str, namespace: str | None = None, argv: list[str] | None 
     backend = check_backend(backend, "backend") if backend else backend_name()
     args = list(sys.argv if argv is None else argv)[1:]
     if backend == "dds":
-        from stillframe.middleware.dds_backend import DdsNode as NodeClass
+        from stillframe.middleware.dds_services import ServiceNode as NodeClass
     else:
         from stillframe.middleware.rclpy_backend import RclpyNode as NodeClass
     node = NodeClass(name, namespace or "/", args)

@@ -63,7 +63,7 @@ DISCOVERY_TYPE = "rmw_dds_common/msg/ParticipantEntitiesInfo"
 MAX_WAIT_NS = 100_000_000
 #: Samples taken from one reader per ``spin_once``.
 TAKE_BATCH = 256
-_ANY = SampleState.Any | ViewState.Any | InstanceState.Any
+ANY_SAMPLES = SampleState.Any | ViewState.Any | InstanceState.Any
 _ALIVE = SampleState.Any | ViewState.Any | InstanceState.Alive
 _RELIABLE_BLOCKING_NS = 100_000_000  # rmw_cyclonedds' max_blocking_time
 
@@ -184,10 +184,11 @@ class Context:
         self._discovery_reader: DataReader | None = None
         self._participant_nodes: dict[bytes, list[Any]] = {}
 
-    def topic(self, dds_name: str, ros_type: str) -> Topic:
-        """The Cyclone topic ``dds_name`` of type ``ros_type`` (one per name and participant)."""
+    def topic(self, dds_name: str, ros_type: str, request_header: bool = False) -> Topic:
+        """The Cyclone topic ``dds_name`` of type ``ros_type`` (one per name and participant;
+        ``request_header``: a service's request or reply topic)."""
         existing = self.topics.get(dds_name)
-        struct = dds_types.idl_struct(ros_type)
+        struct = dds_types.idl_struct(ros_type, request_header)
         if existing is not None:
             if existing.data_type is not struct:
                 raise InputError(
@@ -248,7 +249,7 @@ class Context:
             qos = QoSProfile(depth=1000, durability=Durability.TRANSIENT_LOCAL)
             topic = self.topic(DISCOVERY_TOPIC, DISCOVERY_TYPE)
             self._discovery_reader = DataReader(self.participant, topic, dds_qos(qos, writer=False))
-        for data, sample in ddspy_take(self._discovery_reader._ref, _ANY, 100_000):
+        for data, sample in ddspy_take(self._discovery_reader._ref, ANY_SAMPLES, 100_000):
             if sample.valid_data:
                 info = messages.deserialize(data, DISCOVERY_TYPE)
                 self._participant_nodes[bytes(info.gid.data)] = [
@@ -350,7 +351,7 @@ class DdsSubscription:
             node.context.topic(dds_types.dds_topic(topic), ros_type),
             dds_qos(qos, user_data, writer=False),
         )
-        self.condition = ReadCondition(self._reader, _ANY)
+        self.condition = ReadCondition(self._reader, ANY_SAMPLES)
         self.gid = self._reader.guid.bytes
         messages.prepare(ros_type)
         self._clock = node.get_clock()
@@ -360,7 +361,7 @@ class DdsSubscription:
 
     def take_and_dispatch(self) -> int:
         """Hand every waiting sample to the callback; the number handed."""
-        samples = ddspy_take(self._reader._ref, _ANY, TAKE_BATCH)
+        samples = ddspy_take(self._reader._ref, ANY_SAMPLES, TAKE_BATCH)
         count = 0
         for data, info in samples:
             if not info.valid_data:
@@ -438,7 +439,8 @@ class DdsNode:
         self._subscriptions: list[DdsSubscription] = []
         self._timers: list[DdsTimer] = []
         self._waitset = WaitSet(self.context.participant)
-        self._clock = Clock(sim=bool(self.declare_parameter("use_sim_time", False).value))
+        sim_time = self.declare_parameter("use_sim_time", False, read_only=True).value
+        self._clock = Clock(sim=bool(sim_time))
         self.context.nodes.append(self)
         if self._clock.sim:
             self.create_subscription("rosgraph_msgs/msg/Clock", "/clock", self._on_clock, CLOCK)
@@ -463,11 +465,16 @@ class DdsNode:
     def _on_clock(self, msg: Any) -> None:
         self._clock.set_sim_time(messages.stamp_ns(msg.clock))
 
-    def declare_parameter(self, name: str, default: Any = None) -> api.Parameter:
-        return api.Parameter(name, self._params.declare(name, default))
+    def declare_parameter(
+        self, name: str, default: Any = None, read_only: bool = False
+    ) -> api.Parameter:
+        return api.Parameter(name, self._params.declare(name, default, read_only))
 
     def get_parameter(self, name: str) -> api.Parameter:
         return api.Parameter(name, self._params.get(name))
+
+    def add_on_set_parameters_callback(self, callback: params.SetCallback) -> None:
+        self._params.callbacks.append(callback)
 
     # -- endpoints ---------------------------------------------------------------------------
     def resolve_topic_name(self, topic: str) -> str:

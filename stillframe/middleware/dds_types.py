@@ -68,9 +68,16 @@ def _member(desc: tuple[Nodetype, Any]) -> Any:
     return idl.sequence[_member(sub), size] if size else idl.sequence[_member(sub)]
 
 
+#: rmw_cyclonedds_cpp's ``cdds_request_header_t``, before the fields of every request and
+#: reply: the client's id and the request's sequence number.
+REQUEST_HEADER = {"request_header_guid": idl.uint64, "request_header_seq": idl.int64}
+
+
 @cache
-def idl_struct(ros_type_name: str) -> type[IdlStruct]:
-    """The ``cyclonedds`` struct (final, keyless) of a ROS message type, from its fielddefs."""
+def idl_struct(ros_type_name: str, request_header: bool = False) -> type[IdlStruct]:
+    """The ``cyclonedds`` struct (final, keyless) of a ROS message type, from its fielddefs;
+    with ``request_header`` (service requests and replies) the header members come first."""
     name = messages.type_name(ros_type_name)
-    members = {field: _member(desc) for field, desc in messages.fielddefs(name)}
+    members = dict(REQUEST_HEADER) if request_header else {}
+    members.update({field: _member(desc) for field, desc in messages.fielddefs(name)})
     return make_idl_struct(name.rsplit("/", 1)[1] + "_", dds_type(name), members)

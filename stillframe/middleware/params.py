@@ -12,7 +12,9 @@ Overrides apply in command-line order, later ones win.
 
 from __future__ import annotations
 
+import math
 import re
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -158,15 +160,48 @@ def _kind(value: Any) -> str:
     return type(value).__name__
 
 
+@dataclass(frozen=True)
+class Parameter:
+    """A declared parameter (``.name``, ``.value`` as in rclpy)."""
+
+    name: str
+    value: Any
+
+
+@dataclass(frozen=True)
+class SetParametersResult:
+    """The answer to setting parameters (rcl_interfaces/msg/SetParametersResult)."""
+
+    successful: bool
+    reason: str = ""
+
+
+#: An on-set-parameters callback: the parameters about to be set; refusing refuses them all
+#: (rclpy's ``add_on_set_parameters_callback``).
+SetCallback = Callable[[list[Parameter]], SetParametersResult]
+
+
+def _ros_kind(value: Any) -> str:
+    """The ROS name of a value's parameter type (``double``, ``string[]``, ...)."""
+    kind = _kind(value)
+    scalar = kind.removesuffix("[]")
+    return {"float": "double", "int": "integer", "str": "string"}.get(scalar, scalar) + kind[
+        len(scalar):]
+
+
 class Parameters:
-    """A node's declared parameters: a default per name, overridden from the command line."""
+    """A node's declared parameters: a default per name, overridden from the command line,
+    set at run time through :meth:`set` (checked like rclpy: declared, not read-only, same
+    type, then every on-set callback)."""
 
     def __init__(self, node_fqn: str, overrides: dict[str, Any]) -> None:
         self.node_fqn = node_fqn
         self.overrides = overrides
         self.values: dict[str, Any] = {}
+        self.read_only: set[str] = set()
+        self.callbacks: list[SetCallback] = []
 
-    def declare(self, name: str, default: Any) -> Any:
+    def declare(self, name: str, default: Any, read_only: bool = False) -> Any:
         """Declare ``name``: the override if one was given (same type), else ``default``."""
         where = f"parameter {name!r} of node {self.node_fqn}"
         if name in self.values:
@@ -177,12 +212,51 @@ class Parameters:
         if default is not None and value is not default:
             value = _coerce(value, default, where)
         self.values[name] = value
+        if read_only:
+            self.read_only.add(name)
         return value
 
     def get(self, name: str) -> Any:
         if name not in self.values:
             raise InputError(f"parameter {name!r} of node {self.node_fqn} is not declared")
         return self.values[name]
+
+    def set(self, name: str, value: Any) -> SetParametersResult:
+        """Set one declared parameter at run time, or refuse with the reason (value kept)."""
+        refusal = self._refusal(name, value)
+        if refusal:
+            return SetParametersResult(False, refusal)
+        for callback in self.callbacks:
+            result = callback([Parameter(name, value)])
+            if not result.successful:
+                return result
+        self.values[name] = value
+        return SetParametersResult(True)
+
+    def _refusal(self, name: str, value: Any) -> str:
+        if name not in self.values:
+            return f"parameter {name!r} is not declared"
+        if name in self.read_only:
+            return f"parameter {name!r} is read-only"
+        try:
+            check_value(value, name)
+        except InputError as exc:
+            return str(exc)
+        if _kind(value) != _kind(self.values[name]):
+            return (f"wrong parameter type for {name!r}: expected "
+                    f"{_ros_kind(self.values[name])}, got {_ros_kind(value)}")
+        return ""
+
+
+def finite_floats(value: Any, name: str, length: int | None = None) -> str:
+    """Why ``value`` is not a finite float (or, with ``length``, a list of that many finite
+    floats); '' if it is. For on-set-parameters callbacks."""
+    items = value if length is not None else [value]
+    if length is not None and (not isinstance(value, list) or len(value) != length):
+        return f"{name}: expected {length} values, got {value!r}"
+    if not all(isinstance(v, float) and math.isfinite(v) for v in items):
+        return f"{name}: expected finite numbers, got {value!r}"
+    return ""
 
 
 def _coerce(value: Any, default: Any, where: str) -> Any:

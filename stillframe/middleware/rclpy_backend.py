@@ -10,11 +10,14 @@ carry the DDS sample info.
 
 from __future__ import annotations
 
+import array
 import importlib
 from collections.abc import Callable
 from typing import Any
 
 import rclpy
+from rcl_interfaces.msg import ParameterDescriptor
+from rcl_interfaces.msg import SetParametersResult as RclpySetParametersResult
 from rclpy.clock import ClockType
 from rclpy.duration import Duration
 from rclpy.executors import SingleThreadedExecutor
@@ -25,12 +28,15 @@ from rclpy.qos import (
     ReliabilityPolicy,
 )
 from rclpy.qos import QoSProfile as RclpyQoS
+from rclpy.serialization import deserialize_message
 from rclpy.signals import SignalHandlerOptions
+from rosbags.typesys.base import Nodetype
 
 from stillframe import messages
 from stillframe.errors import InputError
 from stillframe.middleware import api
 from stillframe.middleware.clock import SYSTEM_CLOCK, Clock, Time
+from stillframe.middleware.params import Parameter, SetCallback
 from stillframe.middleware.qos import (
     INFINITE_NS,
     Durability,
@@ -45,8 +51,9 @@ MAX_WAIT_S = 0.1
 
 
 def ros_message_class(name: str) -> type:
-    """rclpy's generated class of ``pkg/msg/Type``, imported from the installed message package
-    (what ``rosidl_runtime_py.utilities.get_message`` does; that package is not on PyPI)."""
+    """rclpy's generated class of ``pkg/msg/Type`` or ``pkg/srv/Type``, imported from the
+    installed interface package (what ``rosidl_runtime_py.utilities.get_message`` does; that
+    package is not on PyPI)."""
     package, kind, type_name = name.split("/")
     try:
         return getattr(importlib.import_module(f"{package}.{kind}"), type_name)
@@ -86,6 +93,27 @@ def ros_qos(qos: RclpyQoS) -> QoSProfile:
         liveliness=Liveliness(int(qos.liveliness)),
         liveliness_lease_duration_ns=ns(qos.liveliness_lease_duration),
     )
+
+
+def plain_value(value: Any) -> Any:
+    """A parameter value as our API holds it (rclpy gives arrays as ``array.array``)."""
+    return list(value) if isinstance(value, array.array | tuple) else value
+
+
+def rosbags_message(msg: Any, name: str) -> Any:
+    """The ``rosbags`` message of an rclpy message, field by field (``serialize_message`` is
+    no way round: its buffer can be longer than the CDR, which ``rosbags`` refuses)."""
+    fields = {}
+    for field, (kind, detail) in messages.fielddefs(name):
+        value = getattr(msg, field)
+        if kind == Nodetype.NAME:
+            value = rosbags_message(value, detail)
+        elif kind in (Nodetype.ARRAY, Nodetype.SEQUENCE):
+            sub_kind, sub_detail = detail[0]
+            value = [rosbags_message(v, sub_detail) if sub_kind == Nodetype.NAME
+                     else v[0] if isinstance(v, bytes) else v for v in value]
+        fields[field] = value
+    return messages.new(name, **fields)
 
 
 class RclpyClock(Clock):
@@ -144,11 +172,42 @@ class RclpyNode:
     def get_clock(self) -> Clock:
         return self._clock
 
-    def declare_parameter(self, name: str, default: Any = None) -> api.Parameter:
-        return api.Parameter(name, self._node.declare_parameter(name, default).value)
+    def declare_parameter(
+        self, name: str, default: Any = None, read_only: bool = False
+    ) -> Parameter:
+        declared = self._node.declare_parameter(
+            name, default, ParameterDescriptor(read_only=read_only)
+        )
+        return Parameter(name, plain_value(declared.value))
 
-    def get_parameter(self, name: str) -> api.Parameter:
-        return api.Parameter(name, self._node.get_parameter(name).value)
+    def get_parameter(self, name: str) -> Parameter:
+        return Parameter(name, plain_value(self._node.get_parameter(name).value))
+
+    def add_on_set_parameters_callback(self, callback: SetCallback) -> None:
+        """rclpy's own callback (it checks declared, read-only and type first)."""
+        def on_set(parameters: list[Any]) -> RclpySetParametersResult:
+            result = callback([Parameter(p.name, plain_value(p.value)) for p in parameters])
+            return RclpySetParametersResult(successful=result.successful, reason=result.reason)
+
+        self._node.add_on_set_parameters_callback(on_set)
+
+    def call_service(self, srv_type: str, service: str, request: Any,
+                     timeout_sec: float) -> Any | None:
+        """Call ``service`` with rclpy's own client; the ``rosbags`` request and response
+        cross as CDR. None if the service did not appear or answer within ``timeout_sec``."""
+        srv_class = ros_message_class(srv_type)
+        client = self._node.create_client(srv_class, service)
+        try:
+            if not client.wait_for_service(timeout_sec=timeout_sec):
+                return None
+            future = client.call_async(
+                deserialize_message(messages.serialize(request), srv_class.Request))
+            RclpyNode._executor.spin_until_future_complete(future, timeout_sec=timeout_sec)
+            if not future.done():
+                return None
+            return rosbags_message(future.result(), f"{srv_type}_Response")
+        finally:
+            self._node.destroy_client(client)
 
     def create_publisher(
         self, msg_type: str | type, topic: str, qos: QoSProfile | str | int
