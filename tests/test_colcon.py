@@ -108,10 +108,12 @@ def test_sourced_install_space_finds_packages_and_executables_like_ros2_run(
 
 
 def ros2_run(install: Path, package: str, *args: str) -> list[str]:
-    """The installed executable install/PKG/lib/PKG/PKG with ``args``, in the sourced
-    workspace (exec: signals reach the node itself)."""
+    """``ros2 run PKG PKG args`` in the sourced workspace: PREFIX/lib/PKG/PKG with the prefix
+    from the ament index (exec: signals reach the node itself)."""
+    prefix = (f'"{sys.executable}" -c "from ament_index_python.packages import '
+              f'get_package_prefix; print(get_package_prefix(\'{package}\'))"')
     quoted = " ".join(f"'{a}'" for a in args)
-    return sourced(install, f'exec "{install}/{package}/lib/{package}/{package}" {quoted}')
+    return sourced(install, f'exec "$({prefix})/lib/{package}/{package}" {quoted}')
 
 
 def start(argv: list[str], cwd: Path) -> subprocess.Popen:
