@@ -9,8 +9,8 @@ BIN := $(VENV)/bin
 $(BIN)/stillframe: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/pip install --quiet --upgrade pip
-	$(BIN)/pip install --quiet -e '.[test]'
-	$(BIN)/pip install --quiet -e '.[test,ros]' 2>/dev/null \
+	$(BIN)/pip install --quiet -e '.[test,colcon]'
+	$(BIN)/pip install --quiet -e '.[test,colcon,ros]' 2>/dev/null \
 	  || echo "make: real ROS 2 (rclpy) has no wheels for this platform; nodes run on the dds backend"
 	touch $@
 

@@ -8,15 +8,9 @@ from controller_node.supervisor import Controller
 from stillframe.errors import InputError
 from stillframe.models import FrameModel
 from stillframe.schema import Section
+from stillframe.signals import ACTUATOR
 
 TORQUE_INPUT = 3  # index of the hinge torque in u = [f1, f2, f3, torque]
-#: The actuator each controller type drives: 0 pendulum torque, 1 floor-3 force.
-ACTUATOR = {"lqg": 0, "euk_pendulum": 0, "euk_floor": 1}
-
-
-def actuator_of(scene: Section) -> int | None:
-    """The index in [torque, floor-3 force] the scene's controller drives (None: no controller)."""
-    return ACTUATOR.get(scene.controller.type)
 
 
 def make_controller(scene: Section, design: FrameModel) -> Controller:

@@ -33,7 +33,6 @@ from typing import Any
 
 import numpy as np
 
-from controller_node.factory import actuator_of
 from estimator_node.base import Filter
 from estimator_node.factory import make_estimator
 from stillframe import messages, topics
@@ -61,7 +60,7 @@ from stillframe.loop_node import (
 from stillframe.middleware import api
 from stillframe.middleware.params import Parameter, SetParametersResult, finite_floats
 from stillframe.models.identified import frame_for
-from stillframe.signals import Sample
+from stillframe.signals import Sample, actuator_of
 
 SENSOR_TOPICS = (*topics.FLOOR_IMU, topics.PENDULUM_JOINT_STATES, topics.EXCITATION_WRENCH)
 

@@ -26,7 +26,6 @@ from typing import Any
 
 import numpy as np
 
-from controller_node.factory import actuator_of
 from sim_node.plant import Plant
 from stillframe import messages, topics
 from stillframe.closed_loop import LoopHistory, evaluate
@@ -45,7 +44,7 @@ from stillframe.loop_node import (
 )
 from stillframe.middleware import api
 from stillframe.middleware.clock import ClockPublisher
-from stillframe.signals import Sample
+from stillframe.signals import Sample, actuator_of
 
 SENSOR_TOPICS = (*topics.FLOOR_IMU, topics.PENDULUM_JOINT_STATES, topics.EXCITATION_WRENCH)
 LOOP_NODES = ("sim_node", "estimator_node", "controller_node")

@@ -11,6 +11,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from stillframe.schema import Section
+
 
 @dataclass
 class Sample:
@@ -54,6 +56,15 @@ class Command:
     def vector(self) -> np.ndarray:
         """[torque, floor-3 force], the order of :class:`sim_node.plant.Plant` inputs."""
         return np.array([self.torque, self.force])
+
+
+#: The actuator each controller type drives, an index into :attr:`Command.vector`.
+ACTUATOR = {"lqg": 0, "euk_pendulum": 0, "euk_floor": 1}
+
+
+def actuator_of(scene: Section) -> int | None:
+    """The index in [torque, floor-3 force] the scene's controller drives (None: no controller)."""
+    return ACTUATOR.get(scene.controller.type)
 
 
 def full_inputs(control: np.ndarray, force: float, excited_floor: int) -> np.ndarray:
