@@ -68,11 +68,15 @@ class FloatingBody:
     section: BeamSection | None = None
     gravity: float = 0.0
     _flex: dict[str, np.ndarray] = field(init=False, repr=False)
+    _port_shapes: dict[str, tuple[np.ndarray, ...]] = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
         if self.mass <= 0 or self.inertia <= 0:
             raise InputError(f"body {self.name}: mass and inertia must be > 0")
         self._flex = self._flexible_tables() if self.mesh is not None else {}
+        self._port_shapes = {
+            name: (self.mesh.p1([a])[0], self.mesh.hermite([a])[0], self.mesh.hermite([a], 1)[0])
+            for name, a in self.ports.items()} if self.mesh is not None else {}
 
     # sizes -----------------------------------------------------------------------------
     @property
@@ -226,9 +230,8 @@ class FloatingBody:
         R = rotation(q[2])
         if self.mesh is not None:
             na = self.n_axial
-            phx, phy = self.mesh.p1([a])[0], self.mesh.hermite([a])[0]
+            phx, phy, slope = self._port_shapes[name]
             local = local + np.array([phx @ q[3:3 + na], phy @ q[3 + na:]])
-            slope = self.mesh.hermite([a], 1)[0]
             angle = angle + slope @ q[3 + na:]
             jac[:2, 3:3 + na] = np.outer(R[:, 0], phx)
             jac[:2, 3 + na:] = np.outer(R[:, 1], phy)
