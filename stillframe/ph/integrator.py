@@ -104,13 +104,13 @@ class MidpointDAE:
         return np.concatenate([r1, r2])
 
     def _factor(self, x: np.ndarray, e0: np.ndarray, t0: float) -> None:
-        f0 = self.residual(x, e0, t0)
-        jac = np.empty((f0.size, x.size))
-        for i in range(x.size):
-            step = 1e-7 * max(1.0, abs(x[i]))
-            xp = x.copy()
+        jac = np.empty((x.size, x.size))
+        for i in range(x.size):  # central differences: Newton converges quadratically
+            step = 1e-6 * max(1.0, abs(x[i]))
+            xp, xm = x.copy(), x.copy()
             xp[i] += step
-            jac[:, i] = (self.residual(xp, e0, t0) - f0) / step
+            xm[i] -= step
+            jac[:, i] = (self.residual(xp, e0, t0) - self.residual(xm, e0, t0)) / (2 * step)
         self._lu = sla.lu_factor(jac)
 
     def step(self, e0: np.ndarray, lam0: np.ndarray, t0: float,
@@ -139,7 +139,8 @@ class MidpointDAE:
             every: int = 1, progress: Callable[[float], None] | None = None,
             ) -> tuple[np.ndarray, np.ndarray, StepRecord, np.ndarray]:
         """Integrate to t_end; returns times, states (every ``every`` steps), the per-step
-        balance record and the largest position-constraint residual per stored state."""
+        balance record and the largest position-constraint residual per stored state (the
+        final state is always stored)."""
         sys, h = self.system, self.dt
         steps = round((t_end - t0) / h)
         lam = np.zeros(sys.n_constraints)
@@ -165,7 +166,7 @@ class MidpointDAE:
             record.dissipated.append(h * float(num @ sys.dissipation(qm) @ num))
             record.constraint_work.append(h * float(lam @ rate))
             e, H0 = e1, H1
-            if (k + 1) % every == 0:
+            if (k + 1) % every == 0 or k == steps - 1:
                 times.append(t + h)
                 states.append(e.copy())
                 drift.append(self._drift(e, t + h))

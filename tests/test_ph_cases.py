@@ -1,0 +1,75 @@
+"""The validation cases of seed 000 §6 and the manufactured-solution test, with their commands."""
+
+import json
+
+import numpy as np
+import pytest
+
+from stillframe.cli import main
+from stillframe.ph import crank_slider, fourbar
+from stillframe.ph.manufactured import l2_errors, observed_rates
+from stillframe.ph.reference import radau_reference
+
+
+@pytest.mark.parametrize("degrees", [0.0, 75.0, 210.0, 300.0])
+def test_fourbar_pulsations_equal_a_classical_fe_of_the_same_linked_beams(degrees):
+    angle = np.radians(degrees)
+    np.testing.assert_allclose(fourbar.ph_pulsations(angle, 4),
+                               fourbar.classical_pulsations(angle, 4), rtol=1e-8)
+
+
+def test_fourbar_pulsations_are_converged_to_0_1_percent_at_4_elements():
+    angle = np.radians(120.0)
+    np.testing.assert_allclose(fourbar.ph_pulsations(angle, 4),
+                               fourbar.classical_pulsations(angle, 16), rtol=1e-3)
+
+
+def test_fourbar_command_prints_json_and_rejects_bad_input(capsys):
+    assert main(["ph", "fourbar", "--crank-angle", "45", "--elements", "2", "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    np.testing.assert_allclose(doc["pulsations_rad_s"],
+                               fourbar.classical_pulsations(np.radians(45.0), 2), rtol=1e-8)
+    assert main(["ph", "fourbar", "--crank-angle", "45", "--elements", "0"]) == 2
+    assert "--elements" in capsys.readouterr().err
+
+
+def test_manufactured_solution_rates_are_about_two():
+    errors = [l2_errors(n) for n in (16, 32, 64)]
+    rates = observed_rates(errors)
+    for key in ("displacement", "moment"):
+        assert all(1.9 < r < 2.2 for r in rates[key]), (key, rates[key])
+    # the velocity error mixes the O(h⁴) Hermite and the O(Δt²) midpoint errors: not monotone
+    # per mesh, but second order over the two halvings
+    assert errors[0].velocity / errors[2].velocity > 2**3
+
+
+@pytest.fixture(scope="module")
+def crank_run():
+    """Crank angle 0 to 1 rad, 2 coupler elements."""
+    return crank_slider.simulate(2, 1.0 / crank_slider.CRANK_RATE, 2.5e-5, samples=4)
+
+
+def test_crank_slider_power_balance_and_drift_at_round_off(crank_run):
+    assert crank_run.energy_balance_error < 1e-13
+    assert crank_run.max_constraint_drift < 1e-13
+    # the crank feeds power through the prescribed-motion port: the balance is not trivial
+    assert np.max(np.abs(crank_run.record.constraint_work)) > 1e-4
+
+
+@pytest.mark.slow
+def test_crank_slider_midpoint_deflection_agrees_with_radau_on_the_index1_form(crank_run):
+    ph = crank_slider.system(2)
+    e0 = crank_slider.initial_state(ph)
+    ref = radau_reference(ph, e0, crank_run.times[[0, -1]], rtol=1e-6, atol=1e-10)
+    coupler = ph.bodies["coupler"]
+    w_mid = coupler.mesh.hermite([crank_slider.COUPLER / 2])[0] @ \
+        ref[-1][ph.q_slices["coupler"]][3 + coupler.n_axial:] / crank_slider.COUPLER
+    assert abs(crank_run.w_mid_over_l[-1] - w_mid) < 1e-3 * np.max(np.abs(crank_run.w_mid_over_l))
+
+
+@pytest.mark.slow
+def test_crank_slider_rigid_kinematics_match_the_ivp_test_set():
+    run = crank_slider.simulate(2, 0.1, 1e-4, data=crank_slider.TEST_SET, samples=2)
+    ref = crank_slider.TEST_SET_REFERENCE
+    assert abs(run.coupler_angle[-1] - ref["coupler_angle"]) < 1e-4
+    assert abs(run.slider_x[-1] - ref["slider_x"]) < 1e-4
