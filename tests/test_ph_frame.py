@@ -1,5 +1,7 @@
 """The frame and pendulum as a pHDAE against the FE model, and its energy behaviour."""
 
+import json
+
 import numpy as np
 import pytest
 import scipy.linalg as sla
@@ -42,6 +44,7 @@ def released(scene, rayleigh=None):
     return system, system.state(q, stress=frame.static_stresses(system, q))
 
 
+@pytest.mark.slow
 def test_undamped_frame_conserves_h_and_a_damped_one_dissipates_exactly_z_r_z(scene):
     scene_u = load_scene("scenes/thesis_fe.yaml", ["rig.pendulum.hinge_damping=0"])
     system, e0 = released(scene_u)
@@ -56,3 +59,29 @@ def test_undamped_frame_conserves_h_and_a_damped_one_dissipates_exactly_z_r_z(sc
     assert lost > 1e-3  # J: the columns' and floors' Rayleigh R and the hinge damper work
     assert abs(lost - np.sum(record.dissipated)) < 1e-10 * lost
     assert balance_error(record, abs(H[0])) < 1e-13
+
+
+def test_modes_command_runs_the_ph_scene(capsys):
+    from stillframe.cli import main
+    assert main(["modes", "scenes/ph_frame.yaml", "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["model"] == "ph2"
+    np.testing.assert_allclose(doc["frequencies_hz"][:6], fe_frequencies(2)[:6], rtol=1e-6)
+
+
+@pytest.mark.slow
+def test_simulate_json_reports_the_power_balance_and_follows_the_fe_model(capsys):
+    from stillframe.cli import main
+    from stillframe.simulation import simulate
+    assert main(["simulate", "scenes/ph_frame.yaml", "--duration", "0.3", "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["energy_balance_error"] < 1e-13
+    fe = simulate(load_scene("scenes/ph_frame.yaml", ["model.type=fe"]), 0.3).summary()
+    np.testing.assert_allclose(doc["peak_displacement_m"], fe["peak_displacement_m"], rtol=2e-3)
+    assert abs(doc["peak_phi_rad"] - fe["peak_phi_rad"]) < 2e-3 * fe["peak_phi_rad"]
+
+
+def test_tools_built_on_frame_models_reject_ph_with_a_clear_error():
+    from stillframe.errors import InputError
+    with pytest.raises(InputError, match=r"model\.type: ph"):
+        build_model(load_scene("scenes/ph_frame.yaml"))

@@ -21,6 +21,9 @@ __all__ = ["INPUT_NAMES", "FrameModel", "LinearModel", "build_model", "build_str
 def build_structure(scene: Section) -> Structure:
     """The scene's undamped structure: lumped, FE or Craig–Bampton-reduced FE."""
     model = scene.model
+    if model.type == "ph":
+        raise InputError("model.type: ph is a port-Hamiltonian DAE; `stillframe modes` and "
+                         "`stillframe simulate` run it, this tool needs lumped, fe or modal")
     if model.type == "lumped":
         return lumped_structure(scene.rig)
     full = fe_structure(scene.rig, model.elements_per_column)
