@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from controller_node.euk import EUKLaw
 from controller_node.lqg import LQGLaw, design_lqr
+from controller_node.passivity import PassivityLaw
 from controller_node.supervisor import Controller
 from stillframe.errors import InputError
 from stillframe.models import FrameModel
@@ -11,7 +12,7 @@ from stillframe.schema import Section
 
 TORQUE_INPUT = 3  # index of the hinge torque in u = [f1, f2, f3, torque]
 #: The actuator each controller type drives: 0 pendulum torque, 1 floor-3 force.
-ACTUATOR = {"lqg": 0, "euk_pendulum": 0, "euk_floor": 1}
+ACTUATOR = {"lqg": 0, "euk_pendulum": 0, "euk_floor": 1, "passivity": 0}
 
 
 def actuator_of(scene: Section) -> int | None:
@@ -30,6 +31,9 @@ def make_controller(scene: Section, design: FrameModel) -> Controller:
     elif c.type in ("euk_pendulum", "euk_floor"):
         variant = "pendulum" if c.type == "euk_pendulum" else "floor"
         law = EUKLaw(design, variant, floor, c.hold_stiffness, c.hold_damping, c.singular_margin)
+    elif c.type == "passivity":
+        law = PassivityLaw(design.n_dof, design.phi_index, c.shaping_stiffness,
+                           c.injection_damping)
     else:
         raise InputError(f"controller.type: {c.type!r} computes no command")
     return Controller(law, ACTUATOR[c.type], period, c.start, c.limit, c.watchdog_periods)

@@ -46,16 +46,22 @@ def stiffness(system: PHSystem, q: np.ndarray) -> np.ndarray:
     return K
 
 
-def natural_frequencies(system: PHSystem, q: np.ndarray, count: int | None = None,
-                        ) -> tuple[np.ndarray, np.ndarray]:
-    """Pulsations ω [rad/s] (ascending) and mode shapes in ν of the system linearised at q."""
+def reduced_matrices(system: PHSystem, q: np.ndarray,
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Null-space basis P of the velocity constraints (ν = P ξ) and the reduced M̂, R̂, K̂
+    (eq. 47): M̂ ξ̈ + R̂ ξ̇ + K̂ ξ = 0 about q at rest."""
     Dg = system.constraints(q, 0.0)[1]
     A = system.kinematics(q)
     P = sla.null_space(Dg @ A) if Dg.size else np.eye(system.n_q)
-    K = stiffness(system, q)
-    Kr = P.T @ K @ P
-    Mr = P.T @ system.mass @ P
-    w2, modes = sla.eigh(0.5 * (Kr + Kr.T), Mr)
+    K = P.T @ stiffness(system, q) @ P
+    return P, P.T @ system.mass @ P, P.T @ system.dissipation(q) @ P, 0.5 * (K + K.T)
+
+
+def natural_frequencies(system: PHSystem, q: np.ndarray, count: int | None = None,
+                        ) -> tuple[np.ndarray, np.ndarray]:
+    """Pulsations ω [rad/s] (ascending) and mode shapes in ν of the system linearised at q."""
+    P, Mr, _, Kr = reduced_matrices(system, q)
+    w2, modes = sla.eigh(Kr, Mr)
     keep = slice(None) if count is None else slice(0, count)
     return np.sqrt(np.clip(w2, 0.0, None))[keep], (P @ modes)[:, keep]
 

@@ -12,13 +12,12 @@ from __future__ import annotations
 from collections.abc import Callable
 
 import numpy as np
-import scipy.linalg as sla
 
 from stillframe.errors import InputError
 from stillframe.excitation import floor_load
 from stillframe.ph import frame
 from stillframe.ph.integrator import MidpointDAE, balance_error
-from stillframe.ph.linear import natural_frequencies, stiffness
+from stillframe.ph.linear import natural_frequencies, reduced_matrices
 from stillframe.ph.system import PHSystem
 from stillframe.schema import Section
 
@@ -41,8 +40,7 @@ def modal_table(scene: Section) -> dict:
     picks = [system.q_slices[f"floor{i}"].start for i in (1, 2, 3)]
     picks.append(system.q_slices["pendulum"].start + 2)
     rows = (A @ modes)[picks]
-    P = sla.null_space(system.constraints(q, 0.0)[1] @ A)
-    M, C, K = (P.T @ X @ P for X in (system.mass, system.dissipation(q), stiffness(system, q)))
+    P, M, C, K = reduced_matrices(system, q)
     n = M.shape[0]
     first_order = np.block([[np.zeros((n, n)), np.eye(n)],
                             [-np.linalg.solve(M, K), -np.linalg.solve(M, C)]])
