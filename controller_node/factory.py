@@ -20,6 +20,17 @@ def actuator_of(scene: Section) -> int | None:
     return ACTUATOR.get(scene.controller.type)
 
 
+def check_sampled_injection(damping: float, period: float, inertia: float) -> None:
+    """Passivity holds for the continuous law; held over a sample period T the injected damping
+    k_d acts on the pendulum (inertia J) like explicit Euler, unstable once k_d T / J ≥ 2."""
+    ratio = damping * period / inertia
+    if ratio >= 2.0:
+        raise InputError(
+            f"controller.injection_damping: k_d T / J = {ratio:.3g} >= 2 destabilises the sampled "
+            f"loop (T = {period:g} s, pendulum J = {inertia:.4g} kg m^2); use k_d < "
+            f"{2 * inertia / period:.3g} or a higher sensors.rate_hz")
+
+
 def make_controller(scene: Section, design: FrameModel) -> Controller:
     """The controller of ``scene.controller.type`` (not ``none``)."""
     c = scene.controller
@@ -34,6 +45,7 @@ def make_controller(scene: Section, design: FrameModel) -> Controller:
     elif c.type == "passivity":
         law = PassivityLaw(design.n_dof, design.phi_index, c.shaping_stiffness,
                            c.injection_damping)
+        check_sampled_injection(c.injection_damping, period, design.pendulum_inertia)
     else:
         raise InputError(f"controller.type: {c.type!r} computes no command")
     return Controller(law, ACTUATOR[c.type], period, c.start, c.limit, c.watchdog_periods)

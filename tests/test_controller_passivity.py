@@ -2,7 +2,9 @@
 
 import numpy as np
 import pytest
+import scipy.linalg as sla
 
+from controller_node.factory import make_controller
 from controller_node.passivity import PassivityLaw
 from stillframe.errors import InputError
 from stillframe.models import build_model
@@ -56,3 +58,28 @@ def test_injection_damps_the_pendulum_more_than_the_open_loop():
 def test_negative_gains_are_rejected():
     with pytest.raises(InputError, match="passivity"):
         PassivityLaw(4, 3, -1.0, 0.1)
+
+
+def sampled_radius(overrides, kp, kd, period=1 / 32):
+    """Spectral radius of the loop sampled with a zero-order hold (the controller's command is
+    computed from the state at t_k and held over the period)."""
+    model = build_model(load_scene("scenes/thesis_fe.yaml", overrides))
+    A, B = model.linearized().state_space()
+    n = A.shape[0]
+    big = sla.expm(np.block([[A, B[:, 3:4]], [np.zeros((1, n + 1))]]) * period)
+    Ad, Bd = big[:n, :n], big[:n, n:]
+    gain = np.zeros(n)
+    gain[model.phi_index], gain[model.n_dof + model.phi_index] = kp, kd
+    return np.max(np.abs(np.linalg.eigvals(Ad - Bd @ gain[None, :])))
+
+
+def test_sampled_loop_is_stable_below_the_injection_bound_and_the_factory_rejects_above():
+    plants = (["model.type=lumped", "damping.model=rayleigh"], ["model.type=fe"],
+              ["model.type=modal", "model.modes=3"])
+    for overrides in plants:
+        assert sampled_radius(overrides, 0.0, 0.05) < 1.0  # the scene default, k_d T/J = 1.1
+    assert sampled_radius(plants[0], 0.0, 0.15) > 1.0      # k_d T/J = 3.4: the guard's reason
+    scene = load_scene("scenes/thesis_lqg.yaml", ["controller.type=passivity",
+                                                  "controller.injection_damping=0.15"])
+    with pytest.raises(InputError, match="injection_damping"):
+        make_controller(scene, build_model(load_scene("scenes/thesis_fe.yaml")))
