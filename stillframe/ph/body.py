@@ -40,11 +40,6 @@ def rotation(theta: float) -> np.ndarray:
     return np.array([[c, -s], [s, c]])
 
 
-def rotation_derivative(theta: float) -> np.ndarray:
-    c, s = np.cos(theta), np.sin(theta)
-    return np.array([[-s, -c], [c, -s]])
-
-
 @dataclass(frozen=True)
 class BeamSection:
     """Uniform section: density × area, axial and bending rigidity."""
@@ -69,24 +64,21 @@ class FloatingBody:
     gravity: float = 0.0
     _flex: dict[str, np.ndarray] = field(init=False, repr=False)
     _port_shapes: dict[str, tuple[np.ndarray, ...]] = field(init=False, repr=False)
+    n_axial: int = field(init=False)
+    n_flex: int = field(init=False)
 
     def __post_init__(self) -> None:
         if self.mass <= 0 or self.inertia <= 0:
             raise InputError(f"body {self.name}: mass and inertia must be > 0")
+        self.n_axial = 0 if self.mesh is None else self.mesh.axial_dofs().size
+        self.n_flex = 0 if self.mesh is None else (self.n_axial
+                                                    + self.mesh.transverse_dofs().size)
         self._flex = self._flexible_tables() if self.mesh is not None else {}
         self._port_shapes = {
             name: (self.mesh.p1([a])[0], self.mesh.hermite([a])[0], self.mesh.hermite([a], 1)[0])
             for name, a in self.ports.items()} if self.mesh is not None else {}
 
     # sizes -----------------------------------------------------------------------------
-    @property
-    def n_axial(self) -> int:
-        return 0 if self.mesh is None else self.mesh.axial_dofs().size
-
-    @property
-    def n_flex(self) -> int:
-        return 0 if self.mesh is None else self.n_axial + self.mesh.transverse_dofs().size
-
     @property
     def n_q(self) -> int:
         return 3 + self.n_flex
@@ -225,21 +217,21 @@ class FloatingBody:
             raise InputError(f"body {self.name} has no port {name!r} (has {sorted(self.ports)})")
         a = self.ports[name]
         jac = np.zeros((3, self.n_q))
-        local = np.array([a, 0.0])
-        angle = q[2]
-        R = rotation(q[2])
+        c, s = np.cos(q[2]), np.sin(q[2])
+        lx, ly, angle = a, 0.0, q[2]
         if self.mesh is not None:
             na = self.n_axial
             phx, phy, slope = self._port_shapes[name]
-            local = local + np.array([phx @ q[3:3 + na], phy @ q[3 + na:]])
+            ux, uy = phx @ q[3:3 + na], phy @ q[3 + na:]
+            lx, ly = lx + ux, uy
             angle = angle + slope @ q[3 + na:]
-            jac[:2, 3:3 + na] = np.outer(R[:, 0], phx)
-            jac[:2, 3 + na:] = np.outer(R[:, 1], phy)
+            jac[0, 3:3 + na], jac[1, 3:3 + na] = c * phx, s * phx
+            jac[0, 3 + na:], jac[1, 3 + na:] = -s * phy, c * phy
             jac[2, 3 + na:] = slope
-        jac[:2, :2] = np.eye(2)
-        jac[:2, 2] = rotation_derivative(q[2]) @ local
-        jac[2, 2] = 1.0
-        return np.concatenate([q[:2] + R @ local, [angle]]), jac
+        jac[0, 0] = jac[1, 1] = jac[2, 2] = 1.0
+        jac[0, 2], jac[1, 2] = -s * lx - c * ly, c * lx - s * ly
+        position = np.array([q[0] + c * lx - s * ly, q[1] + s * lx + c * ly, angle])
+        return position, jac
 
 
 def rigid_body(name: str, mass: float, inertia_about_com: float, com: float,
