@@ -76,7 +76,7 @@ def frame_system(rig: Section, elements: int, rayleigh: tuple[float, float] | No
     dampers.append(RotaryDamper(("pendulum", "P"), ("floor3", "P"), p.hinge_damping))
     inputs = [PortInput(f"f{i}", (f"floor{i}", "P"), (1.0, 0.0, 0.0)) for i in (1, 2, 3)]
     inputs.append(PortInput("torque", ("pendulum", "P"), (0.0, 0.0, 1.0)))
-    return PHSystem(bodies, connections, inputs, dampers)
+    return PHSystem(bodies, connections, inputs, dampers, name=f"ph{elements}")
 
 
 def rest_configuration(system: PHSystem, rig: Section, floors: np.ndarray | None = None,

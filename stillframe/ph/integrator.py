@@ -55,6 +55,8 @@ class StepRecord:
 class MidpointDAE:
     """The AVF implicit midpoint integrator of a :class:`PHSystem`."""
 
+    name = "midpoint (AVF, pHDAE)"
+
     def __init__(self, system: PHSystem, dt: float, inputs: InputSignal | None = None) -> None:
         if dt <= 0:
             raise InputError(f"time step must be > 0, got {dt}")

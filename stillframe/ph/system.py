@@ -64,7 +64,9 @@ class PHSystem:
     """Blocks and their connections, like the paper's block diagrams (Fig. 3–7)."""
 
     def __init__(self, bodies: Sequence[FloatingBody], connections: Sequence[Connection],
-                 inputs: Sequence[Input] = (), dampers: Sequence[Damper] = ()) -> None:
+                 inputs: Sequence[Input] = (), dampers: Sequence[Damper] = (),
+                 name: str = "ph") -> None:
+        self.name = name
         names = [b.name for b in bodies]
         if len(set(names)) != len(names):
             raise InputError(f"body names must be unique, got {names}")
