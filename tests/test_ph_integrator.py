@@ -56,6 +56,7 @@ def test_discrete_power_balance_holds_to_round_off_with_gravity_and_a_damper():
     assert drift.max() < 1e-13
 
 
+@pytest.mark.slow
 def test_midpoint_is_second_order_against_radau_on_the_index1_form():
     system, e0 = double_pendulum()
     errors = []

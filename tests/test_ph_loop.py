@@ -17,7 +17,7 @@ __all__ = ["ros_domain"]
 
 SHORT = ["duration=2.0", "controller.start=1.0", "evaluation.window=1.0"]
 FREE = ["excitation.type=none", "initial.floors=[0.002, 0.004, 0.005]", "initial.phi=0.2",
-        "controller.start=0.5", "duration=2.0", "evaluation.window=0.5"]
+        "controller.start=0.5", "duration=1.5", "evaluation.window=0.5"]
 
 
 def late_phi_rate_rms(overrides: list[str]) -> float:
