@@ -73,3 +73,13 @@ def test_crank_slider_rigid_kinematics_match_the_ivp_test_set():
     ref = crank_slider.TEST_SET_REFERENCE
     assert abs(run.coupler_angle[-1] - ref["coupler_angle"]) < 1e-4
     assert abs(run.slider_x[-1] - ref["slider_x"]) < 1e-4
+
+
+def test_crank_slider_command_prints_the_midpoint_series_and_the_balance(capsys):
+    assert main(["ph", "crank-slider", "--elements", "2", "--dt", "1e-4",
+                 "--crank-angle-end", "0.15", "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert len(doc["crank_angle_rad"]) == len(doc["w_mid_over_L"]) == len(doc["u_mid_over_L"])
+    np.testing.assert_allclose(doc["crank_angle_rad"][-1], 0.15, rtol=1e-12)
+    assert doc["energy_balance_error"] < 1e-13
+    assert main(["ph", "crank-slider", "--elements", "3"]) == 2
