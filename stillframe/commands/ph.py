@@ -116,7 +116,7 @@ def _fourbar_plot(path: str, elements: int) -> None:
 def _crank_slider(args: argparse.Namespace) -> int:
     if args.dt <= 0 or args.crank_angle_end <= 0:
         raise InputError("ph crank-slider: --dt and --crank-angle-end must be > 0")
-    t_end = args.crank_angle_end / crank_slider.CRANK_RATE
+    t_end = args.crank_angle_end / crank_slider.CrankSliderData().crank_rate
     run_ = crank_slider.simulate(args.elements, t_end, args.dt,
                                  progress=lambda t: _progress(f"crank-slider t = {t:.4f} s")
                                  if round(t / args.dt) % 500 == 0 else None)

@@ -1,10 +1,10 @@
 """§6.2 of seed 000: the rotating crank-slider (Fig. 7–8).
 
-A rigid crank (0.15 m) turns at a constant 150 rad/s: its tip drives port P of the flexible
-coupler (a prescribed-motion support, the flow input u_cl of eq. 49, its multiplier the crank
-force). The coupler is a floating beam with the simply supported deformation condition; a slider
-block (a rigid body) is pinned to its end C and slides on the ground line y = 0. The coupler
-starts undeformed with the rigid velocities of the mechanism.
+A rigid crank (0.15 m) turns at a constant 150 rad/s (``crank_rate``): its tip drives port P of
+the flexible coupler (a prescribed-motion support, the flow input u_cl of eq. 49, its multiplier
+the crank force). The coupler is a floating beam with the simply supported deformation
+condition; a slider block (a rigid body) is pinned to its end C and slides on the ground line
+y = 0. The coupler starts undeformed with the rigid velocities of the mechanism.
 """
 
 from __future__ import annotations
@@ -22,7 +22,6 @@ from stillframe.ph.system import PHSystem
 
 CRANK = 0.15
 COUPLER = 0.3
-CRANK_RATE = 150.0
 
 
 @dataclass(frozen=True)
@@ -35,6 +34,7 @@ class CrankSliderData:
     density: float = 7870.0
     young: float = 2e11
     slider_mass: float = 0.033
+    crank_rate: float = 150.0
 
 
 TEST_SET = CrankSliderData(area=0.008**2, second_moment=0.008**4 / 12, slider_mass=0.075552)
@@ -56,21 +56,20 @@ class CrankSliderRun:
     record: StepRecord
 
 
-def crank_path(t: float) -> tuple[float, float]:
-    return CRANK * np.cos(CRANK_RATE * t), CRANK * np.sin(CRANK_RATE * t)
-
-
-def crank_velocity(t: float) -> tuple[float, float]:
-    return (-CRANK * CRANK_RATE * np.sin(CRANK_RATE * t),
-            CRANK * CRANK_RATE * np.cos(CRANK_RATE * t))
-
-
 def system(elements: int, data: CrankSliderData = CrankSliderData()) -> PHSystem:
     """The block diagram of Fig. 7 (right)."""
     section = BeamSection(data.density * data.area, data.young * data.area,
                           data.young * data.second_moment)
     coupler = floating_beam("coupler", COUPLER, section, elements, "simply_supported")
     slider = rigid_body("slider", data.slider_mass, 1e-6, 0.0, {"P": 0.0})
+    rate = data.crank_rate
+
+    def crank_path(t: float) -> tuple[float, float]:
+        return CRANK * np.cos(rate * t), CRANK * np.sin(rate * t)
+
+    def crank_velocity(t: float) -> tuple[float, float]:
+        return -CRANK * rate * np.sin(rate * t), CRANK * rate * np.cos(rate * t)
+
     connections = [
         Support(("coupler", "P"), (0, 1), crank_path, crank_velocity),
         Link(("coupler", "C"), ("slider", "P"), (0, 1)),
@@ -79,7 +78,7 @@ def system(elements: int, data: CrankSliderData = CrankSliderData()) -> PHSystem
     return PHSystem([coupler, slider], connections)
 
 
-def initial_state(ph: PHSystem) -> np.ndarray:
+def initial_state(ph: PHSystem, data: CrankSliderData = CrankSliderData()) -> np.ndarray:
     """Crank angle 0, undeformed coupler along x, rigid velocities of the mechanism."""
     q = np.zeros(ph.n_q)
     q[ph.q_slices["coupler"]][:3] = [CRANK, 0.0, 0.0]
@@ -87,8 +86,8 @@ def initial_state(ph: PHSystem) -> np.ndarray:
     q = ph.assemble(q)
     guess = np.zeros(ph.n_q)
     cs = ph.q_slices["coupler"]
-    guess[cs][1] = CRANK * CRANK_RATE            # v_P^y in the coupler frame
-    guess[cs][2] = -CRANK * CRANK_RATE / COUPLER  # ω keeping C on the slide
+    guess[cs][1] = CRANK * data.crank_rate            # v_P^y in the coupler frame
+    guess[cs][2] = -CRANK * data.crank_rate / COUPLER  # ω keeping C on the slide
     return ph.state(q, ph.consistent_velocity(q, guess))
 
 
@@ -99,7 +98,7 @@ def simulate(elements: int, t_end: float, dt: float, data: CrankSliderData = Cra
     if elements < 2 or elements % 2:
         raise InputError(f"crank-slider: --elements must be even and >= 2, got {elements}")
     ph = system(elements, data)
-    e0 = initial_state(ph)
+    e0 = initial_state(ph, data)
     integrator = MidpointDAE(ph, dt)
     steps = round(t_end / dt)
     times, states, record, drift = integrator.run(e0, t_end, every=max(1, steps // samples),
@@ -112,7 +111,7 @@ def simulate(elements: int, t_end: float, dt: float, data: CrankSliderData = Cra
     qc = q[:, cs]
     H = np.array([ph.hamiltonian(e) for e in states])
     return CrankSliderRun(
-        times=times, crank_angle=CRANK_RATE * times,
+        times=times, crank_angle=data.crank_rate * times,
         w_mid_over_l=qc[:, 3 + na:] @ uy_mid / COUPLER,
         u_mid_over_l=qc[:, 3:3 + na] @ ux_mid / COUPLER,
         coupler_angle=qc[:, 2], slider_x=q[:, ss][:, 0],
