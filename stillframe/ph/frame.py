@@ -104,8 +104,7 @@ def _static_deflection(system: PHSystem, q: np.ndarray) -> np.ndarray:
     D, C = system.stress_coupling, system.compliance
     K = D.T @ np.linalg.solve(C, D)
     flex = np.flatnonzero(np.any(K != 0, axis=0))
-    _, Dg, _ = system.constraints(q, 0.0)
-    g = system.constraints(q, 0.0)[0]
+    g, Dg, _ = system.constraints(q, 0.0)
     # minimise ½ dqᵀ K dq on the flexible DOFs subject to the linearised connections
     k = Dg.shape[0]
     n = flex.size
