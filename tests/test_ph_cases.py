@@ -35,13 +35,10 @@ def test_fourbar_command_prints_json_and_rejects_bad_input(capsys):
 
 
 def test_manufactured_solution_rates_are_about_two():
-    errors = [l2_errors(n) for n in (16, 32, 64)]
-    rates = observed_rates(errors)
-    for key in ("displacement", "moment"):
-        assert all(1.9 < r < 2.2 for r in rates[key]), (key, rates[key])
-    # the velocity error mixes the O(h⁴) Hermite and the O(Δt²) midpoint errors: not monotone
-    # per mesh, but second order over the two halvings
-    assert errors[0].velocity / errors[2].velocity > 2**3
+    rates = observed_rates([l2_errors(n) for n in (16, 32, 64)])
+    for key in ("displacement", "velocity", "moment"):
+        assert all(r > 1.7 for r in rates[key]), (key, rates[key])
+        assert 1.9 < rates[key][-1] < 2.1, (key, rates[key])
 
 
 @pytest.fixture(scope="module")
