@@ -4,6 +4,8 @@ velocities. Test helper only: stillframe does not depend on Exudyn."""
 
 from __future__ import annotations
 
+import warnings
+
 import exudyn as exu
 import numpy as np
 from exudyn.beams import GenerateStraightLineANCFCable2D
@@ -29,10 +31,12 @@ def midpoint_deflection(data: CrankSliderData, elements: int, crank_angle_end: f
     cable = ObjectANCFCable2D(physicsMassPerLength=data.density * data.area,
                               physicsBendingStiffness=data.young * data.second_moment,
                               physicsAxialStiffness=data.young * data.area, nodeNumbers=[0, 0])
-    nodes = GenerateStraightLineANCFCable2D(
-        mbs, positionOfNode0=[CRANK, 0, 0], positionOfNode1=[CRANK + COUPLER, 0, 0],
-        numberOfElements=elements, cableTemplate=cable, massProportionalLoad=[0, 0, 0],
-        fixedConstraintsNode0=[0, 0, 0, 0], fixedConstraintsNode1=[0, 0, 0, 0])[0]
+    with warnings.catch_warnings():  # deprecated in Exudyn 1.11, kept until 2029
+        warnings.simplefilter("ignore", DeprecationWarning)
+        nodes = GenerateStraightLineANCFCable2D(
+            mbs, positionOfNode0=[CRANK, 0, 0], positionOfNode1=[CRANK + COUPLER, 0, 0],
+            numberOfElements=elements, cableTemplate=cable, massProportionalLoad=[0, 0, 0],
+            fixedConstraintsNode0=[0, 0, 0, 0], fixedConstraintsNode1=[0, 0, 0, 0])[0]
     ground = mbs.AddMarker(MarkerNodeCoordinate(nodeNumber=mbs.AddNode(NodePointGround()),
                                                 coordinate=0))
     paths = (lambda mbs, t, i, o: CRANK * np.cos(rate * t) - CRANK,
@@ -64,8 +68,8 @@ def midpoint_deflection(data: CrankSliderData, elements: int, crank_angle_end: f
     settings.timeIntegration.endTime = t_end
     settings.timeIntegration.generalizedAlpha.spectralRadius = 1.0
     settings.timeIntegration.verboseMode = 0
-    settings.solutionSettings.sensorsWritePeriod = t_end / samples
-    settings.solutionSettings.writeSolutionToFile = False
+    settings.solution.sensors.writePeriod = t_end / samples
+    settings.solution.file.write = False
     mbs.SolveDynamic(settings)
     p, m, c = (mbs.GetSensorStoredData(s) for s in sensors)
     chord = c[:, 1:3] - p[:, 1:3]
