@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from sim_node.plant import Plant
+from sim_node.plant import make_plant
 from stillframe import messages, topics
 from stillframe.closed_loop import LoopHistory, evaluate
 from stillframe.errors import InputError
@@ -62,7 +62,7 @@ class SimNode:
         self.params = params
         self.discovery_timeout_s = discovery_timeout_s
         scene = params.scene
-        self.plant = Plant(scene)
+        self.plant = make_plant(scene)
         self.grid = SampleGrid(self.plant.period)
         self.active = actuator_of(scene)
         self.clock = ClockPublisher(node)

@@ -14,6 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from sim_node.actuators import Actuators
+from sim_node.ph_plant import PHPlant
 from sim_node.sensors import Sensors
 from stillframe.errors import InputError
 from stillframe.excitation import floor_load
@@ -36,6 +37,14 @@ def sample_period(scene: Section) -> tuple[float, int]:
             f"{period:g} s (1/sensors.rate_hz)"
         )
     return period, steps
+
+
+def make_plant(scene: Section) -> Plant | PHPlant:
+    """The scene's plant: the frame pHDAE for ``model.type: ph`` (``plant.model: scene``),
+    else :class:`Plant`."""
+    if scene.model.type == "ph" and scene.plant.model == "scene":
+        return PHPlant(scene, *sample_period(scene))
+    return Plant(scene)
 
 
 class Plant:

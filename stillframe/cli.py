@@ -28,6 +28,7 @@ COMMANDS: tuple[str, ...] = (
     "stillframe.commands.launch",
     "stillframe.commands.reproduce",
     "stillframe.commands.demo",
+    "stillframe.commands.ph",
 )
 
 

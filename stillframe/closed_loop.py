@@ -24,7 +24,7 @@ import numpy as np
 
 from controller_node.factory import make_controller
 from estimator_node.factory import make_estimator
-from sim_node.plant import Plant
+from sim_node.plant import make_plant
 from stillframe.models.identified import frame_for
 from stillframe.schema import Section
 from stillframe.signals import Command
@@ -63,7 +63,7 @@ def reduction_pct(uncontrolled: np.ndarray, controlled: np.ndarray) -> list[floa
 
 def open_loop_truth(scene: Section) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The plant's fine truth history with no command (same scene and seeds)."""
-    plant = Plant(scene)
+    plant = make_plant(scene)
     for _ in range(round(scene.duration / plant.period)):
         plant.advance(np.zeros(2))
     return plant.truth_history()
@@ -90,7 +90,7 @@ def evaluate(history: LoopHistory, scene: Section) -> dict:
 def run_closed_loop(scene: Section, progress: Progress | None = None) -> LoopHistory:
     """Run the scene's plant, estimator and controller lock-step for ``scene.duration``."""
     started = time.perf_counter()
-    plant = Plant(scene)
+    plant = make_plant(scene)
     design = frame_for(scene.design.model, scene.design.file, scene, "design.file")
     estimator = make_estimator(scene, design) if scene.estimator.type != "none" else None
     controller = make_controller(scene, design) if scene.controller.type != "none" else None

@@ -66,7 +66,8 @@ LOOP_SCHEMA: dict[str, Any] = {
         "max_substep": Field(float, 5e-3, positive, doc="EKF: longest RK4 prediction step [s]"),
     },
     "controller": {
-        "type": Field(str, "none", choices=("none", "lqg", "euk_pendulum", "euk_floor")),
+        "type": Field(str, "none", choices=("none", "lqg", "euk_pendulum", "euk_floor",
+                                            "passivity")),
         "start": Field(float, 0.0, non_negative, doc="enable time [s]"),
         "state_weights": Field("floats", THESIS_STATE_WEIGHTS, non_negative, length=8,
                                doc="LQG: diagonal of Q_z (eq. 5.229)"),
@@ -75,6 +76,10 @@ LOOP_SCHEMA: dict[str, Any] = {
         "hold_stiffness": Field(float, 0.0, non_negative, doc=(
             "EUK: kp [1/s^2] of the virtual constraint x3'' = -kd x3' - kp x3 (0: eq. 5.240)")),
         "hold_damping": Field(float, 0.0, non_negative, doc="EUK: kd [1/s]"),
+        "shaping_stiffness": Field(float, 0.0, non_negative, doc=(
+            "passivity: k_p [N m/rad] of u = -k_p phi - k_d phi' (energy shaping)")),
+        "injection_damping": Field(float, 0.05, positive, doc=(
+            "passivity: k_d [N m s/rad] (damping injection through the torque port)")),
         "singular_margin": Field(float, 0.02, in_range(1e-6, 1.0), doc=(
             "EUK pendulum: damping of the singularity-robust inverse, as a fraction of the "
             "gain at rest")),

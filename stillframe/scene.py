@@ -72,7 +72,7 @@ SCENE_SCHEMA: dict[str, Any] = {
     "rig": RIG_SCHEMA,
     "damping": DAMPING_SCHEMA,
     "model": {
-        "type": Field(str, "lumped", choices=("lumped", "fe", "modal", "auto")),
+        "type": Field(str, "lumped", choices=("lumped", "fe", "modal", "ph", "auto")),
         "elements_per_column": Field(int, 3, positive),
         "modes": Field(int, 3, positive, doc="modal: retained fixed-interface column modes"),
         "band_hz": Field("floats", [0.0, 15.0], non_negative, length=2,

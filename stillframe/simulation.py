@@ -13,6 +13,7 @@ from stillframe.excitation import floor_load
 from stillframe.integrators import ADAPTIVE, integrate, make_integrator, reference_solution
 from stillframe.kernels import compiled_integrate, compiles
 from stillframe.models import FrameModel, build_model
+from stillframe.ph import scene_model as ph_scene
 from stillframe.schema import Section
 from stillframe.stability import check_rk4_step, drift_warning
 from stillframe.systems import MechanicalSystem
@@ -81,6 +82,8 @@ def simulate(scene: Section, duration: float | None = None,
              progress: Progress | None = None) -> History:
     """Integrate the scene open loop and record floor motion, φ, the load and the energy."""
     duration = scene.duration if duration is None else duration
+    if scene.model.type == "ph":
+        return _ph_history(scene, duration, progress)
     model = build_model(scene)
     system = MechanicalSystem(model, floor_load(scene.excitation, duration))
     x0 = initial_state(model, scene.initial)
@@ -120,3 +123,13 @@ def simulate(scene: Section, duration: float | None = None,
         log.warning("%s: %s", scene.name, warning)
         meta["warnings"] = [warning]
     return history
+
+
+def _ph_history(scene: Section, duration: float, progress: Progress | None) -> History:
+    """``model.type: ph``: the frame pHDAE (:mod:`stillframe.ph.scene_model`)."""
+    start = time.perf_counter()
+    run = ph_scene.simulate(scene, duration, progress)
+    wall = time.perf_counter() - start
+    meta = {**run.pop("meta"), "compiled": False, "wall_s": wall}
+    meta["steps_per_s"] = meta["steps"] / wall
+    return History(**run, meta=meta)

@@ -102,3 +102,10 @@ def test_a_duration_off_the_output_grid_is_refused(duration: str) -> None:
     done = run_stillframe("bench", "fidelity", "--duration", duration, timeout=120)
     assert done.returncode == 2
     assert "--duration: must be a positive multiple of 0.01 s" in done.stderr
+
+
+def test_energy_drift_rows_include_the_ph_model(fidelity) -> None:
+    doc, _ = fidelity
+    rows = {(r["model"], r["method"]): r for r in doc["energy_drift"]}
+    assert rows[("ph2", "avf-midpoint")]["energy_drift"] < 1e-12
+    assert rows[("lumped", "midpoint")]["energy_drift"] > 1e-9

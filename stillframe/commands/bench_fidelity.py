@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from dataclasses import asdict
 from pathlib import Path
 
 from stillframe.commands.common import add_json_argument, emit_json, format_table
@@ -73,6 +74,7 @@ def plot(result: dict, directory: Path) -> list[Path]:
 def run(args: argparse.Namespace) -> int:
     from stillframe.auto_model import write_table
     from stillframe.fidelity import GRID_DT, sweep
+    from stillframe.ph.energy_drift import FREE_VIBRATION, energy_drift_rows
 
     if args.duration is not None:
         grid_steps = args.duration / GRID_DT
@@ -80,6 +82,8 @@ def run(args: argparse.Namespace) -> int:
             raise InputError(f"--duration: must be a positive multiple of {GRID_DT:g} s "
                              f"(got {args.duration:g})")
     result = sweep(quick=args.quick, duration=args.duration, progress=_progress)
+    result["energy_drift"] = [asdict(r) for r in energy_drift_rows(
+        duration=0.5 if args.quick else 2.0, progress=_progress)]
     if args.plots:
         result["plots"] = [str(p) for p in plot(result, args.plots)]
     if args.write_table:
@@ -100,6 +104,12 @@ def run(args: argparse.Namespace) -> int:
                 for p in front]
         print(format_table(["model", "DOFs", "method", "dt [s]", "error", "CPU s / sim s"],
                            rows))
+    print(f"\nEnergy drift, undamped free vibration ({' '.join(FREE_VIBRATION)}), pH rows "
+          "(docs/port-hamiltonian.md):")
+    rows = [[r["model"], r["method"], r["dt"], r["energy_drift"], r["error_vs_fe40"],
+             r["cpu_per_s"], r["note"]] for r in result["energy_drift"]]
+    print(format_table(["model", "method", "dt [s]", "max |dE|/E0", "error vs fe40",
+                        "CPU s / sim s", "note"], rows))
     for path in result.get("plots", []):
         print(f"plot: {path}")
     if "table" in result:

@@ -16,10 +16,13 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from stillframe.modal_analysis import modal_table
     from stillframe.models import build_model
+    from stillframe.ph import scene_model
 
     scene = scene_from_args(args)
-    model = build_model(scene)
-    table = modal_table(model)
+    if scene.model.type == "ph":
+        table = scene_model.modal_table(scene)
+    else:
+        table = modal_table(build_model(scene))
     if args.json:
         emit_json(table)
         return 0

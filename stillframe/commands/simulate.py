@@ -76,6 +76,10 @@ def run(args: argparse.Namespace) -> int:
     print(format_table(["", "peak |x| [m]", "peak |a| [m/s^2]"], rows))
     print(f"peak |phi| {summary['peak_phi_rad']:.6g} rad; final energy "
           f"{summary['final_energy_j']:.6g} J")
+    if "energy_balance_error" in summary:
+        print(f"discrete power balance: largest relative residual "
+              f"{summary['energy_balance_error']:.3g}; constraint drift "
+              f"{summary['max_constraint_drift']:.3g} m")
     if scene.model.reason:
         print(f"model choice: {scene.model.reason}")
     for warning in summary.get("warnings", []):

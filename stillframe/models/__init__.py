@@ -21,6 +21,10 @@ __all__ = ["INPUT_NAMES", "FrameModel", "LinearModel", "build_model", "build_str
 def build_structure(scene: Section) -> Structure:
     """The scene's undamped structure: lumped, FE or Craig–Bampton-reduced FE."""
     model = scene.model
+    if model.type == "ph":
+        raise InputError("model.type: ph is a port-Hamiltonian DAE, not a FrameModel: modes, "
+                         "simulate and the plant of closed-loop/launch take it; a design model "
+                         "or this tool needs lumped, fe or modal (design.model: lumped or file)")
     if model.type == "lumped":
         return lumped_structure(scene.rig)
     full = fe_structure(scene.rig, model.elements_per_column)
