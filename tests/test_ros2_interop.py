@@ -73,7 +73,9 @@ def one_process() -> dict:
 
 
 def launch(*args: str) -> dict:
-    done = run_stillframe("launch", str(SCENE), *SHORT, "--json", *args, timeout=300)
+    # a generous lock-step timeout: a timeout then means a lost sample, never a slow machine
+    done = run_stillframe("launch", str(SCENE), *SHORT, "--json", "--lockstep-timeout", "10",
+                          *args, timeout=300)
     assert done.returncode == 0, done.stderr[-3000:]
     return json.loads(done.stdout)
 
