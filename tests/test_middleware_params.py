@@ -10,6 +10,7 @@ import pytest
 from stillframe.errors import InputError
 from stillframe.middleware import params
 from stillframe.middleware.api import create_node
+from stillframe.middleware.params import node_overrides, parse_ros_args
 from tests.mw_support import finish, ros_domain, start_python
 
 __all__ = ["ros_domain"]
@@ -140,3 +141,25 @@ def test_override_of_the_wrong_type_is_rejected_naming_parameter_and_node() -> N
         store.declare("n", 1)
     with pytest.raises(InputError, match="not declared"):
         store.get("other")
+
+
+@pytest.mark.parametrize("file_first", [True, False])
+def test_precedence_of_files_and_p_equals_real_rclpy(file_first: bool, tmp_path: Path) -> None:
+    """rcl files ``-p`` under ``/**``: a key naming the node wins over it whatever the order, and
+    within ``/**`` the later assignment wins. The reference is real rclpy on the same arguments."""
+    rclpy = pytest.importorskip("rclpy", reason="real rclpy is installed by `make setup` ([ros])")
+    path = tmp_path / "p.yaml"
+    path.write_text("/**:\n  ros__parameters:\n    a: wild_file\n    b: wild_file\n"
+                    "/**/sim_node:\n  ros__parameters:\n    a: node_file\n")
+    cli = ["-p", "a:=cli", "-p", "b:=cli"]
+    args = ["--params-file", str(path), *cli] if file_first else [*cli, "--params-file", str(path)]
+    ours = node_overrides(parse_ros_args(["--ros-args", *args]), "/frame/sim_node")
+    context = rclpy.Context()
+    rclpy.init(args=["x", "--ros-args", *args], context=context)
+    try:
+        node = rclpy.create_node("sim_node", namespace="/frame", context=context)
+        theirs = {n: node.declare_parameter(n, "unset").value for n in ("a", "b")}
+        node.destroy_node()
+    finally:
+        rclpy.shutdown(context=context)
+    assert ours == theirs == {"a": "node_file", "b": "cli" if file_first else "wild_file"}

@@ -113,6 +113,10 @@ def _flatten(prefix: str, tree: Any, where: str) -> dict[str, Any]:
     return {prefix: check_value(tree, f"{where}: parameter {prefix!r}")}
 
 
+#: the node key of parameters for every node, and of ``-p`` on the command line
+WILDCARD = "/**"
+
+
 def _node_key_matches(key: str, node_fqn: str) -> bool:
     key = key if key.startswith("/") else "/" + key
     pattern = "".join(
@@ -122,8 +126,8 @@ def _node_key_matches(key: str, node_fqn: str) -> bool:
     return re.fullmatch(pattern, node_fqn) is not None
 
 
-def load_param_file(path: Path, node_fqn: str) -> dict[str, Any]:
-    """The parameters a ROS 2 parameter file gives the node ``node_fqn`` (flattened names)."""
+def _param_file_entries(path: Path) -> list[tuple[str, dict[str, Any]]]:
+    """(node key, flattened parameters) of each entry of a ROS 2 parameter file, in file order."""
     try:
         tree = load_yaml(Path(path).read_text())
     except OSError as exc:
@@ -134,24 +138,43 @@ def load_param_file(path: Path, node_fqn: str) -> dict[str, Any]:
         raise InputError(f"parameter file {path}: not valid YAML{line}") from exc
     if not isinstance(tree, dict):
         raise InputError(f"parameter file {path}: expected 'node_name: {{ros__parameters: ...}}'")
-    params: dict[str, Any] = {}
+    entries = []
     for key, body in tree.items():
         if not isinstance(body, dict) or not isinstance(body.get("ros__parameters"), dict):
             raise InputError(f"parameter file {path}: node {key!r} has no 'ros__parameters' map")
-        if _node_key_matches(str(key), node_fqn):
-            params.update(_flatten("", body["ros__parameters"], f"parameter file {path}"))
-    return params
+        entries.append((str(key), _flatten("", body["ros__parameters"], f"parameter file {path}")))
+    return entries
+
+
+def _resolve(entries: list[tuple[str, dict[str, Any]]], node_fqn: str) -> dict[str, Any]:
+    """What rcl and rclpy make of ``entries`` for ``node_fqn``: entries under the same key merge
+    in order (later wins), then the ``/**`` key applies first and every other matching key after
+    it, so a key naming the node wins over ``/**`` (where ``-p`` goes) whatever the order."""
+    by_key: dict[str, dict[str, Any]] = {WILDCARD: {}}
+    for key, params in entries:
+        by_key.setdefault(key, {}).update(params)
+    merged: dict[str, Any] = {}
+    for key, params in by_key.items():
+        if _node_key_matches(key, node_fqn):
+            merged.update(params)
+    return merged
+
+
+def load_param_file(path: Path, node_fqn: str) -> dict[str, Any]:
+    """The parameters a ROS 2 parameter file gives the node ``node_fqn`` (flattened names)."""
+    return _resolve(_param_file_entries(path), node_fqn)
 
 
 def node_overrides(ros_args: RosArgs, node_fqn: str) -> dict[str, Any]:
-    """All parameter overrides for node ``node_fqn``, in command-line order."""
-    params: dict[str, Any] = {}
+    """All parameter overrides for node ``node_fqn``: ``--params-file`` entries and ``-p``
+    (which rcl files under ``/**``), resolved as rclpy resolves them (:func:`_resolve`)."""
+    entries: list[tuple[str, dict[str, Any]]] = []
     for kind, value in ros_args.overrides:
         if kind == "file":
-            params.update(load_param_file(value, node_fqn))
+            entries += _param_file_entries(value)
         else:
-            params[value[0]] = value[1]
-    return params
+            entries.append((WILDCARD, {value[0]: value[1]}))
+    return _resolve(entries, node_fqn)
 
 
 def _kind(value: Any) -> str:
