@@ -10,6 +10,7 @@ from scipy.optimize import brentq
 from stillframe.errors import InputError
 from stillframe.modal_analysis import modal_table
 from stillframe.models import build_model, build_structure
+from stillframe.models.damping import low_modes_first
 from stillframe.models.structure import column_matrices
 from stillframe.scene import scene_from_dict
 
@@ -35,7 +36,7 @@ def scene(**model: object) -> object:
 
 def frequencies_hz(model) -> np.ndarray:
     lin = model.linearized()
-    return np.sqrt(sla.eigh(lin.stiffness, lin.mass, eigvals_only=True)) / (2 * np.pi)
+    return np.sqrt(low_modes_first(lin.stiffness, lin.mass)[0]) / (2 * np.pi)
 
 
 def test_lumped_frequencies_and_shapes_match_the_thesis() -> None:
@@ -122,14 +123,19 @@ def _fe_with_density(density: float) -> object:
 
 
 def test_fe_with_column_density_to_zero_tends_to_the_lumped_model() -> None:
-    """Error ∝ column mass: 10× lighter columns, 10× closer; at 1e-4 ρ within 0.01 %."""
+    """Error ∝ column mass: 10× lighter columns, 10× closer; at 1e-4 ρ within 0.01 %.
+
+    Measured ratios 9.9922 and 9.9992 (the first-order law; 2e-3 leaves room for the r² term).
+    At 1e-4 ρ cond M is 4.2e10: eigh(K, M) moved mode 2 by 8.4e-7 there, 20 % of the 4.2e-6
+    measured (ratio 8.95 to 10.06 with the OpenBLAS kernel), hence low_modes_first.
+    """
     errors = [np.max(np.abs(frequencies_hz(_fe_with_density(7860 * r))[:4] / LUMPED_HZ - 1))
               for r in (1e-2, 1e-3, 1e-4)]
     assert errors[-1] < 1e-4
     lumped_exact = frequencies_hz(build_model(scene()))
     exact_errors = [np.max(np.abs(frequencies_hz(_fe_with_density(7860 * r))[:4] / lumped_exact
                                   - 1)) for r in (1e-2, 1e-3, 1e-4)]
-    np.testing.assert_allclose(np.array(exact_errors[:-1]) / exact_errors[1:], 10, rtol=0.05)
+    np.testing.assert_allclose(np.array(exact_errors[:-1]) / exact_errors[1:], 10, rtol=2e-3)
 
 
 def test_massless_fe_columns_are_rejected_clearly() -> None:
@@ -165,9 +171,14 @@ def test_craig_bampton_with_three_modes_keeps_the_first_four_within_half_a_perce
 def test_modal_damping_gives_the_stated_ratios() -> None:
     model = build_model(scene(type="fe", elements_per_column=10))
     structure = build_structure(scene(type="fe", elements_per_column=10))
+    # the low modes from the inverse problem (eigh(K, M) puts ζ₁ off by 4.8e-9 here), the high
+    # ones from the direct problem, each where it is accurate (low_modes_first's docstring)
+    w2_low, phi_low = low_modes_first(structure.stiffness, structure.mass)
+    zeta_low = np.einsum("ij,ik,kj->j", phi_low[:, :3], model.c_struct, phi_low[:, :3])
+    np.testing.assert_allclose(zeta_low / (2 * np.sqrt(w2_low[:3])), [0.0395, 0.0030, 0.0042],
+                               rtol=1e-9)
     w2, phi = sla.eigh(structure.stiffness, structure.mass)
     zeta = np.einsum("ij,ik,kj->j", phi, model.c_struct, phi) / (2 * np.sqrt(w2))
-    np.testing.assert_allclose(zeta[:3], [0.0395, 0.0030, 0.0042], rtol=1e-9)
     assert zeta[3] == pytest.approx(0.005, rel=1e-9)
     assert np.all(zeta[3:] >= 0.005 * (1 - 1e-9))
     # classical damping: the modal damping matrix is diagonal
