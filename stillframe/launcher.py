@@ -36,6 +36,8 @@ MODES: tuple[str, ...] = ("lockstep", "realtime")
 REPO_ROOT = Path(__file__).resolve().parents[1]
 #: seconds a child gets to exit after SIGINT, then after SIGTERM, before SIGKILL
 STOP_GRACE_S = 10.0
+#: the log line by which a helper child says it is ready (the nodes start after it)
+READY_LINES: dict[str, str] = {"recorder": "Recording to", "monitor": "Monitor ready"}
 #: lines of a child's output kept to explain its death
 TAIL_LINES = 15
 _PR_SET_PDEATHSIG = 1
@@ -252,6 +254,8 @@ class LaunchOptions:
     record_dir: Path | None = None
     lockstep_timeout_s: float | None = None
     record_topics: list[str] = field(default_factory=list)
+    #: ``stillframe monitor`` arguments (ports) to run the monitor beside the nodes; None: none
+    monitor_args: list[str] | None = None
 
 
 class Launcher:
@@ -289,6 +293,11 @@ class Launcher:
             children.append(("recorder", [sys.executable, "-m", "stillframe", "record", "-o",
                                           str(o.record_dir), "--use-sim-time",
                                           *(o.record_topics or ["--all"])]))
+        if o.monitor_args is not None:
+            sets = [arg for override in o.overrides for arg in ("--set", override)]
+            children.append(("monitor", [sys.executable, "-m", "stillframe", "monitor",
+                                         "--dashboard", "--use-sim-time", "--scene", str(scene),
+                                         *sets, *o.monitor_args]))
         children += [(name, node_command(name, scene, o.overrides, o.mode,
                                          sim_params if name == "sim_node" else None))
                      for name in reversed(nodes_for(load_scene(scene, o.overrides)))]
@@ -303,8 +312,8 @@ class Launcher:
         try:
             for name, argv in self.commands():
                 child = self.processes.start(name, argv)
-                if name == "recorder":
-                    self._wait_for_recorder(child)
+                if name in READY_LINES:
+                    self._wait_until_ready(child, READY_LINES[name])
             sim = next(c for c in self.processes.children if c.name == "sim_node")
             while api.ok():
                 self.node.spin_once(0.1)
@@ -327,18 +336,19 @@ class Launcher:
             self.node.destroy_node()
         return self._result()
 
-    def _wait_for_recorder(self, child: Child, timeout_s: float = 20.0) -> None:
-        """Nodes start only once the recorder is recording (its 'Recording to' log line)."""
+    def _wait_until_ready(self, child: Child, ready: str, timeout_s: float = 20.0) -> None:
+        """Nodes start only once the recorder is recording and the monitor serving (their
+        ``ready`` log line)."""
         from stillframe.middleware import api
 
         deadline = time.monotonic() + timeout_s
-        while not any("Recording to" in line for line in child.tail):
+        while not any(ready in line for line in child.tail):
             if child.proc.poll() is not None:
                 raise NodeDiedError.exited(child)
             if not api.ok():
                 raise KeyboardInterrupt
             if time.monotonic() > deadline:
-                raise NodeDiedError(child.name, f"not recording after {timeout_s:g} s", child.tail)
+                raise NodeDiedError(child.name, f"not ready after {timeout_s:g} s", child.tail)
             time.sleep(0.05)
 
     def _result(self) -> LaunchResult:
@@ -353,14 +363,17 @@ class Launcher:
 def run_scene(scene: Path, overrides: Sequence[str], out: Path, mode: str = "lockstep",
               record: Path | None = None, lockstep_timeout_s: float | None = None,
               prepare: Callable[[Any], None] | None = None,
-              record_topics: Sequence[str] = ()) -> LaunchResult:
+              record_topics: Sequence[str] = (),
+              monitor_args: Sequence[str] | None = None) -> LaunchResult:
     """Launch ``scene`` through the three nodes to its end; sim_node's results go to ``out``
     (``result.json``, ``result.npz``); ``record`` records ``record_topics`` (default all) into
-    a bag. ``prepare(node)`` may subscribe the launcher's hidden
+    a bag; ``monitor_args`` (e.g. ports) start ``stillframe monitor`` beside the nodes.
+    ``prepare(node)`` may subscribe the launcher's hidden
     node to more topics before the children start."""
     out.mkdir(parents=True, exist_ok=True)
     launcher = Launcher(LaunchOptions(scene, list(overrides), mode, out / "result.json", record,
-                                      lockstep_timeout_s, list(record_topics)))
+                                      lockstep_timeout_s, list(record_topics),
+                                      None if monitor_args is None else list(monitor_args)))
     if prepare is not None:
         prepare(launcher.node)
     return launcher.run()

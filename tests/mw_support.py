@@ -18,6 +18,11 @@ REPO_ROOT = Path(__file__).resolve().parents[1]
 @pytest.fixture
 def ros_domain(monkeypatch: pytest.MonkeyPatch) -> int:
     """A random ROS_DOMAIN_ID (1..200) so parallel test runs never see each other."""
+    return isolate_domain(monkeypatch)
+
+
+def isolate_domain(monkeypatch: pytest.MonkeyPatch) -> int:
+    """Set a random ROS_DOMAIN_ID (1..200) and the dds backend for this test or module."""
     domain = random.SystemRandom().randint(1, 200)
     monkeypatch.setenv("ROS_DOMAIN_ID", str(domain))
     monkeypatch.delenv("CYCLONEDDS_URI", raising=False)
