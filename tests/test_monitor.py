@@ -4,19 +4,28 @@ the recorder's bag, slow and churning clients, and the dashboard in headless Chr
 from __future__ import annotations
 
 import asyncio
+import io
 import itertools
 import json
 import re
+import signal
 import subprocess
 import sys
 import threading
+import time
 from collections.abc import Iterator
 from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
 
+import matplotlib.pyplot as plt
+import numpy as np
 import pytest
 
 from stillframe import messages
 from stillframe.bags import read_bag
+from stillframe.commands.bench_loop import realtime_overrides
+from stillframe.dashboard import ERROR_KEYS
 from tests.foxglove_client import Capture, capture, churn, stall
 from tests.mw_support import REPO_ROOT, child_env, isolate_domain
 
@@ -142,3 +151,79 @@ def test_slow_and_churning_clients_do_not_stop_the_loop(lockstep_run: dict) -> N
     assert lockstep_run["churned"] >= 3
     assert lockstep_run["evaluation"]["steps"] == 12 * 32
     assert any("[monitor]" in line and "Forwarded" in line for line in lockstep_run["lines"])
+
+
+CHROMIUM, CHROMEDRIVER = Path("/usr/bin/chromium"), Path("/usr/bin/chromedriver")
+CHROMIUM_FLAGS = ("--headless", "--no-sandbox", "--disable-gpu", "--disable-quic",
+                  "--no-first-run", "--disable-background-networking",
+                  "--disable-component-update", "--disable-sync", "--window-size=1500,900")
+#: plotly's first trace colour (#1f77b4): the true displacements and angle
+TRACE_RGB = np.array([0x1F, 0x77, 0xB4])
+
+
+def browser(profile: Path) -> Any:
+    """Debian's headless Chromium through its chromedriver, browser console logged."""
+    from selenium import webdriver
+    from selenium.webdriver.chrome.service import Service
+
+    options = webdriver.ChromeOptions()
+    options.binary_location = str(CHROMIUM)
+    for flag in (*CHROMIUM_FLAGS, f"--user-data-dir={profile}"):
+        options.add_argument(flag)
+    options.set_capability("goog:loggingPrefs", {"browser": "ALL"})
+    return webdriver.Chrome(options=options, service=Service(str(CHROMEDRIVER)))
+
+
+def trace_pixels(png: bytes) -> int:
+    """Pixels of the first trace colour in a screenshot."""
+    image = (plt.imread(io.BytesIO(png))[..., :3] * 255).round()
+    return int((np.abs(image - TRACE_RGB).max(axis=-1) <= 8).sum())
+
+
+def plotted_ends(driver: Any) -> list[float]:
+    """The last time plotted by each chart's first trace (NaN while it is empty)."""
+    return driver.execute_script(
+        "return ['floor1', 'floor2', 'floor3', 'pendulum', 'command'].map(id => {"
+        "  const d = document.getElementById(id).data;"
+        "  return d && d[0].x.length ? d[0].x[d[0].x.length - 1] : NaN; });")
+
+
+@pytest.mark.skipif(not (CHROMIUM.exists() and CHROMEDRIVER.exists()),
+                    reason="needs Debian's chromium and chromium-driver "
+                           "(apt-get install -y chromium chromium-driver)")
+def test_dashboard_in_headless_chromium(tmp_path: Path, ros_domain_module: int) -> None:
+    """The dashboard during a real-time launch at 1 kHz: every chart has data, the first trace
+    colour is on the page, two screenshots 1.5 s apart differ in the plotted data, exactly the
+    non-zero error counters are red (saturation is forced), and the browser logs no error."""
+    overrides = [*realtime_overrides(1000.0, 12.0), "controller.limit=0.5",
+                 "controller.start=1.5", "evaluation.window=1"]
+    launch = Launch.start("--mode", "realtime", *(a for o in overrides for a in ("--set", o)))
+    driver = browser(tmp_path / "profile")
+    try:
+        driver.get(launch.urls[1])
+        deadline = time.monotonic() + 60
+        # NaN != NaN: a chart still empty; wait until the controller has saturated
+        while not (all(t == t for t in plotted_ends(driver)) and min(plotted_ends(driver)) > 2):
+            assert time.monotonic() < deadline, plotted_ends(driver)
+            time.sleep(0.2)
+        first, first_ends = driver.get_screenshot_as_png(), plotted_ends(driver)
+        time.sleep(1.5)
+        second, second_ends = driver.get_screenshot_as_png(), plotted_ends(driver)
+        cells = driver.execute_script(
+            "return [...document.querySelectorAll('td[data-key]')].map("
+            "  td => [td.dataset.key, td.textContent, td.classList.contains('error')]);")
+        errors = [e for e in driver.get_log("browser") if e["level"] == "SEVERE"]
+    finally:
+        driver.quit()
+        launch.proc.send_signal(signal.SIGINT)
+        launch.proc.communicate(timeout=120)
+    (tmp_path / "dashboard.png").write_bytes(second)
+    assert not errors, errors
+    assert trace_pixels(first) > 500 and trace_pixels(second) > 500
+    assert first != second
+    assert all(b > a for a, b in zip(first_ends, second_ends, strict=True)), (first_ends,
+                                                                             second_ends)
+    # red exactly where an error counter is non-zero; saturation is forced (0.5 N m from 1.5 s)
+    for key, value, red in cells:
+        assert red == (key in ERROR_KEYS and value not in ("", "0", "False")), (key, value)
+    assert any(key == "saturated" and red for key, _, red in cells), cells
