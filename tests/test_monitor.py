@@ -26,7 +26,7 @@ from stillframe import messages
 from stillframe.bags import read_bag
 from stillframe.commands.bench_loop import realtime_overrides
 from stillframe.dashboard import ERROR_KEYS
-from tests.foxglove_client import Capture, capture, churn, stall
+from stillframe.foxglove_client import Capture, capture, churn, stall
 from tests.mw_support import REPO_ROOT, child_env, isolate_domain
 
 pytestmark = pytest.mark.slow

@@ -1,8 +1,8 @@
-"""A minimal ``foxglove.websocket.v1`` client for the tests, as Foxglove's spec defines the
-protocol: JSON ``serverInfo``/``advertise``, ``subscribe``; binary message data (opcode 1:
-subscription id u32, receive time u64, payload) and time (opcode 2: u64 ns), little-endian.
-``foxglove-sdk``'s server calls it ``foxglove.sdk.v1`` (the same protocol under its new name)
-and accepts only that name, so the client offers both.
+"""A minimal ``foxglove.websocket.v1`` client (for the tests and ``bench monitor``), as
+Foxglove's spec defines the protocol: JSON ``serverInfo``/``advertise``, ``subscribe``; binary
+message data (opcode 1: subscription id u32, receive time u64, payload) and time (opcode 2: u64
+ns), little-endian. ``foxglove-sdk``'s server calls it ``foxglove.sdk.v1`` (the same protocol
+under its new name) and accepts only that name, so the client offers both.
 
 Messages are decoded with the schema the server advertised only: its ``ros2msg`` text is parsed
 into an empty ``rosbags`` typestore, so nothing of our own message definitions is used."""
@@ -43,9 +43,10 @@ def decoder(channel: dict[str, Any]) -> Any:
     return lambda data: store.deserialize_cdr(data, channel["schemaName"])
 
 
-async def capture(url: str, topics: list[str], until: asyncio.Event, out: Capture) -> None:
-    """Subscribe to ``topics`` as they are advertised and decode what arrives until ``until``
-    is set (or the server closes)."""
+async def capture(url: str, topics: list[str] | None, until: asyncio.Event,
+                  out: Capture) -> None:
+    """Subscribe to ``topics`` (None: every topic) as they are advertised and decode what
+    arrives until ``until`` is set (or the server closes)."""
     subscribed: dict[int, tuple[str, Any]] = {}
     async with websockets.connect(url, subprotocols=SUBPROTOCOLS, max_size=None) as ws:
         out.subprotocol = ws.subprotocol or ""
@@ -63,7 +64,7 @@ async def capture(url: str, topics: list[str], until: asyncio.Event, out: Captur
                 elif message["op"] == "advertise":
                     for channel in message["channels"]:
                         out.channels[channel["topic"]] = channel
-                        if channel["topic"] in topics:
+                        if topics is None or channel["topic"] in topics:
                             sub_id = len(subscribed) + 1
                             subscribed[sub_id] = (channel["topic"], decoder(channel))
                             await ws.send(json.dumps({"op": "subscribe", "subscriptions": [
