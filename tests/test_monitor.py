@@ -181,11 +181,11 @@ def trace_pixels(png: bytes) -> int:
 
 
 def plotted_ends(driver: Any) -> list[float]:
-    """The last time plotted by each chart's first trace (NaN while it is empty)."""
+    """The last time plotted by each chart's first trace (None while it is empty)."""
     return driver.execute_script(
         "return ['floor1', 'floor2', 'floor3', 'pendulum', 'command'].map(id => {"
         "  const d = document.getElementById(id).data;"
-        "  return d && d[0].x.length ? d[0].x[d[0].x.length - 1] : NaN; });")
+        "  return d && d[0].x.length ? d[0].x[d[0].x.length - 1] : null; });")
 
 
 @pytest.mark.skipif(not (CHROMIUM.exists() and CHROMEDRIVER.exists()),
@@ -202,8 +202,8 @@ def test_dashboard_in_headless_chromium(tmp_path: Path, ros_domain_module: int) 
     try:
         driver.get(launch.urls[1])
         deadline = time.monotonic() + 60
-        # NaN != NaN: a chart still empty; wait until the controller has saturated
-        while not (all(t == t for t in plotted_ends(driver)) and min(plotted_ends(driver)) > 2):
+        # until every chart has data and the controller has been saturating for a while
+        while not all(t is not None and t > 2 for t in plotted_ends(driver)):
             assert time.monotonic() < deadline, plotted_ends(driver)
             time.sleep(0.2)
         first, first_ends = driver.get_screenshot_as_png(), plotted_ends(driver)
@@ -227,3 +227,15 @@ def test_dashboard_in_headless_chromium(tmp_path: Path, ros_domain_module: int) 
     for key, value, red in cells:
         assert red == (key in ERROR_KEYS and value not in ("", "0", "False")), (key, value)
     assert any(key == "saturated" and red for key, _, red in cells), cells
+
+
+@pytest.mark.parametrize(("args", "message"), [
+    (["monitor", "--port", "70000"], "--port 70000: expected 0..65535"),
+    (["monitor", "--dashboard", "--scene", "no/such.yaml"], "no/such.yaml"),
+    (["bench", "monitor", "--repeats", "0"], "--repeats must be >= 1"),
+])
+def test_bad_monitor_arguments_are_one_line(args: list[str], message: str) -> None:
+    done = subprocess.run([sys.executable, "-m", "stillframe", *args], env=child_env(),
+                          cwd=REPO_ROOT, capture_output=True, text=True, timeout=60)
+    assert done.returncode == 2
+    assert message in done.stderr and len(done.stderr.strip().splitlines()) == 1, done.stderr
