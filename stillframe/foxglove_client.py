@@ -44,9 +44,10 @@ def decoder(channel: dict[str, Any]) -> Any:
 
 
 async def capture(url: str, topics: list[str] | None, until: asyncio.Event,
-                  out: Capture) -> None:
+                  out: Capture, decode: bool = True) -> None:
     """Subscribe to ``topics`` (None: every topic) as they are advertised and decode what
-    arrives until ``until`` is set (or the server closes)."""
+    arrives (or, without ``decode``, keep its size) until ``until`` is set or the server
+    closes."""
     subscribed: dict[int, tuple[str, Any]] = {}
     async with websockets.connect(url, subprotocols=SUBPROTOCOLS, max_size=None) as ws:
         out.subprotocol = ws.subprotocol or ""
@@ -71,8 +72,10 @@ async def capture(url: str, topics: list[str] | None, until: asyncio.Event,
                                 {"id": sub_id, "channelId": channel["id"]}]}))
             elif frame[0] == MESSAGE_DATA:
                 sub_id, _receive_ns = struct.unpack_from("<IQ", frame, 1)
-                topic, decode = subscribed[sub_id]
-                out.messages.setdefault(topic, []).append(decode(frame[13:]))
+                topic, decoded = subscribed[sub_id]
+                payload = frame[13:]
+                out.messages.setdefault(topic, []).append(
+                    decoded(payload) if decode else len(payload))
             elif frame[0] == TIME:
                 out.times.append(struct.unpack_from("<Q", frame, 1)[0])
 

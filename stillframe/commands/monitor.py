@@ -9,6 +9,7 @@ Runs until Ctrl-C. See docs/monitor.md.
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from pathlib import Path
 
@@ -36,6 +37,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                         help="scene whose command limits the dashboard draws")
     parser.add_argument("--set", dest="overrides", action="append", default=[],
                         metavar="KEY=VALUE", help="with --scene: override a scene value")
+    parser.add_argument("--nice", type=int, default=10, metavar="N",
+                        help="lower the monitor's CPU priority by N (default 10), so that under "
+                             "load the loop's nodes come first")
     parser.add_argument("--use-sim-time", action="store_true",
                         help="follow /clock: stamps and the Foxglove time cursor in sim time")
     parser.set_defaults(func=run)
@@ -57,6 +61,9 @@ def run(args: argparse.Namespace) -> int:
 
     _check_port("--port", args.port)
     _check_port("--dashboard-port", args.dashboard_port)
+    if not 0 <= args.nice <= 19:
+        raise InputError(f"--nice {args.nice}: expected 0..19")
+    os.nice(args.nice)
     limits = Limits()
     if args.scene is not None:
         scene = load_scene(args.scene, args.overrides)
