@@ -22,6 +22,7 @@ COMMANDS: tuple[str, ...] = (
     "stillframe.commands.bag",
     "stillframe.commands.record",
     "stillframe.commands.play",
+    "stillframe.commands.monitor",
     "stillframe.commands.identify",
     "stillframe.commands.identify_daisy",
     "stillframe.commands.closed_loop",

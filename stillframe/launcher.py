@@ -34,11 +34,13 @@ from stillframe.schema import Section
 
 NODES: tuple[str, ...] = ("sim_node", "estimator_node", "controller_node")
 #: the children whose middleware backend ``--backend NAME=BACKEND`` can choose
-BACKEND_TARGETS: tuple[str, ...] = (*NODES, "recorder")
+BACKEND_TARGETS: tuple[str, ...] = (*NODES, "recorder", "monitor")
 MODES: tuple[str, ...] = ("lockstep", "realtime")
 REPO_ROOT = Path(__file__).resolve().parents[1]
 #: seconds a child gets to exit after SIGINT, then after SIGTERM, before SIGKILL
 STOP_GRACE_S = 10.0
+#: the log line by which a helper child says it is ready (the nodes start after it)
+READY_LINES: dict[str, str] = {"recorder": "Recording to", "monitor": "Monitor ready"}
 #: lines of a child's output kept to explain its death
 TAIL_LINES = 15
 _PR_SET_PDEATHSIG = 1
@@ -284,6 +286,8 @@ class LaunchOptions:
     lockstep_timeout_s: float | None = None
     record_topics: list[str] = field(default_factory=list)
     backends: list[str] = field(default_factory=list)
+    #: ``stillframe monitor`` arguments (ports) to run the monitor beside the nodes; None: none
+    monitor_args: list[str] | None = None
 
 
 class Launcher:
@@ -326,6 +330,11 @@ class Launcher:
             children.append(("recorder", [sys.executable, "-m", "stillframe", "record", "-o",
                                           str(o.record_dir), "--use-sim-time",
                                           *(o.record_topics or ["--all"])]))
+        if o.monitor_args is not None:
+            sets = [arg for override in o.overrides for arg in ("--set", override)]
+            children.append(("monitor", [sys.executable, "-m", "stillframe", "monitor",
+                                         "--dashboard", "--use-sim-time", "--scene", str(scene),
+                                         *sets, *o.monitor_args]))
         children += [(name, node_command(name, scene, o.overrides, o.mode,
                                          sim_params if name == "sim_node" else None))
                      for name in reversed(nodes_for(load_scene(scene, o.overrides)))]
@@ -338,14 +347,14 @@ class Launcher:
 
         self.options.result_file.unlink(missing_ok=True)
         try:
-            self.status.echo(f"discovery range {self.discovery}; backends " + ", ".join(
-                f"{name} {self.backends[name]}" for name, _ in self.commands()))
             commands = self.commands()
+            self.status.echo(f"discovery range {self.discovery}; backends " + ", ".join(
+                f"{name} {self.backends[name]}" for name, _ in commands))
             mixed = len({self.backends[name] for name, _ in commands}) > 1
             for name, argv in commands:
                 child = self.processes.start(name, argv, {"STILLFRAME_RMW": self.backends[name]})
-                if name == "recorder":
-                    self._wait_for_line(child, "Recording to")
+                if name in READY_LINES:
+                    self._wait_for_line(child, READY_LINES[name])
                 elif mixed:
                     self._wait_for_line(child, "middleware backend")
             sim = next(c for c in self.processes.children if c.name == "sim_node")
@@ -372,10 +381,11 @@ class Launcher:
 
     def _wait_for_line(self, child: Child, text: str, timeout_s: float = 20.0) -> None:
         """Wait for ``child`` to log ``text`` before starting the next: nodes start once the
-        recorder is recording ('Recording to'); with mixed vendors, a node starts once the
-        previous one has its participant ('middleware backend'), because a Cyclone and a Fast
-        DDS participant created in the same instant can take the same participant index and
-        then never discover each other (measured: 3 of 4 simultaneous starts)."""
+        recorder is recording and the monitor serving (:data:`READY_LINES`); with mixed vendors,
+        a node starts once the previous one has its participant ('middleware backend'), because
+        a Cyclone and a Fast DDS participant created in the same instant can take the same
+        participant index and then never discover each other (measured: 3 of 4 simultaneous
+        starts)."""
         from stillframe.middleware import api
 
         deadline = time.monotonic() + timeout_s
@@ -400,14 +410,17 @@ class Launcher:
 def run_scene(scene: Path, overrides: Sequence[str], out: Path, mode: str = "lockstep",
               record: Path | None = None, lockstep_timeout_s: float | None = None,
               prepare: Callable[[Any], None] | None = None,
-              record_topics: Sequence[str] = (), backends: Sequence[str] = ()) -> LaunchResult:
+              record_topics: Sequence[str] = (), backends: Sequence[str] = (),
+              monitor_args: Sequence[str] | None = None) -> LaunchResult:
     """Launch ``scene`` through the three nodes to its end; sim_node's results go to ``out``
     (``result.json``, ``result.npz``); ``record`` records ``record_topics`` (default all) into
-    a bag; ``backends`` are ``--backend`` values (:func:`parse_backends`). ``prepare(node)`` may
+    a bag; ``backends`` are ``--backend`` values (:func:`parse_backends`); ``monitor_args``
+    (e.g. ports) start ``stillframe monitor`` beside the nodes. ``prepare(node)`` may
     subscribe the launcher's hidden node to more topics before the children start."""
     out.mkdir(parents=True, exist_ok=True)
     launcher = Launcher(LaunchOptions(scene, list(overrides), mode, out / "result.json", record,
-                                      lockstep_timeout_s, list(record_topics), list(backends)))
+                                      lockstep_timeout_s, list(record_topics), list(backends),
+                                      None if monitor_args is None else list(monitor_args)))
     if prepare is not None:
         prepare(launcher.node)
     return launcher.run()

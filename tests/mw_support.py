@@ -19,9 +19,14 @@ REPO_ROOT = Path(__file__).resolve().parents[1]
 def ros_domain(monkeypatch: pytest.MonkeyPatch) -> int:
     """A random ROS_DOMAIN_ID (1..200) so parallel test runs never see each other; discovery
     on this machine only (no multicast leaves it)."""
+    return isolate_domain(monkeypatch)
+
+
+def isolate_domain(monkeypatch: pytest.MonkeyPatch) -> int:
+    """Set a random ROS_DOMAIN_ID (1..200), discovery on this machine only and the dds backend
+    for this test or module."""
     domain = random.SystemRandom().randint(1, 200)
     monkeypatch.setenv("ROS_DOMAIN_ID", str(domain))
-    monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     monkeypatch.delenv("CYCLONEDDS_URI", raising=False)
     monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     monkeypatch.setenv("STILLFRAME_RMW", "dds")

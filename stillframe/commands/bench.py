@@ -12,6 +12,7 @@ BENCHES: tuple[str, ...] = (
     "stillframe.commands.bench_transport",
     "stillframe.commands.bench_identify",
     "stillframe.commands.bench_loop",
+    "stillframe.commands.bench_monitor",
     "stillframe.commands.bench_fidelity",
     "stillframe.commands.bench_speed",
 )

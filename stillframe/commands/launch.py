@@ -48,6 +48,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     parser.add_argument("--record-topic", dest="record_topics", action="append", default=[],
                         metavar="TOPIC", help="with --record: record only this topic "
                                               "(repeatable)")
+    parser.add_argument("--monitor", action="store_true",
+                        help="also run `stillframe monitor --dashboard` (Foxglove bridge and "
+                             "live dashboard on 127.0.0.1)")
+    parser.add_argument("--monitor-port", type=int, default=8765, metavar="P",
+                        help="with --monitor: Foxglove WebSocket port (default 8765; 0: any)")
+    parser.add_argument("--dashboard-port", type=int, default=8080, metavar="P",
+                        help="with --monitor: dashboard port (default 8080; 0: any)")
     parser.add_argument("--out", type=Path, default=None, metavar="DIR",
                         help="keep sim_node's result.json and result.npz (histories) here")
     parser.set_defaults(func=run)
@@ -108,7 +115,10 @@ def run(args: argparse.Namespace) -> int:
         try:
             result = run_scene(Path(args.scene), args.overrides, args.out or Path(tmp),
                                args.mode, args.record, args.lockstep_timeout,
-                               record_topics=args.record_topics, backends=args.backends)
+                               record_topics=args.record_topics, backends=args.backends,
+                               monitor_args=["--port", str(args.monitor_port),
+                                             "--dashboard-port", str(args.dashboard_port)]
+                               if args.monitor else None)
         except NodeDiedError as exc:
             return report_death("launch", exc)
         except KeyboardInterrupt:
