@@ -32,4 +32,7 @@ def make_controller(scene: Section, design: FrameModel) -> Controller:
         law = EUKLaw(design, variant, floor, c.hold_stiffness, c.hold_damping, c.singular_margin)
     else:
         raise InputError(f"controller.type: {c.type!r} computes no command")
-    return Controller(law, ACTUATOR[c.type], period, c.start, c.limit, c.watchdog_periods)
+    actuators = scene.actuators
+    actuator_limit = (actuators.torque_limit, actuators.force_limit)[ACTUATOR[c.type]]
+    return Controller(law, ACTUATOR[c.type], period, c.start, c.limit, c.watchdog_periods,
+                      actuator_limit)

@@ -30,6 +30,7 @@ from typing import Any
 import numpy as np
 
 from controller_node.factory import make_controller
+from controller_node.supervisor import RUNAWAY_FACTOR
 from estimator_node.coordinates import design_map
 from stillframe import messages, topics
 from stillframe.errors import InputError
@@ -187,11 +188,17 @@ class ControllerNode:
         values = {"mode": self.params.mode, "rate_hz": self.rate.read(),
                   "commands": c.commands, "saturated": c.saturated, "singular": c.singular,
                   "watchdog": c.watchdog, "watchdog_active": cmd.watchdog,
+                  "runaway": c.runaway,
                   "enabled": cmd.enabled,
                   "last_command": float(cmd.vector[self.controller.actuator]), **self.counts,
                   **{f"compute_ms_{k}": v for k, v in self.compute.summary().items()}}
-        self.diagnostics.publish(max(self.last_ns, 0), values, WARN if cmd.watchdog else OK,
-                                 "watchdog: zero command" if cmd.watchdog else "")
+        problems = [text for flag, text in (
+            (cmd.watchdog, "watchdog: zero command"),
+            (c.runaway, f"control law output non-finite or beyond {RUNAWAY_FACTOR:g}x the "
+                        f"limit {c.runaway} times"),
+        ) if flag]
+        self.diagnostics.publish(max(self.last_ns, 0), values, WARN if problems else OK,
+                                 "; ".join(problems))
 
     def peers_ready(self) -> bool:
         return self.pub.get_subscription_count() > 0

@@ -1,8 +1,10 @@
 """sim_node: the simulated rig on the topic contract (DESIGN.md "Topic contract", docs/nodes.md).
 
 A thin shell around :class:`sim_node.plant.Plant`. Per sample k it publishes ``/clock`` = t_k,
-the three floor IMUs, the encoder, the load cell and ``state_truth``, all stamped t_k, then
-waits for the command stamped t_k on the scene's actuator topic and advances the plant with it:
+the three floor IMUs, the encoder (its ``effort`` the torque applied over the last period), the
+load cell, the floor-3 actuator's load cell (the force applied) and ``state_truth``, all stamped
+t_k, then waits for the command stamped t_k on the scene's actuator topic and advances the plant
+with it:
 
 - ``mode: lockstep``: waits as long as it takes, at most ``lockstep_timeout_s`` of wall time;
   after that it counts a lock-step timeout and holds the previous command.
@@ -47,7 +49,8 @@ from stillframe.middleware import api
 from stillframe.middleware.clock import ClockPublisher
 from stillframe.signals import Sample
 
-SENSOR_TOPICS = (*topics.FLOOR_IMU, topics.PENDULUM_JOINT_STATES, topics.EXCITATION_WRENCH)
+SENSOR_TOPICS = (*topics.FLOOR_IMU, topics.PENDULUM_JOINT_STATES, topics.EXCITATION_WRENCH,
+                 topics.FLOOR3_LOAD_CELL)
 LOOP_NODES = ("sim_node", "estimator_node", "controller_node")
 #: the node name of ``stillframe record``
 RECORDER_NODE = "stillframe_recorder"
