@@ -12,6 +12,12 @@ with it:
   in by the next sample's due time is a deadline miss (previous command held), and a sample
   that starts more than a period late is an overrun.
 
+Commands pass a :class:`stillframe.command_gate.CommandGate` per topic: only one writer (by its
+writer GID; the first seen, or the node named by the ``command_writer`` parameter) may command,
+a second writer is reported in ``/diagnostics`` and ignored, and non-finite values, values beyond
+the actuator's limit and stamps from the future or before the held command are rejected and
+counted by reason.
+
 At the end of the scene's duration it writes ``result_file`` (the evaluation of
 :func:`stillframe.closed_loop.evaluate` on its own truth history plus the loop's counters) and
 an ``.npz`` of the histories beside it, then exits 0.
@@ -32,6 +38,7 @@ from controller_node.factory import actuator_of
 from sim_node.plant import Plant
 from stillframe import messages, topics
 from stillframe.closed_loop import LoopHistory, evaluate
+from stillframe.command_gate import CommandGate
 from stillframe.errors import InputError
 from stillframe.loop_messages import COMMAND_TOPICS, SampleGrid, SensorMessages, command_value
 from stillframe.loop_node import (
@@ -60,7 +67,7 @@ class SimNode:
     """The plant, its publishers and the command subscriptions of one node."""
 
     def __init__(self, node: api.Node, params: LoopParameters, discovery_timeout_s: float,
-                 await_recorder: list[str] | None = None) -> None:
+                 await_recorder: list[str] | None = None, command_writer: str = "") -> None:
         self.node = node
         self.await_recorder = [t for t in (await_recorder or []) if t]
         self.params = params
@@ -77,9 +84,12 @@ class SimNode:
         self.messages = SensorMessages(scene.sensors)
         self.publishers = [*self.sensor_pubs, self.truth_pub]
         self.diagnostics = Diagnostics(node, params.diagnostics_period_s)
+        limits = (scene.actuators.torque_limit, scene.actuators.force_limit)
+        self.gates = [CommandGate(limit, command_writer, functools.partial(self.writers, spec.name))
+                      for limit, spec in zip(limits, COMMAND_TOPICS, strict=True)]
         for i, spec in enumerate(COMMAND_TOPICS):
             node.create_subscription(spec.type_name, spec.name,
-                                     functools.partial(self.on_command, i), spec.qos)
+                                     functools.partial(self.on_command, i), spec.qos, raw=True)
         self.command = np.zeros(2)          # [torque, force] held
         self.command_ns = [-1, -1]
         self.now_ns = 0
@@ -92,12 +102,18 @@ class SimNode:
         self.started = time.monotonic()   # reset when the first sample is due
         node.add_on_set_parameters_callback(check_settable)   # nothing changes while it runs
 
-    def on_command(self, actuator: int, msg: Any) -> None:
-        """Take a command stamped at or before the current sample and not older than the one
-        held; reject (and count) non-finite values and stamps from the future."""
+    def writers(self, topic: str) -> list[tuple[bytes, str]]:
+        """(GID, node) of every writer of ``topic`` in the graph."""
+        return [(ep.endpoint_gid, f"{ep.node_namespace.rstrip('/')}/{ep.node_name}")
+                for ep in self.node.get_publishers_info_by_topic(topic)]
+
+    def on_command(self, actuator: int, cdr: bytes, info: api.MessageInfo) -> None:
+        """Take a command its topic's gate lets through (module docstring); count the others."""
+        msg = messages.deserialize(cdr, COMMAND_TOPICS[actuator].type_name)
         ns = messages.stamp_ns(msg.header.stamp)
         value = command_value(actuator, msg)
-        if not np.isfinite(value) or ns > self.now_ns or ns < self.command_ns[actuator]:
+        if not self.gates[actuator].check(value, ns, info.publisher_gid, self.now_ns,
+                                          self.command_ns[actuator]):
             self.counts["rejected_commands"] += 1
             return
         if actuator == self.active and ns == self.now_ns and self.command_ns[actuator] != ns:
@@ -168,12 +184,22 @@ class SimNode:
             **self.counts, "max_lateness_ms": 1e3 * self.max_lateness,
             "saturated_commands": self.plant.actuators.limited,
         }
-        bad = sum(self.counts.values()) - self.counts["rejected_commands"]
+        for gate, spec in zip(self.gates, COMMAND_TOPICS, strict=True):
+            prefix = spec.name.rsplit("/", 1)[-1]
+            values.update({f"{prefix}_{key}": value for key, value in gate.report().items()})
+        bad = sum(self.counts.values())
         return values, WARN if bad else OK
+
+    def intruder_message(self) -> str:
+        """Which second writers are being ignored, for the status message."""
+        return "; ".join(f"second writer on {spec.name} ignored: "
+                         f"{', '.join(gate.ignored())}"
+                         for gate, spec in zip(self.gates, COMMAND_TOPICS, strict=True)
+                         if gate.intruders)
 
     def publish_status(self) -> None:
         values, level = self.status()
-        self.diagnostics.publish(self.now_ns, values, level)
+        self.diagnostics.publish(self.now_ns, values, level, self.intruder_message())
 
     def step(self, k: int) -> np.ndarray | None:
         """Sample k: publish, wait for its command, advance. The row [t, truth (8), command
@@ -231,6 +257,8 @@ class SimNode:
         history.evaluation.update({
             "mode": p.mode, "steps": n, "wall_s": time.perf_counter() - wall,
             **self.counts, "latency_ms": self.latency.summary(),
+            "command_gates": {spec.name: gate.report()
+                              for gate, spec in zip(self.gates, COMMAND_TOPICS, strict=True)},
             "max_lateness_ms": 1e3 * self.max_lateness,
             "plant": {"model": plant.model.name, "integrator": plant.integrator.name,
                       "dt": plant.h, "actuator_limited": plant.actuators.limited},
@@ -259,7 +287,9 @@ def main() -> int:
             raise InputError(f"parameter 'discovery_timeout_s': must be >= 0, got {discovery}")
         # topics the launch's recorder must subscribe before lock-step starts ("*": all)
         await_recorder = node.declare_parameter("await_recorder", [""], read_only=True).value
-        sim = SimNode(node, params, float(discovery), list(await_recorder))
+        # the node allowed to command ("" : the first writer seen), e.g. "controller_node"
+        writer = node.declare_parameter("command_writer", "", read_only=True).value
+        sim = SimNode(node, params, float(discovery), list(await_recorder), str(writer))
         history = sim.run()
         if history is not None and result:
             write_result(history, Path(result))

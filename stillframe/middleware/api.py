@@ -45,10 +45,13 @@ BACKENDS = ("dds", "rclpy")
 @dataclass(frozen=True)
 class MessageInfo:
     """What a raw subscription learns about a sample besides its bytes (ns since the epoch;
-    ``received_timestamp`` on the node's clock, i.e. sim time with ``use_sim_time``)."""
+    ``received_timestamp`` on the node's clock, i.e. sim time with ``use_sim_time``).
+    ``publisher_gid``: the writer's GID (its DDS GUID, as ``endpoint_gid`` in the graph), empty
+    where the backend does not expose it (rclpy Jazzy's message info carries none)."""
 
     source_timestamp: int
     received_timestamp: int
+    publisher_gid: bytes = b""
 
 
 @dataclass(frozen=True)
