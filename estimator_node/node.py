@@ -24,6 +24,10 @@ starting at the scene's ``estimator`` values; what depends on them (Q, R, and fo
 stationary covariance and gain) is recomputed before the next sample. Every other parameter is
 read-only.
 
+An estimator started while the loop runs (its first sample stamped after 0, e.g. restarted after
+a crash) starts a Kalman filter's mean from that sample's measurements
+(:meth:`estimator_node.kalman.LinearFilter.initialise_from`) rather than the scene's initial state.
+
 Messages older than the last stamp used are rejected and counted (``stale_messages``); NaN or
 Inf readings are dropped by the filter and counted (``non_finite``).
 """
@@ -40,6 +44,7 @@ import numpy as np
 from controller_node.factory import actuator_of
 from estimator_node.base import Filter
 from estimator_node.factory import make_estimator
+from estimator_node.kalman import LinearFilter
 from stillframe import messages, topics
 from stillframe.errors import InputError
 from stillframe.loop_messages import (
@@ -111,7 +116,7 @@ class EstimatorNode:
         self.last_ns = -1
         self.counts = {"estimates": 0, "stale_messages": 0, "partial_updates": 0,
                        "rejected_commands": 0, "command_waits_timed_out": 0,
-                       "applied_reported": 0}
+                       "applied_reported": 0, "initialised_from_measurements": 0}
         self.compute = Durations()
         self.rate = RateMeter()
         if isinstance(self.estimator, Filter):
@@ -232,6 +237,11 @@ class EstimatorNode:
         reported = np.isfinite(p.applied)
         control = np.where(reported, p.applied, self.command)
         self.counts["applied_reported"] += bool(reported[self.active or 0])
+        if self.last_ns < 0 and p.ns > 0 and isinstance(self.estimator, LinearFilter) \
+                and p.present[:4].all() and np.isfinite(p.values[:4]).all():
+            # joined a running loop (restarted): start from the measurements, not the scene
+            self.estimator.initialise_from(sample, control)
+            self.counts["initialised_from_measurements"] += 1
         estimate = self.estimator.step(sample, control)
         self.last_ns = p.ns
         if estimate is None:

@@ -18,6 +18,10 @@ a second writer is reported in ``/diagnostics`` and ignored, and non-finite valu
 the actuator's limit and stamps from the future or before the held command are rejected and
 counted by reason.
 
+When the newest command taken is ``command_timeout_periods`` (default 3) sample periods old, the
+sim applies zero actuation (the safe state) until a fresh command comes, and counts the samples
+(``safe_state_samples``).
+
 At the end of the scene's duration it writes ``result_file`` (the evaluation of
 :func:`stillframe.closed_loop.evaluate` on its own truth history plus the loop's counters) and
 an ``.npz`` of the histories beside it, then exits 0.
@@ -67,8 +71,10 @@ class SimNode:
     """The plant, its publishers and the command subscriptions of one node."""
 
     def __init__(self, node: api.Node, params: LoopParameters, discovery_timeout_s: float,
-                 await_recorder: list[str] | None = None, command_writer: str = "") -> None:
+                 await_recorder: list[str] | None = None, command_writer: str = "",
+                 command_timeout_periods: int = 3) -> None:
         self.node = node
+        self.command_timeout_periods = command_timeout_periods
         self.await_recorder = [t for t in (await_recorder or []) if t]
         self.params = params
         self.discovery_timeout_s = discovery_timeout_s
@@ -96,7 +102,7 @@ class SimNode:
         self.published_at = 0.0
         self.latency = Durations()
         self.counts = {"lockstep_timeouts": 0, "deadline_misses": 0, "overruns": 0,
-                       "rejected_commands": 0}
+                       "rejected_commands": 0, "safe_state_samples": 0}
         self.max_lateness = 0.0
         self.k = 0
         self.started = time.monotonic()   # reset when the first sample is due
@@ -169,6 +175,14 @@ class SimNode:
             self.node.spin_once(remaining)
         return True
 
+    def command_timed_out(self) -> bool:
+        """The newest command taken is ``command_timeout_periods`` periods older than the
+        current sample (or none came for as long): the controller is gone or stuck."""
+        if self.active is None:
+            return False
+        age = self.now_ns - max(self.command_ns[self.active], 0)
+        return age >= self.command_timeout_periods * self.grid.ns(self.plant.period)
+
     def sleep_until(self, when: float) -> None:
         while api.ok() and (remaining := when - time.monotonic()) > 0:
             self.node.spin_once(remaining)
@@ -223,6 +237,9 @@ class SimNode:
                 return None
             self.counts["lockstep_timeouts" if p.lockstep else "deadline_misses"] += 1
         control = self.command.copy()
+        if self.command_timed_out():
+            control[self.active] = 0.0      # the safe state: no actuation
+            self.counts["safe_state_samples"] += 1
         plant.advance(control)
         if self.diagnostics.due():
             self.publish_status()
@@ -289,7 +306,11 @@ def main() -> int:
         await_recorder = node.declare_parameter("await_recorder", [""], read_only=True).value
         # the node allowed to command ("" : the first writer seen), e.g. "controller_node"
         writer = node.declare_parameter("command_writer", "", read_only=True).value
-        sim = SimNode(node, params, float(discovery), list(await_recorder), str(writer))
+        timeout = node.declare_parameter("command_timeout_periods", 3, read_only=True).value
+        if not (isinstance(timeout, int) and timeout >= 1):
+            raise InputError(f"parameter 'command_timeout_periods': must be an integer >= 1, "
+                             f"got {timeout!r}")
+        sim = SimNode(node, params, float(discovery), list(await_recorder), str(writer), timeout)
         history = sim.run()
         if history is not None and result:
             write_result(history, Path(result))
