@@ -26,7 +26,8 @@ read-only.
 
 An estimator started while the loop runs (its first sample stamped after 0, e.g. restarted after
 a crash) starts a Kalman filter's mean from that sample's measurements
-(:meth:`estimator_node.kalman.LinearFilter.initialise_from`) rather than the scene's initial state.
+(:meth:`estimator_node.kalman.LinearFilter.initialise_from`) rather than the scene's initial state,
+at the first sample that carries all four measurements (earlier ones are skipped and counted).
 
 Messages older than the last stamp used are rejected and counted (``stale_messages``); NaN or
 Inf readings are dropped by the filter and counted (``non_finite``).
@@ -116,7 +117,8 @@ class EstimatorNode:
         self.last_ns = -1
         self.counts = {"estimates": 0, "stale_messages": 0, "partial_updates": 0,
                        "rejected_commands": 0, "command_waits_timed_out": 0,
-                       "applied_reported": 0, "initialised_from_measurements": 0}
+                       "applied_reported": 0, "initialised_from_measurements": 0,
+                       "skipped_before_initialisation": 0}
         self.compute = Durations()
         self.rate = RateMeter()
         if isinstance(self.estimator, Filter):
@@ -237,9 +239,12 @@ class EstimatorNode:
         reported = np.isfinite(p.applied)
         control = np.where(reported, p.applied, self.command)
         self.counts["applied_reported"] += bool(reported[self.active or 0])
-        if self.last_ns < 0 and p.ns > 0 and isinstance(self.estimator, LinearFilter) \
-                and p.present[:4].all() and np.isfinite(p.values[:4]).all():
-            # joined a running loop (restarted): start from the measurements, not the scene
+        if self.last_ns < 0 and p.ns > 0 and isinstance(self.estimator, LinearFilter):
+            # joined a running loop (restarted): start from the measurements, not the scene,
+            # at the first sample that carries all of them
+            if not (p.present[:4].all() and np.isfinite(p.values[:4]).all()):
+                self.counts["skipped_before_initialisation"] += 1
+                return
             self.estimator.initialise_from(sample, control)
             self.counts["initialised_from_measurements"] += 1
         estimate = self.estimator.step(sample, control)
