@@ -8,7 +8,9 @@ the simulator reports it applied over the previous period (after saturation and 
 the encoder's ``effort`` (hinge torque) and ``floor3/load_cell`` (floor-3 force), so that a
 saturated actuator does not wind the estimate up; where a sample carries no such reading, the
 newest command received on ``pendulum/torque_cmd`` and ``floor3/force_cmd``. In lock-step a
-stamp of a scene driving the floor-3 force waits for its ``floor3/load_cell`` reading too.
+stamp of a scene driving the floor-3 force waits for its ``floor3/load_cell`` reading too. The
+actuator the scene's controller does not drive is taken as zero (the sim refuses its commands),
+whatever arrives on its topics.
 
 - ``mode: lockstep``: a stamp is used once all its channels arrived and the command stamped
   t_k−1 did (the previous step's answer); after half of ``lockstep_timeout_s`` without them
@@ -170,9 +172,10 @@ class EstimatorNode:
             self.node.create_subscription(spec.type_name, spec.name,
                                           functools.partial(self.on_sensor, channel),
                                           self.params.qos(spec))
-        spec = topics.FLOOR3_LOAD_CELL
-        self.node.create_subscription(spec.type_name, spec.name, self.on_applied_force,
-                                      self.params.qos(spec))
+        if self.active == 1:    # the applied floor-3 force matters only when it is driven
+            spec = topics.FLOOR3_LOAD_CELL
+            self.node.create_subscription(spec.type_name, spec.name, self.on_applied_force,
+                                          self.params.qos(spec))
         if self.needs_truth:
             spec = topics.STATE_TRUTH
             self.node.create_subscription(spec.type_name, spec.name, self.on_truth, spec.qos)
@@ -238,6 +241,7 @@ class EstimatorNode:
                         p.present.copy(), p.truth)
         reported = np.isfinite(p.applied)
         control = np.where(reported, p.applied, self.command)
+        control[[i for i in (0, 1) if i != self.active]] = 0.0   # the sim drives only this one
         self.counts["applied_reported"] += bool(reported[self.active or 0])
         if self.last_ns < 0 and p.ns > 0 and isinstance(self.estimator, LinearFilter):
             # joined a running loop (restarted): start from the measurements, not the scene,

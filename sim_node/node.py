@@ -91,8 +91,9 @@ class SimNode:
         self.publishers = [*self.sensor_pubs, self.truth_pub]
         self.diagnostics = Diagnostics(node, params.diagnostics_period_s)
         limits = (scene.actuators.torque_limit, scene.actuators.force_limit)
-        self.gates = [CommandGate(limit, command_writer, functools.partial(self.writers, spec.name))
-                      for limit, spec in zip(limits, COMMAND_TOPICS, strict=True)]
+        self.gates = [CommandGate(limit, command_writer, functools.partial(self.writers, spec.name),
+                                  active=i == self.active)
+                      for i, (limit, spec) in enumerate(zip(limits, COMMAND_TOPICS, strict=True))]
         for i, spec in enumerate(COMMAND_TOPICS):
             node.create_subscription(spec.type_name, spec.name,
                                      functools.partial(self.on_command, i), spec.qos, raw=True)
@@ -115,7 +116,11 @@ class SimNode:
 
     def on_command(self, actuator: int, cdr: bytes, info: api.MessageInfo) -> None:
         """Take a command its topic's gate lets through (module docstring); count the others."""
-        msg = messages.deserialize(cdr, COMMAND_TOPICS[actuator].type_name)
+        spec = COMMAND_TOPICS[actuator]
+        msg = messages.decode_sample(cdr, spec.type_name)
+        if msg is None:
+            api.MALFORMED[spec.name] += 1
+            return
         ns = messages.stamp_ns(msg.header.stamp)
         value = command_value(actuator, msg)
         if not self.gates[actuator].check(value, ns, info.publisher_gid, self.now_ns,
@@ -131,6 +136,8 @@ class SimNode:
         and the controller publishes the scene's command topic."""
         scene = self.params.scene
         pubs = self.sensor_pubs if scene.estimator.type != "none" else []
+        if self.active != 1:    # the floor-3 load cell is read only when that force is driven
+            pubs = pubs[:-1]
         if scene.estimator.type == "truth":
             pubs = [*pubs, self.truth_pub]
         return (all(p.get_subscription_count() > 0 for p in pubs)
@@ -273,6 +280,7 @@ class SimNode:
             history.evaluation = evaluate(history, p.scene)
         history.evaluation.update({
             "mode": p.mode, "steps": n, "wall_s": time.perf_counter() - wall,
+            "malformed_samples": sum(api.MALFORMED.values()),
             **self.counts, "latency_ms": self.latency.summary(),
             "command_gates": {spec.name: gate.report()
                               for gate, spec in zip(self.gates, COMMAND_TOPICS, strict=True)},

@@ -5,8 +5,9 @@ identified by its writer GID (the DDS publication GUID the middleware hands with
 the first writer seen, or, when ``pinned`` names a node, the writer whose node has that name in
 the ROS graph. Any other writer is a second writer: it is reported (:meth:`CommandGate.report`)
 and its samples are ignored. Commands from the command writer are rejected, and counted by
-reason, when their value is not finite or beyond the actuator's limit, or their stamp lies in
-the future of the current sample or before the command already held.
+reason, when their value is not finite or beyond the actuator's limit (:data:`HARD_LIMIT`
+without one), or their stamp lies in the future of the current sample or before the command
+already held; commands for an actuator the scene's controller does not drive are refused.
 
 Where the middleware gives no writer GID (real rclpy Jazzy: its message info has none), the gate
 cannot tell samples apart: while the graph shows more than one writer on the topic it rejects
@@ -21,8 +22,12 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 #: reasons a command is rejected, in the order they are checked
-REASONS = ("second_writer", "unknown_writer", "ambiguous_writer", "non_finite", "beyond_limit",
-           "future_stamp", "past_stamp")
+REASONS = ("inactive_actuator", "second_writer", "unknown_writer", "ambiguous_writer",
+           "non_finite", "beyond_limit", "future_stamp", "past_stamp")
+
+#: the bound on a command when the actuator has no limit (N m or N; far beyond any rig's
+#: actuator, it keeps values like 1e308 from reaching the integrator)
+HARD_LIMIT = 1e6
 
 #: (writer GID, node namespace/name) of the topic's current writers, from the ROS graph
 GraphWriters = Callable[[], list[tuple[bytes, str]]]
@@ -32,14 +37,17 @@ GraphWriters = Callable[[], list[tuple[bytes, str]]]
 class CommandGate:
     """The accept/reject decision for one command topic.
 
-    ``limit``: the actuator's saturation (None: none); ``pinned``: the node name (``name`` or
-    ``/namespace/name``) allowed to command, empty for the first writer seen; ``writers``: the
-    topic's writers in the graph (to resolve a GID to its node name and to count writers).
+    ``limit``: the actuator's saturation (None: :data:`HARD_LIMIT`); ``active``: whether the
+    scene's controller drives this actuator (commands for the other one are refused);
+    ``pinned``: the node name (``name`` or ``/namespace/name``) allowed to command, empty for the
+    first writer seen; ``writers``: the topic's writers in the graph (to resolve a GID to its
+    node name and to count writers).
     """
 
     limit: float | None
     pinned: str
     writers: GraphWriters
+    active: bool = True
     owner: bytes = b""
     rejected: Counter = field(default_factory=Counter)
     intruders: set[bytes] = field(default_factory=set)
@@ -73,11 +81,11 @@ class CommandGate:
     def check(self, value: float, stamp_ns: int, gid: bytes, now_ns: int, held_ns: int) -> bool:
         """Whether the command ``value`` stamped ``stamp_ns`` from writer ``gid`` is taken at
         sample ``now_ns`` with the command stamped ``held_ns`` held; counts the reason if not."""
-        reason = self.is_owner(gid)
+        reason = "inactive_actuator" if not self.active else self.is_owner(gid)
         if reason is None:
             if not math.isfinite(value):
                 reason = "non_finite"
-            elif self.limit is not None and abs(value) > self.limit:
+            elif abs(value) > (HARD_LIMIT if self.limit is None else self.limit):
                 reason = "beyond_limit"
             elif stamp_ns > now_ns:
                 reason = "future_stamp"

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from stillframe.closed_loop import run_closed_loop
-from stillframe.command_gate import REASONS, CommandGate
+from stillframe.command_gate import HARD_LIMIT, REASONS, CommandGate
 from tests.loop_helpers import thesis_scene
 from tests.mw_support import finish, ros_domain, start_python
 from tests.node_support import SHORT_LQG, run_loop
@@ -59,6 +59,17 @@ def test_gate_pinned_by_node_name_and_without_writer_ids() -> None:
     blind.writers = lambda: graph
     assert not blind.check(1.0, 20, b"", 20, 10)
     assert dict(blind.rejected) == {"ambiguous_writer": 1}
+
+
+def test_gate_refuses_the_inactive_actuator_and_absurd_values_without_a_limit() -> None:
+    graph = [(CONTROLLER, "/frame/controller_node")]
+    unused = CommandGate(limit=None, pinned="", writers=lambda: graph, active=False)
+    assert not unused.check(0.0, 10, CONTROLLER, 10, 0)
+    unlimited = CommandGate(limit=None, pinned="", writers=lambda: graph)
+    assert not unlimited.check(1e308, 10, CONTROLLER, 10, 0)
+    assert unlimited.check(-HARD_LIMIT, 10, CONTROLLER, 10, 0)
+    assert dict(unused.rejected) == {"inactive_actuator": 1}
+    assert dict(unlimited.rejected) == {"beyond_limit": 1}
 
 
 STRAY_NODE = """

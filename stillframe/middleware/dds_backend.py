@@ -381,7 +381,7 @@ class DdsSubscription:
                 self.callback(bytes(data), api.MessageInfo(
                     info.source_timestamp, received, self.writer_gid(info.publication_handle)))
             else:
-                self.callback(messages.deserialize(data, self.msg_type))
+                api.deliver(self.callback, data, self.msg_type, self.topic_name)
             count += 1
         return count
 

@@ -230,7 +230,7 @@ class RclpyNode:
                 gid = bytes(info.get("publisher_gid") or b"")   # absent in Jazzy's rclpy
                 callback(data, api.MessageInfo(now, now, gid))
             else:
-                callback(messages.deserialize(data, name))
+                api.deliver(callback, data, name, topic)
 
         return self._node.create_subscription(
             ros_message_class(name), topic, on_data, rclpy_qos(as_profile(qos)), raw=True
