@@ -11,7 +11,6 @@ identified by its writer GID, and rejects bad commands by reason.
 
 from __future__ import annotations
 
-import signal
 from pathlib import Path
 
 import numpy as np
@@ -19,8 +18,8 @@ import numpy as np
 from stillframe.closed_loop import run_closed_loop
 from stillframe.command_gate import HARD_LIMIT, REASONS, CommandGate
 from tests.loop_helpers import thesis_scene
-from tests.mw_support import finish, ros_domain, start_python
-from tests.node_support import SHORT_LQG, run_loop
+from tests.mw_support import ros_domain
+from tests.node_support import SHORT_LQG, run_loop_beside
 
 __all__ = ["ros_domain"]
 
@@ -99,14 +98,8 @@ print("sent", sent, flush=True)
 
 
 def test_stray_command_writer_is_ignored_and_reported(ros_domain: int, tmp_path: Path) -> None:
-    stray = start_python(STRAY_NODE)
-    assert stray.stdout.readline().strip() == "ready"
-    try:
-        result, hist = run_loop(tmp_path, "thesis_lqg", SHORT_LQG, command_writer="controller_node")
-    finally:
-        stray.send_signal(signal.SIGTERM)
-        out, _err = finish(stray, timeout=20)
-    sent = int(out.split()[-1])
+    result, hist, sent = run_loop_beside(tmp_path, STRAY_NODE, "thesis_lqg", SHORT_LQG,
+                                         command_writer="controller_node")
     reference = run_closed_loop(thesis_scene("thesis_lqg", SHORT_LQG))
     np.testing.assert_array_equal(hist["command"], reference.command)
     np.testing.assert_array_equal(hist["truth"], reference.truth)

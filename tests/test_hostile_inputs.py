@@ -12,7 +12,6 @@ each node's ``/diagnostics``).
 
 from __future__ import annotations
 
-import signal
 from pathlib import Path
 
 import numpy as np
@@ -22,8 +21,8 @@ from stillframe import messages, topics
 from stillframe.closed_loop import run_closed_loop
 from stillframe.middleware import api
 from tests.loop_helpers import thesis_scene
-from tests.mw_support import finish, ros_domain, start_python
-from tests.node_support import SHORT_LQG, run_loop
+from tests.mw_support import ros_domain
+from tests.node_support import SHORT_LQG, run_loop_beside
 
 __all__ = ["ros_domain"]
 
@@ -58,16 +57,10 @@ print("sent", sent, flush=True)
 
 
 def test_garbage_and_hostile_values_change_nothing(ros_domain: int, tmp_path: Path) -> None:
-    hostile = start_python(RCLPY_WRITER)
-    assert hostile.stdout.readline().strip() == "ready"
-    try:
-        result, hist = run_loop(tmp_path, "thesis_lqg", SHORT_LQG,
-                                command_writer="controller_node", diagnostics_period_s=0.2)
-    finally:
-        hostile.send_signal(signal.SIGTERM)
-        hostile_out, hostile_err = finish(hostile, timeout=20)
-    assert hostile.returncode == 0, hostile_err[-2000:]
-    assert int(hostile_out.split()[-1]) > 0
+    result, hist, sent = run_loop_beside(tmp_path, RCLPY_WRITER, "thesis_lqg", SHORT_LQG,
+                                         command_writer="controller_node",
+                                         diagnostics_period_s=0.2)
+    assert sent > 0
     reference = run_closed_loop(thesis_scene("thesis_lqg", SHORT_LQG))
     np.testing.assert_array_equal(hist["truth"], reference.truth)
     np.testing.assert_array_equal(hist["command"], reference.command)
