@@ -56,6 +56,7 @@ print("sent", sent, flush=True)
 """
 
 
+@pytest.mark.slow
 def test_garbage_and_hostile_values_change_nothing(ros_domain: int, tmp_path: Path) -> None:
     result, hist, sent = run_loop_beside(tmp_path, RCLPY_WRITER, "thesis_lqg", SHORT_LQG,
                                          command_writer="controller_node",

@@ -21,6 +21,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from stillframe import messages, topics
 from stillframe.bags import read_bag
@@ -67,6 +68,7 @@ def _by_topic(bag: Path) -> dict[str, list]:
     return out
 
 
+@pytest.mark.slow
 def test_kill_and_restart_estimator_then_kill_controller(ros_domain: int, tmp_path: Path) -> None:
     bag = tmp_path / "bag"
     params = params_file(tmp_path, "thesis_lqg", OVERRIDES, lockstep_timeout_s=0.2,

@@ -98,6 +98,7 @@ def test_record_stopped_by_signal_loses_nothing(ros_domain: int, tmp_path: Path,
     assert counts == {t: sent for t, _ in TOPICS}, err[-2000:]
 
 
+@pytest.mark.slow
 def test_killed_recorder_bag_reindexed_up_to_last_complete_chunk(ros_domain: int,
                                                                  tmp_path: Path) -> None:
     bag, sent, _err = _run(tmp_path, signal.SIGKILL, 3000)
