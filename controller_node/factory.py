@@ -43,4 +43,7 @@ def make_controller(scene: Section, design: FrameModel) -> Controller:
         check_sampled_injection(c.injection_damping, period, design.pendulum_inertia)
     else:
         raise InputError(f"controller.type: {c.type!r} computes no command")
-    return Controller(law, ACTUATOR[c.type], period, c.start, c.limit, c.watchdog_periods)
+    actuators = scene.actuators
+    actuator_limit = (actuators.torque_limit, actuators.force_limit)[ACTUATOR[c.type]]
+    return Controller(law, ACTUATOR[c.type], period, c.start, c.limit, c.watchdog_periods,
+                      actuator_limit)

@@ -13,7 +13,8 @@ reason, and the loop goes on, when the value is wrong): ``enabled`` (bool; false
 from the next sample on) and ``command_limit`` (the saturation ±limit [N m or N], finite and
 ≥ 0, 0: none; starts at ``controller.limit``). Every other parameter is read-only.
 
-Watchdog: once armed by a first estimate, when the newest estimate is ``watchdog_periods``
+Watchdog (``/diagnostics`` level ERROR while it holds the command at zero): once armed by a
+first estimate, when the newest estimate is ``watchdog_periods``
 periods older than the newest sample time the node has seen (the load cell's stamp, which every
 sample carries, or ``/clock`` with ``use_sim_time`` if newer), the node publishes the
 supervisor's zero command stamped with that time, once per sample time, and counts it. Sample
@@ -30,11 +31,13 @@ from typing import Any
 import numpy as np
 
 from controller_node.factory import make_controller
+from controller_node.supervisor import RUNAWAY_FACTOR
 from estimator_node.coordinates import design_map
 from stillframe import messages, topics
 from stillframe.errors import InputError
 from stillframe.loop_messages import COMMAND_TOPICS, CommandMessage, SampleGrid, physical_state
 from stillframe.loop_node import (
+    ERROR,
     OK,
     WARN,
     Diagnostics,
@@ -187,11 +190,18 @@ class ControllerNode:
         values = {"mode": self.params.mode, "rate_hz": self.rate.read(),
                   "commands": c.commands, "saturated": c.saturated, "singular": c.singular,
                   "watchdog": c.watchdog, "watchdog_active": cmd.watchdog,
+                  "runaway": c.runaway,
                   "enabled": cmd.enabled,
                   "last_command": float(cmd.vector[self.controller.actuator]), **self.counts,
                   **{f"compute_ms_{k}": v for k, v in self.compute.summary().items()}}
-        self.diagnostics.publish(max(self.last_ns, 0), values, WARN if cmd.watchdog else OK,
-                                 "watchdog: zero command" if cmd.watchdog else "")
+        problems = [text for flag, text in (
+            (cmd.watchdog, f"watchdog: no fresh estimate for {self.controller.watchdog_periods} "
+                           "periods (estimator stale or gone); commanding zero"),
+            (c.runaway, f"control law output non-finite or beyond {RUNAWAY_FACTOR:g}x the "
+                        f"limit {c.runaway} times"),
+        ) if flag]
+        level = ERROR if cmd.watchdog else WARN if problems else OK
+        self.diagnostics.publish(max(self.last_ns, 0), values, level, "; ".join(problems))
 
     def peers_ready(self) -> bool:
         return self.pub.get_subscription_count() > 0

@@ -4,7 +4,10 @@ Called once per control period with the newest estimate (or None when none arriv
 command before ``start`` and while ``enabled`` is False (switched at run time); zero command
 and the ``watchdog`` flag when the newest estimate is ``watchdog_periods`` periods old or more;
 a non-finite law output also gives zero (flagged ``singular``); otherwise the law's command
-clipped to ±``limit``.
+clipped to ±``limit`` and to ±``actuator_limit`` (the scene's actuator saturation: a command the
+actuator cannot apply is never sent). A law output more than :data:`RUNAWAY_FACTOR` times the
+tighter of the two limits is flagged ``runaway`` (counted, and ``/diagnostics`` warns): the sign of
+an estimate or a design that no longer matches the plant.
 """
 
 from __future__ import annotations
@@ -16,6 +19,9 @@ import numpy as np
 
 from stillframe.signals import Command, Estimate
 
+#: A law output beyond this multiple of the command's limit is flagged ``runaway``.
+RUNAWAY_FACTOR = 10.0
+
 Law = Callable[[np.ndarray, float], tuple[float, bool]]
 
 
@@ -25,18 +31,21 @@ class ControllerCounters:
     saturated: int = 0
     singular: int = 0
     watchdog: int = 0
+    runaway: int = 0
 
 
 class Controller:
     """A law acting on one actuator (0: pendulum torque, 1: floor-3 force)."""
 
     def __init__(self, law: Law, actuator: int, period: float, start: float = 0.0,
-                 limit: float | None = None, watchdog_periods: int = 3) -> None:
+                 limit: float | None = None, watchdog_periods: int = 3,
+                 actuator_limit: float | None = None) -> None:
         self.law = law
         self.actuator = actuator
         self.period = period
         self.start = start
         self.limit = limit
+        self.actuator_limit = actuator_limit
         self.watchdog_periods = watchdog_periods
         self.enabled = True
         self.latest: Estimate | None = None
@@ -66,9 +75,13 @@ class Controller:
         value, out.singular = self.law(latest.z, force)
         if not np.isfinite(value):
             value, out.singular = 0.0, True
-        if self.limit is not None and abs(value) > self.limit:
-            value, out.saturated = float(np.clip(value, -self.limit, self.limit)), True
+        bounds = [b for b in (self.limit, self.actuator_limit) if b]
+        bound = min(bounds) if bounds else None
+        out.runaway = out.singular or (bound is not None and abs(value) > RUNAWAY_FACTOR * bound)
+        if bound is not None and abs(value) > bound:
+            value, out.saturated = float(np.clip(value, -bound, bound)), True
         c.saturated += out.saturated
+        c.runaway += out.runaway
         c.singular += out.singular
         if self.actuator == 0:
             out.torque = value

@@ -27,7 +27,7 @@ from estimator_node.discrete import Discrete, first_order_hold
 from stillframe.models import FrameModel
 from stillframe.riccati import solve_dare
 from stillframe.schema import Section
-from stillframe.signals import full_inputs
+from stillframe.signals import Sample, full_inputs
 
 
 class LinearFilter(Filter):
@@ -57,6 +57,22 @@ class LinearFilter(Filter):
         u1 = full_inputs(control, force1, self.excited_floor)
         self.x = d.phi @ self.x + d.gamma0 @ u0 + d.gamma1 @ (u1 - u0)
         return d
+
+    def initialise_from(self, sample: Sample, control: np.ndarray) -> None:
+        """Restart the mean from one sample (an estimator that joins a running loop): φ from
+        the encoder, the velocities zero, the floor displacements that explain the measured
+        accelerations with the model's y = C z + D u (least squares; the sample's excitation
+        and ``control`` as inputs). The covariance restarts at the scene's initial one."""
+        u = full_inputs(control, sample.force if np.isfinite(sample.force) else 0.0,
+                        self.excited_floor)
+        y = np.asarray(sample.measurements, dtype=float)
+        physical = np.zeros(8)
+        physical[3] = y[3]
+        floors = self.C[:3] @ self.T[:, :3]
+        rest = y[:3] - self.D[:3] @ u - self.C[:3] @ self.T @ physical
+        physical[:3] = np.linalg.lstsq(floors, rest, rcond=None)[0]
+        self.x = self.T @ physical
+        self.t = None
 
     def innovation(self, y: np.ndarray, present: np.ndarray, force: float,
                    control: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -113,6 +129,10 @@ class TimeVaryingKalman(LinearFilter):
     def set_noise(self, process_std: list[float], measurement_std: list[float]) -> None:
         super().set_noise(process_std, measurement_std)
         self.kf.Q, self.kf.R = self.Q, self.R
+
+    def initialise_from(self, sample: Sample, control: np.ndarray) -> None:
+        super().initialise_from(sample, control)
+        self.kf.x = self.x
 
     def predict(self, dt: float, force0: float, force1: float, control: np.ndarray) -> None:
         d = self.discrete(dt)

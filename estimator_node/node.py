@@ -3,8 +3,14 @@
 A thin shell around :func:`estimator_node.factory.make_estimator`. It collects the readings of
 one stamp t_k from the floor IMUs, the encoder and the load cell (and ``state_truth`` for the
 ``truth`` estimator), then calls ``step(sample, command in effect)`` and publishes
-``state_estimate`` and ``state_estimate/covariance`` stamped t_k. The command in effect is the
-newest command received on ``pendulum/torque_cmd`` and ``floor3/force_cmd``.
+``state_estimate`` and ``state_estimate/covariance`` stamped t_k. The actuation in effect is what
+the simulator reports it applied over the previous period (after saturation and slew limits):
+the encoder's ``effort`` (hinge torque) and ``floor3/load_cell`` (floor-3 force), so that a
+saturated actuator does not wind the estimate up; where a sample carries no such reading, the
+newest command received on ``pendulum/torque_cmd`` and ``floor3/force_cmd``. In lock-step a
+stamp of a scene driving the floor-3 force waits for its ``floor3/load_cell`` reading too. The
+actuator the scene's controller does not drive is taken as zero (the sim refuses its commands),
+whatever arrives on its topics.
 
 - ``mode: lockstep``: a stamp is used once all its channels arrived and the command stamped
   t_k−1 did (the previous step's answer); after half of ``lockstep_timeout_s`` without them
@@ -19,6 +25,11 @@ on, when the value is wrong): ``process_noise_std`` (8 finite values ≥ 0) and
 starting at the scene's ``estimator`` values; what depends on them (Q, R, and for ``kf`` the
 stationary covariance and gain) is recomputed before the next sample. Every other parameter is
 read-only.
+
+An estimator started while the loop runs (its first sample stamped after 0, e.g. restarted after
+a crash) starts a Kalman filter's mean from that sample's measurements
+(:meth:`estimator_node.kalman.LinearFilter.initialise_from`) rather than the scene's initial state,
+at the first sample that carries all four measurements (earlier ones are skipped and counted).
 
 Messages older than the last stamp used are rejected and counted (``stale_messages``); NaN or
 Inf readings are dropped by the filter and counted (``non_finite``).
@@ -35,12 +46,14 @@ import numpy as np
 
 from estimator_node.base import Filter
 from estimator_node.factory import make_estimator
+from estimator_node.kalman import LinearFilter
 from stillframe import messages, topics
 from stillframe.errors import InputError
 from stillframe.loop_messages import (
     COMMAND_TOPICS,
     EstimateMessages,
     SampleGrid,
+    applied_torque,
     command_value,
     physical_state,
     sensor_reading,
@@ -63,6 +76,7 @@ from stillframe.models.identified import frame_for
 from stillframe.signals import Sample, actuator_of
 
 SENSOR_TOPICS = (*topics.FLOOR_IMU, topics.PENDULUM_JOINT_STATES, topics.EXCITATION_WRENCH)
+ENCODER_CHANNEL = SENSOR_TOPICS.index(topics.PENDULUM_JOINT_STATES)
 
 
 class Pending:
@@ -73,6 +87,7 @@ class Pending:
         self.values = np.full(5, np.nan)
         self.present = np.zeros(5, dtype=bool)
         self.truth: np.ndarray | None = None
+        self.applied = np.full(2, np.nan)    # [torque, force] applied over the previous period
         self.first = time.monotonic()
 
 
@@ -102,7 +117,9 @@ class EstimatorNode:
         self.pending: dict[int, Pending] = {}
         self.last_ns = -1
         self.counts = {"estimates": 0, "stale_messages": 0, "partial_updates": 0,
-                       "rejected_commands": 0, "command_waits_timed_out": 0}
+                       "rejected_commands": 0, "command_waits_timed_out": 0,
+                       "applied_reported": 0, "initialised_from_measurements": 0,
+                       "skipped_before_initialisation": 0}
         self.compute = Durations()
         self.rate = RateMeter()
         if isinstance(self.estimator, Filter):
@@ -154,6 +171,10 @@ class EstimatorNode:
             self.node.create_subscription(spec.type_name, spec.name,
                                           functools.partial(self.on_sensor, channel),
                                           self.params.qos(spec))
+        if self.active == 1:    # the applied floor-3 force matters only when it is driven
+            spec = topics.FLOOR3_LOAD_CELL
+            self.node.create_subscription(spec.type_name, spec.name, self.on_applied_force,
+                                          self.params.qos(spec))
         if self.needs_truth:
             spec = topics.STATE_TRUTH
             self.node.create_subscription(spec.type_name, spec.name, self.on_truth, spec.qos)
@@ -169,6 +190,12 @@ class EstimatorNode:
         if (p := self.slot(msg)) is not None:
             p.values[channel] = sensor_reading(channel, msg)
             p.present[channel] = True
+            if channel == ENCODER_CHANNEL:
+                p.applied[0] = applied_torque(msg)
+
+    def on_applied_force(self, msg: Any) -> None:
+        if (p := self.slot(msg)) is not None:
+            p.applied[1] = float(msg.wrench.force.x)
 
     def on_truth(self, msg: Any) -> None:
         if (p := self.slot(msg)) is not None:
@@ -184,7 +211,8 @@ class EstimatorNode:
 
     # -- stepping ------------------------------------------------------------------------
     def complete(self, p: Pending) -> bool:
-        return bool(p.present.all()) and (p.truth is not None or not self.needs_truth)
+        return (bool(p.present.all()) and (p.truth is not None or not self.needs_truth)
+                and (self.active != 1 or not np.isnan(p.applied[1])))
 
     def command_in(self) -> bool:
         """In lock-step, the answer to the previous stamp has arrived (or none is expected)."""
@@ -210,7 +238,19 @@ class EstimatorNode:
         self.counts["partial_updates"] += not complete
         sample = Sample(self.grid.seconds(p.ns), p.values[:4].copy(), float(p.values[4]),
                         p.present.copy(), p.truth)
-        estimate = self.estimator.step(sample, self.command.copy())
+        reported = np.isfinite(p.applied)
+        control = np.where(reported, p.applied, self.command)
+        control[[i for i in (0, 1) if i != self.active]] = 0.0   # the sim drives only this one
+        self.counts["applied_reported"] += bool(reported[self.active or 0])
+        if self.last_ns < 0 and p.ns > 0 and isinstance(self.estimator, LinearFilter):
+            # joined a running loop (restarted): start from the measurements, not the scene,
+            # at the first sample that carries all of them
+            if not (p.present[:4].all() and np.isfinite(p.values[:4]).all()):
+                self.counts["skipped_before_initialisation"] += 1
+                return
+            self.estimator.initialise_from(sample, control)
+            self.counts["initialised_from_measurements"] += 1
+        estimate = self.estimator.step(sample, control)
         self.last_ns = p.ns
         if estimate is None:
             return

@@ -1,14 +1,26 @@
 """sim_node: the simulated rig on the topic contract (DESIGN.md "Topic contract", docs/nodes.md).
 
 A thin shell around :class:`sim_node.plant.Plant`. Per sample k it publishes ``/clock`` = t_k,
-the three floor IMUs, the encoder, the load cell and ``state_truth``, all stamped t_k, then
-waits for the command stamped t_k on the scene's actuator topic and advances the plant with it:
+the three floor IMUs, the encoder (its ``effort`` the torque applied over the last period), the
+load cell, the floor-3 actuator's load cell (the force applied) and ``state_truth``, all stamped
+t_k, then waits for the command stamped t_k on the scene's actuator topic and advances the plant
+with it:
 
 - ``mode: lockstep``: waits as long as it takes, at most ``lockstep_timeout_s`` of wall time;
   after that it counts a lock-step timeout and holds the previous command.
 - ``mode: realtime``: sample k is due at k·period of wall time after the start; a command not
   in by the next sample's due time is a deadline miss (previous command held), and a sample
   that starts more than a period late is an overrun.
+
+Commands pass a :class:`stillframe.command_gate.CommandGate` per topic: only one writer (by its
+writer GID; the first seen, or the node named by the ``command_writer`` parameter) may command,
+a second writer is reported in ``/diagnostics`` and ignored, and non-finite values, values beyond
+the actuator's limit and stamps from the future or before the held command are rejected and
+counted by reason.
+
+When the newest command taken is ``command_timeout_periods`` (default 3) sample periods old, the
+sim applies zero actuation (the safe state) until a fresh command comes, and counts the samples
+(``safe_state_samples``).
 
 At the end of the scene's duration it writes ``result_file`` (the evaluation of
 :func:`stillframe.closed_loop.evaluate` on its own truth history plus the loop's counters) and
@@ -29,6 +41,7 @@ import numpy as np
 from sim_node.plant import make_plant
 from stillframe import messages, topics
 from stillframe.closed_loop import LoopHistory, evaluate
+from stillframe.command_gate import CommandGate
 from stillframe.errors import InputError
 from stillframe.loop_messages import COMMAND_TOPICS, SampleGrid, SensorMessages, command_value
 from stillframe.loop_node import (
@@ -46,7 +59,8 @@ from stillframe.middleware import api
 from stillframe.middleware.clock import ClockPublisher
 from stillframe.signals import Sample, actuator_of
 
-SENSOR_TOPICS = (*topics.FLOOR_IMU, topics.PENDULUM_JOINT_STATES, topics.EXCITATION_WRENCH)
+SENSOR_TOPICS = (*topics.FLOOR_IMU, topics.PENDULUM_JOINT_STATES, topics.EXCITATION_WRENCH,
+                 topics.FLOOR3_LOAD_CELL)
 LOOP_NODES = ("sim_node", "estimator_node", "controller_node")
 #: the node name of ``stillframe record``
 RECORDER_NODE = "stillframe_recorder"
@@ -56,8 +70,10 @@ class SimNode:
     """The plant, its publishers and the command subscriptions of one node."""
 
     def __init__(self, node: api.Node, params: LoopParameters, discovery_timeout_s: float,
-                 await_recorder: list[str] | None = None) -> None:
+                 await_recorder: list[str] | None = None, command_writer: str = "",
+                 command_timeout_periods: int = 3) -> None:
         self.node = node
+        self.command_timeout_periods = command_timeout_periods
         self.await_recorder = [t for t in (await_recorder or []) if t]
         self.params = params
         self.discovery_timeout_s = discovery_timeout_s
@@ -73,27 +89,41 @@ class SimNode:
         self.messages = SensorMessages(scene.sensors)
         self.publishers = [*self.sensor_pubs, self.truth_pub]
         self.diagnostics = Diagnostics(node, params.diagnostics_period_s)
+        limits = (scene.actuators.torque_limit, scene.actuators.force_limit)
+        self.gates = [CommandGate(limit, command_writer, functools.partial(self.writers, spec.name),
+                                  active=i == self.active)
+                      for i, (limit, spec) in enumerate(zip(limits, COMMAND_TOPICS, strict=True))]
         for i, spec in enumerate(COMMAND_TOPICS):
             node.create_subscription(spec.type_name, spec.name,
-                                     functools.partial(self.on_command, i), spec.qos)
+                                     functools.partial(self.on_command, i), spec.qos, raw=True)
         self.command = np.zeros(2)          # [torque, force] held
         self.command_ns = [-1, -1]
         self.now_ns = 0
         self.published_at = 0.0
         self.latency = Durations()
         self.counts = {"lockstep_timeouts": 0, "deadline_misses": 0, "overruns": 0,
-                       "rejected_commands": 0}
+                       "rejected_commands": 0, "safe_state_samples": 0}
         self.max_lateness = 0.0
         self.k = 0
         self.started = time.monotonic()   # reset when the first sample is due
         node.add_on_set_parameters_callback(check_settable)   # nothing changes while it runs
 
-    def on_command(self, actuator: int, msg: Any) -> None:
-        """Take a command stamped at or before the current sample and not older than the one
-        held; reject (and count) non-finite values and stamps from the future."""
+    def writers(self, topic: str) -> list[tuple[bytes, str]]:
+        """(GID, node) of every writer of ``topic`` in the graph."""
+        return [(ep.endpoint_gid, f"{ep.node_namespace.rstrip('/')}/{ep.node_name}")
+                for ep in self.node.get_publishers_info_by_topic(topic)]
+
+    def on_command(self, actuator: int, cdr: bytes, info: api.MessageInfo) -> None:
+        """Take a command its topic's gate lets through (module docstring); count the others."""
+        spec = COMMAND_TOPICS[actuator]
+        msg = messages.decode_sample(cdr, spec.type_name)
+        if msg is None:
+            api.MALFORMED[spec.name] += 1
+            return
         ns = messages.stamp_ns(msg.header.stamp)
         value = command_value(actuator, msg)
-        if not np.isfinite(value) or ns > self.now_ns or ns < self.command_ns[actuator]:
+        if not self.gates[actuator].check(value, ns, info.publisher_gid, self.now_ns,
+                                          self.command_ns[actuator]):
             self.counts["rejected_commands"] += 1
             return
         if actuator == self.active and ns == self.now_ns and self.command_ns[actuator] != ns:
@@ -105,6 +135,8 @@ class SimNode:
         and the controller publishes the scene's command topic."""
         scene = self.params.scene
         pubs = self.sensor_pubs if scene.estimator.type != "none" else []
+        if self.active != 1:    # the floor-3 load cell is read only when that force is driven
+            pubs = pubs[:-1]
         if scene.estimator.type == "truth":
             pubs = [*pubs, self.truth_pub]
         return (all(p.get_subscription_count() > 0 for p in pubs)
@@ -149,6 +181,14 @@ class SimNode:
             self.node.spin_once(remaining)
         return True
 
+    def command_timed_out(self) -> bool:
+        """The newest command taken is ``command_timeout_periods`` periods older than the
+        current sample (or none came for as long): the controller is gone or stuck."""
+        if self.active is None:
+            return False
+        age = self.now_ns - max(self.command_ns[self.active], 0)
+        return age >= self.command_timeout_periods * self.grid.ns(self.plant.period)
+
     def sleep_until(self, when: float) -> None:
         while api.ok() and (remaining := when - time.monotonic()) > 0:
             self.node.spin_once(remaining)
@@ -164,12 +204,22 @@ class SimNode:
             **self.counts, "max_lateness_ms": 1e3 * self.max_lateness,
             "saturated_commands": self.plant.actuators.limited,
         }
-        bad = sum(self.counts.values()) - self.counts["rejected_commands"]
+        for gate, spec in zip(self.gates, COMMAND_TOPICS, strict=True):
+            prefix = spec.name.rsplit("/", 1)[-1]
+            values.update({f"{prefix}_{key}": value for key, value in gate.report().items()})
+        bad = sum(self.counts.values())
         return values, WARN if bad else OK
+
+    def intruder_message(self) -> str:
+        """Which second writers are being ignored, for the status message."""
+        return "; ".join(f"second writer on {spec.name} ignored: "
+                         f"{', '.join(gate.ignored())}"
+                         for gate, spec in zip(self.gates, COMMAND_TOPICS, strict=True)
+                         if gate.intruders)
 
     def publish_status(self) -> None:
         values, level = self.status()
-        self.diagnostics.publish(self.now_ns, values, level)
+        self.diagnostics.publish(self.now_ns, values, level, self.intruder_message())
 
     def step(self, k: int) -> np.ndarray | None:
         """Sample k: publish, wait for its command, advance. The row [t, truth (8), command
@@ -193,6 +243,9 @@ class SimNode:
                 return None
             self.counts["lockstep_timeouts" if p.lockstep else "deadline_misses"] += 1
         control = self.command.copy()
+        if self.command_timed_out():
+            control[self.active] = 0.0      # the safe state: no actuation
+            self.counts["safe_state_samples"] += 1
         plant.advance(control)
         if self.diagnostics.due():
             self.publish_status()
@@ -226,7 +279,10 @@ class SimNode:
             history.evaluation = evaluate(history, p.scene)
         history.evaluation.update({
             "mode": p.mode, "steps": n, "wall_s": time.perf_counter() - wall,
+            "malformed_samples": sum(api.MALFORMED.values()),
             **self.counts, "latency_ms": self.latency.summary(),
+            "command_gates": {spec.name: gate.report()
+                              for gate, spec in zip(self.gates, COMMAND_TOPICS, strict=True)},
             "max_lateness_ms": 1e3 * self.max_lateness,
             "plant": {"model": plant.model.name, "integrator": plant.integrator.name,
                       "dt": plant.h, "actuator_limited": plant.actuators.limited},
@@ -255,7 +311,13 @@ def main() -> int:
             raise InputError(f"parameter 'discovery_timeout_s': must be >= 0, got {discovery}")
         # topics the launch's recorder must subscribe before lock-step starts ("*": all)
         await_recorder = node.declare_parameter("await_recorder", [""], read_only=True).value
-        sim = SimNode(node, params, float(discovery), list(await_recorder))
+        # the node allowed to command ("" : the first writer seen), e.g. "controller_node"
+        writer = node.declare_parameter("command_writer", "", read_only=True).value
+        timeout = node.declare_parameter("command_timeout_periods", 3, read_only=True).value
+        if not (isinstance(timeout, int) and timeout >= 1):
+            raise InputError(f"parameter 'command_timeout_periods': must be an integer >= 1, "
+                             f"got {timeout!r}")
+        sim = SimNode(node, params, float(discovery), list(await_recorder), str(writer), timeout)
         history = sim.run()
         if history is not None and result:
             write_result(history, Path(result))

@@ -93,7 +93,8 @@ class Plant:
         accelerations = self.system.derivative(t, self.x)[self.n_dof:][self.model.floor_index]
         readings, force = self.sensors.read(accelerations, self.x[self.model.phi_index],
                                             self.force(t))
-        return Sample(t, readings, force, truth=self.physical())
+        applied = np.array([self.actuators.torque.value, self.actuators.force.value])
+        return Sample(t, readings, force, truth=self.physical(), applied=applied)
 
     def advance(self, command: np.ndarray) -> np.ndarray:
         """Apply [torque, floor-3 force] via the actuators for one period; the applied values."""

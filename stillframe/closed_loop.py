@@ -1,8 +1,11 @@
 """The closed loop in one process, lock-step: plant → estimator → controller → plant.
 
 Per sample period k, exactly what the three nodes do in the DDS lock-step protocol:
-``Plant.sample`` (readings stamped t_k), ``estimator.step(sample, command in effect)``,
-``controller.command(t_k, estimate, measured force)``, ``Plant.advance(command)``. The same scene
+``Plant.sample`` (readings stamped t_k), ``estimator.step(sample, actuation applied since t_k−1)``,
+``controller.command(t_k, estimate, measured force)``, ``Plant.advance(command)``. The estimator
+gets what the actuators applied after their saturation and slew limits (what the simulator reports
+in the encoder's ``effort`` and the floor-3 load cell), not the command, so that a saturated
+actuator cannot wind the estimate up. The same scene
 and seeds therefore give the same numbers here and through the nodes.
 
 Evaluation (the thesis's "percentage decrease of the maximum amplitude at steady state",
@@ -103,10 +106,10 @@ def run_closed_loop(scene: Section, progress: Progress | None = None) -> LoopHis
         estimate = estimator.step(sample, control) if estimator else None
         command = (controller.command(sample.t, estimate, sample.force) if controller
                    else Command(sample.t))
-        control = command.vector
-        plant.advance(control)
+        applied = plant.advance(command.vector)
         rows[k, 0], rows[k, 1:9], rows[k, 17:19], rows[k, 19] = (
-            sample.t, sample.truth, control, sample.force)
+            sample.t, sample.truth, command.vector, sample.force)
+        control = applied
         if estimate is not None:
             rows[k, 9:17] = estimate.physical
         if progress and k % every == 0:

@@ -318,7 +318,8 @@ class Launcher:
     def commands(self) -> list[tuple[str, list[str]]]:
         """(name, argv) of each child, in start order."""
         o = self.options
-        sim_params: dict[str, Any] = {"result_file": str(o.result_file.resolve())}
+        sim_params: dict[str, Any] = {"result_file": str(o.result_file.resolve()),
+                                      "command_writer": "controller_node"}
         if o.record_dir is not None and o.mode == "lockstep":
             sim_params["await_recorder"] = [
                 names.resolve_topic(t) for t in o.record_topics] or ["*"]

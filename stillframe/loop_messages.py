@@ -77,18 +77,25 @@ class SensorMessages:
         self.encoder.header.frame_id = "pendulum"
         self.load_cell = messages.new("geometry_msgs/msg/WrenchStamped")
         self.load_cell.header.frame_id = "floor1"
+        self.actuator_load_cell = messages.new("geometry_msgs/msg/WrenchStamped")
+        self.actuator_load_cell.header.frame_id = "floor3"
         self.truth = _joint_state(list(STATE_NAMES))
 
     def fill(self, sample: Sample, ns: int) -> list[Any]:
-        """[imu1, imu2, imu3, encoder, load cell] for ``sample``, stamped ``ns``."""
+        """[imu1, imu2, imu3, encoder, load cell, floor-3 load cell] for ``sample``, stamped
+        ``ns``; the encoder's effort and the floor-3 load cell carry ``sample.applied``."""
         for imu, a in zip(self.imus, sample.measurements[:3], strict=True):
             set_stamp(imu, ns)
             imu.linear_acceleration.x = float(a)
         set_stamp(self.encoder, ns)
         self.encoder.position = np.array([sample.measurements[3]])
+        applied = np.zeros(2) if sample.applied is None else sample.applied
+        self.encoder.effort = np.array([applied[0]])
         set_stamp(self.load_cell, ns)
         self.load_cell.wrench.force.x = float(sample.force)
-        return [*self.imus, self.encoder, self.load_cell]
+        set_stamp(self.actuator_load_cell, ns)
+        self.actuator_load_cell.wrench.force.x = float(applied[1])
+        return [*self.imus, self.encoder, self.load_cell, self.actuator_load_cell]
 
     def fill_truth(self, sample: Sample, ns: int) -> Any:
         fill_joint_state(self.truth, ns, sample.truth)
@@ -107,6 +114,16 @@ def sensor_reading(channel: int, msg: Any) -> float:
         return float("nan")
     i = names.index(PENDULUM_JOINT) if names else 0
     return float(msg.position[i]) if i < len(msg.position) else float("nan")
+
+
+def applied_torque(msg: Any) -> float:
+    """The hinge torque applied over the previous period, the ``effort`` of the encoder
+    message's ``pendulum`` joint; NaN when it carries none."""
+    names = list(msg.name)
+    if names and PENDULUM_JOINT not in names:
+        return float("nan")
+    i = names.index(PENDULUM_JOINT) if names else 0
+    return float(msg.effort[i]) if i < len(msg.effort) else float("nan")
 
 
 def physical_state(msg: Any) -> np.ndarray:

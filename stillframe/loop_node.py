@@ -121,6 +121,7 @@ class Diagnostics:
     def publish(self, stamp_ns: int, values: dict[str, Any], level: int = OK,
                 message: str = "") -> None:
         kv = messages.msg_class("diagnostic_msgs/msg/KeyValue")
+        values = {**values, "malformed_samples": sum(api.MALFORMED.values())}
         status = messages.new(
             "diagnostic_msgs/msg/DiagnosticStatus", level=level, name=self.name,
             message=message or ("OK" if level == OK else "degraded"), hardware_id="stillframe",

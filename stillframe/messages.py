@@ -7,10 +7,12 @@ Jazzy typestore, ``Stores.ROS2_JAZZY``); numeric arrays and sequences are numpy 
 
 from __future__ import annotations
 
+import struct
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+from rosbags.serde import SerdeError
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from rosbags.typesys.base import Nodetype
 
@@ -115,6 +117,20 @@ def serialize(msg: Any) -> bytes:
 def deserialize(data: bytes | memoryview, name: str) -> Any:
     """The ``rosbags`` message decoded from CDR ``data`` of type ``name``."""
     return TYPESTORE.deserialize_cdr(data, type_name(name))
+
+
+#: what decoding bytes that are not a valid CDR message of the type raises
+MALFORMED_ERRORS = (SerdeError, UnicodeDecodeError, struct.error, IndexError, ValueError,
+                    OverflowError)
+
+
+def decode_sample(data: bytes | memoryview, name: str) -> Any | None:
+    """:func:`deserialize`, or None for bytes that are not a valid message of type ``name``
+    (truncated or garbage CDR from a faulty or hostile writer)."""
+    try:
+        return deserialize(data, name)
+    except MALFORMED_ERRORS:
+        return None
 
 
 def prepare(name: str) -> None:

@@ -19,13 +19,16 @@ class Sample:
     """Sensor readings at time ``t``: ``measurements`` = [a1, a2, a3, φ] (accelerometers and
     encoder), ``force`` = the load cell on the excited floor; ``present`` marks the channels that
     arrived (a node assembling messages leaves the others False). ``truth`` is the simulator's
-    physical state, for evaluation and the ``truth`` estimator, never for a filter."""
+    physical state, for evaluation and the ``truth`` estimator, never for a filter. ``applied``
+    is the [torque, force] the actuators applied over the previous period (after saturation and
+    slew limits), as the simulator reports it (NaN where not received)."""
 
     t: float
     measurements: np.ndarray
     force: float
     present: np.ndarray = field(default_factory=lambda: np.ones(5, dtype=bool))
     truth: np.ndarray | None = None
+    applied: np.ndarray | None = None
 
 
 @dataclass
@@ -51,6 +54,7 @@ class Command:
     saturated: bool = False
     singular: bool = False
     watchdog: bool = False
+    runaway: bool = False
 
     @property
     def vector(self) -> np.ndarray:

@@ -9,6 +9,7 @@ adapted to the publishers' offers (:func:`stillframe.bag_qos.recorder_request`).
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable, Sequence
 from typing import Any
 
@@ -18,6 +19,9 @@ from stillframe.middleware.clock import SYSTEM_CLOCK
 from stillframe.middleware.qos import QoSProfile
 
 DISCOVERY_PERIOD_S = 0.1
+#: on shutdown, keep handing on what arrives until nothing came for this long [s]
+DRAIN_QUIET_S = 0.2
+DRAIN_POLL_S = 0.005
 #: what a subclass returns for a new topic: the raw callback ``(cdr_bytes, MessageInfo)``
 RawCallback = Callable[[bytes, Any], None]
 
@@ -73,12 +77,18 @@ class TopicFollower:
 
     def drain(self) -> None:
         """After shutdown was requested (``spin`` no longer takes samples): hand on the samples
-        the middleware has already received. The ``dds`` backend's subscriptions can be asked
-        for them directly; under rclpy, what rclpy delivered before shutdown is all there is."""
+        the middleware has received, and those still arriving, until none came for
+        :data:`DRAIN_QUIET_S` (samples in flight when the signal came are kept). The ``dds``
+        backend's subscriptions can be asked for them directly; under rclpy, what rclpy
+        delivered before shutdown is all there is."""
         takers = [take for sub in self._subscriptions.values()
                   if (take := getattr(sub, "take_and_dispatch", None)) is not None]
-        while sum(take() for take in takers):
-            pass
+        quiet_since = time.monotonic()
+        while takers and time.monotonic() - quiet_since < DRAIN_QUIET_S:
+            if sum(take() for take in takers):
+                quiet_since = time.monotonic()
+            else:
+                time.sleep(DRAIN_POLL_S)
 
     def missing(self) -> list[str]:
         """Requested topics never seen with a publisher."""

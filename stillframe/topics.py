@@ -34,11 +34,17 @@ FLOOR_IMU = tuple(
 )
 PENDULUM_JOINT_STATES = TopicSpec(
     "pendulum/joint_states", "sensor_msgs/msg/JointState", "sensor_data",
-    "encoder: name 'pendulum', position = phi",
+    "encoder: name 'pendulum', position = phi; effort = hinge torque the motor applied over the "
+    "previous sample period (after saturation and slew limits)",
 )
 EXCITATION_WRENCH = TopicSpec(
     "excitation/wrench", "geometry_msgs/msg/WrenchStamped", "sensor_data",
     "load cell on floor 1: force.x",
+)
+FLOOR3_LOAD_CELL = TopicSpec(
+    "floor3/load_cell", "geometry_msgs/msg/WrenchStamped", "sensor_data",
+    "load cell of the floor-3 actuator: force.x = force applied over the previous sample period "
+    "(after saturation and slew limits)",
 )
 TORQUE_CMD = TopicSpec(
     "pendulum/torque_cmd", "geometry_msgs/msg/WrenchStamped", "default",
@@ -66,6 +72,7 @@ DIAGNOSTICS = TopicSpec(
 )
 
 CONTRACT: tuple[TopicSpec, ...] = (
-    CLOCK, *FLOOR_IMU, PENDULUM_JOINT_STATES, EXCITATION_WRENCH, TORQUE_CMD, FORCE_CMD,
+    CLOCK, *FLOOR_IMU, PENDULUM_JOINT_STATES, EXCITATION_WRENCH, FLOOR3_LOAD_CELL, TORQUE_CMD,
+    FORCE_CMD,
     STATE_ESTIMATE, STATE_COVARIANCE, STATE_TRUTH, DIAGNOSTICS,
 )

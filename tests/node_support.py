@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 import yaml
 
-from tests.mw_support import REPO_ROOT, child_env, finish
+from tests.mw_support import REPO_ROOT, child_env, finish, start_python
 
 SCENES = REPO_ROOT / "scenes"
 SHORT_LQG = ["duration=6", "controller.start=3", "evaluation.window=2"]
@@ -81,3 +81,18 @@ def run_loop(tmp_path: Path, scene: str, overrides: list[str],
     with np.load(result.with_suffix(".npz")) as data:
         histories = dict(data)
     return json.loads(result.read_text()), histories
+
+
+def run_loop_beside(tmp_path: Path, writer_code: str, scene: str, overrides: list[str],
+                    **params: Any) -> tuple[dict, dict[str, np.ndarray], int]:
+    """:func:`run_loop` while another process runs ``writer_code`` (a Python script that prints
+    ``ready``, writes until SIGTERM and then prints ``sent N``); also returns N."""
+    writer = start_python(writer_code)
+    assert writer.stdout.readline().strip() == "ready"
+    try:
+        result, hist = run_loop(tmp_path, scene, overrides, **params)
+    finally:
+        writer.send_signal(signal.SIGTERM)
+        out, err = finish(writer, timeout=20)
+    assert writer.returncode == 0, err[-2000:]
+    return result, hist, int(out.split()[-1])

@@ -104,4 +104,5 @@ def test_commands_and_watchdog(ros_domain: int, tmp_path: Path, time_source: str
     assert not reference.command((first - 1) * period, None, 0.0).watchdog
     values = diagnostic_values(diagnostics[-1])
     assert values["watchdog"] == str(STEPS - first) and values["watchdog_active"] == "True"
-    assert diagnostics[-1].status[0].level == 1
+    assert diagnostics[-1].status[0].level == 2     # ERROR: the estimator is stale or gone
+    assert "watchdog" in diagnostics[-1].status[0].message

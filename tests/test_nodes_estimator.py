@@ -1,7 +1,9 @@
 """estimator_node as a process, fed by a probe playing simulator and controller: its estimates
 equal the in-process estimator's on the same samples and commands, including a NaN reading
 (dropped and counted), a stale message (rejected and counted) and a missing channel (partial
-update after half the lock-step timeout)."""
+update after half the lock-step timeout). The probe's "simulator" saturates the torque at
+:data:`TORQUE_LIMIT` and reports the applied torque in the encoder's ``effort``: the estimator
+uses that, not the command (no windup), and the command where no effort is reported."""
 
 from __future__ import annotations
 
@@ -26,6 +28,7 @@ __all__ = ["ros_domain"]
 
 STEPS = 6
 NAN_STEP, MISSING_STEP = 2, 4   # floor-2 reading NaN; encoder not sent
+TORQUE_LIMIT = 0.12
 
 
 def _samples() -> list[Sample]:
@@ -44,6 +47,9 @@ def test_estimates_nan_stale_and_missing_channels(ros_domain: int, tmp_path: Pat
     scene = thesis_scene("thesis_lqg", SHORT_LQG)
     samples = _samples()
     commands = [0.05 * (k + 1) for k in range(STEPS)]
+    applied = [0.0, *np.minimum(commands[:-1], TORQUE_LIMIT)]   # over the period before k
+    for s, torque in zip(samples, applied, strict=True):
+        s.applied = np.array([torque, 0.0])
     proc = start_node("estimator_node", params_file(tmp_path, "thesis_lqg", SHORT_LQG,
                                                     lockstep_timeout_s=1.0,
                                                     diagnostics_period_s=0.2))
@@ -64,7 +70,7 @@ def test_estimates_nan_stale_and_missing_channels(ros_domain: int, tmp_path: Pat
         wire = SensorMessages(scene.sensors)
         for k, s in enumerate(samples):
             ns = round(s.t * 1e9)
-            for channel, (pub, msg) in enumerate(zip(sensors, wire.fill(s, ns), strict=True)):
+            for channel, (pub, msg) in enumerate(zip(sensors, wire.fill(s, ns)[:5], strict=True)):
                 if s.present[channel]:
                     pub.publish(msg)
             if k == NAN_STEP:   # a late floor-1 reading of the previous stamp: stale
@@ -88,10 +94,10 @@ def test_estimates_nan_stale_and_missing_channels(ros_domain: int, tmp_path: Pat
 
     design = frame_for(scene.design.model, scene.design.file, scene, "design.file")
     reference = make_estimator(scene, design)
-    control = np.zeros(2)
     for k, s in enumerate(samples):
-        e = reference.step(s, control)
-        control = np.array([commands[k], 0.0])
+        # the missing encoder carried no effort: the command in effect then
+        torque = commands[k - 1] if k == MISSING_STEP else applied[k]
+        e = reference.step(s, np.array([torque, 0.0]))
         msg = estimates[k]
         assert messages.stamp_ns(msg.header.stamp) == round(s.t * 1e9)
         assert list(msg.name) == ["x1", "x2", "x3", "phi"]
@@ -102,4 +108,5 @@ def test_estimates_nan_stale_and_missing_channels(ros_domain: int, tmp_path: Pat
     assert values["stale_messages"] == "1"
     assert values["missing"] == "1" and values["estimates"] == str(STEPS)
     assert values["rejected"] == "2"
+    assert values["applied_reported"] == str(STEPS - 1)
     assert diagnostics[-1].status[0].level == 1   # WARN

@@ -121,12 +121,16 @@ def test_contract_topics_carry_the_plant_samples(ros_domain: int, tmp_path: Path
     assert got["/diagnostics"][-1].status[0].name == "/frame/sim_node"
 
 
-def test_missing_command_times_out_and_the_previous_one_is_held(ros_domain: int,
-                                                                tmp_path: Path) -> None:
-    answered = 8
+def test_missing_command_times_out_held_then_safe_state(ros_domain: int,
+                                                        tmp_path: Path) -> None:
+    """The last command is held until it is ``command_timeout_periods`` (3) periods old, then
+    the sim applies zero (the safe state when the controller is gone)."""
+    answered, timeout = 8, 3
     probe, result, hist = _run_sim(tmp_path, answers=answered, lockstep_timeout_s=0.15)
-    commands = [torque(min(k, answered - 1)) for k in range(STEPS)]
+    last = answered - 1
+    commands = [torque(min(k, last)) if k - last < timeout else 0.0 for k in range(STEPS)]
     assert result["lockstep_timeouts"] == STEPS - answered
+    assert result["safe_state_samples"] == STEPS - last - timeout
     np.testing.assert_array_equal(hist["command"][:, 0], commands)
     np.testing.assert_array_equal(hist["truth"], [s.truth for s in _reference(commands)])
     status = probe.received["/diagnostics"][-1].status[0]

@@ -26,11 +26,13 @@ import os
 import signal
 import sys
 import threading
+from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Protocol
 
+from stillframe import messages
 from stillframe.errors import InputError
 from stillframe.middleware.clock import Clock, Time
 from stillframe.middleware.logger import Logger
@@ -45,10 +47,13 @@ BACKENDS = ("dds", "rclpy")
 @dataclass(frozen=True)
 class MessageInfo:
     """What a raw subscription learns about a sample besides its bytes (ns since the epoch;
-    ``received_timestamp`` on the node's clock, i.e. sim time with ``use_sim_time``)."""
+    ``received_timestamp`` on the node's clock, i.e. sim time with ``use_sim_time``).
+    ``publisher_gid``: the writer's GID (its DDS GUID, as ``endpoint_gid`` in the graph), empty
+    where the backend does not expose it (rclpy Jazzy's message info carries none)."""
 
     source_timestamp: int
     received_timestamp: int
+    publisher_gid: bytes = b""
 
 
 @dataclass(frozen=True)
@@ -114,6 +119,21 @@ class Node(Protocol):
     def get_node_names_and_namespaces(self) -> list[tuple[str, str]]: ...
     def spin_once(self, timeout_sec: float | None = None) -> None: ...
     def destroy_node(self) -> None: ...
+
+
+#: samples per topic that did not decode (malformed CDR), dropped by the subscriptions of this
+#: process; the loop nodes report them in ``/diagnostics``
+MALFORMED: Counter[str] = Counter()
+
+
+def deliver(callback: Callable[[Any], None], data: bytes | memoryview, type_name: str,
+            topic: str) -> None:
+    """Decode ``data`` and hand it to ``callback``; a malformed sample is dropped and counted."""
+    msg = messages.decode_sample(data, type_name)
+    if msg is None:
+        MALFORMED[topic] += 1
+    else:
+        callback(msg)
 
 
 _shutdown = threading.Event()

@@ -353,11 +353,21 @@ class DdsSubscription:
         )
         self.condition = ReadCondition(self._reader, ANY_SAMPLES)
         self.gid = self._reader.guid.bytes
+        self._writer_gids: dict[int, bytes] = {}
         messages.prepare(ros_type)
         self._clock = node.get_clock()
 
     def get_publisher_count(self) -> int:
         return len(self._reader.get_matched_publications())
+
+    def writer_gid(self, handle: int) -> bytes:
+        """The GUID of the matched writer with instance handle ``handle`` (empty if gone)."""
+        if handle not in self._writer_gids:
+            endpoint = self._reader.get_matched_publication_data(handle)
+            if endpoint is None:
+                return b""
+            self._writer_gids[handle] = endpoint.key.bytes
+        return self._writer_gids[handle]
 
     def take_and_dispatch(self) -> int:
         """Hand every waiting sample to the callback; the number handed."""
@@ -368,9 +378,10 @@ class DdsSubscription:
                 continue
             if self.raw:
                 received = self._clock.now().nanoseconds
-                self.callback(bytes(data), api.MessageInfo(info.source_timestamp, received))
+                self.callback(bytes(data), api.MessageInfo(
+                    info.source_timestamp, received, self.writer_gid(info.publication_handle)))
             else:
-                self.callback(messages.deserialize(data, self.msg_type))
+                api.deliver(self.callback, data, self.msg_type, self.topic_name)
             count += 1
         return count
 

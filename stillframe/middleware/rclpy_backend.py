@@ -228,12 +228,13 @@ class RclpyNode:
     ) -> Any:
         name = messages.type_name(msg_type)
 
-        def on_data(data: bytes) -> None:
+        def on_data(data: bytes, info: dict) -> None:
             if raw:
                 now = self._clock.now().nanoseconds
-                callback(data, api.MessageInfo(now, now))
+                gid = bytes(info.get("publisher_gid") or b"")   # absent in Jazzy's rclpy
+                callback(data, api.MessageInfo(now, now, gid))
             else:
-                callback(messages.deserialize(data, name))
+                api.deliver(callback, data, name, topic)
 
         return self._node.create_subscription(
             ros_message_class(name), topic, on_data, rclpy_qos(as_profile(qos)), raw=True
