@@ -20,8 +20,7 @@ from rcl_interfaces.msg import ParameterDescriptor
 from rcl_interfaces.msg import SetParametersResult as RclpySetParametersResult
 from rclpy.clock import ClockType
 from rclpy.duration import Duration
-from rclpy.executors import Executor
-from rclpy.experimental import EventsExecutor
+from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import (
     DurabilityPolicy,
     HistoryPolicy,
@@ -149,10 +148,10 @@ class RclpyNode:
     """:class:`.api.Node` over an ``rclpy.node.Node``."""
 
     backend = "rclpy"
-    #: rclpy's events executor (C++, Jazzy's rclpy.experimental): lock-step through three rclpy
-    #: processes ran 1.7x faster with it than with SingleThreadedExecutor (6.7 s against 11.5 s
-    #: for thesis_lqg, same numbers); every rclpy test passes with it.
-    _executor: Executor | None = None
+    #: rclpy's SingleThreadedExecutor. Its experimental EventsExecutor (C++) ran lock-step 1.7x
+    #: faster, but crashed in spin_once ("SystemError: null argument to internal routine") in
+    #: the launcher's node during a real-time bench run, so it is not used.
+    _executor: SingleThreadedExecutor | None = None
 
     def __init__(self, name: str, namespace: str, args: list[str]) -> None:
         if not rclpy.ok():
@@ -161,7 +160,7 @@ class RclpyNode:
         self.user_args = rclpy.utilities.remove_ros_args(["stillframe", *args])[1:]
         self._clock = RclpyClock(self._node.get_clock())
         if RclpyNode._executor is None:
-            RclpyNode._executor = EventsExecutor()
+            RclpyNode._executor = SingleThreadedExecutor()
         RclpyNode._executor.add_node(self._node)
 
     def get_name(self) -> str:
