@@ -201,6 +201,12 @@ def refine_prediction_error(A: Array, B: Array, C: Array, D: Array, G: Array, u:
     )
 
 
+def bic(refinement: Refinement, samples: int) -> float:
+    """Bayesian information criterion of a refined model (Ljung §16.4, eq. 16.33 with the
+    log N penalty): ``N ln det Λ̂ + d ln N``, d the identifiable parameters."""
+    return samples * refinement.log_det_covariance + refinement.parameter_count * np.log(samples)
+
+
 def _frequency_damping(a: float, b: float, dt: float) -> Array:
     lam = np.log(complex(a, b)) / dt
     wn = abs(lam)

@@ -30,7 +30,7 @@ from numpy.typing import NDArray
 from identification.era import EraDimensions, HankelFactorization, auto_order, factorize, order_gap
 from identification.modal import ModalTable, modal_parameters
 from identification.okid import minimum_samples, observer_gain, okid
-from identification.pem import Refinement, refine_prediction_error
+from identification.pem import Refinement, bic, refine_prediction_error
 from identification.quality import (
     left_out_modes,
     mode_consistency,
@@ -230,9 +230,19 @@ def identify(
     modes = modal_parameters(A, C, float(dt), reference=reference_sensor)
     consistent = mode_consistency(fac, modes, chosen, float(dt))
     left_out = left_out_modes(fac, modes, chosen, float(dt))
-    refinement, uncertain = None, None
+    refinement, uncertain, order_note = None, None, None
     if refine:
         refinement = refine_prediction_error(A, B, C, D, G, u, y, float(dt))
+        if order == "auto" and chosen + 2 <= fac.numerical_rank:
+            larger = fac.realize(chosen + 2)
+            gain = observer_gain(larger.A, larger.C, gain_markov[: p + 1])
+            alternative = refine_prediction_error(larger.A, larger.B, larger.C, larger.D[:, :r],
+                                                  gain, u, y, float(dt))
+            if bic(alternative, n_samples) < bic(refinement, n_samples):
+                order_note = (f"ambiguous order: the Hankel gap chose {chosen}, the prediction "
+                              f"error (BIC) prefers {chosen + 2}, which is used")
+                chosen, refinement = chosen + 2, alternative
+                consistent = mode_consistency(fac, refinement.modes, chosen, float(dt))
         A, B, C, D, G = refinement.A, refinement.B, refinement.C, refinement.D, -refinement.K
         modes = modal_parameters(A, C, float(dt), reference=reference_sensor)
         uncertain = uncertain_modes(modes, refinement.frequency_ci_hz, refinement.damping_ci)
@@ -240,6 +250,7 @@ def identify(
         A=A, B=B, C=C, D=D, G=G, dt=float(dt), order=chosen, order_gap=gap,
         hankel_singular_values=s, markov=markov, method=method, observer_order=p,
         dimensions=dims, factorization=fac, modes=modes, consistent=consistent,
-        warnings=tuple(quality_warnings(modes, consistent, chosen, gap, left_out, uncertain)),
+        warnings=tuple(([order_note] if order_note else [])
+                       + quality_warnings(modes, consistent, chosen, gap, left_out, uncertain)),
         refinement=refinement,
     )

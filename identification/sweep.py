@@ -2,6 +2,7 @@
 
 A *case* is one random building, one record length, one signal-to-noise ratio and one seed.
 :func:`run_case` simulates it and identifies it with stillframe (OKID + ERA/DC, order ``auto``),
+stillframe with the prediction-error refinement (``refine=True``, which also gives 95 % intervals),
 N4SID (``nfoursid``, PO-MOESP) and python-control (``markov`` + ``eigensys_realization``); the
 last two are given the true order, stillframe chooses its own. :func:`run_cases` maps it over a
 list of cases (serially, with progress); the function is top-level and picklable so a parallel
@@ -18,7 +19,8 @@ Scoring: identified oscillatory modes are paired with the true ones by least rel
 distance (Hungarian assignment); a true mode without a partner within 5 % is *missed*. A run is
 *wrong* when a mode is missed, or off by more than 1 % in frequency or 30 % in damping ratio; it
 is *silently wrong* when, in addition, the method gave no warning (N4SID and python-control never
-warn).
+warn). For the refined model, *coverage* counts the paired modes whose true frequency (and
+damping ratio) lies inside its 95 % interval.
 """
 
 from __future__ import annotations
@@ -46,7 +48,7 @@ SEEDS = 10
 QUICK_SNR_DB: tuple[float, ...] = (40.0, 15.0)
 QUICK_LENGTHS: tuple[int, ...] = (1024, 256)
 QUICK_SEEDS = 3
-METHODS: tuple[str, ...] = ("stillframe", "n4sid", "python_control")
+METHODS: tuple[str, ...] = ("stillframe", "stillframe_pem", "n4sid", "python_control")
 
 FREQUENCY_LIMIT, DAMPING_LIMIT = 0.01, 0.30
 """A run is wrong beyond these relative errors (issue 12)."""
@@ -146,11 +148,13 @@ def simulate(building: Building, samples: int, snr_db: float, seed: int) -> Reco
     return Record(u=u, y=y + noise, dt=dt)
 
 
-def score(frequency_hz: Array, damping_ratio: Array, true_frequency: Array, true_damping: Array
-          ) -> dict:
-    """Pair the identified modes with the true ones and return the worst errors and flags."""
+def score(frequency_hz: Array, damping_ratio: Array, true_frequency: Array, true_damping: Array,
+          frequency_ci_hz: Array | None = None, damping_ci: Array | None = None) -> dict:
+    """Pair the identified modes with the true ones and return the worst errors and flags (and,
+    given the 95 % intervals, how many paired modes they cover)."""
     keep = (frequency_hz > 0) & np.isfinite(frequency_hz)
     f, z = frequency_hz[keep], damping_ratio[keep]
+    covered = {"frequency": 0, "damping": 0, "paired": 0}
     n_true = true_frequency.size
     freq_err = np.full(n_true, math.inf)
     damp_err = np.full(n_true, math.inf)
@@ -162,35 +166,54 @@ def score(frequency_hz: Array, damping_ratio: Array, true_frequency: Array, true
             if cost[i, j] <= MISSED_DISTANCE:
                 freq_err[i] = cost[i, j]
                 damp_err[i] = abs(z[j] - true_damping[i]) / true_damping[i]
+                if frequency_ci_hz is not None and damping_ci is not None:
+                    f_lo, f_hi = frequency_ci_hz[keep][j]
+                    z_lo, z_hi = damping_ci[keep][j]
+                    covered["paired"] += 1
+                    covered["frequency"] += int(f_lo <= true_frequency[i] <= f_hi)
+                    covered["damping"] += int(z_lo <= true_damping[i] <= z_hi)
     missed = int(np.sum(~np.isfinite(freq_err)))
     wrong = bool(missed or np.any(freq_err > FREQUENCY_LIMIT) or np.any(damp_err > DAMPING_LIMIT))
-    return {"frequency_error": float(freq_err.max()), "damping_error": float(damp_err.max()),
-            "missed": missed, "wrong": wrong}
+    out = {"frequency_error": float(freq_err.max()), "damping_error": float(damp_err.max()),
+           "missed": missed, "wrong": wrong}
+    return out | ({"ci_covered": covered} if frequency_ci_hz is not None else {})
 
 
-def _stillframe(record: Record, order: int) -> tuple[Array, Array, list[str]]:
+Identified = tuple[Array, Array, list[str], Array | None, Array | None]
+"""Frequencies, damping ratios, warnings and (or None) the 95 % intervals."""
+
+
+def _stillframe(record: Record, order: int) -> Identified:
     ident = identify(record.u, record.y, record.dt, "okid-eradc", "auto")
-    return ident.modes.frequency_hz, ident.modes.damping_ratio, list(ident.warnings)
+    return ident.modes.frequency_hz, ident.modes.damping_ratio, list(ident.warnings), None, None
 
 
-def _n4sid(record: Record, order: int) -> tuple[Array, Array, list[str]]:
+def _stillframe_pem(record: Record, order: int) -> Identified:
+    ident = identify(record.u, record.y, record.dt, "okid-eradc", "auto", refine=True)
+    ref = ident.refinement
+    return (ident.modes.frequency_hz, ident.modes.damping_ratio, list(ident.warnings),
+            ref.frequency_ci_hz, ref.damping_ci)
+
+
+def _n4sid(record: Record, order: int) -> Identified:
     m = record.y.shape[1]
     block_rows = max(math.ceil(order / m) + 1, min(10, record.u.shape[0] // 40))
     A, _, C, _ = identify_n4sid(record.u, record.y, order, block_rows)
     modes = modal_parameters(A, C, record.dt)
-    return modes.frequency_hz, modes.damping_ratio, []
+    return modes.frequency_hz, modes.damping_ratio, [], None, None
 
 
-def _python_control(record: Record, order: int) -> tuple[Array, Array, list[str]]:
+def _python_control(record: Record, order: int) -> Identified:
     count = min(MARKOV_COUNT, record.u.shape[0] // 8)
     markov = control.markov(record.y.T, record.u.T, count)
     sys_, _ = control.eigensys_realization(markov, order, dt=record.dt)
     modes = modal_parameters(sys_.A, sys_.C, record.dt)
-    return modes.frequency_hz, modes.damping_ratio, []
+    return modes.frequency_hz, modes.damping_ratio, [], None, None
 
 
-IDENTIFIERS: dict[str, Callable[[Record, int], tuple[Array, Array, list[str]]]] = {
-    "stillframe": _stillframe, "n4sid": _n4sid, "python_control": _python_control,
+IDENTIFIERS: dict[str, Callable[[Record, int], Identified]] = {
+    "stillframe": _stillframe, "stillframe_pem": _stillframe_pem, "n4sid": _n4sid,
+    "python_control": _python_control,
 }
 
 
@@ -205,14 +228,14 @@ def run_case(case: Case) -> dict:
                  "true_damping_ratio": building.damping_ratio.tolist()}
     for name, identifier in IDENTIFIERS.items():
         try:
-            f, z, warnings = identifier(record, order)
+            f, z, warnings, f_ci, z_ci = identifier(record, order)
         except Exception as exc:  # a refusal or a failure of any method is scored
             out[name] = {"frequency_error": math.inf, "damping_error": math.inf,
                          "missed": int(building.frequency_hz.size), "wrong": True,
                          "warned": True, "silently_wrong": False,
                          "warnings": [f"refused: {exc}"]}
             continue
-        result = score(f, z, building.frequency_hz, building.damping_ratio)
+        result = score(f, z, building.frequency_hz, building.damping_ratio, f_ci, z_ci)
         result["warned"] = bool(warnings)
         result["silently_wrong"] = result["wrong"] and not warnings
         result["warnings"] = warnings
@@ -267,5 +290,11 @@ def summarize(results: Sequence[dict]) -> list[dict]:
                 "warned": sum(p["warned"] for p in per),
                 "silently_wrong": sum(p["silently_wrong"] for p in per),
             }
+            paired = sum(p.get("ci_covered", {}).get("paired", 0) for p in per)
+            if paired:
+                row[name]["ci_coverage_frequency"] = sum(
+                    p["ci_covered"]["frequency"] for p in per if "ci_covered" in p) / paired
+                row[name]["ci_coverage_damping"] = sum(
+                    p["ci_covered"]["damping"] for p in per if "ci_covered" in p) / paired
         table.append(row)
     return table

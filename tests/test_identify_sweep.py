@@ -69,7 +69,7 @@ def test_bench_json_cells_count_their_runs() -> None:
     for cell in doc["cells"]:
         runs = [r for r in doc["runs"]
                 if (r["snr_db"], r["samples"]) == (cell["snr_db"], cell["samples"])]
-        for method in ("stillframe", "n4sid", "python_control"):
+        for method in ("stillframe", "stillframe_pem", "n4sid", "python_control"):
             assert cell[method]["silently_wrong"] == sum(r[method]["silently_wrong"]
                                                          for r in runs)
             assert cell[method]["frequency_error_median"] == runs[0][method]["frequency_error"]

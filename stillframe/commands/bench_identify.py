@@ -42,7 +42,8 @@ FIGURES: tuple[tuple[str, str, float], ...] = (
     ("damping_error_p90", "90th-percentile worst-mode damping error [%]", 100.0),
     ("silently_wrong", "silently wrong runs", 1.0),
 )
-LABELS = {"stillframe": "stillframe", "n4sid": "N4SID", "python_control": "python-control"}
+LABELS = {"stillframe": "stillframe", "stillframe_pem": "stillframe + PEM", "n4sid": "N4SID",
+          "python_control": "python-control"}
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -60,6 +61,12 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def _percent(value: float) -> str:
     return "inf" if not np.isfinite(value) else f"{100 * value:.3g}"
+
+
+def _coverage(cell: dict) -> str:
+    if "ci_coverage_frequency" not in cell:
+        return "-"
+    return f"{100 * cell['ci_coverage_frequency']:.0f}/{100 * cell['ci_coverage_damping']:.0f}"
 
 
 def heat_maps(table: list[dict], directory: Path) -> list[Path]:
@@ -117,9 +124,11 @@ def run(args: argparse.Namespace) -> int:
                          _percent(cell["frequency_error_p90"]),
                          _percent(cell["damping_error_median"]),
                          _percent(cell["damping_error_p90"]),
-                         f"{cell['wrong']}/{row['runs']}", cell["silently_wrong"]])
+                         f"{cell['wrong']}/{row['runs']}", cell["silently_wrong"],
+                         _coverage(cell)])
     print(format_table(["SNR [dB]", "samples", "method", "freq err med [%]", "freq p90 [%]",
-                        "damp err med [%]", "damp p90 [%]", "wrong", "silently wrong"], rows))
+                        "damp err med [%]", "damp p90 [%]", "wrong", "silently wrong",
+                        "95 % CI coverage f/z [%]"], rows))
     for path in paths:
         print(f"wrote {path}")
     return 0
