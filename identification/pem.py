@@ -81,11 +81,14 @@ class _Layout:
     r: int
     pairs: int
     reals: int
+    innovations: bool = True
+    """False: K is fixed at zero (output-error model) and not a parameter."""
 
     @property
     def sizes(self) -> tuple[int, ...]:
         n, m, r = self.n, self.m, self.r
-        return (2 * self.pairs + self.reals, n * r, m * n, m * r, n * m, n)
+        return (2 * self.pairs + self.reals, n * r, m * n, m * r,
+                n * m if self.innovations else 0, n)
 
     @property
     def size(self) -> int:
@@ -107,7 +110,7 @@ class _Layout:
             i = 2 * self.pairs + j
             A[:, i, i] = eig[:, 2 * self.pairs + j]
         return (A, B.reshape(b, n, r), C.reshape(b, m, n), D.reshape(b, m, r),
-                K.reshape(b, n, m), x0)
+                K.reshape(b, n, m) if self.innovations else np.zeros((b, n, m)), x0)
 
 
 def real_modal_form(A: Array, B: Array, C: Array, K: Array) -> tuple[Array, Array, Array, Array,
@@ -146,15 +149,18 @@ def _predict(layout: _Layout, theta: Array, u: Array, y: Array) -> Array:
 
 
 def refine_prediction_error(A: Array, B: Array, C: Array, D: Array, G: Array, u: Array, y: Array,
-                            dt: float) -> Refinement:
+                            dt: float, innovations: bool = True) -> Refinement:
     """Refine an OKID/ERA model ``(A, B, C, D)`` with observer gain ``G`` on the record
-    ``u (N, r)``, ``y (N, m)`` by prediction-error least squares (module docstring)."""
+    ``u (N, r)``, ``y (N, m)`` by prediction-error least squares (module docstring).
+    ``innovations=False`` fixes K = 0: the output-error model, whose one-step prediction is the
+    simulation from the input alone (Ljung §4.2, eq. 4.25)."""
     u = np.asarray(u, dtype=float)
     y = np.asarray(y, dtype=float)
     n, m, r = A.shape[0], C.shape[0], B.shape[1]
     eig, Bm, Cm, Km, pairs, reals = real_modal_form(A, B, C, -G)
-    layout = _Layout(n=n, m=m, r=r, pairs=pairs, reals=reals)
-    theta0 = np.concatenate([eig, Bm.ravel(), Cm.ravel(), D.ravel(), Km.ravel(), np.zeros(n)])
+    layout = _Layout(n=n, m=m, r=r, pairs=pairs, reals=reals, innovations=innovations)
+    gain = Km.ravel() if innovations else np.zeros(0)
+    theta0 = np.concatenate([eig, Bm.ravel(), Cm.ravel(), D.ravel(), gain, np.zeros(n)])
     e0 = _predict(layout, theta0[None], u, y)[0]
     if not np.all(np.isfinite(e0)):
         raise InputError("the starting model's predictor diverges: cannot refine")
