@@ -6,7 +6,9 @@ Random shear buildings (2–5 modes, some closely spaced), SNR × record length 
 per cell; stillframe (OKID + ERA/DC, order auto), N4SID (``nfoursid``) and python-control
 (``markov`` + ``era``) on the same records. Per cell and method: median and 90th-percentile
 worst-mode frequency and damping errors and the count of silently wrong runs. Terminal table,
-``--json``, heat maps with ``--plots DIR``; ``--quick`` runs a small subset.
+``--json``, heat maps with ``--plots DIR``; ``--quick`` runs a small subset. The sweep's
+modules (python-control, nfoursid, matplotlib) are imported in ``run``: every CLI command
+registers this module at start-up.
 """
 
 from __future__ import annotations
@@ -14,26 +16,10 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt
 import numpy as np
 
-from identification.sweep import (
-    LENGTHS,
-    METHODS,
-    QUICK_LENGTHS,
-    QUICK_SEEDS,
-    QUICK_SNR_DB,
-    SEEDS,
-    SNR_DB,
-    cases,
-    run_case,
-    run_cases,
-    summarize,
-)
 from stillframe.commands.common import add_json_argument, emit_json, format_table
+from stillframe.errors import InputError
 
 FIGURES: tuple[tuple[str, str, float], ...] = (
     ("frequency_error_median", "median worst-mode frequency error [%]", 100.0),
@@ -50,9 +36,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     parser = sub.add_parser("identify", help="identification sweep: stillframe vs N4SID vs "
                                              "python-control on random shear buildings")
     parser.add_argument("--quick", action="store_true",
-                        help=f"SNR {QUICK_SNR_DB} dB, lengths {QUICK_LENGTHS}, "
-                             f"{QUICK_SEEDS} seeds")
-    parser.add_argument("--seeds", type=int, default=None, help=f"seeds per cell ({SEEDS})")
+                        help="SNR 40, 15 dB x lengths 1024, 256 x 3 seeds")
+    parser.add_argument("--seeds", type=int, default=None,
+                        help="seeds per cell (default 10, --quick 3)")
     parser.add_argument("--plots", type=Path, default=None, metavar="DIR",
                         help="write one heat-map PNG per method and figure")
     add_json_argument(parser)
@@ -71,6 +57,12 @@ def _coverage(cell: dict) -> str:
 
 def heat_maps(table: list[dict], directory: Path) -> list[Path]:
     """One PNG per method and figure: SNR down, record length across."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from identification.sweep import METHODS
     snrs = sorted({row["snr_db"] for row in table}, reverse=True)
     lengths = sorted({row["samples"] for row in table}, reverse=True)
     index = {(row["snr_db"], row["samples"]): row for row in table}
@@ -104,10 +96,26 @@ def heat_maps(table: list[dict], directory: Path) -> list[Path]:
 
 
 def run(args: argparse.Namespace) -> int:
+    from identification.sweep import (
+        LENGTHS,
+        METHODS,
+        QUICK_LENGTHS,
+        QUICK_SEEDS,
+        QUICK_SNR_DB,
+        SEEDS,
+        SNR_DB,
+        cases,
+        run_case,
+        run_cases,
+        summarize,
+    )
+
     if args.quick:
         snrs, lengths, seeds = QUICK_SNR_DB, QUICK_LENGTHS, QUICK_SEEDS
     else:
         snrs, lengths, seeds = SNR_DB, LENGTHS, SEEDS
+    if args.seeds is not None and args.seeds < 1:
+        raise InputError(f"--seeds {args.seeds}: must be a positive integer")
     seeds = args.seeds or seeds
     results = run_cases(run_case, cases(snrs, lengths, seeds))
     table = summarize(results)
