@@ -15,6 +15,11 @@ input, :mod:`identification.validation`). Choices, fixed before looking at the h
   identified on the first three quarters of the identification half and simulated on its last
   quarter.
 
+``okid-era-oe``: the OKID + ERA model (its p as above) refined on the identification half as an
+output-error model (:func:`identification.pem.refine_prediction_error` with ``innovations=False``:
+least squares on the simulation error from the input alone, which is what the held-out fit
+measures).
+
 Dominant modes are those with the largest peak of their modal contribution
 ``|| C psi_i w_i B || / (1 - |lambda_i|)`` (the height of the mode's resonance peak in the
 FRF), among modes with damping ratio below 0.2.
@@ -36,6 +41,7 @@ from scipy import signal
 from identification.frf import h1_frf
 from identification.modal import modal_parameters
 from identification.n4sid import identify_n4sid
+from identification.pem import refine_prediction_error
 from identification.pipeline import identify
 from identification.validation import fit_percent, simulate_fitted
 from stillframe.errors import InputError
@@ -125,6 +131,17 @@ def choose_observer_order(u: np.ndarray, y: np.ndarray, method: str) -> int:
     return best
 
 
+def output_error_model(start: Model, u: np.ndarray, y: np.ndarray) -> Model:
+    """``start`` refined as an output-error model on ``u``, ``y`` (module docstring)."""
+    begin = time.perf_counter()
+    ref = refine_prediction_error(start.A, start.B, start.C, start.D,
+                                  np.zeros((start.A.shape[0], y.shape[1])), u, y, DT,
+                                  innovations=False)
+    return Model(f"{start.method}-oe", ref.A, ref.B, ref.C, ref.D,
+                 start.seconds + time.perf_counter() - begin, start.observer_order,
+                 start.warnings)
+
+
 def n4sid_model(u: np.ndarray, y: np.ndarray) -> Model:
     start = time.perf_counter()
     A, B, C, D = identify_n4sid(u, y, ORDER, BLOCK_ROWS)
@@ -161,6 +178,8 @@ def report(path: str | Path = DEFAULT_PATH,
         p = choose_observer_order(u[:half], y[:half], method)
         progress(f"{method}: observer order {p}")
         models.append(okid_model(u[:half], y[:half], method, p))
+    progress("okid-era-oe: output-error refinement")
+    models.append(output_error_model(models[0], u[:half], y[:half]))
     progress("n4sid")
     models.append(n4sid_model(u[:half], y[:half]))
     methods = {}

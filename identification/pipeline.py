@@ -11,6 +11,8 @@ With ``combined=True`` the OKID methods realize the combined parameters ``[Y_k, 
 (eqs. 3.165–3.203, the thesis's variant for the rig in §5.5), which gives B and G together; on the
 simulated hammer test its damping ratios are worse (docs/identification.md), so it is not the
 default.
+With ``refine=True`` the OKID model is then refined by prediction-error least squares in
+innovation form (:mod:`identification.pem`), which also gives each mode a 95 % interval.
 - ``era-impulse``: the record is the response to one pulse on a single input at the first
   sample; ``Y_k = y(k) / u(0)`` and ERA. No observer gain.
 """
@@ -28,7 +30,13 @@ from numpy.typing import NDArray
 from identification.era import EraDimensions, HankelFactorization, auto_order, factorize, order_gap
 from identification.modal import ModalTable, modal_parameters
 from identification.okid import minimum_samples, observer_gain, okid
-from identification.quality import mode_consistency, quality_warnings
+from identification.pem import Refinement, bic, refine_prediction_error
+from identification.quality import (
+    left_out_modes,
+    mode_consistency,
+    quality_warnings,
+    uncertain_modes,
+)
 from stillframe.errors import InputError
 
 Array = NDArray[np.float64]
@@ -66,7 +74,11 @@ class Identification:
     consistent: NDArray[np.bool_]
     """Per mode: persists at orders n + 2 and n + 4 (:mod:`identification.quality`)."""
     warnings: tuple[str, ...]
-    """The quality checks that failed (weak order gap, inconsistent or unstable modes)."""
+    """The quality checks that failed (weak order gap, inconsistent, unstable, left-out or
+    uncertain modes)."""
+    refinement: Refinement | None = None
+    """The prediction-error refinement (``refine=True``): A, B, C, D and the modes above are
+    its; it holds the modes' 95 % intervals."""
 
 
 def _as_record(name: str, values: Array) -> Array:
@@ -161,6 +173,7 @@ def identify(
     tau: int = 1,
     reference_sensor: int | None = None,
     combined: bool = False,
+    refine: bool = False,
 ) -> Identification:
     """Identify a discrete state-space model of order ``order`` (or the largest singular-value
     gap up to ``max_order`` when ``"auto"``; default: half the Hankel matrix's rank bound)
@@ -171,11 +184,16 @@ def identify(
     as the record allows up to 50 and 200); ``gamma``, ``delta``, ``tau`` are the ERA/DC
     correlation sizes (eq. 3.141). ``reference_sensor`` normalises the mode shapes (default: the
     largest component). ``combined`` realizes ``[Y_k, Y^0_k]`` (eq. 3.165) for the OKID methods.
+    ``refine`` (OKID methods, not combined) refines the model by prediction-error least squares
+    (:func:`identification.pem.refine_prediction_error`) and checks its modes' intervals.
     Raises :class:`InputError` on bad input or a record too short.
     """
     u = _as_record("input", u)
     y = _as_record("output", y)
     _check_request(u, y, dt, method, order, max_order, combined)
+    if refine and (combined or method == "era-impulse"):
+        raise InputError("the refinement needs OKID's observer gain of the plain realization: "
+                         "not with era-impulse or combined")
     n_samples, r = u.shape
     m = y.shape[1]
     needed_order = 2 if order == "auto" else int(order)
@@ -208,12 +226,31 @@ def identify(
         B, G = real.B[:, :r], real.B[:, r:]  # eqs. 3.198, 3.199
     else:
         B, G = real.B, observer_gain(real.A, real.C, gain_markov[: p + 1])
-    modes = modal_parameters(real.A, real.C, float(dt), reference=reference_sensor)
+    A, C, D = real.A, real.C, real.D[:, :r]  # the combined Gamma_0 is [D, 0]
+    modes = modal_parameters(A, C, float(dt), reference=reference_sensor)
     consistent = mode_consistency(fac, modes, chosen, float(dt))
+    left_out = left_out_modes(fac, modes, chosen, float(dt))
+    refinement, uncertain, order_note = None, None, None
+    if refine:
+        refinement = refine_prediction_error(A, B, C, D, G, u, y, float(dt))
+        if order == "auto" and chosen + 2 <= fac.numerical_rank:
+            larger = fac.realize(chosen + 2)
+            gain = observer_gain(larger.A, larger.C, gain_markov[: p + 1])
+            alternative = refine_prediction_error(larger.A, larger.B, larger.C, larger.D[:, :r],
+                                                  gain, u, y, float(dt))
+            if bic(alternative, n_samples) < bic(refinement, n_samples):
+                order_note = (f"ambiguous order: the Hankel gap chose {chosen}, the prediction "
+                              f"error (BIC) prefers {chosen + 2}, which is used")
+                chosen, refinement = chosen + 2, alternative
+                consistent = mode_consistency(fac, refinement.modes, chosen, float(dt))
+        A, B, C, D, G = refinement.A, refinement.B, refinement.C, refinement.D, -refinement.K
+        modes = modal_parameters(A, C, float(dt), reference=reference_sensor)
+        uncertain = uncertain_modes(modes, refinement.frequency_ci_hz, refinement.damping_ci)
     return Identification(
-        A=real.A, B=B, C=real.C, D=real.D[:, :r],  # the combined Gamma_0 is [D, 0]
-        G=G, dt=float(dt), order=chosen, order_gap=gap, hankel_singular_values=s,
-        markov=markov, method=method, observer_order=p, dimensions=dims, factorization=fac,
-        modes=modes, consistent=consistent,
-        warnings=tuple(quality_warnings(modes, consistent, chosen, gap)),
+        A=A, B=B, C=C, D=D, G=G, dt=float(dt), order=chosen, order_gap=gap,
+        hankel_singular_values=s, markov=markov, method=method, observer_order=p,
+        dimensions=dims, factorization=fac, modes=modes, consistent=consistent,
+        warnings=tuple(([order_note] if order_note else [])
+                       + quality_warnings(modes, consistent, chosen, gap, left_out, uncertain)),
+        refinement=refinement,
     )

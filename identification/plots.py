@@ -52,9 +52,15 @@ def hankel_singular_values(singular_values: np.ndarray, order: int, path: Path,
 
 def stabilization_diagram(orders: Sequence[int], frequencies_hz: Sequence[np.ndarray],
                           stable: Sequence[np.ndarray], chosen: int, path: Path,
-                          nyquist_hz: float | None = None) -> Path:
-    """Poles' frequencies against model order; stable ones filled, the chosen order marked."""
+                          nyquist_hz: float | None = None,
+                          frequency_ci_hz: np.ndarray | None = None) -> Path:
+    """Poles' frequencies against model order; stable ones filled, the chosen order marked;
+    with ``frequency_ci_hz (modes, 2)`` the chosen model's 95 % intervals as bars on its line."""
     fig, ax = plt.subplots(figsize=(8, 5))
+    if frequency_ci_hz is not None:
+        ci = np.asarray(frequency_ci_hz, dtype=float)
+        ax.hlines(np.full(len(ci), chosen), ci[:, 0], ci[:, 1], color="C1", lw=6, alpha=0.6,
+                  label="95 % interval (refined model)")
     for n, f, ok in zip(orders, frequencies_hz, stable, strict=True):
         f, ok = np.asarray(f), np.asarray(ok, dtype=bool)
         ax.plot(f[ok], np.full(ok.sum(), n), "o", color="C0", ms=4)
@@ -163,7 +169,9 @@ def identification_plots(ident: Identification, record: Record, directory: str |
                                out / "hankel_singular_values.png"),
         stabilization_diagram([r.order for r in rows], [r.modes.frequency_hz for r in rows],
                               [r.stable for r in rows], ident.order,
-                              out / "stabilization.png", nyquist_hz=0.5 / ident.dt),
+                              out / "stabilization.png", nyquist_hz=0.5 / ident.dt,
+                              frequency_ci_hz=(None if ident.refinement is None
+                                               else ident.refinement.frequency_ci_hz)),
         frf(measured.frequency_hz, measured.H, measured.coherence, model,
             [str(c) for c in record.inputs], names, out / "frf.png"),
         mode_shapes(ident.modes.frequency_hz, ident.modes.damping_ratio, ident.modes.shapes,

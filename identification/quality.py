@@ -10,7 +10,13 @@ from the one Hankel factorization (thesis §3.6):
   hold a mode within 1 % in frequency, 20 % in damping ratio and MAC 0.9 of it (a stabilization
   diagram read forwards from the chosen order). Modes fitted to noise move when the order grows;
 - **stability**: a mode with a negative damping ratio makes the model unstable, which a passive
-  structure is not.
+  structure is not;
+- **modes left out** (issue 12): a mode that is stable (1 % frequency, 20 % damping, MAC 0.9)
+  through :data:`STABLE_RUN` successive higher orders up to twice the chosen order, but has no
+  counterpart within 1 % in the chosen model, is a physical candidate the order dropped;
+- **uncertain modes** (with the prediction-error refinement, :mod:`identification.pem`): a mode
+  whose 95 % interval is wider than ± 1 % in frequency or ± 30 % in damping ratio is not known to
+  that accuracy from this record.
 """
 
 from __future__ import annotations
@@ -25,6 +31,10 @@ from identification.stabilization import matching_modes
 GAP_WARNING = 15.0
 """σ_n / σ_{n+1} below this: the chosen order is weakly supported by the record."""
 CONSISTENCY_STEPS = (2, 4)
+STABLE_RUN = 3
+"""A left-out mode must persist through this many successive higher orders (step 2)."""
+FREQUENCY_CI_LIMIT, DAMPING_CI_LIMIT = 0.01, 0.30
+"""Relative half-widths of the 95 % intervals beyond which a mode is called uncertain."""
 FREQUENCY_TOL, DAMPING_TOL, MAC_MIN = 0.01, 0.2, 0.9
 
 
@@ -43,10 +53,56 @@ def mode_consistency(factorization: HankelFactorization, modes: ModalTable, orde
     return consistent
 
 
+def left_out_modes(factorization: HankelFactorization, modes: ModalTable, order: int,
+                   dt: float) -> NDArray[np.float64]:
+    """Frequencies of the modes stable through :data:`STABLE_RUN` successive orders above
+    ``order`` (up to ``2 order + 2`` and the numerical rank) that the chosen model lacks."""
+    top = min(2 * order + 2, factorization.numerical_rank)
+    orders = list(range(order + 2, top + 1, 2))
+    tables = [modal_parameters(*_a_c(factorization, n), dt) for n in orders]
+    found: list[float] = []
+    for start in range(len(tables) - STABLE_RUN + 1):
+        run = tables[start:start + STABLE_RUN]
+        persistent = np.ones(len(run[0]), dtype=bool)
+        for later in run[1:]:
+            persistent &= matching_modes(run[0], later, FREQUENCY_TOL, DAMPING_TOL, MAC_MIN)[1]
+        present, _ = matching_modes(run[0], modes, FREQUENCY_TOL, 1.0, 0.0)
+        positive = run[0].damping_ratio > 0
+        for f in run[0].frequency_hz[persistent & ~present & positive]:
+            if all(abs(f - g) > FREQUENCY_TOL * f for g in found):
+                found.append(float(f))
+    return np.array(sorted(found))
+
+
+def _a_c(factorization: HankelFactorization, order: int) -> tuple[np.ndarray, np.ndarray]:
+    real = factorization.realize(order)
+    return real.A, real.C
+
+
+def uncertain_modes(modes: ModalTable, frequency_ci_hz: np.ndarray, damping_ci: np.ndarray
+                    ) -> NDArray[np.bool_]:
+    """Per mode: is its 95 % interval wider than the limits (module docstring)?"""
+    f_half = 0.5 * (frequency_ci_hz[:, 1] - frequency_ci_hz[:, 0])
+    z_half = 0.5 * (damping_ci[:, 1] - damping_ci[:, 0])
+    return ((f_half > FREQUENCY_CI_LIMIT * modes.frequency_hz)
+            | (z_half > DAMPING_CI_LIMIT * np.abs(modes.damping_ratio)))
+
+
 def quality_warnings(modes: ModalTable, consistent: NDArray[np.bool_], order: int,
-                     gap: float) -> list[str]:
-    """One sentence per failed check; empty when the model passes all three."""
+                     gap: float, left_out: NDArray[np.float64] | None = None,
+                     uncertain: NDArray[np.bool_] | None = None) -> list[str]:
+    """One sentence per failed check; empty when the model passes them all."""
     found = []
+    if left_out is not None and left_out.size:
+        listed = ", ".join(f"{f:.4g} Hz" for f in left_out)
+        found.append(f"ambiguous order: modes at {listed} are stable at higher orders but not in "
+                     f"the order-{order} model (a physical mode may have been dropped; try a "
+                     "higher --order)")
+    if uncertain is not None and uncertain.any():
+        listed = ", ".join(f"{f:.4g} Hz" for f in modes.frequency_hz[uncertain])
+        found.append(f"uncertain modes: {listed} have 95 % intervals wider than "
+                     f"{100 * FREQUENCY_CI_LIMIT:g} % in frequency or "
+                     f"{100 * DAMPING_CI_LIMIT:g} % in damping")
     if np.isfinite(gap) and gap < GAP_WARNING:
         found.append(f"weak order gap: sigma_n/sigma_n+1 = {gap:.3g} at order {order} (below "
                      f"{GAP_WARNING:g}); the record does not single out this order (noise, a "

@@ -187,10 +187,12 @@ def test_save_model_with_mkr_recovers_m_k_r(clean_bag: Path, tmp_path: Path) -> 
     assert model.provenance["rayleigh_beta"] == pytest.approx(2e-4, rel=1e-3)
 
 
-def test_plots_are_written(noisy_bag: Path, tmp_path: Path) -> None:
+@pytest.mark.parametrize("extra", [[], ["--refine"]])
+def test_plots_are_written(noisy_bag: Path, tmp_path: Path, extra: list[str]) -> None:
+    """With --refine the stabilization diagram also carries the 95 % intervals."""
     out = tmp_path / "plots"
     result = stillframe("identify", str(noisy_bag), *CHANNELS, "--order", "6", "--plots",
-                        str(out), "--progress")
+                        str(out), "--progress", *extra)
     assert result.returncode == 0, result.stderr
     names = {"hankel_singular_values.png", "stabilization.png", "frf.png", "mode_shapes.png"}
     assert {p.name for p in out.iterdir()} == names

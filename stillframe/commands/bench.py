@@ -11,6 +11,7 @@ import importlib
 BENCHES: tuple[str, ...] = (
     "stillframe.commands.bench_transport",
     "stillframe.commands.bench_identify",
+    "stillframe.commands.bench_identify_hammer",
     "stillframe.commands.bench_loop",
     "stillframe.commands.bench_monitor",
     "stillframe.commands.bench_fidelity",

@@ -1,107 +1,142 @@
-"""``stillframe bench identify``: OKID + ERA/DC against python-control's ``markov`` + ``era``.
+"""``stillframe bench identify``: the identification sweep of issue 12.
 
-Data: the thesis's hammer test (§5.5) on the lumped model of ``scenes/thesis_lumped.yaml``,
-as :func:`identification.hammer.hammer_test` simulates it: a blow on floor 1, the three floor
-accelerations, 32 Hz, 2048 samples, sensor noise, one fixed seed. Both methods get the same
-arrays and the same order (6, the thesis's); python-control estimates 256 Markov parameters by
-plain least squares (its ``markov`` assumes C A^k B = 0 beyond them; 8 s, where the 2 Hz mode has
-decayed to about 2 %). Accuracy: relative frequency and damping errors against the model's
-eigenvalues for the three structural modes the thesis identifies (its pendulum mode, 1.1 Hz with
-ζ 0.12, is barely observable from floor accelerations and neither method is asked for it).
-Times are the best of ``--repeat`` runs; the ratio is python-control's time over ours.
+The cases and their scoring are in :mod:`identification.sweep`.
+
+Random shear buildings (2–5 modes, some closely spaced), SNR × record length cells, several seeds
+per cell; stillframe (OKID + ERA/DC, order auto), N4SID (``nfoursid``) and python-control
+(``markov`` + ``era``) on the same records. Per cell and method: median and 90th-percentile
+worst-mode frequency and damping errors and the count of silently wrong runs. Terminal table,
+``--json``, heat maps with ``--plots DIR``; ``--quick`` runs a small subset. The sweep's
+modules (python-control, nfoursid, matplotlib) are imported in ``run``: every CLI command
+registers this module at start-up.
 """
 
 from __future__ import annotations
 
 import argparse
-import time
-from collections.abc import Callable
+from pathlib import Path
 
 import numpy as np
 
 from stillframe.commands.common import add_json_argument, emit_json, format_table
+from stillframe.errors import InputError
 
-ORDER = 6
-MARKOV_COUNT = 256
+FIGURES: tuple[tuple[str, str, float], ...] = (
+    ("frequency_error_median", "median worst-mode frequency error [%]", 100.0),
+    ("frequency_error_p90", "90th-percentile worst-mode frequency error [%]", 100.0),
+    ("damping_error_median", "median worst-mode damping error [%]", 100.0),
+    ("damping_error_p90", "90th-percentile worst-mode damping error [%]", 100.0),
+    ("silently_wrong", "silently wrong runs", 1.0),
+)
+LABELS = {"stillframe": "stillframe", "stillframe_pem": "stillframe + PEM", "n4sid": "N4SID",
+          "python_control": "python-control"}
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    parser = sub.add_parser("identify", help="OKID + ERA/DC vs python-control markov + era")
-    parser.add_argument("--repeat", type=int, default=5, help="timed runs per method (best kept)")
-    parser.add_argument("--seed", type=int, default=0)
+    parser = sub.add_parser("identify", help="identification sweep: stillframe vs N4SID vs "
+                                             "python-control on random shear buildings")
+    parser.add_argument("--quick", action="store_true",
+                        help="SNR 40, 15 dB x lengths 1024, 256 x 3 seeds")
+    parser.add_argument("--seeds", type=int, default=None,
+                        help="seeds per cell (default 10, --quick 3)")
+    parser.add_argument("--plots", type=Path, default=None, metavar="DIR",
+                        help="write one heat-map PNG per method and figure")
     add_json_argument(parser)
     parser.set_defaults(func=run)
 
 
-def best_time(fn: Callable[[], np.ndarray], repeat: int) -> tuple[float, np.ndarray]:
-    times, out = [], None
-    for _ in range(max(repeat, 1)):
-        start = time.perf_counter()
-        out = fn()
-        times.append(time.perf_counter() - start)
-    return min(times), out
+def _percent(value: float) -> str:
+    return "inf" if not np.isfinite(value) else f"{100 * value:.3g}"
 
 
-def errors(A: np.ndarray, C: np.ndarray, dt: float, freq: np.ndarray, zeta: np.ndarray
-           ) -> dict:
-    """Nearest identified mode to each true one: frequency and damping, relative errors."""
-    from identification.modal import modal_parameters
+def _coverage(cell: dict) -> str:
+    if "ci_coverage_frequency" not in cell:
+        return "-"
+    return f"{100 * cell['ci_coverage_frequency']:.0f}/{100 * cell['ci_coverage_damping']:.0f}"
 
-    modes = modal_parameters(A, C, dt)
-    idx = [int(np.argmin(np.abs(modes.frequency_hz - f))) for f in freq]
-    got_f, got_z = modes.frequency_hz[idx], modes.damping_ratio[idx]
-    return {"frequency_hz": got_f.tolist(), "damping_ratio": got_z.tolist(),
-            "frequency_error": (np.abs(got_f - freq) / freq).tolist(),
-            "damping_error": (np.abs(got_z - zeta) / zeta).tolist()}
+
+def heat_maps(table: list[dict], directory: Path) -> list[Path]:
+    """One PNG per method and figure: SNR down, record length across."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from identification.sweep import METHODS
+    snrs = sorted({row["snr_db"] for row in table}, reverse=True)
+    lengths = sorted({row["samples"] for row in table}, reverse=True)
+    index = {(row["snr_db"], row["samples"]): row for row in table}
+    directory.mkdir(parents=True, exist_ok=True)
+    paths = []
+    for method in METHODS:
+        for key, title, scale in FIGURES:
+            grid = np.array([[index[(s, n)][method][key] * scale for n in lengths]
+                             for s in snrs], dtype=float)
+            shown = np.where(np.isfinite(grid), grid, np.nan)
+            fig, ax = plt.subplots(figsize=(5.5, 4))
+            image = ax.imshow(np.log10(np.maximum(shown, 1e-3)) if scale != 1.0 else shown,
+                              cmap="viridis", aspect="auto")
+            for i in range(len(snrs)):
+                for j in range(len(lengths)):
+                    value = grid[i, j]
+                    text = "inf" if not np.isfinite(value) else f"{value:.3g}"
+                    ax.text(j, i, text, ha="center", va="center", color="w", fontsize=8)
+            ax.set_xticks(range(len(lengths)), [str(n) for n in lengths])
+            ax.set_yticks(range(len(snrs)), [f"{s:g}" for s in snrs])
+            ax.set_xlabel("record length [samples]")
+            ax.set_ylabel("SNR [dB]")
+            ax.set_title(f"{LABELS[method]}: {title}", fontsize=9)
+            fig.colorbar(image, ax=ax, label="log10" if scale != 1.0 else "runs")
+            fig.tight_layout()
+            path = directory / f"identify_sweep_{method}_{key}.png"
+            fig.savefig(path, dpi=100)
+            plt.close(fig)
+            paths.append(path)
+    return paths
 
 
 def run(args: argparse.Namespace) -> int:
-    import control
+    from identification.sweep import (
+        LENGTHS,
+        METHODS,
+        QUICK_LENGTHS,
+        QUICK_SEEDS,
+        QUICK_SNR_DB,
+        SEEDS,
+        SNR_DB,
+        cases,
+        run_case,
+        run_cases,
+        summarize,
+    )
 
-    from identification.hammer import SCENE, hammer_test
-    from identification.pipeline import identify
-    from stillframe.models import build_model
-    from stillframe.scene import load_scene
-
-    record = hammer_test(build_model(load_scene(SCENE)).linearized(), seed=args.seed)
-    u, y, dt = record.u, record.y, record.dt
-    # the three structural modes (see the module docstring)
-    freq, zeta = record.frequency_hz[1:], record.damping_ratio[1:]
-
-    def ours() -> tuple[np.ndarray, np.ndarray]:
-        ident = identify(u, y, dt, "okid-eradc", ORDER)
-        return ident.A, ident.C
-
-    def theirs() -> tuple[np.ndarray, np.ndarray]:
-        markov = control.markov(y.T, u.T, MARKOV_COUNT)
-        sys, _ = control.eigensys_realization(markov, ORDER, dt=dt)
-        return sys.A, sys.C
-
-    t_ours, (A1, C1) = best_time(ours, args.repeat)
-    t_theirs, (A2, C2) = best_time(theirs, args.repeat)
-    doc = {
-        "samples": len(u), "outputs": y.shape[1], "dt": dt, "order": ORDER,
-        "true": {"frequency_hz": freq.tolist(), "damping_ratio": zeta.tolist()},
-        "okid_eradc": {"seconds": t_ours, **errors(A1, C1, dt, freq, zeta)},
-        "python_control": {"seconds": t_theirs, "markov_parameters": MARKOV_COUNT,
-                           **errors(A2, C2, dt, freq, zeta)},
-        "time_ratio_python_control_over_ours": t_theirs / t_ours,
-    }
+    if args.quick:
+        snrs, lengths, seeds = QUICK_SNR_DB, QUICK_LENGTHS, QUICK_SEEDS
+    else:
+        snrs, lengths, seeds = SNR_DB, LENGTHS, SEEDS
+    if args.seeds is not None and args.seeds < 1:
+        raise InputError(f"--seeds {args.seeds}: must be a positive integer")
+    seeds = args.seeds or seeds
+    results = run_cases(run_case, cases(snrs, lengths, seeds))
+    table = summarize(results)
+    paths = heat_maps(table, args.plots) if args.plots else []
     if args.json:
-        emit_json(doc)
+        emit_json({"cells": table, "runs": results, "plots": [str(p) for p in paths]})
         return 0
-    print(f"hammer test: {len(u)} samples x {y.shape[1]} outputs at {1 / dt:g} Hz, order "
-          f"{ORDER}; best of {args.repeat} runs")
     rows = []
-    for label, key in (("OKID + ERA/DC (ours)", "okid_eradc"),
-                       (f"control.markov({MARKOV_COUNT}) + era", "python_control")):
-        entry = doc[key]
-        rows.append([label, f"{entry['seconds'] * 1e3:.1f}",
-                     *(f"{f:.4f} ({100 * e:.3f} %)" for f, e in
-                       zip(entry["frequency_hz"], entry["frequency_error"], strict=True)),
-                     f"{100 * max(entry['damping_error']):.1f}"])
-    print(format_table(["method", "time [ms]",
-                        *(f"f{i + 2} = {f:.4f} Hz" for i, f in enumerate(freq)),
-                        "max damping err [%]"], rows))
-    print(f"time ratio python-control / ours: {doc['time_ratio_python_control_over_ours']:.2f}")
+    for row in table:
+        for method in METHODS:
+            cell = row[method]
+            rows.append([f"{row['snr_db']:g}", row["samples"], LABELS[method],
+                         _percent(cell["frequency_error_median"]),
+                         _percent(cell["frequency_error_p90"]),
+                         _percent(cell["damping_error_median"]),
+                         _percent(cell["damping_error_p90"]),
+                         f"{cell['wrong']}/{row['runs']}", cell["silently_wrong"],
+                         _coverage(cell)])
+    print(format_table(["SNR [dB]", "samples", "method", "freq err med [%]", "freq p90 [%]",
+                        "damp err med [%]", "damp p90 [%]", "wrong", "silently wrong",
+                        "95 % CI coverage f/z [%]"], rows))
+    for path in paths:
+        print(f"wrote {path}")
     return 0

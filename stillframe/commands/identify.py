@@ -56,6 +56,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     parser.add_argument("--combined", action="store_true",
                         help="OKID methods: realize [Y_k, Y0_k] together, giving B and the "
                         "observer gain at once (thesis eqs. 3.165-3.203)")
+    parser.add_argument("--refine", action="store_true",
+                        help="refine the OKID model by prediction-error least squares (innovation "
+                        "form) and give each mode a 95 %% interval")
     parser.add_argument("--detrend", action="store_true", help="remove a linear trend first")
     parser.add_argument("--lowpass", type=float, default=None, metavar="HZ",
                         help="zero-phase Butterworth low-pass on inputs and outputs")
@@ -133,7 +136,7 @@ def run(args: argparse.Namespace) -> int:
     progress(f"{record.samples} samples at {1 / record.dt:g} Hz; identifying ({args.method})")
     ident = identify(record.u, record.y, record.dt, args.method, args.order,
                      observer_order=args.observer_order, max_order=args.max_order,
-                     combined=args.combined)
+                     combined=args.combined, refine=args.refine)
     progress(f"order {ident.order}, {len(ident.modes)} modes")
     for warning in ident.warnings:
         print(f"stillframe identify: warning: {warning}", file=sys.stderr)
@@ -165,7 +168,8 @@ def run(args: argparse.Namespace) -> int:
           + (f" (auto: gap sigma_n/sigma_n+1 = {ident.order_gap:.4g})" if args.order == "auto"
              else ""))
     print("outputs: " + ", ".join(f"y{i + 1} = {n}" for i, n in enumerate(names)))
-    print(modes_table(ident.modes, ident.consistent, [f"y{i + 1}" for i in range(len(names))]))
+    print(modes_table(ident.modes, ident.consistent, [f"y{i + 1}" for i in range(len(names))],
+                      ident.refinement))
     if physical is not None:
         for key in ("M", "K", "R"):
             print(f"{key} =\n{format_matrix(physical_doc[key])}")

@@ -1,5 +1,6 @@
-"""``stillframe identify-daisy``: OKID + ERA and ERA/DC beside N4SID on real measured data
-(the DaISy steel subframe), validated on a held-out half. See :mod:`identification.daisy`."""
+"""``stillframe identify-daisy``: OKID + ERA, OKID + ERA/DC and OKID + ERA refined as an
+output-error model beside N4SID on real measured data (the DaISy steel subframe), validated on a
+held-out half. See :mod:`identification.daisy`."""
 
 from __future__ import annotations
 

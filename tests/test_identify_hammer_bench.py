@@ -1,5 +1,5 @@
-"""``stillframe bench identify``: its data is the thesis's set-up and both methods' accuracy is
-what the bench claims (times are printed, never asserted)."""
+"""``stillframe bench identify-hammer``: its data is the thesis's set-up and both methods'
+accuracy is what the bench claims (times are printed, never asserted)."""
 
 from __future__ import annotations
 
@@ -16,7 +16,7 @@ from stillframe.cli import main
 def bench() -> dict:
     out = io.StringIO()
     with contextlib.redirect_stdout(out):
-        assert main(["bench", "identify", "--json", "--repeat", "1"]) == 0
+        assert main(["bench", "identify-hammer", "--json", "--repeat", "1"]) == 0
     return json.loads(out.getvalue())
 
 
