@@ -47,8 +47,8 @@ def test_bag_info_reads_the_sample_bags(bag: str, counts: dict[str, int]) -> Non
 
 
 def test_closed_loop_bag_equals_the_one_process_run() -> None:
-    """Truth and commands at every sample, bit for bit, against run_closed_loop with the
-    overrides of bags/README.md."""
+    """Truth and commands at every sample against run_closed_loop with the overrides of
+    bags/README.md, to round-off."""
     scene = load_scene(REPO_ROOT / "scenes" / "thesis_lqg.yaml",
                        ["duration=4", "controller.start=2", "evaluation.window=2"])
     history = run_closed_loop(scene)
@@ -64,8 +64,13 @@ def test_closed_loop_bag_equals_the_one_process_run() -> None:
             else:
                 torque.setdefault(round(t * 32), msg.wrench.torque.z)
     assert sorted(truth) == list(range(128))
-    np.testing.assert_array_equal(np.array([truth[k] for k in range(128)]), history.truth)
-    np.testing.assert_array_equal([torque[k] for k in range(128)], history.command[:, 0])
+    # the bag was made on another machine: OpenBLAS picks its kernels per CPU, so the same run
+    # agrees to round-off there (measured: 5e-16 relative), bit for bit only on one machine
+    # (the launch tests compare three processes with one process bit for bit)
+    np.testing.assert_allclose(np.array([truth[k] for k in range(128)]), history.truth,
+                               rtol=1e-9, atol=1e-15)
+    np.testing.assert_allclose([torque[k] for k in range(128)], history.command[:, 0],
+                               rtol=1e-9, atol=1e-15)
     assert np.max(np.abs(history.command[64:, 0])) > 0.1  # control is on in the second half
 
 
