@@ -73,7 +73,8 @@ class PHPlant:
         accelerations = np.array([rates[self.system.q_slices[f"floor{i}"].start]
                                   for i in (1, 2, 3)])
         readings, force = self.sensors.read(accelerations, self._reading()["phi"], self.force(t))
-        return Sample(t, readings, force, truth=self.physical())
+        applied = np.array([self.actuators.torque.value, self.actuators.force.value])
+        return Sample(t, readings, force, truth=self.physical(), applied=applied)
 
     def advance(self, command: np.ndarray) -> np.ndarray:
         applied = self.actuators.apply(command)
