@@ -1,6 +1,6 @@
 """Control laws for the loop: LQG (DLQR on a linear design model) and the extended
 Udwadia–Kalaba controller in its two actuator variants, behind a supervisor that adds the enable
-time, saturation and a watchdog (DESIGN.md, controller_node).
+time, saturation and a watchdog (docs/nodes.md).
 
-Plain numpy; the node wraps :func:`controller_node.factory.make_controller`'s ``command``.
+Plain numpy; the node wraps :func:`stillframe.control.factory.make_controller`'s ``command``.
 """

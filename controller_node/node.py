@@ -1,6 +1,6 @@
 """controller_node: the scene's controller on the topic contract (docs/nodes.md).
 
-A thin shell around :func:`controller_node.factory.make_controller`. For every
+A thin shell around :func:`stillframe.control.factory.make_controller`. For every
 ``state_estimate`` stamped t_k it calls ``command(t_k, estimate, load cell at t_k)`` and
 publishes the command stamped t_k on ``pendulum/torque_cmd`` (``torque.z``) or
 ``floor3/force_cmd`` (``force.x``). The load cell comes from ``excitation/wrench``: in
@@ -30,13 +30,15 @@ from typing import Any
 
 import numpy as np
 
-from controller_node.factory import make_controller
-from controller_node.supervisor import RUNAWAY_FACTOR
-from estimator_node.coordinates import design_map
-from stillframe import messages, topics
+from stillframe.contract import messages, topics
+from stillframe.contract.codecs import COMMAND_TOPICS, CommandMessage, SampleGrid, physical_state
+from stillframe.contract.signals import Command, Estimate
+from stillframe.control.factory import make_controller
+from stillframe.control.supervisor import RUNAWAY_FACTOR
+from stillframe.design.coordinates import design_map
+from stillframe.dynamics.models.identified import frame_for
 from stillframe.errors import InputError
-from stillframe.loop_messages import COMMAND_TOPICS, CommandMessage, SampleGrid, physical_state
-from stillframe.loop_node import (
+from stillframe.loop.node_support import (
     ERROR,
     OK,
     WARN,
@@ -50,8 +52,6 @@ from stillframe.loop_node import (
 )
 from stillframe.middleware import api
 from stillframe.middleware.params import Parameter, SetParametersResult, finite_floats
-from stillframe.models.identified import frame_for
-from stillframe.signals import Command, Estimate
 
 FORCES_KEPT = 256  # load-cell readings kept for matching estimates by stamp
 RUN_TIME_PARAMETERS = frozenset({"enabled", "command_limit"})

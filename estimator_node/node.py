@@ -1,6 +1,7 @@
 """estimator_node: the scene's estimator on the topic contract (docs/nodes.md).
 
-A thin shell around :func:`estimator_node.factory.make_estimator`. It collects the readings of
+A thin shell around :func:`stillframe.estimation.factory.make_estimator`. It collects the readings
+of
 one stamp t_k from the floor IMUs, the encoder and the load cell (and ``state_truth`` for the
 ``truth`` estimator), then calls ``step(sample, command in effect)`` and publishes
 ``state_estimate`` and ``state_estimate/covariance`` stamped t_k. The actuation in effect is what
@@ -28,7 +29,8 @@ read-only.
 
 An estimator started while the loop runs (its first sample stamped after 0, e.g. restarted after
 a crash) starts a Kalman filter's mean from that sample's measurements
-(:meth:`estimator_node.kalman.LinearFilter.initialise_from`) rather than the scene's initial state,
+(:meth:`stillframe.estimation.kalman.LinearFilter.initialise_from`) rather than the scene's initial
+state,
 at the first sample that carries all four measurements (earlier ones are skipped and counted).
 
 Messages older than the last stamp used are rejected and counted (``stale_messages``); NaN or
@@ -44,12 +46,8 @@ from typing import Any
 
 import numpy as np
 
-from estimator_node.base import Filter
-from estimator_node.factory import make_estimator
-from estimator_node.kalman import LinearFilter
-from stillframe import messages, topics
-from stillframe.errors import InputError
-from stillframe.loop_messages import (
+from stillframe.contract import messages, topics
+from stillframe.contract.codecs import (
     COMMAND_TOPICS,
     EstimateMessages,
     SampleGrid,
@@ -58,7 +56,13 @@ from stillframe.loop_messages import (
     physical_state,
     sensor_reading,
 )
-from stillframe.loop_node import (
+from stillframe.contract.signals import Sample, actuator_of
+from stillframe.dynamics.models.identified import frame_for
+from stillframe.errors import InputError
+from stillframe.estimation.base import Filter
+from stillframe.estimation.factory import make_estimator
+from stillframe.estimation.kalman import LinearFilter
+from stillframe.loop.node_support import (
     OK,
     WARN,
     Diagnostics,
@@ -72,8 +76,6 @@ from stillframe.loop_node import (
 )
 from stillframe.middleware import api
 from stillframe.middleware.params import Parameter, SetParametersResult, finite_floats
-from stillframe.models.identified import frame_for
-from stillframe.signals import Sample, actuator_of
 
 SENSOR_TOPICS = (*topics.FLOOR_IMU, topics.PENDULUM_JOINT_STATES, topics.EXCITATION_WRENCH)
 ENCODER_CHANNEL = SENSOR_TOPICS.index(topics.PENDULUM_JOINT_STATES)

@@ -1,4 +1,5 @@
-"""The simulator: a scene-driven plant with sensor and actuator models (DESIGN.md, sim_node).
+"""The simulator: a scene-driven plant with sensor and actuator models (docs/nodes.md).
 
-Plain numpy; the node that publishes the topic contract wraps :class:`sim_node.plant.Plant`.
+Plain numpy; the node that publishes the topic contract wraps
+:class:`stillframe.plant.frame_plant.Plant`.
 """

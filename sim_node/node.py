@@ -1,6 +1,7 @@
-"""sim_node: the simulated rig on the topic contract (DESIGN.md "Topic contract", docs/nodes.md).
+"""sim_node: the simulated rig on the topic contract (docs/architecture.md, docs/nodes.md).
 
-A thin shell around :class:`sim_node.plant.Plant`. Per sample k it publishes ``/clock`` = t_k,
+A thin shell around :class:`stillframe.plant.frame_plant.Plant`. Per sample k it publishes
+``/clock`` = t_k,
 the three floor IMUs, the encoder (its ``effort`` the torque applied over the last period), the
 load cell, the floor-3 actuator's load cell (the force applied) and ``state_truth``, all stamped
 t_k, then waits for the command stamped t_k on the scene's actuator topic and advances the plant
@@ -12,7 +13,8 @@ with it:
   in by the next sample's due time is a deadline miss (previous command held), and a sample
   that starts more than a period late is an overrun.
 
-Commands pass a :class:`stillframe.command_gate.CommandGate` per topic: only one writer (by its
+Commands pass a :class:`stillframe.plant.command_gate.CommandGate` per topic: only one writer (by
+its
 writer GID; the first seen, or the node named by the ``command_writer`` parameter) may command,
 a second writer is reported in ``/diagnostics`` and ignored, and non-finite values, values beyond
 the actuator's limit and stamps from the future or before the held command are rejected and
@@ -23,7 +25,7 @@ sim applies zero actuation (the safe state) until a fresh command comes, and cou
 (``safe_state_samples``).
 
 At the end of the scene's duration it writes ``result_file`` (the evaluation of
-:func:`stillframe.closed_loop.evaluate` on its own truth history plus the loop's counters) and
+:func:`stillframe.loop.closed_loop.evaluate` on its own truth history plus the loop's counters) and
 an ``.npz`` of the histories beside it, then exits 0.
 """
 
@@ -38,13 +40,12 @@ from typing import Any
 
 import numpy as np
 
-from sim_node.plant import make_plant
-from stillframe import messages, topics
-from stillframe.closed_loop import LoopHistory, evaluate
-from stillframe.command_gate import CommandGate
+from stillframe.contract import messages, topics
+from stillframe.contract.codecs import COMMAND_TOPICS, SampleGrid, SensorMessages, command_value
+from stillframe.contract.signals import Sample, actuator_of
 from stillframe.errors import InputError
-from stillframe.loop_messages import COMMAND_TOPICS, SampleGrid, SensorMessages, command_value
-from stillframe.loop_node import (
+from stillframe.loop.closed_loop import LoopHistory, evaluate
+from stillframe.loop.node_support import (
     OK,
     WARN,
     Diagnostics,
@@ -57,7 +58,8 @@ from stillframe.loop_node import (
 )
 from stillframe.middleware import api
 from stillframe.middleware.clock import ClockPublisher
-from stillframe.signals import Sample, actuator_of
+from stillframe.plant.command_gate import CommandGate
+from stillframe.plant.frame_plant import make_plant
 
 SENSOR_TOPICS = (*topics.FLOOR_IMU, topics.PENDULUM_JOINT_STATES, topics.EXCITATION_WRENCH,
                  topics.FLOOR3_LOAD_CELL)

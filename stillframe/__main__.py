@@ -1,5 +1,5 @@
 import sys
 
-from stillframe.cli import main
+from stillframe.app.cli import main
 
 sys.exit(main())

@@ -19,7 +19,7 @@ from exudyn.utilities import (
     SensorNode,
 )
 
-from stillframe.ph.crank_slider import COUPLER, CRANK, CrankSliderData
+from stillframe.dynamics.ph.crank_slider import COUPLER, CRANK, CrankSliderData
 
 
 def midpoint_deflection(data: CrankSliderData, elements: int, crank_angle_end: float,

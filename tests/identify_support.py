@@ -11,7 +11,7 @@ from rosbags.typesys import Stores, get_typestore
 from scipy import signal
 
 TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
-MASSES = np.array([1.281, 0.814, 1.380])  # DESIGN.md, the rig
+MASSES = np.array([1.281, 0.814, 1.380])  # the thesis's rig (§5.2), README "Scenes"
 STIFFNESSES = 24 * 207e9 * 2.917e-12 / np.array([0.23, 0.28, 0.23]) ** 3  # k_i = 24 E J / L_i^3
 ALPHA, BETA = 0.5, 2e-4  # Rayleigh damping chosen positive for every mode
 IMU_TOPICS = [f"/frame/floor{i}/imu" for i in (1, 2, 3)]

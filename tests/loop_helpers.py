@@ -6,9 +6,9 @@ from pathlib import Path
 
 import numpy as np
 
-from stillframe.scene import load_scene, scene_from_dict
-from stillframe.schema import Section
-from stillframe.signals import Sample
+from stillframe.config.scene import load_scene, scene_from_dict
+from stillframe.config.schema import Section
+from stillframe.contract.signals import Sample
 
 ROOT = Path(__file__).resolve().parents[1]
 

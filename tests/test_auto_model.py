@@ -6,20 +6,21 @@ import numpy as np
 import pytest
 import scipy.linalg as sla
 
+from stillframe.config.scene import scene_from_dict
+from stillframe.dynamics.models import build_model
 from stillframe.errors import InputError
-from stillframe.models import build_model
-from stillframe.scene import scene_from_dict
+from stillframe.fidelity.auto_model import resolve_model
 
 MODAL = ["damping.model=modal", "model.type=auto"]
 
 
 def test_a_0_to_15_hz_band_at_1_percent_picks_a_reduced_model() -> None:
-    scene = scene_from_dict({"name": "t"}, [*MODAL, "model.band_hz=[0, 15]",
-                                            "model.tolerance=0.01"])
+    scene, choice = resolve_model(scene_from_dict(
+        {"name": "t"}, [*MODAL, "model.band_hz=[0, 15]", "model.tolerance=0.01"]))
     model = build_model(scene)
     assert model.n_dof <= 4  # floors + pendulum only (fe1: columns' mass, no inner nodes)
-    assert scene.model.reason.startswith("auto: fe1")
-    assert "worst_case, swing" in scene.model.reason
+    assert choice.model == "fe1"
+    assert "worst_case, swing" in choice.reason
     # the lumped model is cheaper but its second mode is 3.8 % off the converged FE mesh
     lumped = build_model(scene_from_dict({"name": "t"}, ["damping.model=modal"])).linearized()
     f = np.sqrt(sla.eigh(lumped.stiffness, lumped.mass, eigvals_only=True)) / (2 * np.pi)
@@ -29,8 +30,8 @@ def test_a_0_to_15_hz_band_at_1_percent_picks_a_reduced_model() -> None:
 def test_a_0_to_200_hz_band_at_a_tight_tolerance_picks_the_fine_fe_mesh() -> None:
     """Only models built on the 40-element mesh keep the column modes to 1e-5; the measured
     data make its Craig–Bampton reduction cheaper than the full mesh."""
-    scene = scene_from_dict({"name": "t"}, [*MODAL, "model.band_hz=[0, 200]",
-                                            "model.tolerance=1e-5"])
+    scene, _ = resolve_model(scene_from_dict({"name": "t"}, [*MODAL, "model.band_hz=[0, 200]",
+                                                             "model.tolerance=1e-5"]))
     assert scene.model.type in ("fe", "modal") and scene.model.elements_per_column == 40
     model = build_model(scene)
     full = build_model(scene_from_dict({"name": "t"}, ["damping.model=modal", "model.type=fe",
@@ -46,7 +47,7 @@ def test_a_0_to_200_hz_band_at_a_tight_tolerance_picks_the_fine_fe_mesh() -> Non
 
 def test_impossible_requests_fail_clearly() -> None:
     with pytest.raises(InputError, match=r"model\.tolerance: no measured model"):
-        scene_from_dict({"name": "t"}, [*MODAL, "model.band_hz=[0, 200]",
-                                        "model.tolerance=1e-8"])
+        resolve_model(scene_from_dict({"name": "t"}, [*MODAL, "model.band_hz=[0, 200]",
+                                                      "model.tolerance=1e-8"]))
     with pytest.raises(InputError, match=r"model\.band_hz: the lower edge must be below"):
-        scene_from_dict({"name": "t"}, [*MODAL, "model.band_hz=[20, 10]"])
+        resolve_model(scene_from_dict({"name": "t"}, [*MODAL, "model.band_hz=[20, 10]"]))

@@ -22,7 +22,7 @@ from rosbags.interfaces import QosTime as T
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
 
-from stillframe.bags import BagWriter, bag_summary, format_summary, read_bag
+from stillframe.bags.storage import BagWriter, bag_summary, format_summary, read_bag
 from stillframe.errors import InputError
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -235,7 +235,7 @@ def test_bag_info_json(our_bag: Path) -> None:
 
 def test_service_event_topics_listed_as_services() -> None:
     """A ``/_service_event`` topic is a service in ``ros2 bag info``, not counted as a message."""
-    from stillframe.bags import BagSummary, TopicSummary
+    from stillframe.bags.storage import BagSummary, TopicSummary
     summary = BagSummary(
         path="b", files=["b_0.mcap"], size_bytes=100, storage_id="mcap", ros_distro="jazzy",
         start_ns=0, duration_ns=0, message_count=7, topics=[

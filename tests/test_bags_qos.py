@@ -8,16 +8,18 @@ from rosbags.interfaces import QosReliability
 from rosbags.interfaces import QosTime as BagTime
 from rosbags.rosbag2.metadata import dump_qos_v9
 
-from stillframe.bag_qos import RECORD_DEPTH, from_bag, player_offer, recorder_request, to_bag
+from stillframe.bags.qos import from_bag, player_offer, to_bag
 from stillframe.middleware.qos import (
     CLOCK,
     DEFAULT,
     PROFILES,
+    RECORD_DEPTH,
     SENSOR_DATA,
     Durability,
     History,
     QoSProfile,
     Reliability,
+    recorder_request,
 )
 
 LATCHED = QoSProfile(depth=1, durability=Durability.TRANSIENT_LOCAL)

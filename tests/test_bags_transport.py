@@ -83,7 +83,7 @@ def write_source(path: Path, n_imu: int, n_js: int, period_ns: int) -> list[tupl
 
 
 def read_all(path: Path) -> list[tuple[str, int, bytes]]:
-    """Messages of a bag through rosbags's Reader (not stillframe.bags)."""
+    """Messages of a bag through rosbags's Reader (not stillframe.bags.storage)."""
     with Reader(path) as reader:
         return [(c.topic, t, bytes(d)) for c, t, d in reader.messages()]
 
@@ -179,10 +179,12 @@ def test_record_play_record_keeps_every_message_stamp_and_order(
         got = read_all(path)
         for topic in (IMU, JS):
             assert [d for t, _, d in got if t == topic] == [d for t, _, d in msgs if t == topic]
-        # Played with the recorded spacing: the receive stamps span at least 90 % of A's 2 s.
+        # Played with the recorded spacing: the receive stamps span at least half of A's 2 s
+        # (a player that ignored the timing delivers all 150 in milliseconds; on a loaded machine
+        # the first samples can arrive late and bunched, so the bound is not tighter).
         stamps = [s for _, s, _ in got]
         assert stamps == sorted(stamps)
-        assert stamps[-1] - stamps[0] >= 0.9 * (msgs[-1][1] - msgs[0][1])
+        assert stamps[-1] - stamps[0] >= 0.5 * (msgs[-1][1] - msgs[0][1])
         meta = topic_metadata(path)
         assert (meta[IMU]["count"], meta[JS]["count"]) == (100, 50)
         assert meta[IMU]["type_description_hash"] == TS.hash_rihs01("sensor_msgs/msg/Imu")

@@ -2,7 +2,8 @@
 
 Independent checks, not speed assertions: the Pareto front is recomputed here by a dominance
 test; RK4 points the bench did not run lie beyond the stability limit predicted from the model's
-eigenvalues (:func:`stillframe.stability.rk4_stable_step`); an RK4 error at a step size that did
+eigenvalues (:func:`stillframe.dynamics.stability.rk4_stable_step`); an RK4 error at a step size
+that did
 run matches an integration by the numpy path.
 """
 
@@ -14,9 +15,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from stillframe.models import build_model
-from stillframe.scene import scene_from_dict
-from stillframe.stability import rk4_stable_step
+from stillframe.config.scene import scene_from_dict
+from stillframe.dynamics.models import build_model
+from stillframe.dynamics.stability import rk4_stable_step
 from tests.mw_support import run_stillframe
 
 pytestmark = pytest.mark.slow

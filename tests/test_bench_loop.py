@@ -8,9 +8,9 @@ import math
 import numpy as np
 import pytest
 
-from stillframe.commands.bench_loop import realtime_overrides
-from stillframe.loop_latency import LatencyLog
-from stillframe.scene import load_scene
+from stillframe.app.commands.bench_loop import realtime_overrides
+from stillframe.config.scene import load_scene
+from stillframe.loop.latency import LatencyLog
 from tests.mw_support import REPO_ROOT, run_stillframe
 
 MS = 1_000_000

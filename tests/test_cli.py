@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 import scipy.linalg as sla
 
-from stillframe.commands.simulate import CSV_COLUMNS
-from stillframe.models import build_model
-from stillframe.scene import load_scene
+from stillframe.app.commands.simulate import CSV_COLUMNS
+from stillframe.config.scene import load_scene
+from stillframe.dynamics.models import build_model
 
 ROOT = Path(__file__).resolve().parents[1]
 LUMPED = str(ROOT / "scenes" / "thesis_lumped.yaml")

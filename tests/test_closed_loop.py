@@ -10,13 +10,13 @@ import sys
 import numpy as np
 import pytest
 
-from sim_node.actuators import Actuator
-from sim_node.plant import Plant
-from sim_node.sensors import quantise
-from stillframe.closed_loop import run_closed_loop
+from stillframe.dynamics.models.identified import frame_for, identified_frame
+from stillframe.dynamics.simulation import simulate
 from stillframe.errors import InputError
-from stillframe.models.identified import frame_for, identified_frame
-from stillframe.simulation import simulate
+from stillframe.loop.closed_loop import run_closed_loop
+from stillframe.plant.actuators import Actuator
+from stillframe.plant.frame_plant import Plant
+from stillframe.plant.sensors import quantise
 from tests.loop_helpers import ROOT, lumped_scene, thesis_scene
 
 

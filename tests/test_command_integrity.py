@@ -15,8 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
-from stillframe.closed_loop import run_closed_loop
-from stillframe.command_gate import HARD_LIMIT, REASONS, CommandGate
+from stillframe.loop.closed_loop import run_closed_loop
+from stillframe.plant.command_gate import HARD_LIMIT, REASONS, CommandGate
 from tests.loop_helpers import thesis_scene
 from tests.mw_support import ros_domain
 from tests.node_support import SHORT_LQG, run_loop_beside

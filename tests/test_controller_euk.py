@@ -9,10 +9,10 @@ import math
 import numpy as np
 import pytest
 
-from controller_node.euk import EUKLaw
-from controller_node.supervisor import Controller
-from stillframe.models import build_model
-from stillframe.signals import Estimate, full_inputs
+from stillframe.contract.signals import Estimate, full_inputs
+from stillframe.control.euk import EUKLaw
+from stillframe.control.supervisor import Controller
+from stillframe.dynamics.models import build_model
 from tests.loop_helpers import lumped_scene
 
 RNG = np.random.default_rng(11)

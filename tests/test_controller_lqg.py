@@ -7,11 +7,11 @@ import control
 import numpy as np
 import scipy.optimize as so
 
-from controller_node.factory import TORQUE_INPUT, make_controller
-from controller_node.lqg import design_lqr
-from estimator_node.coordinates import physical_selector
-from stillframe.models.identified import frame_for
-from stillframe.signals import Estimate
+from stillframe.contract.signals import Estimate
+from stillframe.control.factory import TORQUE_INPUT, make_controller
+from stillframe.control.lqg import design_lqr
+from stillframe.design.coordinates import physical_selector
+from stillframe.dynamics.models.identified import frame_for
 from tests.loop_helpers import thesis_scene
 
 PERIOD = 1.0 / 32

@@ -4,14 +4,14 @@ import numpy as np
 import pytest
 import scipy.linalg as sla
 
-from controller_node.factory import make_controller
-from controller_node.passivity import PassivityLaw
+from stillframe.config.scene import load_scene
+from stillframe.control.factory import make_controller
+from stillframe.control.passivity import PassivityLaw
+from stillframe.dynamics.models import build_model
+from stillframe.dynamics.ph import frame
+from stillframe.dynamics.ph.linear import reduced_matrices
+from stillframe.dynamics.ph.scene_model import scene_system
 from stillframe.errors import InputError
-from stillframe.models import build_model
-from stillframe.ph import frame
-from stillframe.ph.linear import reduced_matrices
-from stillframe.ph.scene_model import scene_system
-from stillframe.scene import load_scene
 
 GAINS = [(0.0, 0.05), (0.5, 0.05), (5.0, 2.0)]  # (k_p, k_d), never retuned per plant
 

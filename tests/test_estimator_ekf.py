@@ -9,13 +9,13 @@ import numpy as np
 import pytest
 from filterpy.kalman import ExtendedKalmanFilter
 
-from estimator_node.ekf import ExtendedKalman
-from estimator_node.factory import initial_physical, make_estimator
-from sim_node.plant import Plant
-from stillframe.integrators import reference_solution
-from stillframe.models import build_model
-from stillframe.signals import full_inputs
-from stillframe.systems import MechanicalSystem
+from stillframe.contract.signals import full_inputs
+from stillframe.dynamics.integrators import reference_solution
+from stillframe.dynamics.models import build_model
+from stillframe.dynamics.systems import MechanicalSystem
+from stillframe.estimation.ekf import ExtendedKalman
+from stillframe.estimation.factory import initial_physical, make_estimator
+from stillframe.plant.frame_plant import Plant
 from tests.loop_helpers import lumped_scene, thesis_scene
 
 PERIOD = 1.0 / 32

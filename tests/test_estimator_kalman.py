@@ -10,13 +10,13 @@ import pytest
 from scipy.integrate import solve_ivp
 from scipy.signal import cont2discrete
 
-from estimator_node.discrete import first_order_hold
-from estimator_node.factory import initial_physical, make_estimator
-from estimator_node.kalman import SteadyStateKalman, TimeVaryingKalman
-from sim_node.plant import Plant
-from stillframe.models import build_model
-from stillframe.models.identified import frame_for
-from stillframe.signals import full_inputs
+from stillframe.contract.signals import full_inputs
+from stillframe.design.discrete import first_order_hold
+from stillframe.dynamics.models import build_model
+from stillframe.dynamics.models.identified import frame_for
+from stillframe.estimation.factory import initial_physical, make_estimator
+from stillframe.estimation.kalman import SteadyStateKalman, TimeVaryingKalman
+from stillframe.plant.frame_plant import Plant
 from tests.loop_helpers import lumped_scene, sample, thesis_scene
 
 PERIOD = 1.0 / 32

@@ -10,16 +10,16 @@ import numpy as np
 import pytest
 import scipy.linalg as sla
 
+from stillframe.config.scene import scene_from_dict
+from stillframe.dynamics.excitation import floor_load
+from stillframe.dynamics.integrators import IntegrationError, reference_solution
+from stillframe.dynamics.kernels import CompiledFrame
+from stillframe.dynamics.models import build_model, build_structure
+from stillframe.dynamics.models.damping import undamped_modes
+from stillframe.dynamics.simulation import initial_state, simulate
+from stillframe.dynamics.stability import RK4_IMAGINARY_LIMIT, rk4_growth, rk4_stable_step
+from stillframe.dynamics.systems import MechanicalSystem
 from stillframe.errors import InputError
-from stillframe.excitation import floor_load
-from stillframe.integrators import IntegrationError, reference_solution
-from stillframe.kernels import CompiledFrame
-from stillframe.models import build_model, build_structure
-from stillframe.models.damping import undamped_modes
-from stillframe.scene import scene_from_dict
-from stillframe.simulation import initial_state, simulate
-from stillframe.stability import RK4_IMAGINARY_LIMIT, rk4_growth, rk4_stable_step
-from stillframe.systems import MechanicalSystem
 
 UNDAMPED = ["damping.model=none", "rig.pendulum.hinge_damping=0"]
 
@@ -141,7 +141,7 @@ def test_large_floor_amplitudes_warn_that_the_columns_leave_linear_theory(caplog
     small = simulate(scene_from_dict({"name": "t"}, ["initial.floors=[0.001, 0.002, 0.003]",
                                                      "duration=0.2"]))
     assert "warnings" not in small.meta
-    with caplog.at_level(logging.WARNING, logger="stillframe.simulation"):
+    with caplog.at_level(logging.WARNING, logger="stillframe.dynamics.simulation"):
         large = simulate(scene_from_dict({"name": "t"}, ["initial.floors=[0.05, 0.1, 0.15]",
                                                          "duration=0.2"]))
     assert re.match(r"story \d drifts \d+\.\d% of its height \(> 2%\)", large.meta["warnings"][0])

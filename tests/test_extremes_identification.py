@@ -1,5 +1,6 @@
 """Identification at the extremes (docs/extremes.md): short records, low SNR, an over-estimated
-order. The reference is the simulated hammer test's own model (identification.hammer): its
+order. The reference is the simulated hammer test's own model (stillframe.identification.hammer):
+its
 three floor modes. Contract: every run is refused with a clear error, warns, or gives the modes
 within the stated accuracy; a silent wrong model is the failure."""
 
@@ -8,11 +9,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from identification.hammer import SCENE, HammerRecord, hammer_test
-from identification.pipeline import Identification, identify
+from stillframe.config.scene import load_scene
+from stillframe.dynamics.models import build_model
 from stillframe.errors import InputError
-from stillframe.models import build_model
-from stillframe.scene import load_scene
+from stillframe.identification.hammer import SCENE, HammerRecord, hammer_test
+from stillframe.identification.pipeline import Identification, identify
 
 SEEDS = range(10)
 #: the accuracy a silent (warning-free) result is held to: frequency, damping ratio (relative)
@@ -104,8 +105,8 @@ def test_an_over_estimated_order_keeps_the_physical_modes_consistent(lin, order:
 
 def test_unstable_identified_modes_are_named(lin) -> None:
     """A mode with negative damping is reported: a passive structure has none."""
-    from identification.modal import ModalTable
-    from identification.quality import quality_warnings
+    from stillframe.identification.modal import ModalTable
+    from stillframe.identification.quality import quality_warnings
 
     modes = ModalTable(frequency_hz=np.array([2.0, 14.9]), damping_ratio=np.array([0.04, -0.04]),
                        eigenvalues=np.zeros(2, complex), shapes=np.ones((3, 2), complex))

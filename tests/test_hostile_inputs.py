@@ -17,8 +17,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from stillframe import messages, topics
-from stillframe.closed_loop import run_closed_loop
+from stillframe.contract import messages, topics
+from stillframe.loop.closed_loop import run_closed_loop
 from stillframe.middleware import api
 from tests.loop_helpers import thesis_scene
 from tests.mw_support import ros_domain

@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 from scipy import linalg
 
-from identification.damping import fit_proportional_damping
-from identification.modal import mac, modal_parameters
 from stillframe.errors import InputError
+from stillframe.identification.damping import fit_proportional_damping
+from stillframe.identification.modal import mac, modal_parameters
 
 
 def test_two_modes_give_the_closed_form():

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 from ident_systems import MASS, STIFFNESS, continuous, discrete, simulate
 
-from identification.frf import h1_frf, model_frf
 from stillframe.errors import InputError
+from stillframe.identification.frf import h1_frf, model_frf
 
 DT = 0.02
 DAMPED = 2.0 * MASS + 1e-2 * STIFFNESS  # damping ratios 10–20 %: little leakage bias

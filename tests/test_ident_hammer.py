@@ -1,7 +1,8 @@
 """The thesis's hammer test (§5.5) on the simulated lumped model: impulse on floor 1, three floor
 accelerations, 32 Hz, 2048 samples, sensor noise; OKID + ERA/DC of order 6 as in the thesis.
 
-:func:`identification.hammer.hammer_test` samples the linearised lumped model (pendulum included,
+:func:`stillframe.identification.hammer.hammer_test` samples the linearised lumped model (pendulum
+included,
 the scene's Rayleigh damping) exactly. Noise: 1e-3 m/s^2 rms on each accelerometer (0.1 mg,
 piezoelectric class) and 1e-3 N rms on the load cell (16-bit converter over ±50 N), against
 peak accelerations near 1.2 m/s^2. References: the model's own continuous eigenvalues.
@@ -20,14 +21,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from identification.damping import fit_proportional_damping, proportional_damping_matrix
-from identification.hammer import SCENE, hammer_test
-from identification.mkr import mkr
-from identification.modal import mac, modal_parameters
-from identification.pipeline import identify
-from identification.stabilization import stabilization_diagram
-from stillframe.models import build_model
-from stillframe.scene import load_scene
+from stillframe.config.scene import load_scene
+from stillframe.dynamics.models import build_model
+from stillframe.identification.damping import fit_proportional_damping, proportional_damping_matrix
+from stillframe.identification.hammer import SCENE, hammer_test
+from stillframe.identification.mkr import mkr
+from stillframe.identification.modal import mac, modal_parameters
+from stillframe.identification.pipeline import identify
+from stillframe.identification.stabilization import stabilization_diagram
 
 
 @pytest.fixture(scope="module")
@@ -87,9 +88,10 @@ def test_the_combined_variant_is_less_accurate_in_damping(lumped):
 
 @pytest.mark.slow
 def test_hammer_table_command():
-    """``python -m identification.hammer`` prints one row per identified mode and variant."""
+    """``python -m stillframe.identification.hammer`` prints one row per identified mode and
+    variant."""
     root = Path(__file__).resolve().parents[1]
-    out = subprocess.run([sys.executable, "-m", "identification.hammer", "--seeds", "1"],
+    out = subprocess.run([sys.executable, "-m", "stillframe.identification.hammer", "--seeds", "1"],
                          cwd=root, capture_output=True, text=True, check=True).stdout
     rows = [line.split() for line in out.splitlines()[2:]]
     plain = [row for row in rows if "combined" not in row]

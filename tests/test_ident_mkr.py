@@ -7,10 +7,10 @@ import numpy as np
 import pytest
 from ident_systems import DAMPING, MASS, STIFFNESS, continuous, discrete, simulate
 
-from identification.damping import proportional_damping_matrix
-from identification.mkr import mkr
-from identification.pipeline import identify
 from stillframe.errors import InputError
+from stillframe.identification.damping import proportional_damping_matrix
+from stillframe.identification.mkr import mkr
+from stillframe.identification.pipeline import identify
 
 DT = 0.02
 FLOOR1 = np.array([[1.0], [0.0], [0.0]])

@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 from ident_systems import DAMPING, MASS, STIFFNESS, continuous, discrete, simulate
 
-from identification.mkr import mkr
-from identification.model_file import load_model, model_from_identification, save_model
-from identification.pipeline import identify
 from stillframe.errors import InputError
+from stillframe.identification.mkr import mkr
+from stillframe.identification.model_file import load_model, model_from_identification, save_model
+from stillframe.identification.pipeline import identify
 
 DT = 0.02
 

@@ -18,10 +18,10 @@ from ident_systems import (
 )
 from scipy import linalg
 
-from identification.era import EraDimensions, factorize
-from identification.okid import OkidResult, observer_gain, okid
-from identification.pipeline import identify
 from stillframe.errors import InputError
+from stillframe.identification.era import EraDimensions, factorize
+from stillframe.identification.okid import OkidResult, observer_gain, okid
+from stillframe.identification.pipeline import identify
 
 DT = 0.02
 B2 = np.array([[1.0, 0.0], [0.0, 0.0], [0.0, 1.0]])  # forces on DOFs 1 and 3

@@ -1,4 +1,5 @@
-"""Prediction-error refinement (:mod:`identification.pem`): exact on noise-free data, and its
+"""Prediction-error refinement (:mod:`stillframe.identification.pem`): exact on noise-free data,
+and its
 95 % intervals against the Monte Carlo spread of the estimates on a known system."""
 
 from __future__ import annotations
@@ -6,9 +7,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from identification.pem import refine_prediction_error
-from identification.pipeline import identify
-from identification.sweep import shear_building, simulate
+from stillframe.identification.pem import refine_prediction_error
+from stillframe.identification.pipeline import identify
+from stillframe.identification.sweep import shear_building, simulate
 
 
 def test_refinement_recovers_a_noise_free_system_to_round_off() -> None:

@@ -7,9 +7,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from identification.mkr import mkr
-from identification.modal import modal_parameters
 from stillframe.errors import InputError
+from stillframe.identification.mkr import mkr
+from stillframe.identification.modal import modal_parameters
 
 DT = 1.0 / 32.0
 A = np.array([

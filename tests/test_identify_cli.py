@@ -19,8 +19,8 @@ import numpy as np
 import pytest
 from rosbags.rosbag2 import StoragePlugin
 
-from identification.model_file import load_model
-from stillframe.cli import main
+from stillframe.app.cli import main
+from stillframe.identification.model_file import load_model
 from tests.identify_support import (
     FORCE_TOPIC,
     IMU_TOPICS,

@@ -17,14 +17,9 @@ from pathlib import Path
 
 import pytest
 
-from identification.daisy import DEFAULT_PATH
-
 ROOT = Path(__file__).resolve().parents[1]
 
-pytestmark = [
-    pytest.mark.slow,
-    pytest.mark.skipif(not DEFAULT_PATH.is_file(), reason=f"DaISy record not at {DEFAULT_PATH}"),
-]
+pytestmark = pytest.mark.slow
 
 
 @pytest.fixture(scope="module")

@@ -9,7 +9,7 @@ import json
 
 import pytest
 
-from stillframe.cli import main
+from stillframe.app.cli import main
 
 
 @pytest.fixture(scope="module")
@@ -21,7 +21,7 @@ def bench() -> dict:
 
 
 def test_true_modes_are_the_lumped_models(bench: dict) -> None:
-    """DESIGN.md reference figures for the lumped model: 1.9846, 5.7902, 8.8248 Hz (undamped);
+    """The README's reference figures for the lumped model: 1.9846, 5.7902, 8.8248 Hz (undamped);
     the bench uses |λ| of the damped eigenvalues, which the non-proportional hinge damping moves
     by a few 1e-4."""
     assert bench["true"]["frequency_hz"] == pytest.approx([1.9846, 5.7902, 8.8248], rel=5e-4)

@@ -10,8 +10,8 @@ import json
 import numpy as np
 import pytest
 
-from identification.sweep import Case, run_case, score, shear_building
-from stillframe.cli import main
+from stillframe.app.cli import main
+from stillframe.identification.sweep import Case, run_case, score, shear_building
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2, 3])

@@ -5,18 +5,18 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from stillframe.excitation import floor_load
-from stillframe.integrators import (
+from stillframe.config.scene import scene_from_dict
+from stillframe.dynamics.excitation import floor_load
+from stillframe.dynamics.integrators import (
     RK4,
     ImplicitMidpoint,
     IntegrationError,
     integrate,
     reference_solution,
 )
-from stillframe.models import build_model
-from stillframe.scene import scene_from_dict
-from stillframe.simulation import initial_state
-from stillframe.systems import LinearSystem, MechanicalSystem
+from stillframe.dynamics.models import build_model
+from stillframe.dynamics.simulation import initial_state
+from stillframe.dynamics.systems import LinearSystem, MechanicalSystem
 
 # A large pendulum swing makes the lumped model clearly nonlinear.
 SWING = ["initial.phi=1.2", "initial.floors=[0.002, 0.003, 0.004]"]

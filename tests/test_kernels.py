@@ -5,13 +5,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from stillframe.excitation import floor_load
-from stillframe.integrators import RK4, ImplicitMidpoint, IntegrationError, integrate
-from stillframe.kernels import CompiledFrame, banded_order, bandwidth
-from stillframe.models import build_model
-from stillframe.scene import scene_from_dict
-from stillframe.simulation import initial_state, simulate
-from stillframe.systems import MechanicalSystem
+from stillframe.config.scene import scene_from_dict
+from stillframe.dynamics.excitation import floor_load
+from stillframe.dynamics.integrators import RK4, ImplicitMidpoint, IntegrationError, integrate
+from stillframe.dynamics.kernels import CompiledFrame, banded_order, bandwidth
+from stillframe.dynamics.models import build_model
+from stillframe.dynamics.simulation import initial_state, simulate
+from stillframe.dynamics.systems import MechanicalSystem
 
 CASES = {
     "lumped-harmonics-swing": ["excitation.type=harmonics", "initial.phi=1.2"],

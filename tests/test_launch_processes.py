@@ -18,7 +18,7 @@ from pathlib import Path
 
 import pytest
 
-from stillframe.launcher import StatusLine, node_command, status_text
+from stillframe.app.launcher import StatusLine, node_command, status_text
 from stillframe.middleware.params import node_overrides, parse_ros_args
 from tests.mw_support import REPO_ROOT, ros_domain, run_stillframe  # noqa: F401
 

@@ -10,9 +10,9 @@ from pathlib import Path
 
 import pytest
 
-from stillframe.launcher import NODES
+from stillframe.app.launcher import NODES
+from stillframe.config.scene import load_scene
 from stillframe.middleware.params import load_param_file
-from stillframe.scene import load_scene
 
 ROOT = Path(__file__).resolve().parents[1]
 LAUNCH = ROOT / "ros_ws" / "launch" / "closed_loop.launch.py"

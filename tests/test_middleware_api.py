@@ -7,7 +7,7 @@ import time
 
 import pytest
 
-from stillframe import messages
+from stillframe.contract import messages
 from stillframe.middleware import qos
 from stillframe.middleware.api import create_node, spin_until
 from stillframe.middleware.logger import Logger

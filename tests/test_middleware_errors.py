@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from stillframe import messages
+from stillframe.contract import messages
 from stillframe.errors import InputError
 from stillframe.middleware import api, names
 from stillframe.middleware.api import create_node

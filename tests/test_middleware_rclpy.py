@@ -12,7 +12,7 @@ rclpy = pytest.importorskip(
     "rclpy", reason="rclpy is not importable (not on PyPI/Debian): the rclpy backend is untested"
 )
 
-from stillframe import messages  # noqa: E402
+from stillframe.contract import messages  # noqa: E402
 from stillframe.middleware.api import create_node, spin_until  # noqa: E402
 from stillframe.middleware.qos import SENSOR_DATA, Durability, Reliability  # noqa: E402
 from tests.mw_support import ros_domain  # noqa: E402

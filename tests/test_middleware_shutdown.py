@@ -15,7 +15,7 @@ __all__ = ["ros_domain"]
 
 NODE = """
 import sys
-from stillframe import messages
+from stillframe.contract import messages
 from stillframe.middleware.api import create_node, node_main, spin
 
 def main():

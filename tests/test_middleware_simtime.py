@@ -3,7 +3,7 @@ clock running 10x faster than real time."""
 
 from __future__ import annotations
 
-from stillframe import messages
+from stillframe.contract import messages
 from stillframe.middleware.api import create_node, spin_until
 from stillframe.middleware.clock import SYSTEM_CLOCK, ClockPublisher
 from tests.mw_support import ros_domain

@@ -13,7 +13,7 @@ __all__ = ["ros_domain"]
 
 RATE_HZ = 50.0
 PUBLISHER = f"""
-from stillframe import messages
+from stillframe.contract import messages
 from stillframe.middleware.api import create_node, spin
 node = create_node("truth_pub", namespace="/frame")
 pub = node.create_publisher("sensor_msgs/msg/JointState", "state_truth", "default")

@@ -28,10 +28,10 @@ from rosbags.typesys import Stores, get_typestore
 from rosbags.typesys.base import Nodetype
 
 from cyclonedds._clayer import ddspy_take  # isort: skip
+from stillframe.contract.topics import CONTRACT
 from stillframe.middleware.api import create_node, spin_until
 from stillframe.middleware.dds_types import idl_struct
 from stillframe.middleware.discovery import cyclone_config
-from stillframe.topics import CONTRACT
 from tests.mw_support import finish, ros_domain, start_python, wait_for_line
 
 __all__ = ["ros_domain"]
@@ -180,7 +180,7 @@ class DdsParticipantEntitiesInfo(
 
 IMU_NODE = """
 import sys
-from stillframe import messages
+from stillframe.contract import messages
 from stillframe.middleware.api import create_node, spin
 node = create_node("imu_pub", namespace="/frame")
 pub = node.create_publisher("sensor_msgs/msg/Imu", "floor1/imu", "sensor_data")
@@ -261,7 +261,7 @@ def test_independent_reader_decodes_a_node_and_finds_it_in_ros_discovery_info(
 
 
 TALKER = """
-from stillframe import messages
+from stillframe.contract import messages
 from stillframe.middleware.api import create_node, spin_until
 node = create_node("talker")
 pub = node.create_publisher("sensor_msgs/msg/JointState", "chatter", "default")

@@ -7,14 +7,14 @@ import pytest
 import scipy.linalg as sla
 from scipy.optimize import brentq
 
+from stillframe.config.scene import scene_from_dict
+from stillframe.dynamics.modal_analysis import modal_table
+from stillframe.dynamics.models import build_model, build_structure
+from stillframe.dynamics.models.damping import low_modes_first
+from stillframe.dynamics.models.structure import column_matrices
 from stillframe.errors import InputError
-from stillframe.modal_analysis import modal_table
-from stillframe.models import build_model, build_structure
-from stillframe.models.damping import low_modes_first
-from stillframe.models.structure import column_matrices
-from stillframe.scene import scene_from_dict
 
-# Lumped natural frequencies computed from the thesis's rig data (DESIGN.md; thesis eq. 5.67–5.70
+# Lumped natural frequencies computed from the thesis's rig data (README; thesis eq. 5.67–5.70
 # prints them rounded: 1.099, 1.985, 5.790, 8.825 Hz).
 LUMPED_HZ = [1.0996, 1.9846, 5.7902, 8.8248]
 # Thesis eq. 5.67–5.70: mode shapes normalised to floor 1 (ρ with the phase signs of Θ; the first
@@ -112,7 +112,7 @@ def test_fe_frequencies_converge_monotonically() -> None:
                       for n in meshes])
     steps = np.diff(freqs, axis=0)
     assert np.all(steps <= 1e-12), steps
-    # and converged at 40 elements: the DESIGN.md figures under our assumptions
+    # and converged at 40 elements: the README's figures under our assumptions
     np.testing.assert_allclose(freqs[-1], [1.0995, 1.9115, 5.5743, 8.4802], rtol=1e-4)
 
 

@@ -22,11 +22,11 @@ import matplotlib.pyplot as plt
 import numpy as np
 import pytest
 
-from stillframe import messages
-from stillframe.bags import read_bag
-from stillframe.commands.bench_loop import realtime_overrides
-from stillframe.dashboard import ERROR_KEYS
-from stillframe.foxglove_client import Capture, capture, churn, stall
+from stillframe.app.commands.bench_loop import realtime_overrides
+from stillframe.bags.storage import read_bag
+from stillframe.contract import messages
+from stillframe.monitor.dashboard import ERROR_KEYS
+from stillframe.monitor.foxglove_client import Capture, capture, churn, stall
 from tests.mw_support import REPO_ROOT, child_env, isolate_domain
 
 pytestmark = pytest.mark.slow

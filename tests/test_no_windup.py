@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from stillframe.closed_loop import open_loop_truth, run_closed_loop
+from stillframe.loop.closed_loop import open_loop_truth, run_closed_loop
 from tests.loop_helpers import thesis_scene
 from tests.mw_support import ros_domain
 from tests.node_support import run_loop

@@ -10,15 +10,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from controller_node.factory import make_controller
-from estimator_node.coordinates import to_design
-from stillframe import messages, topics
-from stillframe.loop_messages import EstimateMessages
-from stillframe.loop_node import LoopParameters, diagnostic_values
+from stillframe.contract import messages, topics
+from stillframe.contract.codecs import EstimateMessages
+from stillframe.contract.signals import Estimate
+from stillframe.control.factory import make_controller
+from stillframe.design.coordinates import to_design
+from stillframe.dynamics.models.identified import frame_for
+from stillframe.loop.node_support import LoopParameters, diagnostic_values
 from stillframe.middleware.api import create_node, spin_until
 from stillframe.middleware.clock import ClockPublisher
-from stillframe.models.identified import frame_for
-from stillframe.signals import Estimate
 from tests.loop_helpers import thesis_scene
 from tests.mw_support import ros_domain
 from tests.node_support import params_file, start_node, stop

@@ -12,14 +12,14 @@ from pathlib import Path
 
 import numpy as np
 
-from estimator_node.factory import make_estimator
-from sim_node.plant import Plant
-from stillframe import messages, topics
-from stillframe.loop_messages import SensorMessages
-from stillframe.loop_node import LoopParameters, diagnostic_values
+from stillframe.contract import messages, topics
+from stillframe.contract.codecs import SensorMessages
+from stillframe.contract.signals import Sample
+from stillframe.dynamics.models.identified import frame_for
+from stillframe.estimation.factory import make_estimator
+from stillframe.loop.node_support import LoopParameters, diagnostic_values
 from stillframe.middleware.api import create_node, spin_until
-from stillframe.models.identified import frame_for
-from stillframe.signals import Sample
+from stillframe.plant.frame_plant import Plant
 from tests.loop_helpers import thesis_scene
 from tests.mw_support import ros_domain
 from tests.node_support import SHORT_LQG, params_file, start_node, stop

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from stillframe.closed_loop import run_closed_loop
+from stillframe.loop.closed_loop import run_closed_loop
 from tests.loop_helpers import thesis_scene
 from tests.mw_support import ros_domain
 from tests.node_support import SHORT_LQG, run_loop

@@ -12,8 +12,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from sim_node.plant import Plant
-from stillframe.closed_loop import run_closed_loop
+from stillframe.loop.closed_loop import run_closed_loop
+from stillframe.plant.frame_plant import Plant
 from tests.loop_helpers import thesis_scene
 from tests.mw_support import REPO_ROOT, child_env, finish, ros_domain
 from tests.node_support import params_file, run_loop, start_node, stop, wait_for_log

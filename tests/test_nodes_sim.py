@@ -9,10 +9,10 @@ from pathlib import Path
 
 import numpy as np
 
-from sim_node.plant import Plant
-from stillframe import messages, topics
-from stillframe.loop_node import diagnostic_values
+from stillframe.contract import messages, topics
+from stillframe.loop.node_support import diagnostic_values
 from stillframe.middleware.api import create_node, spin_until
+from stillframe.plant.frame_plant import Plant
 from tests.loop_helpers import thesis_scene
 from tests.mw_support import finish, ros_domain
 from tests.node_support import params_file, start_node
@@ -141,7 +141,7 @@ def test_missing_command_times_out_held_then_safe_state(ros_domain: int,
 
 def test_sensor_topics_are_reliable_in_lockstep_only() -> None:
     """A lost best-effort sample would break lock-step's promise of identical numbers."""
-    from stillframe.loop_node import LoopParameters
+    from stillframe.loop.node_support import LoopParameters
     from stillframe.middleware.qos import PROFILES, Reliability
 
     scene = thesis_scene("thesis_lqg")

@@ -23,12 +23,13 @@ import pytest
 import scipy.linalg as sla
 from filterpy.kalman import KalmanFilter
 
-from controller_node.supervisor import Controller
-from estimator_node.coordinates import design_map, physical_selector
-from stillframe import cli, messages, topics
+from stillframe.app import cli
+from stillframe.config.scene import load_scene
+from stillframe.contract import messages, topics
+from stillframe.control.supervisor import Controller
+from stillframe.design.coordinates import design_map, physical_selector
+from stillframe.dynamics.models.identified import frame_for
 from stillframe.middleware import api, dds_services, dds_types
-from stillframe.models.identified import frame_for
-from stillframe.scene import load_scene
 from tests.mw_support import (  # noqa: F401
     finish,
     ros_domain,

@@ -3,12 +3,12 @@
 import numpy as np
 import pytest
 
+from stillframe.dynamics.ph.body import BeamSection, floating_beam, rigid_body
+from stillframe.dynamics.ph.classical_fe import FrameModel, fix
+from stillframe.dynamics.ph.joints import Link, Support, fixed
+from stillframe.dynamics.ph.linear import natural_frequencies, pencil_eigenvalues
+from stillframe.dynamics.ph.system import PHSystem, RotaryDamper
 from stillframe.errors import InputError
-from stillframe.ph.body import BeamSection, floating_beam, rigid_body
-from stillframe.ph.classical_fe import FrameModel, fix
-from stillframe.ph.joints import Link, Support, fixed
-from stillframe.ph.linear import natural_frequencies, pencil_eigenvalues
-from stillframe.ph.system import PHSystem, RotaryDamper
 
 SECTION = BeamSection(rho_a=2714.0 * 4.0645e-5, ea=7.1e10 * 4.0645e-5, ei=0.616)
 L = 0.2794

@@ -5,10 +5,10 @@ import json
 import numpy as np
 import pytest
 
-from stillframe.cli import main
-from stillframe.ph import crank_slider, fourbar
-from stillframe.ph.manufactured import l2_errors, observed_rates
-from stillframe.ph.reference import radau_reference
+from stillframe.app.cli import main
+from stillframe.dynamics.ph import crank_slider, fourbar
+from stillframe.dynamics.ph.manufactured import l2_errors, observed_rates
+from stillframe.dynamics.ph.reference import radau_reference
 from tests import exudyn_crank_slider
 
 

@@ -1,7 +1,7 @@
 """Energy drift rows of bench fidelity: the pHDAE integrator conserves H where RK4 and the
 midpoint rule on the other models drift."""
 
-from stillframe.ph.energy_drift import energy_drift_rows
+from stillframe.dynamics.ph.energy_drift import energy_drift_rows
 
 
 def test_ph_rows_conserve_energy_and_follow_the_fe40_reference():

@@ -6,11 +6,11 @@ import numpy as np
 import pytest
 import scipy.linalg as sla
 
-from stillframe.models import build_model
-from stillframe.ph import frame
-from stillframe.ph.integrator import MidpointDAE, balance_error
-from stillframe.ph.linear import natural_frequencies
-from stillframe.scene import load_scene
+from stillframe.config.scene import load_scene
+from stillframe.dynamics.models import build_model
+from stillframe.dynamics.ph import frame
+from stillframe.dynamics.ph.integrator import MidpointDAE, balance_error
+from stillframe.dynamics.ph.linear import natural_frequencies
 
 FE40_HZ = np.array([1.0995, 1.9115, 5.5743, 8.4802])  # README: FE model, 40 el./column
 
@@ -62,7 +62,7 @@ def test_undamped_frame_conserves_h_and_a_damped_one_dissipates_exactly_z_r_z(sc
 
 
 def test_modes_command_runs_the_ph_scene(capsys):
-    from stillframe.cli import main
+    from stillframe.app.cli import main
     assert main(["modes", "scenes/ph_frame.yaml", "--json"]) == 0
     doc = json.loads(capsys.readouterr().out)
     assert doc["model"] == "ph2"
@@ -71,8 +71,8 @@ def test_modes_command_runs_the_ph_scene(capsys):
 
 @pytest.mark.slow
 def test_simulate_json_reports_the_power_balance_and_follows_the_fe_model(capsys):
-    from stillframe.cli import main
-    from stillframe.simulation import simulate
+    from stillframe.app.cli import main
+    from stillframe.dynamics.simulation import simulate
     assert main(["simulate", "scenes/ph_frame.yaml", "--duration", "0.3", "--json"]) == 0
     doc = json.loads(capsys.readouterr().out)
     assert doc["energy_balance_error"] < 1e-13

@@ -4,11 +4,11 @@ scipy's Radau on the index-1 form."""
 import numpy as np
 import pytest
 
-from stillframe.ph.body import BeamSection, floating_beam, rigid_body
-from stillframe.ph.integrator import MidpointDAE, balance_error
-from stillframe.ph.joints import Link, Support, fixed
-from stillframe.ph.reference import radau_reference
-from stillframe.ph.system import PHSystem, RotaryDamper
+from stillframe.dynamics.ph.body import BeamSection, floating_beam, rigid_body
+from stillframe.dynamics.ph.integrator import MidpointDAE, balance_error
+from stillframe.dynamics.ph.joints import Link, Support, fixed
+from stillframe.dynamics.ph.reference import radau_reference
+from stillframe.dynamics.ph.system import PHSystem, RotaryDamper
 
 G = 9.81
 

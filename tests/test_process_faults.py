@@ -23,10 +23,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from stillframe import messages, topics
-from stillframe.bags import read_bag
-from stillframe.loop_messages import applied_torque, physical_state
-from stillframe.messages import TYPESTORE
+from stillframe.bags.storage import read_bag
+from stillframe.contract import messages, topics
+from stillframe.contract.codecs import applied_torque, physical_state
+from stillframe.contract.messages import TYPESTORE
 from stillframe.middleware.api import create_node, spin_until
 from tests.mw_support import REPO_ROOT, child_env, finish, ros_domain
 from tests.node_support import params_file, start_node, stop, wait_for_log

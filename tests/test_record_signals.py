@@ -16,9 +16,9 @@ from pathlib import Path
 import pytest
 from mcap.reader import make_reader
 
-from stillframe import messages
-from stillframe.bags import read_bag
-from stillframe.messages import TYPESTORE
+from stillframe.bags.storage import read_bag
+from stillframe.contract import messages
+from stillframe.contract.messages import TYPESTORE
 from tests.mw_support import REPO_ROOT, child_env, finish, ros_domain, start_python
 
 __all__ = ["ros_domain"]
@@ -31,7 +31,7 @@ TOPICS = [("/load/imu1", "sensor_msgs/msg/Imu"), ("/load/imu2", "sensor_msgs/msg
 
 PUBLISHER = """
 import sys, time
-from stillframe import messages
+from stillframe.contract import messages
 from stillframe.middleware import api
 from stillframe.middleware.qos import QoSProfile
 topics = [t.split("=") for t in sys.argv[2:]]

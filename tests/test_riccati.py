@@ -6,8 +6,8 @@ import control
 import numpy as np
 import pytest
 
+from stillframe.design.riccati import RiccatiWarning, solve_dare
 from stillframe.errors import InputError
-from stillframe.riccati import RiccatiWarning, solve_dare
 
 
 def scalar_dare(a: float, b: float, q: float, r: float) -> float:

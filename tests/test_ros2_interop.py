@@ -15,13 +15,13 @@ from pathlib import Path
 import pytest
 from rosbags.highlevel import AnyReader
 
-from stillframe import launcher
+from stillframe.app import launcher
+from stillframe.app.launcher import node_command
+from stillframe.contract.topics import CONTRACT, FORCE_CMD
 from stillframe.errors import InputError
-from stillframe.launcher import node_command
 from stillframe.middleware import api, discovery
 from stillframe.middleware.names import resolve_topic
 from stillframe.middleware.qos import PROFILES
-from stillframe.topics import CONTRACT, FORCE_CMD
 from tests.mw_support import (  # noqa: F401
     REPO_ROOT,
     child_env,
@@ -42,7 +42,7 @@ STEPS = 6 * 32
 #: expected) and whether the publisher's node is in its graph
 PEER = textwrap.dedent("""
     import sys
-    from stillframe import messages
+    from stillframe.contract import messages
     from stillframe.middleware.api import create_node, spin_until
     role = sys.argv[1]
     node = create_node("peer_" + role, namespace="/t", argv=["peer"])

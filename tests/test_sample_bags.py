@@ -10,12 +10,12 @@ import numpy as np
 import pytest
 from rosbags.highlevel import AnyReader
 
-from stillframe.closed_loop import run_closed_loop
-from stillframe.scene import load_scene
+from stillframe.config.scene import load_scene
+from stillframe.loop.closed_loop import run_closed_loop
 from tests.mw_support import REPO_ROOT, run_stillframe
 
 BAGS = REPO_ROOT / "bags"
-#: DESIGN.md "Reference figures": the lumped model's structural modes (the pendulum's 1.0996 Hz
+#: the README ("Models"): the lumped model's structural modes (the pendulum's 1.0996 Hz
 #: mode is not excited by a force on floor 1 enough to matter at order 6)
 LUMPED_HZ = [1.9846, 5.7902, 8.8248]
 FLOORS = ["/frame/floor1/imu", "/frame/floor2/imu", "/frame/floor3/imu"]

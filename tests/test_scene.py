@@ -8,8 +8,8 @@ from pathlib import Path
 
 import pytest
 
+from stillframe.config.scene import load_scene, scene_from_dict
 from stillframe.errors import InputError
-from stillframe.scene import load_scene, scene_from_dict
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENES = sorted((ROOT / "scenes").glob("*.yaml"))
@@ -72,7 +72,7 @@ ERRORS = [
 
 @pytest.mark.parametrize(("data", "overrides", "message"), ERRORS)
 def test_each_error_names_its_key(data: dict, overrides: list[str], message: str) -> None:
-    from stillframe.models import build_model
+    from stillframe.dynamics.models import build_model
 
     with pytest.raises(InputError) as info:
         build_model(scene_from_dict(data, overrides))

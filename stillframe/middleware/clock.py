@@ -12,7 +12,7 @@ import time
 from dataclasses import dataclass
 from typing import Any
 
-from stillframe import messages
+from stillframe.contract import messages
 
 
 @dataclass(frozen=True, order=True)

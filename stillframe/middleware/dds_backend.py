@@ -1,6 +1,6 @@
 """The ``dds`` backend: the node API over Eclipse Cyclone DDS with ROS 2's wire conventions.
 
-What a Jazzy workstation (``rmw_cyclonedds_cpp``) expects, see DESIGN.md "Middleware":
+What a Jazzy workstation (``rmw_cyclonedds_cpp``) expects, see docs/middleware.md:
 ``rt/`` topics and ``pkg::msg::dds_::Type_`` types (:mod:`.dds_types`), participant USER_DATA
 ``enclave=/;``, endpoint USER_DATA ``typehash=RIHS01_<hex>;``, and the node list on
 ``ros_discovery_info`` (``rmw_dds_common/msg/ParticipantEntitiesInfo``; GIDs are the DDS
@@ -41,9 +41,9 @@ from cyclonedds.sub import DataReader
 from cyclonedds.topic import Topic
 
 from cyclonedds._clayer import ddspy_take, ddspy_write, ddspy_write_ts  # isort: skip
-from stillframe import messages
+from stillframe.contract import messages
 from stillframe.errors import InputError
-from stillframe.middleware import api, dds_types, discovery, names, params
+from stillframe.middleware import dds_types, discovery, interface, names, params
 from stillframe.middleware.clock import Clock
 from stillframe.middleware.logger import Logger
 from stillframe.middleware.qos import (
@@ -260,7 +260,7 @@ class Context:
         alive = {p.key.bytes for p in self._alive("participant")}
         return {gid: nodes for gid, nodes in self._participant_nodes.items() if gid in alive}
 
-    def endpoints(self, kind: str) -> list[api.TopicEndpointInfo]:
+    def endpoints(self, kind: str) -> list[interface.TopicEndpointInfo]:
         """Every alive ROS publisher (``kind='publication'``) or subscription on the network."""
         owners = {
             gid: (namespace, name)
@@ -274,7 +274,7 @@ class Context:
             if topic is None or rtype is None:
                 continue
             namespace, name = owners.get(ep.key.bytes, ("", ""))
-            result.append(api.TopicEndpointInfo(
+            result.append(interface.TopicEndpointInfo(
                 topic_name=topic, topic_type=rtype,
                 topic_type_hash=user_data_field(ep.qos, "typehash"),
                 endpoint_gid=ep.key.bytes, qos_profile=ros_qos(ep.qos),
@@ -378,10 +378,10 @@ class DdsSubscription:
                 continue
             if self.raw:
                 received = self._clock.now().nanoseconds
-                self.callback(bytes(data), api.MessageInfo(
+                self.callback(bytes(data), interface.MessageInfo(
                     info.source_timestamp, received, self.writer_gid(info.publication_handle)))
             else:
-                api.deliver(self.callback, data, self.msg_type, self.topic_name)
+                interface.deliver(self.callback, data, self.msg_type, self.topic_name)
             count += 1
         return count
 
@@ -427,7 +427,7 @@ class DdsTimer:
 
 
 class DdsNode:
-    """A ROS node on the process's Cyclone participant (API: :class:`.api.Node`)."""
+    """A ROS node on the process's Cyclone participant (API: :class:`.interface.Node`)."""
 
     backend = "dds"
 
@@ -478,11 +478,11 @@ class DdsNode:
 
     def declare_parameter(
         self, name: str, default: Any = None, read_only: bool = False
-    ) -> api.Parameter:
-        return api.Parameter(name, self._params.declare(name, default, read_only))
+    ) -> params.Parameter:
+        return params.Parameter(name, self._params.declare(name, default, read_only))
 
-    def get_parameter(self, name: str) -> api.Parameter:
-        return api.Parameter(name, self._params.get(name))
+    def get_parameter(self, name: str) -> params.Parameter:
+        return params.Parameter(name, self._params.get(name))
 
     def add_on_set_parameters_callback(self, callback: params.SetCallback) -> None:
         self._params.callbacks.append(callback)
@@ -547,11 +547,11 @@ class DdsNode:
                 found.setdefault(ep.topic_name, set()).add(ep.topic_type)
         return [(topic, sorted(types)) for topic, types in sorted(found.items())]
 
-    def get_publishers_info_by_topic(self, topic: str) -> list[api.TopicEndpointInfo]:
+    def get_publishers_info_by_topic(self, topic: str) -> list[interface.TopicEndpointInfo]:
         full = names.resolve_topic(topic, self._namespace, self._name)
         return [ep for ep in self.context.endpoints("publication") if ep.topic_name == full]
 
-    def get_subscriptions_info_by_topic(self, topic: str) -> list[api.TopicEndpointInfo]:
+    def get_subscriptions_info_by_topic(self, topic: str) -> list[interface.TopicEndpointInfo]:
         full = names.resolve_topic(topic, self._namespace, self._name)
         return [ep for ep in self.context.endpoints("subscription") if ep.topic_name == full]
 
@@ -565,9 +565,9 @@ class DdsNode:
     # -- execution ---------------------------------------------------------------------------
     def spin_once(self, timeout_sec: float | None = None) -> None:
         """Wait for data or the next timer (at most ``timeout_sec``), then run callbacks."""
-        if not api.ok():
+        if not interface.ok():
             return
-        api.freeze_setup_objects()
+        interface.freeze_setup_objects()
         wait_ns = MAX_WAIT_NS if timeout_sec is None else min(MAX_WAIT_NS, int(timeout_sec * 1e9))
         for timer in self._timers:
             due = timer.time_until_call_ns()

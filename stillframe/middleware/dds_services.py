@@ -31,7 +31,7 @@ from cyclonedds.pub import DataWriter
 from cyclonedds.sub import DataReader
 
 from cyclonedds._clayer import ddspy_take  # isort: skip
-from stillframe import messages
+from stillframe.contract import messages
 from stillframe.errors import InputError
 from stillframe.middleware import names, param_messages
 from stillframe.middleware.dds_backend import (

@@ -15,7 +15,7 @@ from cyclonedds.idl import IdlStruct, make_idl_struct
 from cyclonedds.idl import types as idl
 from rosbags.typesys.base import Nodetype
 
-from stillframe import messages
+from stillframe.contract import messages
 from stillframe.errors import InputError
 
 TOPIC_PREFIX = "rt"

@@ -11,7 +11,7 @@ from typing import Any
 
 import yaml
 
-from stillframe import messages
+from stillframe.contract import messages
 from stillframe.errors import InputError
 from stillframe.middleware import api, names
 from stillframe.middleware.qos import DEFAULT, Durability, QoSProfile, Reliability

@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from stillframe import messages
+from stillframe.contract import messages
 from stillframe.errors import InputError
 from stillframe.middleware.params import Parameters, SetParametersResult, check_value
 

@@ -21,8 +21,8 @@ from typing import Any
 
 import yaml
 
+from stillframe.config.yamlio import load_yaml
 from stillframe.errors import InputError
-from stillframe.yamlio import load_yaml
 
 #: Types a ROS parameter may hold (arrays are homogeneous lists of the scalar types).
 SCALAR_TYPES = (bool, int, float, str)

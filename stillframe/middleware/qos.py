@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import enum
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
 from stillframe.errors import InputError
@@ -87,3 +88,23 @@ def as_profile(qos: QoSProfile | str | int) -> QoSProfile:
     if qos in PROFILES:
         return PROFILES[qos]
     raise InputError(f"unknown QoS profile {qos!r} (one of {', '.join(PROFILES)})")
+
+
+#: Depth of the recorder's subscriptions: deep enough that a slow disk loses nothing.
+RECORD_DEPTH = 1000
+
+
+def recorder_request(offers: Sequence[QoSProfile]) -> QoSProfile:
+    """The recorder's subscription QoS (rosbag2's ``adapt_request_to_offers``): RELIABLE and
+    TRANSIENT_LOCAL only if every publisher offers them (a stricter request would not match the
+    others). History KEEP_LAST with the deepest offered depth, but at least ``RECORD_DEPTH``
+    (rosbag2 takes the deepest offer; a Python recorder needs more room when the disk stalls)."""
+    if not offers:
+        return DEFAULT.with_depth(RECORD_DEPTH)
+    reliable = all(p.reliability == Reliability.RELIABLE for p in offers)
+    transient = all(p.durability == Durability.TRANSIENT_LOCAL for p in offers)
+    return QoSProfile(
+        depth=max(RECORD_DEPTH, *(p.depth for p in offers)),
+        reliability=Reliability.RELIABLE if reliable else Reliability.BEST_EFFORT,
+        durability=Durability.TRANSIENT_LOCAL if transient else Durability.VOLATILE,
+    )

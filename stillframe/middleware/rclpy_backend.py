@@ -32,9 +32,9 @@ from rclpy.serialization import deserialize_message
 from rclpy.signals import SignalHandlerOptions
 from rosbags.typesys.base import Nodetype
 
-from stillframe import messages
+from stillframe.contract import messages
 from stillframe.errors import InputError
-from stillframe.middleware import api
+from stillframe.middleware import interface
 from stillframe.middleware.clock import SYSTEM_CLOCK, Clock, Time
 from stillframe.middleware.params import Parameter, SetCallback
 from stillframe.middleware.qos import (
@@ -145,7 +145,7 @@ class RclpyPublisher:
 
 
 class RclpyNode:
-    """:class:`.api.Node` over an ``rclpy.node.Node``."""
+    """:class:`.interface.Node` over an ``rclpy.node.Node``."""
 
     backend = "rclpy"
     #: rclpy's SingleThreadedExecutor. Its experimental EventsExecutor (C++) ran lock-step 1.7x
@@ -231,9 +231,9 @@ class RclpyNode:
             if raw:
                 now = self._clock.now().nanoseconds
                 gid = bytes(info.get("publisher_gid") or b"")   # absent in Jazzy's rclpy
-                callback(data, api.MessageInfo(now, now, gid))
+                callback(data, interface.MessageInfo(now, now, gid))
             else:
-                api.deliver(callback, data, name, topic)
+                interface.deliver(callback, data, name, topic)
 
         return self._node.create_subscription(
             ros_message_class(name), topic, on_data, rclpy_qos(as_profile(qos)), raw=True
@@ -249,9 +249,9 @@ class RclpyNode:
     def get_topic_names_and_types(self) -> list[tuple[str, list[str]]]:
         return sorted(self._node.get_topic_names_and_types())
 
-    def _endpoints(self, topic: str, infos: list[Any]) -> list[api.TopicEndpointInfo]:
+    def _endpoints(self, topic: str, infos: list[Any]) -> list[interface.TopicEndpointInfo]:
         return [
-            api.TopicEndpointInfo(
+            interface.TopicEndpointInfo(
                 topic_name=self._node.resolve_topic_name(topic),
                 topic_type=info.topic_type,
                 topic_type_hash=str(getattr(info, "topic_type_hash", "")),
@@ -261,18 +261,18 @@ class RclpyNode:
             for info in infos
         ]
 
-    def get_publishers_info_by_topic(self, topic: str) -> list[api.TopicEndpointInfo]:
+    def get_publishers_info_by_topic(self, topic: str) -> list[interface.TopicEndpointInfo]:
         return self._endpoints(topic, self._node.get_publishers_info_by_topic(topic))
 
-    def get_subscriptions_info_by_topic(self, topic: str) -> list[api.TopicEndpointInfo]:
+    def get_subscriptions_info_by_topic(self, topic: str) -> list[interface.TopicEndpointInfo]:
         return self._endpoints(topic, self._node.get_subscriptions_info_by_topic(topic))
 
     def get_node_names_and_namespaces(self) -> list[tuple[str, str]]:
         return sorted(self._node.get_node_names_and_namespaces())
 
     def spin_once(self, timeout_sec: float | None = None) -> None:
-        if api.ok():
-            api.freeze_setup_objects()
+        if interface.ok():
+            interface.freeze_setup_objects()
             wait = MAX_WAIT_S if timeout_sec is None else min(MAX_WAIT_S, timeout_sec)
             RclpyNode._executor.spin_once(timeout_sec=wait)
 

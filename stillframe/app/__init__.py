@@ -1,0 +1,1 @@
+"""The application: the ``stillframe`` command, its subcommands and the process launcher."""

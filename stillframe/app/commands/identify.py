@@ -1,0 +1,180 @@
+"""``stillframe identify BAG``: a state-space model and its modes from a rosbag2 recording.
+
+Inputs and outputs are ``TOPIC[:FIELD]`` channels (see :mod:`stillframe.identification.bagdata`);
+the
+model comes from :func:`stillframe.identification.pipeline.identify` (OKID + ERA or ERA/DC, thesis
+ch. 3).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from typing import TYPE_CHECKING, Any
+
+from stillframe.app.commands.common import add_json_argument, emit_json
+from stillframe.errors import InputError
+
+if TYPE_CHECKING:
+    from stillframe.identification.mkr import PhysicalModel
+    from stillframe.identification.pipeline import Identification
+
+
+def _order(text: str) -> int | str:
+    if text == "auto":
+        return text
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is neither a positive integer nor auto"
+                                         ) from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"{value} is not a positive integer")
+    return value
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    from stillframe.identification.pipeline import METHODS
+
+    parser = sub.add_parser(
+        "identify", help="identify a state-space model and its modes from a rosbag2 bag",
+        description="Identify a discrete state-space model (OKID + ERA or ERA/DC) and its modes "
+                    "from input and output channels recorded in a rosbag2 bag.")
+    parser.add_argument("bag", metavar="BAG", help="rosbag2 bag directory (or a lone .mcap file)")
+    parser.add_argument("--input", dest="inputs", action="append", default=[],
+                        metavar="TOPIC[:FIELD]", help="input channel (repeatable), e.g. "
+                        "/frame/excitation/wrench:wrench.force.x")
+    parser.add_argument("--output", dest="outputs", action="append", default=[],
+                        metavar="TOPIC[:FIELD]", help="output channel (repeatable), e.g. "
+                        "/frame/floor1/imu:linear_acceleration.x")
+    parser.add_argument("--method", choices=METHODS, default="okid-eradc")
+    parser.add_argument("--order", type=_order, default="auto", metavar="N|auto",
+                        help="model order, or auto: the largest Hankel singular-value gap")
+    parser.add_argument("--max-order", type=int, default=None, metavar="N",
+                        help="largest order that --order auto may choose")
+    parser.add_argument("--observer-order", type=int, default=None, metavar="P",
+                        help="OKID observer order p (default 20, lowered for short records)")
+    parser.add_argument("--combined", action="store_true",
+                        help="OKID methods: realize [Y_k, Y0_k] together, giving B and the "
+                        "observer gain at once (thesis eqs. 3.165-3.203)")
+    parser.add_argument("--refine", action="store_true",
+                        help="refine the OKID model by prediction-error least squares (innovation "
+                        "form) and give each mode a 95 %% interval")
+    parser.add_argument("--detrend", action="store_true", help="remove a linear trend first")
+    parser.add_argument("--lowpass", type=float, default=None, metavar="HZ",
+                        help="zero-phase Butterworth low-pass on inputs and outputs")
+    parser.add_argument("--decimate", type=int, default=1, metavar="Q",
+                        help="keep every Q-th sample after a zero-phase anti-alias filter")
+    parser.add_argument("--max-jitter", type=float, default=None, metavar="FRACTION",
+                        help="largest sampling-step deviation accepted (default 0.05 of a step)")
+    add_json_argument(parser)
+    parser.add_argument("--plots", metavar="DIR", default=None, help="write PNG figures here")
+    parser.add_argument("--save-model", metavar="FILE", default=None,
+                        help="write the identified model file")
+    parser.add_argument("--mkr", metavar="SENSOR_DOFS:ACTUATOR_DOFS", default=None,
+                        help="also identify M, K, R (thesis §3.7): the DOF of each output and of "
+                        "each input, e.g. 0,1,2:0 for three floor sensors and a force on floor 1")
+    parser.add_argument("--output-type", choices=("acceleration", "velocity", "displacement"),
+                        default="acceleration", help="what the outputs measure (for --mkr)")
+    parser.add_argument("--progress", action="store_true",
+                        help="show progress on stderr (default: when stderr is a terminal)")
+    parser.set_defaults(func=run)
+
+
+class Progress:
+    """Stage messages with elapsed time on stderr."""
+
+    def __init__(self, enabled: bool) -> None:
+        self.enabled = enabled
+        self.start = time.perf_counter()
+
+    def __call__(self, message: str) -> None:
+        if self.enabled:
+            print(f"[{time.perf_counter() - self.start:7.2f} s] {message}", file=sys.stderr,
+                  flush=True)
+
+
+def _dofs(text: str, what: str) -> list[int]:
+    try:
+        return [int(d) for d in text.split(",")]
+    except ValueError:
+        raise InputError(f"--mkr: {what} DOFs {text!r} must be comma-separated integers"
+                         ) from None
+
+
+def _physical(args: argparse.Namespace, ident: Identification
+              ) -> tuple[PhysicalModel | None, dict[str, Any]]:
+    """MKR matrices and the least-squares Rayleigh α, β of the identified modes (eq. 3.213)."""
+    if args.mkr is None:
+        return None, {}
+    from stillframe.identification.damping import fit_proportional_damping
+    from stillframe.identification.mkr import mkr
+
+    sensors, sep, actuators = args.mkr.partition(":")
+    if not sep:
+        raise InputError(f"--mkr {args.mkr!r}: expected SENSOR_DOFS:ACTUATOR_DOFS, e.g. 0,1,2:0")
+    physical = mkr(ident.A, ident.B, ident.C, ident.dt, _dofs(sensors, "sensor"),
+                   _dofs(actuators, "actuator"), args.output_type)
+    alpha, beta = fit_proportional_damping(ident.modes.omega, ident.modes.damping_ratio)
+    return physical, {"M": physical.M.tolist(), "K": physical.K.tolist(),
+                      "R": physical.R.tolist(), "rayleigh_alpha": alpha, "rayleigh_beta": beta}
+
+
+def run(args: argparse.Namespace) -> int:
+    from stillframe.identification.bagdata import DEFAULT_JITTER, Channel, read_record
+    from stillframe.identification.pipeline import identify
+    from stillframe.identification.report import format_matrix, identification_document, modes_table
+
+    progress = Progress(args.progress or sys.stderr.isatty())
+    inputs = [Channel.parse(s) for s in args.inputs]
+    outputs = [Channel.parse(s) for s in args.outputs]
+    jitter = DEFAULT_JITTER if args.max_jitter is None else args.max_jitter
+    if not 0 < jitter < 0.5:
+        raise InputError(f"--max-jitter {jitter}: must lie between 0 and 0.5")
+    progress(f"reading {args.bag}")
+    record = read_record(args.bag, inputs, outputs, detrend=args.detrend,
+                         lowpass_hz=args.lowpass, decimate=args.decimate, max_jitter=jitter)
+    progress(f"{record.samples} samples at {1 / record.dt:g} Hz; identifying ({args.method})")
+    ident = identify(record.u, record.y, record.dt, args.method, args.order,
+                     observer_order=args.observer_order, max_order=args.max_order,
+                     combined=args.combined, refine=args.refine)
+    progress(f"order {ident.order}, {len(ident.modes)} modes")
+    for warning in ident.warnings:
+        print(f"stillframe identify: warning: {warning}", file=sys.stderr)
+    if args.plots:
+        from stillframe.identification.plots import identification_plots
+
+        progress(f"writing plots to {args.plots}")
+        identification_plots(ident, record, args.plots)
+    physical, physical_doc = _physical(args, ident)
+    if args.save_model:
+        from stillframe.identification.model_file import model_from_identification, save_model
+
+        provenance = {"bag": str(args.bag), "inputs": [str(c) for c in record.inputs],
+                      "outputs": [str(c) for c in record.outputs], **record.preprocessing}
+        if physical is not None:
+            provenance |= {"mkr": {"dofs": args.mkr, "output": args.output_type},
+                           "rayleigh_alpha": physical_doc["rayleigh_alpha"],
+                           "rayleigh_beta": physical_doc["rayleigh_beta"]}
+        save_model(args.save_model, model_from_identification(
+            ident, provenance["inputs"], provenance["outputs"], provenance, physical))
+        progress(f"model written to {args.save_model}")
+    doc = identification_document(ident, args.order == "auto") | physical_doc
+    if args.json:
+        emit_json(doc)
+        return 0
+    names = [str(c) for c in record.outputs]
+    print(f"{args.bag}: {record.samples} samples, dt = {record.dt:g} s; method {ident.method}, "
+          f"order {ident.order}"
+          + (f" (auto: gap sigma_n/sigma_n+1 = {ident.order_gap:.4g})" if args.order == "auto"
+             else ""))
+    print("outputs: " + ", ".join(f"y{i + 1} = {n}" for i, n in enumerate(names)))
+    print(modes_table(ident.modes, ident.consistent, [f"y{i + 1}" for i in range(len(names))],
+                      ident.refinement))
+    if physical is not None:
+        for key in ("M", "K", "R"):
+            print(f"{key} =\n{format_matrix(physical_doc[key])}")
+        print(f"Rayleigh fit of the modes: alpha = {physical_doc['rayleigh_alpha']:.6g} 1/s, "
+              f"beta = {physical_doc['rayleigh_beta']:.6g} s")
+    return 0

@@ -1,0 +1,138 @@
+"""``stillframe launch SCENE``: the three nodes as separate processes over DDS, to the end.
+
+Prints the live status from ``/diagnostics`` on stderr and, at the end of the scene, the
+evaluation sim_node wrote: steady-state peaks per floor with and without control and the
+reductions (thesis eq. 5.233, 5.287); ``--json`` prints it as one document
+``{"reduction_pct": {"displacement": [...], "velocity": [...]}, "peak_command": ...,
+"lockstep_timeouts": ..., "steps": ..., "wall_s": ..., ...}``. Exit code 1 names a node that
+died, 130 follows Ctrl-C (every child stopped and reaped).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import tempfile
+from pathlib import Path
+from typing import Any
+
+from stillframe.app.commands.common import (
+    add_scene_arguments,
+    emit_json,
+    scene_from_args,
+)
+from stillframe.app.launcher import MODES
+from stillframe.config.schema import Section
+from stillframe.errors import InputError
+from stillframe.text_table import format_table
+
+
+def add_launch_arguments(parser: argparse.ArgumentParser) -> None:
+    """``--mode`` and ``--lockstep-timeout`` (shared with ``reproduce`` and ``demo``)."""
+    parser.add_argument("--mode", choices=MODES, default="lockstep",
+                        help="lockstep: deterministic, as fast as the nodes go (default); "
+                             "realtime: paced by the wall clock")
+    parser.add_argument("--lockstep-timeout", type=float, default=None, metavar="S",
+                        help="sim_node's wait for a command before it holds the previous one")
+    parser.add_argument("--backend", dest="backends", action="append", default=[],
+                        metavar="[NODE=]BACKEND",
+                        help="middleware of every node (dds or rclpy; default: STILLFRAME_RMW, "
+                             "else rclpy where installed), or of one node: sim_node=dds "
+                             "(repeatable; also estimator_node, controller_node, recorder)")
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    parser = sub.add_parser(
+        "launch", help="run a scene through sim_node, estimator_node and controller_node over DDS",
+        description="Start the three nodes as separate processes on the current ROS_DOMAIN_ID, "
+                    "show their status, stop cleanly on Ctrl-C, print the evaluation.")
+    add_scene_arguments(parser)
+    add_launch_arguments(parser)
+    parser.add_argument("--record", type=Path, default=None, metavar="DIR",
+                        help="also record every topic into this rosbag2 directory (MCAP)")
+    parser.add_argument("--record-topic", dest="record_topics", action="append", default=[],
+                        metavar="TOPIC", help="with --record: record only this topic "
+                                              "(repeatable)")
+    parser.add_argument("--monitor", action="store_true",
+                        help="also run `stillframe monitor --dashboard` (Foxglove bridge and "
+                             "live dashboard on 127.0.0.1)")
+    parser.add_argument("--monitor-port", type=int, default=8765, metavar="P",
+                        help="with --monitor: Foxglove WebSocket port (default 8765; 0: any)")
+    parser.add_argument("--dashboard-port", type=int, default=8080, metavar="P",
+                        help="with --monitor: dashboard port (default 8080; 0: any)")
+    parser.add_argument("--out", type=Path, default=None, metavar="DIR",
+                        help="keep sim_node's result.json and result.npz (histories) here")
+    parser.set_defaults(func=run)
+
+
+def evaluation_table(evaluation: dict[str, Any], scene: Section) -> str:
+    """Floors as rows: peaks without and with control, the reductions, the scene's reference."""
+    ev = scene.evaluation
+    red = evaluation["reduction_pct"]
+    before = evaluation.get("peak_uncontrolled", {})
+    after = evaluation.get("peak_controlled", {})
+
+    def ref(values: list[float], i: int) -> str:
+        return f"{values[i]:.2f}" if len(values) == 3 else "-"
+
+    def peak(table: dict[str, list[float]], key: str, i: int) -> str:
+        return f"{table[key][i]:.4g}" if key in table else "-"
+
+    rows = [[f"floor {i + 1}",
+             peak(before, "displacement", i), peak(after, "displacement", i),
+             f"{red['displacement'][i]:.2f}", ref(ev.reference_displacement_pct, i),
+             peak(before, "velocity", i), peak(after, "velocity", i),
+             f"{red['velocity'][i]:.2f}", ref(ev.reference_velocity_pct, i)]
+            for i in range(3)]
+    return format_table(["", "x off [m]", "x on [m]", "x red. %", "thesis %",
+                         "v off [m/s]", "v on [m/s]", "v red. %", "thesis %"], rows)
+
+
+def print_evaluation(evaluation: dict[str, Any], scene: Section) -> None:
+    ev = scene.evaluation
+    baseline = (f"the {ev.window:g} s before control starts" if ev.baseline == "before_start"
+                else f"the last {ev.window:g} s of a run without control")
+    print(f"scene {scene.name}: steady-state peaks, last {ev.window:g} s with control against "
+          f"{baseline}:")
+    print(evaluation_table(evaluation, scene))
+    counters = (("deadline_misses", "overruns") if evaluation.get("mode") == "realtime"
+                else ("lockstep_timeouts",))
+    extras = [f"{key} {evaluation[key]}" for key in counters if key in evaluation]
+    print(f"peak command {evaluation['peak_command']:.4g}; {evaluation['steps']} steps in "
+          f"{evaluation['wall_s']:.2f} s wall" + (f"; {', '.join(extras)}" if extras else ""))
+
+
+def report_death(command: str, exc: Exception) -> int:
+    """One line naming the dead node, then the last lines it printed."""
+    print(f"stillframe {command}: error: {exc}", file=sys.stderr)
+    for line in getattr(exc, "tail", []):
+        print(f"  {line}", file=sys.stderr)
+    return 1
+
+
+def run(args: argparse.Namespace) -> int:
+    from stillframe.app.launcher import NodeDiedError, run_scene
+
+    scene = scene_from_args(args)
+    if args.record_topics and args.record is None:
+        raise InputError("--record-topic needs --record DIR")
+    with tempfile.TemporaryDirectory(prefix="stillframe-launch-") as tmp:
+        try:
+            result = run_scene(Path(args.scene), args.overrides, args.out or Path(tmp),
+                               args.mode, args.record, args.lockstep_timeout,
+                               record_topics=args.record_topics, backends=args.backends,
+                               monitor_args=["--port", str(args.monitor_port),
+                                             "--dashboard-port", str(args.dashboard_port)]
+                               if args.monitor else None)
+        except NodeDiedError as exc:
+            return report_death("launch", exc)
+        except KeyboardInterrupt:
+            print("stillframe launch: interrupted; every node stopped", file=sys.stderr)
+            return 130
+    if args.json:
+        emit_json({"scene": scene.name, **result.evaluation, "diagnostics": result.diagnostics})
+    elif "reduction_pct" in result.evaluation:
+        print_evaluation(result.evaluation, scene)
+    else:
+        print(f"scene {scene.name}: {result.evaluation.get('steps')} steps, no controller")
+    return 0

@@ -1,0 +1,95 @@
+"""``stillframe monitor [TOPIC ...]``: the ROS graph live in Foxglove/Lichtblick and a dashboard.
+
+Bridges the topics (all of them by default) to the Foxglove WebSocket protocol
+(``foxglove.websocket.v1``, ``ros2msg`` schemas, CDR messages) on ``ws://HOST:PORT``; with
+``--dashboard`` also serves the built-in live dashboard on ``http://HOST:DASHBOARD_PORT``.
+Runs until Ctrl-C. See docs/monitor.md.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+from pathlib import Path
+
+from stillframe.errors import InputError
+
+READY_LINE = "Monitor ready"
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    parser = sub.add_parser(
+        "monitor", help="bridge topics to Foxglove (WebSocket) and serve a live dashboard",
+        description=__doc__.split("\n\n", 1)[1])
+    parser.add_argument("topics", nargs="*", metavar="TOPIC",
+                        help="topics to bridge (default: every topic)")
+    parser.add_argument("--host", default="127.0.0.1",
+                        help="address to bind (default 127.0.0.1: this machine only)")
+    parser.add_argument("--port", type=int, default=8765,
+                        help="Foxglove WebSocket port (default 8765; 0: any free port)")
+    parser.add_argument("--dashboard", action="store_true", help="also serve the dashboard")
+    parser.add_argument("--dashboard-port", type=int, default=8080,
+                        help="dashboard HTTP port (default 8080; 0: any free port)")
+    parser.add_argument("--namespace", default="/frame",
+                        help="the loop's namespace, for the dashboard (default /frame)")
+    parser.add_argument("--scene", type=Path, default=None,
+                        help="scene whose command limits the dashboard draws")
+    parser.add_argument("--set", dest="overrides", action="append", default=[],
+                        metavar="KEY=VALUE", help="with --scene: override a scene value")
+    parser.add_argument("--nice", type=int, default=10, metavar="N",
+                        help="lower the monitor's CPU priority by N (default 10), so that under "
+                             "load the loop's nodes come first")
+    parser.add_argument("--use-sim-time", action="store_true",
+                        help="follow /clock: stamps and the Foxglove time cursor in sim time")
+    parser.set_defaults(func=run)
+
+
+def _check_port(name: str, port: int) -> None:
+    if not 0 <= port <= 65535:
+        raise InputError(f"{name} {port}: expected 0..65535")
+
+
+def run(args: argparse.Namespace) -> int:
+    import foxglove
+
+    from stillframe.config.scene import load_scene
+    from stillframe.middleware.api import create_node, spin
+    from stillframe.middleware.names import resolve_topic
+    from stillframe.monitor.dashboard import Dashboard, Limits, serve
+    from stillframe.monitor.foxglove_bridge import FoxgloveBridge, start_server
+
+    _check_port("--port", args.port)
+    _check_port("--dashboard-port", args.dashboard_port)
+    if not 0 <= args.nice <= 19:
+        raise InputError(f"--nice {args.nice}: expected 0..19")
+    os.nice(args.nice)
+    limits = Limits()
+    if args.scene is not None:
+        scene = load_scene(args.scene, args.overrides)
+        limits = Limits(scene.controller.limit, scene.actuators.torque_limit,
+                        scene.actuators.force_limit)
+    sim = ["--ros-args", "-p", "use_sim_time:=true"] if args.use_sim_time else []
+    node = create_node("stillframe_monitor", argv=[*sys.argv[:1], *sim])
+    context = foxglove.Context()
+    try:
+        try:
+            server = start_server(args.host, args.port, context)
+        except RuntimeError as exc:
+            raise InputError(f"--port {args.port}: cannot serve on {args.host}: {exc}") from None
+        bridge = FoxgloveBridge(node, server, context, [resolve_topic(t) for t in args.topics])
+        where = f"foxglove ws://{args.host}:{server.port}"
+        if args.dashboard:
+            try:
+                http = serve(Dashboard(node, args.namespace, limits), args.host,
+                             args.dashboard_port)
+            except OSError as exc:
+                raise InputError(f"--dashboard-port {args.dashboard_port}: {exc}") from None
+            where += f", dashboard http://{args.host}:{http.server_address[1]}/"
+        node.get_logger().info(f"{READY_LINE}: {where}")
+        spin(node)
+        server.stop()
+        node.get_logger().info(f"Forwarded {len(bridge.channels)} topics")
+    finally:
+        node.destroy_node()
+    return 0

@@ -1,0 +1,46 @@
+"""``stillframe play DIR [--rate R] [--clock [HZ]] [--loop]``: republish a bag with its timing."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    parser = sub.add_parser(
+        "play", help="republish a rosbag2 bag with its original timing and QoS, like ros2 bag play")
+    parser.add_argument("bag", metavar="DIR", help="rosbag2 directory")
+    parser.add_argument("-r", "--rate", type=float, default=1.0,
+                        help="playback speed factor (default 1.0)")
+    parser.add_argument("--clock", type=float, nargs="?", const=40.0, default=None, metavar="HZ",
+                        help="publish the bag time on /clock at HZ (default 40 Hz)")
+    parser.add_argument("-l", "--loop", action="store_true", help="play again and again")
+    parser.add_argument("-d", "--delay", type=float, default=1.0, metavar="S",
+                        help="seconds to wait after creating the publishers (discovery), "
+                             "default 1.0")
+    parser.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from stillframe.bags.player import Player
+    from stillframe.errors import InputError
+    from stillframe.middleware.api import create_node, ok
+
+    if not args.delay >= 0:
+        raise InputError(f"--delay must be >= 0 s, got {args.delay}")
+    node = create_node("stillframe_player", argv=sys.argv[:1])
+    try:
+        player = Player(node, args.bag, rate=args.rate, clock_hz=args.clock)
+        player.wait(args.delay)
+        while ok():
+            player.play_once()
+            if not args.loop:
+                break
+        interrupted = not ok()
+        acked = interrupted or player.finish()
+        node.get_logger().info(f"Published {player.published} messages"
+                               + (" (interrupted)" if interrupted else "")
+                               + ("" if acked else " (some not acknowledged by subscribers)"))
+    finally:
+        node.destroy_node()
+    return 0

@@ -1,0 +1,49 @@
+"""``stillframe record -o DIR (--all | TOPIC...)``: record topics into a rosbag2 bag (MCAP)."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    parser = sub.add_parser(
+        "record", help="record topics into a rosbag2 bag (metadata v9, MCAP), like ros2 bag record",
+        description="Record until Ctrl-C (SIGINT) or SIGTERM; the bag is closed cleanly then.")
+    parser.add_argument("-o", "--output", required=True, metavar="DIR",
+                        help="bag directory to create (must not exist)")
+    parser.add_argument("-a", "--all", action="store_true", help="record every topic")
+    parser.add_argument("topics", nargs="*", metavar="TOPIC", help="topics to record")
+    parser.add_argument("--use-sim-time", action="store_true",
+                        help="stamp messages with the time on /clock instead of the system time")
+    parser.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from stillframe.bags.recorder import Recorder
+    from stillframe.bags.storage import BagWriter
+    from stillframe.contract import messages
+    from stillframe.errors import InputError
+    from stillframe.middleware.api import create_node, spin
+    from stillframe.middleware.names import resolve_topic
+
+    if args.all == bool(args.topics):
+        raise InputError("give either --all or one or more TOPICs")
+    topics = [resolve_topic(t) for t in args.topics]
+    sim = ["--ros-args", "-p", "use_sim_time:=true"] if args.use_sim_time else []
+    node = create_node("stillframe_recorder", argv=[*sys.argv[:1], *sim])
+    try:
+        with BagWriter(args.output, messages.TYPESTORE) as bag:
+            recorder = Recorder(node, bag, topics)
+            node.get_logger().info(f"Recording to '{args.output}' "
+                                   f"({'all topics' if args.all else ', '.join(topics)})")
+            spin(node)
+            recorder.drain()
+        for topic in recorder.missing():
+            node.get_logger().warning(f"no publisher on '{topic}' was seen: not recorded")
+        per_topic = ", ".join(f"{t} {n}" for t, n in recorder.counts().items())
+        node.get_logger().info(f"Recorded {recorder.total} messages"
+                               + (f": {per_topic}" if per_topic else ""))
+    finally:
+        node.destroy_node()
+    return 0

@@ -1,0 +1,422 @@
+"""Start the closed loop as separate OS processes over DDS and watch it (``stillframe launch``).
+
+The three nodes (``sim_node``, ``estimator_node``, ``controller_node``) and optionally a bag
+recorder run as children, each in its own process group (a Ctrl-C in the terminal reaches only
+the launcher, which forwards one SIGINT to each child) and, on Linux, with a parent-death signal
+(SIGTERM) so that no child outlives a killed launcher. The launcher keeps a hidden node on the
+same ROS domain that listens to ``/diagnostics`` for the status line. The run ends when
+sim_node exits after writing its result file (the scene's duration has passed); a child that
+exits before that, or with a failure code, ends the run with :class:`NodeDiedError` naming it.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import ctypes
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import threading
+import time
+from collections import deque
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from stillframe.config.scene import load_scene
+from stillframe.config.schema import Section
+from stillframe.contract.topics import STATUS_KEYS
+from stillframe.errors import InputError
+from stillframe.locations import REPO_ROOT
+from stillframe.middleware import names
+
+NODES: tuple[str, ...] = ("sim_node", "estimator_node", "controller_node")
+#: the children whose middleware backend ``--backend NAME=BACKEND`` can choose
+BACKEND_TARGETS: tuple[str, ...] = (*NODES, "recorder", "monitor")
+MODES: tuple[str, ...] = ("lockstep", "realtime")
+#: seconds a child gets to exit after SIGINT, then after SIGTERM, before SIGKILL
+STOP_GRACE_S = 10.0
+#: the log line by which a helper child says it is ready (the nodes start after it)
+READY_LINES: dict[str, str] = {"recorder": "Recording to", "monitor": "Monitor ready"}
+#: lines of a child's output kept to explain its death
+TAIL_LINES = 15
+_PR_SET_PDEATHSIG = 1
+
+
+class NodeDiedError(RuntimeError):
+    """A child process ended before the run was over, or with a failure code."""
+
+    def __init__(self, name: str, how: str, tail: Sequence[str]) -> None:
+        super().__init__(f"{name} died ({how})")
+        self.name, self.how, self.tail = name, how, list(tail)
+
+    @classmethod
+    def exited(cls, child: Child) -> NodeDiedError:
+        code = child.proc.returncode
+        how = (f"killed by {signal.Signals(-code).name}" if code < 0 else f"exit code {code}"
+               + (" before the end of the run" if code == 0 else ""))
+        return cls(child.name, how, child.tail)
+
+
+def node_command(package: str, scene: Path, overrides: Sequence[str], mode: str,
+                 params: dict[str, Any] | None = None) -> list[str]:
+    """``python -m PACKAGE.node --ros-args -p scene:=... -p overrides:=[...] -p mode:=...``.
+
+    Overrides go as a JSON list of strings (JSON is YAML, so rcl-style parsing keeps each
+    ``key=value`` whole even when the value is itself a list); an empty list is left out
+    because ROS parameters cannot be empty arrays."""
+    args = [sys.executable, "-m", f"{package}.node", "--ros-args",
+            "-p", f"scene:={scene}", "-p", f"mode:={mode}"]
+    if overrides:
+        args += ["-p", f"overrides:={json.dumps(list(overrides))}"]
+    for name, value in (params or {}).items():
+        args += ["-p", f"{name}:={json.dumps(value) if not isinstance(value, str) else value}"]
+    return args
+
+
+def parse_backends(specs: Sequence[str]) -> dict[str, str]:
+    """The backend of every child from ``--backend`` values: ``BACKEND`` for all, then
+    ``NAME=BACKEND`` for one (later values win); unset children use the process's default
+    (``STILLFRAME_RMW``, else rclpy where importable). InputError names a bad value or a
+    backend this machine lacks, before any process starts."""
+    from stillframe.middleware import api
+
+    chosen = dict.fromkeys(BACKEND_TARGETS, api.backend_name())
+    for spec in specs:
+        name, _, backend = spec.rpartition("=")
+        if name and name not in BACKEND_TARGETS:
+            raise InputError(f"--backend {spec}: unknown node {name!r} "
+                             f"(expected one of {', '.join(BACKEND_TARGETS)})")
+        api.check_backend(backend, f"--backend {spec}")
+        chosen.update({name: backend} if name else dict.fromkeys(BACKEND_TARGETS, backend))
+    return chosen
+
+
+def single_host_discovery() -> str:
+    """The discovery range of the launch: ``ROS_AUTOMATIC_DISCOVERY_RANGE`` if set (checked),
+    else ``LOCALHOST``, set in this process's environment so the children inherit it: a launch
+    runs every node on this host, and nothing beyond it needs to find them unless asked."""
+    from stillframe.middleware import discovery
+
+    os.environ.setdefault(discovery.RANGE_ENV, discovery.DiscoveryRange.LOCALHOST.value)
+    return discovery.discovery_range().value
+
+
+def nodes_for(scene: Section) -> list[str]:
+    """The nodes a scene uses: sim_node always, the estimator and the controller unless the
+    scene sets their type to ``none`` (an open-loop run such as a hammer test)."""
+    used = {"sim_node": True, "estimator_node": scene.estimator.type != "none",
+            "controller_node": scene.controller.type != "none"}
+    return [name for name in NODES if used[name]]
+
+
+def _die_with_parent() -> None:
+    """In the child before exec: SIGTERM when the launcher dies (Linux prctl)."""
+    with contextlib.suppress(OSError, AttributeError):
+        ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGTERM)
+
+
+@dataclass
+class Child:
+    """One child process and the tail of its merged stdout/stderr."""
+
+    name: str
+    proc: subprocess.Popen
+    tail: deque[str] = field(default_factory=lambda: deque(maxlen=TAIL_LINES))
+    stop_requested: bool = False
+
+    @property
+    def pid(self) -> int:
+        return self.proc.pid
+
+
+class ProcessSet:
+    """Children started in order and stopped in reverse order; their output is prefixed with
+    their name and handed to ``echo`` line by line (from reader threads)."""
+
+    def __init__(self, echo: Callable[[str], None]) -> None:
+        self.children: list[Child] = []
+        self.echo = echo
+
+    def start(self, name: str, argv: list[str], env_extra: dict[str, str] | None = None) -> Child:
+        env = dict(os.environ, PYTHONUNBUFFERED="1", **(env_extra or {}))
+        env["PYTHONPATH"] = os.pathsep.join(
+            p for p in (env.get("PYTHONPATH", ""), str(REPO_ROOT)) if p)
+        proc = subprocess.Popen(
+            argv, env=env, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT, text=True, errors="replace", process_group=0,
+            preexec_fn=_die_with_parent if sys.platform == "linux" else None)
+        child = Child(name, proc)
+        self.children.append(child)
+        self.echo(f"started {name} (pid {proc.pid})")
+        threading.Thread(target=self._pump, args=(child,), daemon=True).start()
+        return child
+
+    def _pump(self, child: Child) -> None:
+        for line in child.proc.stdout:
+            line = line.rstrip("\n")
+            child.tail.append(line)
+            self.echo(f"[{child.name}] {line}")
+
+    def first_failure(self) -> Child | None:
+        """The first child that exited although nobody asked it to, or with a failure code
+        after being asked (a code other than 0 or death by the signal we sent)."""
+        for child in self.children:
+            code = child.proc.poll()
+            if code is None:
+                continue
+            if not child.stop_requested or code not in (0, -signal.SIGINT, -signal.SIGTERM):
+                return child
+        return None
+
+    def stop(self, child: Child) -> None:
+        """SIGINT, wait; SIGTERM, wait; SIGKILL. Always reaps the process."""
+        child.stop_requested = True
+        for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGKILL):
+            if child.proc.poll() is not None:
+                break
+            with contextlib.suppress(ProcessLookupError):
+                child.proc.send_signal(sig)
+            with contextlib.suppress(subprocess.TimeoutExpired):
+                child.proc.wait(STOP_GRACE_S)
+        child.proc.wait()
+
+    def stop_all(self) -> None:
+        """Stop every child still running, the last started first (the recorder, started
+        first, closes its bag after the nodes are gone)."""
+        for child in reversed(self.children):
+            self.stop(child)
+
+    def pids(self) -> list[int]:
+        return [c.pid for c in self.children]
+
+
+class StatusLine:
+    """The live status line on a terminal (rewritten in place), or a plain line every
+    ``every_s`` seconds otherwise; node output is printed above it."""
+
+    def __init__(self, stream: Any = None, every_s: float = 5.0) -> None:
+        self.stream = stream or sys.stderr
+        self.live = self.stream.isatty()
+        self.every_s = every_s
+        self.text = ""
+        self._last = 0.0
+        self._lock = threading.Lock()
+
+    def width(self) -> int:
+        """The terminal's width for the live line; plain lines are not cut."""
+        return shutil.get_terminal_size((160, 24)).columns - 1 if self.live else 10_000
+
+    def echo(self, line: str) -> None:
+        with self._lock:
+            self.stream.write(("\r\x1b[K" if self.live else "") + line + "\n")
+            if self.live and self.text:
+                self.stream.write(self.text)
+            self.stream.flush()
+
+    def update(self, text: str) -> None:
+        with self._lock:
+            self.text = text
+            now = time.monotonic()
+            if self.live:
+                self.stream.write("\r\x1b[K" + text)
+            elif now - self._last >= self.every_s:
+                self.stream.write(text + "\n")
+            else:
+                return
+            self._last = now
+            self.stream.flush()
+
+    def close(self) -> None:
+        with self._lock:
+            if self.live and self.text:
+                self.stream.write("\r\x1b[K")
+                self.stream.flush()
+            self.text = ""
+
+
+def status_text(statuses: dict[str, dict[str, str]], width: int = 160) -> str:
+    """One line from the latest ``/diagnostics`` status of each node: ``name: k=v k=v | ...``
+    (the name's last path component; the values of :data:`STATUS_KEYS` it has, all of them if
+    none, as the node wrote them), cut to ``width``."""
+    parts = []
+    for name in sorted(statuses, key=_node_order):
+        shown = {k: v for k, v in statuses[name].items() if k in STATUS_KEYS} or statuses[name]
+        values = " ".join(f"{k}={v}" for k, v in shown.items())
+        parts.append(f"{name.rsplit('/', 1)[-1].split(':')[-1].strip()}: {values}".strip())
+    line = " | ".join(parts)
+    return line if len(line) <= width else line[: width - 1] + "…"
+
+
+def _node_order(name: str) -> tuple[int, str]:
+    for i, node in enumerate(NODES):
+        if node in name:
+            return i, name
+    return len(NODES), name
+
+
+@dataclass
+class LaunchResult:
+    """What sim_node wrote at the end of the scene: its evaluation and the history file."""
+
+    evaluation: dict[str, Any]
+    result_file: Path
+    history_file: Path
+    diagnostics: dict[str, dict[str, str]] = field(default_factory=dict)
+
+
+@dataclass
+class LaunchOptions:
+    """A launch: the scene, its overrides, the mode and where results go."""
+
+    scene: Path
+    overrides: list[str] = field(default_factory=list)
+    mode: str = "lockstep"
+    result_file: Path = Path("result.json")
+    record_dir: Path | None = None
+    lockstep_timeout_s: float | None = None
+    record_topics: list[str] = field(default_factory=list)
+    backends: list[str] = field(default_factory=list)
+    #: ``stillframe monitor`` arguments (ports) to run the monitor beside the nodes; None: none
+    monitor_args: list[str] | None = None
+
+
+class Launcher:
+    """Runs one :class:`LaunchOptions` to its end; ``node`` (a hidden DDS node on the same
+    domain) may be given more subscriptions before :meth:`run` (the loop benchmark does)."""
+
+    def __init__(self, options: LaunchOptions) -> None:
+        from stillframe.middleware import api
+
+        if options.mode not in MODES:
+            raise InputError(f"--mode {options.mode}: expected one of {', '.join(MODES)}")
+        if options.record_dir is not None and options.record_dir.exists():
+            raise InputError(f"--record {options.record_dir}: already exists")
+        self.backends = parse_backends(options.backends)
+        self.discovery = single_host_discovery()
+        self.options = options
+        self.status = StatusLine()
+        self.processes = ProcessSet(self.status.echo)
+        self.node = api.create_node(f"_stillframe_launch_{os.getpid()}", argv=["stillframe"])
+        self.statuses: dict[str, dict[str, str]] = {}
+        self.node.create_subscription("diagnostic_msgs/msg/DiagnosticArray", "/diagnostics",
+                                      self._on_diagnostics, "default")
+
+    def _on_diagnostics(self, msg: Any) -> None:
+        for status in msg.status:
+            self.statuses[status.name] = {kv.key: kv.value for kv in status.values}
+
+    def commands(self) -> list[tuple[str, list[str]]]:
+        """(name, argv) of each child, in start order."""
+        o = self.options
+        sim_params: dict[str, Any] = {"result_file": str(o.result_file.resolve()),
+                                      "command_writer": "controller_node"}
+        if o.record_dir is not None and o.mode == "lockstep":
+            sim_params["await_recorder"] = [
+                names.resolve_topic(t) for t in o.record_topics] or ["*"]
+        if o.lockstep_timeout_s is not None:
+            sim_params["lockstep_timeout_s"] = float(o.lockstep_timeout_s)
+        scene = o.scene.resolve()
+        children = []
+        if o.record_dir is not None:
+            children.append(("recorder", [sys.executable, "-m", "stillframe", "record", "-o",
+                                          str(o.record_dir), "--use-sim-time",
+                                          *(o.record_topics or ["--all"])]))
+        if o.monitor_args is not None:
+            sets = [arg for override in o.overrides for arg in ("--set", override)]
+            children.append(("monitor", [sys.executable, "-m", "stillframe", "monitor",
+                                         "--dashboard", "--use-sim-time", "--scene", str(scene),
+                                         *sets, *o.monitor_args]))
+        children += [(name, node_command(name, scene, o.overrides, o.mode,
+                                         sim_params if name == "sim_node" else None))
+                     for name in reversed(nodes_for(load_scene(scene, o.overrides)))]
+        return children
+
+    def run(self) -> LaunchResult:
+        """Start everything, wait for sim_node's result, stop the rest. Raises NodeDiedError,
+        or KeyboardInterrupt after a clean stop when SIGINT/SIGTERM reached the launcher."""
+        from stillframe.middleware import api
+
+        self.options.result_file.unlink(missing_ok=True)
+        try:
+            commands = self.commands()
+            self.status.echo(f"discovery range {self.discovery}; backends " + ", ".join(
+                f"{name} {self.backends[name]}" for name, _ in commands))
+            mixed = len({self.backends[name] for name, _ in commands}) > 1
+            for name, argv in commands:
+                child = self.processes.start(name, argv, {"STILLFRAME_RMW": self.backends[name]})
+                if name in READY_LINES:
+                    self._wait_for_line(child, READY_LINES[name])
+                elif mixed:
+                    self._wait_for_line(child, "middleware backend")
+            sim = next(c for c in self.processes.children if c.name == "sim_node")
+            while api.ok():
+                self.node.spin_once(0.1)
+                if self.statuses:
+                    self.status.update(status_text(self.statuses, self.status.width()))
+                if sim.proc.poll() == 0 and self.options.result_file.exists():
+                    sim.stop_requested = True
+                    break
+                if (dead := self.processes.first_failure()) is not None:
+                    raise NodeDiedError.exited(dead)
+            else:
+                raise KeyboardInterrupt
+            for child in reversed(self.processes.children):
+                self.processes.stop(child)
+            if (dead := self.processes.first_failure()) is not None:
+                raise NodeDiedError.exited(dead)
+        finally:
+            self.processes.stop_all()
+            self.status.close()
+            self.node.destroy_node()
+        return self._result()
+
+    def _wait_for_line(self, child: Child, text: str, timeout_s: float = 20.0) -> None:
+        """Wait for ``child`` to log ``text`` before starting the next: nodes start once the
+        recorder is recording and the monitor serving (:data:`READY_LINES`); with mixed vendors,
+        a node starts once the previous one has its participant ('middleware backend'), because
+        a Cyclone and a Fast DDS participant created in the same instant can take the same
+        participant index and then never discover each other (measured: 3 of 4 simultaneous
+        starts)."""
+        from stillframe.middleware import api
+
+        deadline = time.monotonic() + timeout_s
+        while not any(text in line for line in child.tail):
+            if child.proc.poll() is not None:
+                raise NodeDiedError.exited(child)
+            if not api.ok():
+                raise KeyboardInterrupt
+            if time.monotonic() > deadline:
+                raise NodeDiedError(child.name, f"no {text!r} after {timeout_s:g} s", child.tail)
+            time.sleep(0.05)
+
+    def _result(self) -> LaunchResult:
+        path = self.options.result_file
+        try:
+            evaluation = json.loads(path.read_text())
+        except (OSError, ValueError) as exc:
+            raise InputError(f"sim_node's result file {path}: cannot read it ({exc})") from None
+        return LaunchResult(evaluation, path, path.with_suffix(".npz"), dict(self.statuses))
+
+
+def run_scene(scene: Path, overrides: Sequence[str], out: Path, mode: str = "lockstep",
+              record: Path | None = None, lockstep_timeout_s: float | None = None,
+              prepare: Callable[[Any], None] | None = None,
+              record_topics: Sequence[str] = (), backends: Sequence[str] = (),
+              monitor_args: Sequence[str] | None = None) -> LaunchResult:
+    """Launch ``scene`` through the three nodes to its end; sim_node's results go to ``out``
+    (``result.json``, ``result.npz``); ``record`` records ``record_topics`` (default all) into
+    a bag; ``backends`` are ``--backend`` values (:func:`parse_backends`); ``monitor_args``
+    (e.g. ports) start ``stillframe monitor`` beside the nodes. ``prepare(node)`` may
+    subscribe the launcher's hidden node to more topics before the children start."""
+    out.mkdir(parents=True, exist_ok=True)
+    launcher = Launcher(LaunchOptions(scene, list(overrides), mode, out / "result.json", record,
+                                      lockstep_timeout_s, list(record_topics), list(backends),
+                                      None if monitor_args is None else list(monitor_args)))
+    if prepare is not None:
+        prepare(launcher.node)
+    return launcher.run()

@@ -1,0 +1,1 @@
+"""rosbag2 bags: storage, QoS metadata, recording, playback and recovery."""

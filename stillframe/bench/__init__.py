@@ -1,0 +1,1 @@
+"""Benchmark kernels that are not a command's own code (transport ping-pong)."""

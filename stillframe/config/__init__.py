@@ -1,0 +1,1 @@
+"""Scene configuration: the declared keys with their checks, loading and overrides."""

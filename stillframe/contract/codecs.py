@@ -1,0 +1,180 @@
+"""The loop's signals on the wire: :mod:`stillframe.contract.signals` ↔ the contract's ROS messages
+(docs/architecture.md "Topic contract", :mod:`stillframe.contract.topics`).
+
+Each writer keeps one message instance per topic and refills it every sample (no per-step
+construction). Stamps are integer nanoseconds; :class:`SampleGrid` turns them back into the
+exact float sample times ``k · period`` the one-process loop uses, so that the nodes compute
+bit-for-bit what :func:`stillframe.loop.closed_loop.run_closed_loop` computes.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from stillframe.config.schema import Section
+from stillframe.contract import messages, topics
+from stillframe.contract.signals import Command, Estimate, Sample
+
+STATE_NAMES = ["x1", "x2", "x3", "phi"]
+PENDULUM_JOINT = "pendulum"
+#: Index of each sensor topic's reading in [a1, a2, a3, φ, load cell] (``Sample.present``).
+SENSOR_CHANNELS = (*(spec.name for spec in topics.FLOOR_IMU),
+                   topics.PENDULUM_JOINT_STATES.name, topics.EXCITATION_WRENCH.name)
+#: Command topics in the order of ``Command.vector`` = [pendulum torque, floor-3 force].
+COMMAND_TOPICS = (topics.TORQUE_CMD, topics.FORCE_CMD)
+
+
+class SampleGrid:
+    """Sample times k·period ↔ stamps in ns; a stamp within 1 µs of the grid reads back as the
+    exact grid time (what the simulator computed), any other as ``ns · 1e-9``."""
+
+    def __init__(self, period: float) -> None:
+        self.period = period
+
+    @staticmethod
+    def ns(t: float) -> int:
+        return round(t * 1e9)
+
+    def seconds(self, ns: int) -> float:
+        k = round(ns * 1e-9 / self.period)
+        t = k * self.period
+        return t if abs(round(t * 1e9) - ns) <= 1000 else ns * 1e-9
+
+
+def set_stamp(msg: Any, ns: int) -> None:
+    """Set ``msg.header.stamp`` to ``ns`` nanoseconds in place."""
+    msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(ns, 1_000_000_000)
+
+
+def _joint_state(names: list[str]) -> Any:
+    return messages.new("sensor_msgs/msg/JointState", name=names)
+
+
+def fill_joint_state(msg: Any, ns: int, physical: np.ndarray) -> None:
+    """x1 x2 x3 phi positions and velocities from [x1, x2, x3, φ, ẋ1, ẋ2, ẋ3, φ̇]."""
+    set_stamp(msg, ns)
+    msg.position = np.asarray(physical[:4], dtype=np.float64)
+    msg.velocity = np.asarray(physical[4:8], dtype=np.float64)
+
+
+class SensorMessages:
+    """The rig's sensor messages for one :class:`Sample`: floor IMUs, encoder, load cell, and
+    the ground truth (``state_truth``); covariances from the scene's ``sensors`` section."""
+
+    def __init__(self, sensors: Section) -> None:
+        var_a = float(sensors.accelerometer_noise_std) ** 2
+        self.imus = []
+        for n in (1, 2, 3):
+            imu = messages.new("sensor_msgs/msg/Imu")
+            imu.header.frame_id = f"floor{n}"
+            imu.orientation_covariance[0] = -1.0      # not measured
+            imu.angular_velocity_covariance[0] = -1.0
+            imu.linear_acceleration_covariance[0] = var_a
+            self.imus.append(imu)
+        self.encoder = _joint_state([PENDULUM_JOINT])
+        self.encoder.header.frame_id = "pendulum"
+        self.load_cell = messages.new("geometry_msgs/msg/WrenchStamped")
+        self.load_cell.header.frame_id = "floor1"
+        self.actuator_load_cell = messages.new("geometry_msgs/msg/WrenchStamped")
+        self.actuator_load_cell.header.frame_id = "floor3"
+        self.truth = _joint_state(list(STATE_NAMES))
+
+    def fill(self, sample: Sample, ns: int) -> list[Any]:
+        """[imu1, imu2, imu3, encoder, load cell, floor-3 load cell] for ``sample``, stamped
+        ``ns``; the encoder's effort and the floor-3 load cell carry ``sample.applied``."""
+        for imu, a in zip(self.imus, sample.measurements[:3], strict=True):
+            set_stamp(imu, ns)
+            imu.linear_acceleration.x = float(a)
+        set_stamp(self.encoder, ns)
+        self.encoder.position = np.array([sample.measurements[3]])
+        applied = np.zeros(2) if sample.applied is None else sample.applied
+        self.encoder.effort = np.array([applied[0]])
+        set_stamp(self.load_cell, ns)
+        self.load_cell.wrench.force.x = float(sample.force)
+        set_stamp(self.actuator_load_cell, ns)
+        self.actuator_load_cell.wrench.force.x = float(applied[1])
+        return [*self.imus, self.encoder, self.load_cell, self.actuator_load_cell]
+
+    def fill_truth(self, sample: Sample, ns: int) -> Any:
+        fill_joint_state(self.truth, ns, sample.truth)
+        return self.truth
+
+
+def sensor_reading(channel: int, msg: Any) -> float:
+    """The reading of sensor channel ``channel`` (index in :data:`SENSOR_CHANNELS`) in ``msg``;
+    NaN when the encoder message carries no ``pendulum`` position."""
+    if channel < 3:
+        return float(msg.linear_acceleration.x)
+    if channel == 4:
+        return float(msg.wrench.force.x)
+    names = list(msg.name)
+    if names and PENDULUM_JOINT not in names:
+        return float("nan")
+    i = names.index(PENDULUM_JOINT) if names else 0
+    return float(msg.position[i]) if i < len(msg.position) else float("nan")
+
+
+def applied_torque(msg: Any) -> float:
+    """The hinge torque applied over the previous period, the ``effort`` of the encoder
+    message's ``pendulum`` joint; NaN when it carries none."""
+    names = list(msg.name)
+    if names and PENDULUM_JOINT not in names:
+        return float("nan")
+    i = names.index(PENDULUM_JOINT) if names else 0
+    return float(msg.effort[i]) if i < len(msg.effort) else float("nan")
+
+
+def physical_state(msg: Any) -> np.ndarray:
+    """[x1, x2, x3, φ, ẋ1, ẋ2, ẋ3, φ̇] of a ``state_estimate``/``state_truth`` JointState,
+    ordered by joint name; NaN where a name or value is missing."""
+    out = np.full(8, np.nan)
+    names = list(msg.name)
+    for i, name in enumerate(STATE_NAMES):
+        if name in names:
+            j = names.index(name)
+            if j < len(msg.position):
+                out[i] = msg.position[j]
+            if j < len(msg.velocity):
+                out[4 + i] = msg.velocity[j]
+    return out
+
+
+class EstimateMessages:
+    """``state_estimate`` and its 8×8 covariance (zeros for the exact ``truth`` estimator)."""
+
+    def __init__(self) -> None:
+        self.state = _joint_state(list(STATE_NAMES))
+        dims = [messages.new("std_msgs/msg/MultiArrayDimension", label=label, size=8,
+                             stride=stride) for label, stride in (("rows", 64), ("cols", 8))]
+        self.covariance = messages.new("std_msgs/msg/Float64MultiArray")
+        self.covariance.layout.dim = dims
+
+    def fill(self, estimate: Estimate, ns: int) -> tuple[Any, Any]:
+        fill_joint_state(self.state, ns, estimate.physical)
+        cov = np.zeros((8, 8)) if estimate.covariance is None else estimate.covariance
+        self.covariance.data = np.ascontiguousarray(cov, dtype=np.float64).ravel()
+        return self.state, self.covariance
+
+
+class CommandMessage:
+    """The command on its topic: ``torque.z`` (pendulum) or ``force.x`` (floor 3)."""
+
+    def __init__(self, actuator: int) -> None:
+        self.actuator = actuator
+        self.msg = messages.new("geometry_msgs/msg/WrenchStamped")
+        self.msg.header.frame_id = "pendulum" if actuator == 0 else "floor3"
+
+    def fill(self, command: Command, ns: int) -> Any:
+        set_stamp(self.msg, ns)
+        if self.actuator == 0:
+            self.msg.wrench.torque.z = command.torque
+        else:
+            self.msg.wrench.force.x = command.force
+        return self.msg
+
+
+def command_value(actuator: int, msg: Any) -> float:
+    """The commanded torque (actuator 0) or floor-3 force (1) in a WrenchStamped."""
+    return float(msg.wrench.torque.z if actuator == 0 else msg.wrench.force.x)

@@ -1,0 +1,84 @@
+"""The topic contract (docs/architecture.md, "Topic contract") as data, for nodes, tools and tests.
+
+Names are relative to the node namespace (default ``/frame``) unless absolute. All units SI,
+angles in rad; stamps are the sample time of the measurement (sim time with ``use_sim_time``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+DEFAULT_NAMESPACE = "/frame"
+
+
+@dataclass(frozen=True)
+class TopicSpec:
+    """One row of the contract: name, message type, QoS profile name and what it carries."""
+
+    name: str
+    type_name: str
+    qos: str
+    content: str
+
+
+CLOCK = TopicSpec(
+    "/clock", "rosgraph_msgs/msg/Clock", "clock", "sim time, published by the simulator"
+)
+FLOOR_IMU = tuple(
+    TopicSpec(
+        f"floor{n}/imu", "sensor_msgs/msg/Imu", "sensor_data",
+        f"linear_acceleration.x = floor {n} horizontal acceleration; covariances filled; "
+        "orientation and angular velocity absent (covariance[0] = -1)",
+    )
+    for n in (1, 2, 3)
+)
+PENDULUM_JOINT_STATES = TopicSpec(
+    "pendulum/joint_states", "sensor_msgs/msg/JointState", "sensor_data",
+    "encoder: name 'pendulum', position = phi; effort = hinge torque the motor applied over the "
+    "previous sample period (after saturation and slew limits)",
+)
+EXCITATION_WRENCH = TopicSpec(
+    "excitation/wrench", "geometry_msgs/msg/WrenchStamped", "sensor_data",
+    "load cell on floor 1: force.x",
+)
+FLOOR3_LOAD_CELL = TopicSpec(
+    "floor3/load_cell", "geometry_msgs/msg/WrenchStamped", "sensor_data",
+    "load cell of the floor-3 actuator: force.x = force applied over the previous sample period "
+    "(after saturation and slew limits)",
+)
+TORQUE_CMD = TopicSpec(
+    "pendulum/torque_cmd", "geometry_msgs/msg/WrenchStamped", "default",
+    "command torque on the pendulum hinge: torque.z; stamp = stamp of the estimate used",
+)
+FORCE_CMD = TopicSpec(
+    "floor3/force_cmd", "geometry_msgs/msg/WrenchStamped", "default",
+    "command force on floor 3 (EUK variant 2): force.x",
+)
+STATE_ESTIMATE = TopicSpec(
+    "state_estimate", "sensor_msgs/msg/JointState", "default",
+    "names x1 x2 x3 phi, position and velocity",
+)
+STATE_COVARIANCE = TopicSpec(
+    "state_estimate/covariance", "std_msgs/msg/Float64MultiArray", "default",
+    "8x8 row-major covariance of [q, qdot]",
+)
+STATE_TRUTH = TopicSpec(
+    "state_truth", "sensor_msgs/msg/JointState", "default",
+    "simulator ground truth, same names as state_estimate",
+)
+DIAGNOSTICS = TopicSpec(
+    "/diagnostics", "diagnostic_msgs/msg/DiagnosticArray", "default",
+    "per node: loop rate, latency, deadline misses, rejected messages, saturation",
+)
+
+CONTRACT: tuple[TopicSpec, ...] = (
+    CLOCK, *FLOOR_IMU, PENDULUM_JOINT_STATES, EXCITATION_WRENCH, FLOOR3_LOAD_CELL, TORQUE_CMD,
+    FORCE_CMD,
+    STATE_ESTIMATE, STATE_COVARIANCE, STATE_TRUTH, DIAGNOSTICS,
+)
+
+
+#: the ``/diagnostics`` values the status line shows, when a node reports them
+STATUS_KEYS: tuple[str, ...] = ("sim_time_s", "step", "realtime_factor", "lockstep_timeouts",
+                                "deadline_misses", "overruns", "rejected", "partial_updates",
+                                "saturated", "watchdog")

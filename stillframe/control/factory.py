@@ -1,0 +1,49 @@
+"""The scene's controller: ``controller.type`` on the design model (scene ``design`` section)."""
+
+from __future__ import annotations
+
+from stillframe.config.schema import Section
+from stillframe.contract.signals import ACTUATOR
+from stillframe.control.euk import EUKLaw
+from stillframe.control.lqg import LQGLaw, design_lqr
+from stillframe.control.passivity import PassivityLaw
+from stillframe.control.supervisor import Controller
+from stillframe.dynamics.models import FrameModel
+from stillframe.errors import InputError
+
+TORQUE_INPUT = 3  # index of the hinge torque in u = [f1, f2, f3, torque]
+
+
+
+def check_sampled_injection(damping: float, period: float, inertia: float) -> None:
+    """Passivity holds for the continuous law; held over a sample period T the injected damping
+    k_d acts on the pendulum (inertia J) like explicit Euler, unstable once k_d T / J ≥ 2."""
+    ratio = damping * period / inertia
+    if ratio >= 2.0:
+        raise InputError(
+            f"controller.injection_damping: k_d T / J = {ratio:.3g} >= 2 destabilises the sampled "
+            f"loop (T = {period:g} s, pendulum J = {inertia:.4g} kg m^2); use k_d < "
+            f"{2 * inertia / period:.3g} or a higher sensors.rate_hz")
+
+
+def make_controller(scene: Section, design: FrameModel) -> Controller:
+    """The controller of ``scene.controller.type`` (not ``none``)."""
+    c = scene.controller
+    period = 1.0 / scene.sensors.rate_hz
+    floor = scene.excitation.floor
+    if c.type == "lqg":
+        law = LQGLaw(design_lqr(design, period, c.state_weights, c.input_weight, TORQUE_INPUT,
+                                floor), c.feedforward)
+    elif c.type in ("euk_pendulum", "euk_floor"):
+        variant = "pendulum" if c.type == "euk_pendulum" else "floor"
+        law = EUKLaw(design, variant, floor, c.hold_stiffness, c.hold_damping, c.singular_margin)
+    elif c.type == "passivity":
+        law = PassivityLaw(design.n_dof, design.phi_index, c.shaping_stiffness,
+                           c.injection_damping)
+        check_sampled_injection(c.injection_damping, period, design.pendulum_inertia)
+    else:
+        raise InputError(f"controller.type: {c.type!r} computes no command")
+    actuators = scene.actuators
+    actuator_limit = (actuators.torque_limit, actuators.force_limit)[ACTUATOR[c.type]]
+    return Controller(law, ACTUATOR[c.type], period, c.start, c.limit, c.watchdog_periods,
+                      actuator_limit)

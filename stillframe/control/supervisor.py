@@ -1,0 +1,90 @@
+"""Around a control law: enable time, saturation and a watchdog (docs/nodes.md, watchdog).
+
+Called once per control period with the newest estimate (or None when none arrived). Zero
+command before ``start`` and while ``enabled`` is False (switched at run time); zero command
+and the ``watchdog`` flag when the newest estimate is ``watchdog_periods`` periods old or more;
+a non-finite law output also gives zero (flagged ``singular``); otherwise the law's command
+clipped to ±``limit`` and to ±``actuator_limit`` (the scene's actuator saturation: a command the
+actuator cannot apply is never sent). A law output more than :data:`RUNAWAY_FACTOR` times the
+tighter of the two limits is flagged ``runaway`` (counted, and ``/diagnostics`` warns): the sign of
+an estimate or a design that no longer matches the plant.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from stillframe.contract.signals import Command, Estimate
+
+#: A law output beyond this multiple of the command's limit is flagged ``runaway``.
+RUNAWAY_FACTOR = 10.0
+
+Law = Callable[[np.ndarray, float], tuple[float, bool]]
+
+
+@dataclass
+class ControllerCounters:
+    commands: int = 0
+    saturated: int = 0
+    singular: int = 0
+    watchdog: int = 0
+    runaway: int = 0
+
+
+class Controller:
+    """A law acting on one actuator (0: pendulum torque, 1: floor-3 force)."""
+
+    def __init__(self, law: Law, actuator: int, period: float, start: float = 0.0,
+                 limit: float | None = None, watchdog_periods: int = 3,
+                 actuator_limit: float | None = None) -> None:
+        self.law = law
+        self.actuator = actuator
+        self.period = period
+        self.start = start
+        self.limit = limit
+        self.actuator_limit = actuator_limit
+        self.watchdog_periods = watchdog_periods
+        self.enabled = True
+        self.latest: Estimate | None = None
+        self.counters = ControllerCounters()
+
+    def stale(self, t: float) -> bool:
+        """True when at time t the newest estimate is ``watchdog_periods`` periods old or more
+        (or there is none): the watchdog's condition."""
+        return (self.latest is None or t - self.latest.t
+                >= self.watchdog_periods * self.period - 1e-9 * self.period)
+
+    def command(self, t: float, estimate: Estimate | None, force: float) -> Command:
+        """The command at time t from the newest estimate and the measured excitation force."""
+        c = self.counters
+        c.commands += 1
+        if estimate is not None and (self.latest is None or estimate.t > self.latest.t):
+            self.latest = estimate
+        latest = self.latest
+        tolerance = 1e-9 * self.period
+        if self.stale(t):
+            c.watchdog += 1
+            return Command(t, watchdog=True)
+        out = Command(latest.t)
+        if t < self.start - tolerance or not self.enabled:
+            return out
+        out.enabled = True
+        value, out.singular = self.law(latest.z, force)
+        if not np.isfinite(value):
+            value, out.singular = 0.0, True
+        bounds = [b for b in (self.limit, self.actuator_limit) if b]
+        bound = min(bounds) if bounds else None
+        out.runaway = out.singular or (bound is not None and abs(value) > RUNAWAY_FACTOR * bound)
+        if bound is not None and abs(value) > bound:
+            value, out.saturated = float(np.clip(value, -bound, bound)), True
+        c.saturated += out.saturated
+        c.runaway += out.runaway
+        c.singular += out.singular
+        if self.actuator == 0:
+            out.torque = value
+        else:
+            out.force = value
+        return out

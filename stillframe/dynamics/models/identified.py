@@ -1,0 +1,103 @@
+"""Identified structures (MKR mass, stiffness, damping) as a :class:`Structure` carrying the
+pendulum, so that the thesis's LQG design model and plant (eq. 5.199–5.207) are a
+:class:`~stillframe.dynamics.models.frame.FrameModel` like the lumped and FE ones.
+
+Two file kinds:
+
+- YAML ``format: stillframe-mkr`` with ``mass``, ``stiffness``, ``damping`` (3×3, floors 1–3)
+  and ``source`` (provenance); the thesis's matrices are bundled as ``thesis_mkr``.
+- ``.npz`` identified-model files (``format: stillframe-identified-model``, written by
+  ``stillframe identify --save-model``) holding the optional MKR arrays ``M``, ``K``, ``R``.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from stillframe.config.scene import scene_from_dict
+from stillframe.config.schema import Section
+from stillframe.config.yamlio import load_yaml
+from stillframe.dynamics.models import build_model
+from stillframe.dynamics.models.frame import FrameModel
+from stillframe.dynamics.models.structure import Structure
+from stillframe.errors import InputError
+from stillframe.locations import DATA_DIR
+
+
+def resolve_model_file(name: str, key: str) -> Path:
+    """A bundled model name (``thesis_mkr``) or a path to a ``.yaml``/``.npz`` file."""
+    bundled = DATA_DIR / f"{name}.yaml"
+    if "/" not in name and "." not in name and bundled.exists():
+        return bundled
+    path = Path(name)
+    if not path.is_file():
+        known = ", ".join(sorted(p.stem for p in DATA_DIR.glob("*.yaml")))
+        raise InputError(f"{key}: {name!r} is neither a file nor a bundled model ({known})")
+    return path
+
+
+def _matrices_from_yaml(path: Path) -> tuple[dict[str, np.ndarray], str]:
+    try:
+        data = load_yaml(path.read_text())
+    except (OSError, yaml.YAMLError) as exc:
+        raise InputError(f"{path}: cannot read the model file ({exc})") from None
+    if not isinstance(data, dict) or data.get("format") != "stillframe-mkr":
+        raise InputError(f"{path}: not a model file (expected 'format: stillframe-mkr')")
+    try:
+        arrays = {k: np.asarray(data[k], dtype=float) for k in ("mass", "stiffness", "damping")}
+    except KeyError as exc:
+        raise InputError(f"{path}: missing {exc.args[0]}") from None
+    except (TypeError, ValueError):
+        raise InputError(f"{path}: mass, stiffness and damping must be numeric matrices") from None
+    return arrays, str(data.get("source", path.name))
+
+
+def _matrices_from_npz(path: Path) -> tuple[dict[str, np.ndarray], str]:
+    try:
+        with np.load(path, allow_pickle=False) as archive:
+            if not {"M", "K", "R"} <= set(archive.files):
+                raise InputError(f"{path}: the identified model holds no MKR matrices M, K, R")
+            arrays = {"mass": archive["M"], "stiffness": archive["K"], "damping": archive["R"]}
+            meta = json.loads(str(archive["meta"])) if "meta" in archive.files else {}
+    except (OSError, ValueError) as exc:
+        raise InputError(f"{path}: cannot read the identified model ({exc})") from None
+    return arrays, json.dumps(meta.get("provenance", {"file": path.name}))
+
+
+def load_identified_structure(path: Path) -> Structure:
+    """The identified floors-only structure with its damping; InputError on a bad file."""
+    reader = _matrices_from_npz if path.suffix == ".npz" else _matrices_from_yaml
+    arrays, source = reader(path)
+    for name, matrix in arrays.items():
+        if matrix.shape != (3, 3) or not np.all(np.isfinite(matrix)):
+            raise InputError(f"{path}: {name} must be a finite 3x3 matrix (floors 1-3)")
+        if not np.allclose(matrix, matrix.T, rtol=0, atol=1e-9 * np.max(np.abs(matrix))):
+            raise InputError(f"{path}: {name} is not symmetric")
+    if np.min(np.linalg.eigvalsh(arrays["mass"])) <= 0:
+        raise InputError(f"{path}: mass is not positive definite")
+    return Structure(f"identified({source})", arrays["mass"], arrays["stiffness"], (0, 1, 2),
+                     ("x1", "x2", "x3"), arrays["damping"])
+
+
+def identified_frame(name: str, rig: Section, key: str) -> FrameModel:
+    """Identified structure + the rig's nonlinear pendulum on floor 3 (eq. 5.200–5.205)."""
+    structure = load_identified_structure(resolve_model_file(name, key))
+    model = FrameModel(structure, rig)
+    model.name = "identified"
+    return model
+
+
+def frame_for(source: str, file: str, scene: Section, key: str) -> FrameModel:
+    """The scene's own model (``scene``), the lumped model of the scene's rig and damping
+    (``lumped``), or the identified one of ``file`` (``file``)."""
+    if source == "file":
+        return identified_frame(file, scene.rig, key)
+    if source == "lumped" and scene.model.type != "lumped":
+        data = scene.to_dict()
+        data["model"]["type"] = "lumped"
+        scene = scene_from_dict(data)
+    return build_model(scene)

@@ -1,0 +1,99 @@
+"""What every estimator does per sample: reject stale samples and non-finite channels (and count
+them), predict from the previous sample time, update with the channels that arrived (a partial
+update when some are missing), and report the estimate."""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from dataclasses import dataclass
+
+import numpy as np
+
+from stillframe.config.schema import Section
+from stillframe.contract.signals import Estimate, Sample
+from stillframe.design.coordinates import design_map, physical_selector
+from stillframe.dynamics.models import FrameModel
+
+
+@dataclass
+class Counters:
+    """For ``/diagnostics``: samples used, rejected (stale, non-finite), channels missing."""
+
+    updates: int = 0
+    stale: int = 0
+    non_finite: int = 0
+    missing: int = 0
+
+    @property
+    def rejected(self) -> int:
+        return self.stale + self.non_finite
+
+
+class Filter(ABC):
+    """A recursive estimator on a design :class:`FrameModel`; state z = [q, q̇]."""
+
+    def __init__(self, model: FrameModel, config: Section, excited_floor: int,
+                 initial_physical: np.ndarray) -> None:
+        self.model = model
+        self.excited_floor = excited_floor
+        self.S = physical_selector(model)
+        self.T = T = design_map(model)
+        self.Q, self.R = self.noise_covariances(config.process_noise_std,
+                                                config.measurement_noise_std)
+        self.x = T @ (np.asarray(initial_physical) + np.asarray(config.initial_offset))
+        self.P = T @ np.diag(np.square(config.initial_std)) @ T.T
+        self.t: float | None = None
+        self.force = 0.0
+        self.counters = Counters()
+
+    def noise_covariances(self, process_std: list[float],
+                          measurement_std: list[float]) -> tuple[np.ndarray, np.ndarray]:
+        """Q (per sample, physical stds mapped to the design state) and R (eq. 5.221–5.222)."""
+        return (self.T @ np.diag(np.square(process_std)) @ self.T.T,
+                np.diag(np.square(measurement_std)))
+
+    def set_noise(self, process_std: list[float], measurement_std: list[float]) -> None:
+        """New noise settings at run time; what depends on them is recomputed (InputError, and
+        nothing changed, if the filter cannot be designed with them)."""
+        self.Q, self.R = self.noise_covariances(process_std, measurement_std)
+
+    def step(self, sample: Sample, control: np.ndarray) -> Estimate | None:
+        """Use one sample; ``control`` = [torque, force] applied since the previous sample.
+
+        Returns None (and counts it) for a sample not newer than the last one used.
+        """
+        c = self.counters
+        if self.t is not None and not sample.t > self.t:
+            c.stale += 1
+            return None
+        present = np.asarray(sample.present[:4], dtype=bool).copy()
+        c.missing += int(np.count_nonzero(~sample.present))
+        finite = np.isfinite(sample.measurements)
+        c.non_finite += int(np.count_nonzero(present & ~finite))
+        present &= finite
+        force = self.force
+        if sample.present[4]:
+            if np.isfinite(sample.force):
+                force = float(sample.force)
+            else:
+                c.non_finite += 1
+        control = np.asarray(control, dtype=float)
+        if self.t is not None:
+            self.predict(sample.t - self.t, self.force, force, control)
+        if present.any():
+            self.update(np.asarray(sample.measurements, dtype=float), present, force, control)
+        self.t, self.force = sample.t, force
+        c.updates += 1
+        return self.estimate()
+
+    def estimate(self) -> Estimate:
+        return Estimate(self.t, self.x.copy(), self.S @ self.x, self.S @ self.P @ self.S.T)
+
+    @abstractmethod
+    def predict(self, dt: float, force0: float, force1: float, control: np.ndarray) -> None:
+        """Time update over dt, the excitation linear from force0 to force1, control held."""
+
+    @abstractmethod
+    def update(self, y: np.ndarray, present: np.ndarray, force: float,
+               control: np.ndarray) -> None:
+        """Measurement update with the rows ``present`` of y = [a1, a2, a3, φ]."""

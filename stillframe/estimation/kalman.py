@@ -1,0 +1,149 @@
+"""Kalman filters on a linear design model (thesis §4.4, §5.6).
+
+Model: the design model linearised at rest (eq. 5.59–5.66) or an identified structure with the
+pendulum (eq. 5.199–5.207), discretised at the sample period with the command held and the
+measured excitation linear between load-cell samples (:mod:`stillframe.design.discrete`). The
+measurements are the floor accelerations and φ (eq. 5.209–5.212): y = C z + D u with C, D the
+acceleration rows of the continuous state equation. Process noise: discrete, per sample.
+
+- :class:`SteadyStateKalman`: the stationary filter. Its a-priori covariance P∞ solves the
+  discrete Riccati equation (:func:`stillframe.design.riccati.solve_dare`: scipy's solver after PBH
+  checks; filterpy has no stationary filter); the gain for the channels present is
+  P∞ Cₛᵀ (Cₛ P∞ Cₛᵀ + Rₛ)⁻¹, the stationary gain when all arrive. After a gap (an interval
+  longer than the period) the mean is propagated over the true interval but the covariance
+  stays P∞.
+- :class:`TimeVaryingKalman`: filterpy's ``KalmanFilter`` (predict with our input matrices,
+  update with the rows present).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.linalg as sla
+from filterpy.kalman import KalmanFilter
+
+from stillframe.config.schema import Section
+from stillframe.contract.signals import Sample, full_inputs
+from stillframe.design.discrete import Discrete, first_order_hold
+from stillframe.design.riccati import solve_dare
+from stillframe.dynamics.models import FrameModel
+from stillframe.estimation.base import Filter
+
+
+class LinearFilter(Filter):
+    """Shared linear model: Φ, Γ0, Γ1 per interval length, and y = C z + D u."""
+
+    def __init__(self, model: FrameModel, config: Section, excited_floor: int,
+                 initial_physical: np.ndarray, period: float) -> None:
+        super().__init__(model, config, excited_floor, initial_physical)
+        self.A, self.B = model.linearized().state_space()
+        n = model.n_dof
+        rows = [n + i for i in model.floor_index]
+        self.C = np.vstack([self.A[rows], np.eye(2 * n)[model.phi_index]])
+        self.D = np.vstack([self.B[rows], np.zeros((1, 4))])
+        self.period = period
+        self._discrete: dict[float, Discrete] = {}
+
+    def discrete(self, dt: float) -> Discrete:
+        key = round(dt, 12)
+        if key not in self._discrete:
+            self._discrete[key] = first_order_hold(self.A, self.B, dt)
+        return self._discrete[key]
+
+    def propagate_mean(self, dt: float, force0: float, force1: float,
+                       control: np.ndarray) -> Discrete:
+        d = self.discrete(dt)
+        u0 = full_inputs(control, force0, self.excited_floor)
+        u1 = full_inputs(control, force1, self.excited_floor)
+        self.x = d.phi @ self.x + d.gamma0 @ u0 + d.gamma1 @ (u1 - u0)
+        return d
+
+    def initialise_from(self, sample: Sample, control: np.ndarray) -> None:
+        """Restart the mean from one sample (an estimator that joins a running loop): φ from
+        the encoder, the velocities zero, the floor displacements that explain the measured
+        accelerations with the model's y = C z + D u (least squares; the sample's excitation
+        and ``control`` as inputs). The covariance restarts at the scene's initial one."""
+        u = full_inputs(control, sample.force if np.isfinite(sample.force) else 0.0,
+                        self.excited_floor)
+        y = np.asarray(sample.measurements, dtype=float)
+        physical = np.zeros(8)
+        physical[3] = y[3]
+        floors = self.C[:3] @ self.T[:, :3]
+        rest = y[:3] - self.D[:3] @ u - self.C[:3] @ self.T @ physical
+        physical[:3] = np.linalg.lstsq(floors, rest, rcond=None)[0]
+        self.x = self.T @ physical
+        self.t = None
+
+    def innovation(self, y: np.ndarray, present: np.ndarray, force: float,
+                   control: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Measured minus feedthrough, and the C and R rows of the channels present."""
+        u = full_inputs(control, force, self.excited_floor)
+        return (y - self.D @ u)[present], self.C[present], self.R[np.ix_(present, present)]
+
+
+class SteadyStateKalman(LinearFilter):
+    """Stationary Kalman filter (fixed covariance P∞ at the nominal period)."""
+
+    def __init__(self, model: FrameModel, config: Section, excited_floor: int,
+                 initial_physical: np.ndarray, period: float) -> None:
+        super().__init__(model, config, excited_floor, initial_physical, period)
+        self.design(self.Q, self.R)
+        self.P = self.prior
+
+    def design(self, Q: np.ndarray, R: np.ndarray) -> None:
+        """P∞ and the full gain for Q, R (InputError, nothing changed, if the DARE fails)."""
+        d = self.discrete(self.period)
+        self.prior = solve_dare(d.phi.T, self.C.T, Q, R,
+                                what="stationary Kalman filter (dual Riccati equation)")
+        self.Q, self.R = Q, R
+        self.gain = self.gain_for(np.ones(4, dtype=bool))
+
+    def set_noise(self, process_std: list[float], measurement_std: list[float]) -> None:
+        self.design(*self.noise_covariances(process_std, measurement_std))
+
+    def gain_for(self, present: np.ndarray) -> np.ndarray:
+        C, R = self.C[present], self.R[np.ix_(present, present)]
+        return sla.solve(C @ self.prior @ C.T + R, C @ self.prior, assume_a="pos").T
+
+    def predict(self, dt: float, force0: float, force1: float, control: np.ndarray) -> None:
+        self.propagate_mean(dt, force0, force1, control)
+        self.P = self.prior
+
+    def update(self, y: np.ndarray, present: np.ndarray, force: float,
+               control: np.ndarray) -> None:
+        z, C, _ = self.innovation(y, present, force, control)
+        K = self.gain if present.all() else self.gain_for(present)
+        self.x = self.x + K @ (z - C @ self.x)
+        self.P = self.prior - K @ C @ self.prior
+
+
+class TimeVaryingKalman(LinearFilter):
+    """Kalman filter with the covariance propagated every sample (filterpy ``KalmanFilter``)."""
+
+    def __init__(self, model: FrameModel, config: Section, excited_floor: int,
+                 initial_physical: np.ndarray, period: float) -> None:
+        super().__init__(model, config, excited_floor, initial_physical, period)
+        self.kf = KalmanFilter(dim_x=self.x.size, dim_z=4)
+        self.kf.x, self.kf.P, self.kf.Q, self.kf.R = self.x, self.P, self.Q, self.R
+
+    def set_noise(self, process_std: list[float], measurement_std: list[float]) -> None:
+        super().set_noise(process_std, measurement_std)
+        self.kf.Q, self.kf.R = self.Q, self.R
+
+    def initialise_from(self, sample: Sample, control: np.ndarray) -> None:
+        super().initialise_from(sample, control)
+        self.kf.x = self.x
+
+    def predict(self, dt: float, force0: float, force1: float, control: np.ndarray) -> None:
+        d = self.discrete(dt)
+        u0 = full_inputs(control, force0, self.excited_floor)
+        u1 = full_inputs(control, force1, self.excited_floor)
+        self.kf.predict(u=np.concatenate([u0, u1 - u0]), B=np.hstack([d.gamma0, d.gamma1]),
+                        F=d.phi)
+        self.x, self.P = self.kf.x, self.kf.P
+
+    def update(self, y: np.ndarray, present: np.ndarray, force: float,
+               control: np.ndarray) -> None:
+        z, C, R = self.innovation(y, present, force, control)
+        self.kf.update(z, R=R, H=C)
+        self.x, self.P = self.kf.x, self.kf.P

@@ -1,0 +1,1 @@
+"""Work-precision measurements and the ``model: auto`` choice made from them."""

@@ -1,0 +1,174 @@
+"""Work-precision measurements: every model × integrator × step against a converged reference.
+
+The reference is the FE model with 40 elements per column integrated by the compiled implicit
+midpoint rule at ``REFERENCE_DT`` and checked by Richardson's estimate against a run at twice
+the step (order 2: error(h) ≈ |x_h − x_2h| / 3). Errors are measured on the outputs the rig
+measures — floor displacements x1..x3 and the pendulum angle φ — on a common 10 ms grid, as
+max_t |y − y_ref| / max_t |y_ref| per channel, the worst channel counting. Cost is CPU time
+(``time.process_time``) of the compiled kernels per simulated second.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from stillframe.config.scene import scene_from_dict
+from stillframe.config.schema import Section
+from stillframe.dynamics.excitation import floor_load
+from stillframe.dynamics.kernels import CompiledFrame
+from stillframe.dynamics.models import FrameModel, build_model
+from stillframe.dynamics.simulation import initial_state
+from stillframe.dynamics.stability import rk4_stable_step
+
+REFERENCE_MODEL = ("fe", 40)
+REFERENCE_DT = 1e-5
+GRID_DT = 1e-2
+STEPS = (1e-2, 5e-3, 2e-3, 1e-3, 5e-4, 2e-4, 1e-4)
+QUICK_STEPS = (5e-3, 1e-3, 2e-4)
+
+# name: scene overrides; all use modal damping, the one damping valid for every model
+SCENES: dict[str, list[str]] = {
+    "hammer": ["excitation.type=hammer", "excitation.impulse=0.05", "excitation.time=0.01",
+               "excitation.width=0.005"],
+    "worst_case": ["excitation.type=harmonics", "excitation.amplitudes=[0.1, 0.1, 0.1]",
+                   "excitation.frequencies_hz=[1.9, 5.7, 8.8]"],
+    "swing": ["initial.phi=2.5"],
+}
+# frequency content of each scene [Hz]: harmonics up to 8.8 Hz and the free swing (modes up to
+# 8.5 Hz) lie below 10 Hz; a half-sine blow of width T has |F(f)/F(0)| = |cos πfT / (1 − 4f²T²)|,
+# 0.33 (−10 dB) at f = 1/T = 200 Hz for T = 5 ms, and its first zero at 1.5/T.
+SCENE_BANDS_HZ: dict[str, tuple[float, float]] = {
+    "hammer": (0.0, 200.0), "worst_case": (0.0, 10.0), "swing": (0.0, 10.0)}
+MODELS: dict[str, list[str]] = {
+    "lumped": ["model.type=lumped"],
+    **{f"fe{n}": ["model.type=fe", f"model.elements_per_column={n}"] for n in (1, 3, 10, 40)},
+    **{f"modal{r}": ["model.type=modal", "model.elements_per_column=40", f"model.modes={r}"]
+       for r in (3, 6, 12)},
+}
+QUICK_MODELS = ("lumped", "fe1", "fe3", "modal3")
+METHODS = ("rk4", "midpoint")
+
+Progress = Callable[[str], None]
+
+
+@dataclass
+class Point:
+    """One run of the work-precision sweep."""
+
+    scene: str
+    model: str
+    dofs: int
+    method: str
+    dt: float
+    error: float | None  # None: not run (beyond the stability limit)
+    cpu_per_s: float | None  # CPU seconds per simulated second
+    note: str = ""
+
+
+def scene_for(scene: str, model: str, duration: float) -> Section:
+    return scene_from_dict({"name": f"{scene}-{model}"}, [
+        "damping.model=modal", *SCENES[scene], *MODELS[model], f"duration={duration}"])
+
+
+def outputs(model: FrameModel, states: np.ndarray) -> np.ndarray:
+    """Floor displacements and φ (columns) of a run's states."""
+    return states[:, [*model.floor_index, model.phi_index]]
+
+
+def run_outputs(frame: CompiledFrame, scene: Section, method: str, dt: float,
+                repeat_until: float = 0.0) -> tuple[np.ndarray, float]:
+    """Outputs on the 10 ms grid and the CPU time per run (repeated to ``repeat_until`` s) of
+    ``frame`` (built from ``scene``'s model)."""
+    model = frame.model
+    load = floor_load(scene.excitation, scene.duration)
+    x0 = initial_state(model, scene.initial)
+    stride = round(GRID_DT / dt)
+    n = round(scene.duration / dt)
+    frame.run(method, x0, dt, 1, load)  # compile and factor outside the clock
+    runs, start = 0, time.process_time()
+    while True:
+        states = frame.run(method, x0, dt, n, load, stride=stride)
+        runs += 1
+        spent = time.process_time() - start
+        if spent >= repeat_until:
+            break
+    return outputs(model, states), spent / runs
+
+
+def relative_error(y: np.ndarray, reference: np.ndarray) -> float:
+    scale = np.max(np.abs(reference), axis=0)
+    return float(np.max(np.max(np.abs(y - reference), axis=0) / scale))
+
+
+@dataclass
+class Reference:
+    scene: str
+    outputs: np.ndarray
+    richardson_error: float
+    cpu_s: float
+
+
+def reference(scene: str, duration: float) -> Reference:
+    """FE 40 by the implicit midpoint at REFERENCE_DT, Richardson-checked against 2·REFERENCE_DT."""
+    s = scene_for(scene, f"fe{REFERENCE_MODEL[1]}", duration)
+    frame = CompiledFrame(build_model(s))
+    fine, cpu = run_outputs(frame, s, "midpoint", REFERENCE_DT)
+    coarse, _ = run_outputs(frame, s, "midpoint", 2 * REFERENCE_DT)
+    return Reference(scene, fine, relative_error(coarse, fine) / 3.0, cpu)
+
+
+def sweep(quick: bool = False, duration: float | None = None,
+          progress: Progress | None = None) -> dict:
+    """The whole work-precision sweep: references, points, Pareto fronts, model frequencies."""
+    duration = duration or (1.0 if quick else 4.0)
+    steps = QUICK_STEPS if quick else STEPS
+    models = QUICK_MODELS if quick else tuple(MODELS)
+    say = progress or (lambda _text: None)
+    points: list[Point] = []
+    references: dict[str, dict] = {}
+    for scene in SCENES:
+        say(f"{scene}: reference fe40 midpoint dt={REFERENCE_DT:g}")
+        ref = reference(scene, duration)
+        references[scene] = {"richardson_error": ref.richardson_error, "cpu_s": ref.cpu_s}
+        for name in models:
+            s = scene_for(scene, name, duration)
+            model = build_model(s)
+            frame = CompiledFrame(model)
+            limit = rk4_stable_step(model)
+            for method in METHODS:
+                for dt in steps:
+                    if method == "rk4" and dt > limit:
+                        points.append(Point(scene, name, model.n_dof, method, dt, None, None,
+                                            f"beyond RK4 stability limit {limit:.3g} s"))
+                        continue
+                    say(f"{scene}: {name} {method} dt={dt:g}")
+                    y, cpu = run_outputs(frame, s, method, dt, repeat_until=0.02)
+                    points.append(Point(scene, name, model.n_dof, method, dt,
+                                        relative_error(y, ref.outputs), cpu / duration))
+    return {
+        "reference": {
+            "model": f"fe{REFERENCE_MODEL[1]}", "method": "midpoint (compiled)",
+            "dt": REFERENCE_DT, "check": "Richardson against 2*dt, order 2",
+            "per_scene": references,
+        },
+        "duration_s": duration,
+        "grid_dt": GRID_DT,
+        "scenes": dict(SCENES),
+        "points": [asdict(p) for p in points],
+        "pareto": {scene: [asdict(p) for p in pareto(points, scene)] for scene in SCENES},
+    }
+
+
+def pareto(points: list[Point], scene: str) -> list[Point]:
+    """Runs of ``scene`` that no other run beats on both cost and error, cheapest first."""
+    ran = sorted((p for p in points if p.scene == scene and p.error is not None),
+                 key=lambda p: (p.cpu_per_s, p.error))
+    front: list[Point] = []
+    for p in ran:
+        if not front or p.error < front[-1].error:
+            front.append(p)
+    return front

@@ -1,0 +1,262 @@
+"""One entry point from sampled input/output records to an identified model and its modes.
+
+Methods (thesis ch. 3):
+
+- ``okid-era``: OKID observer Markov parameters (eq. 3.106), system Markov parameters (eq. 3.107),
+  ERA (eq. 3.137), observer gain G by least squares from the observer gain Markov parameters
+  (eqs. 3.108, 3.112);
+- ``okid-eradc``: the same with ERA/DC (eq. 3.164) in place of ERA.
+
+With ``combined=True`` the OKID methods realize the combined parameters ``[Y_k, Y^0_k]`` instead
+(eqs. 3.165–3.203, the thesis's variant for the rig in §5.5), which gives B and G together; on the
+simulated hammer test its damping ratios are worse (docs/identification.md), so it is not the
+default.
+With ``refine=True`` the OKID model is then refined by prediction-error least squares in
+innovation form (:mod:`stillframe.identification.pem`), which also gives each mode a 95 % interval.
+- ``era-impulse``: the record is the response to one pulse on a single input at the first
+  sample; ``Y_k = y(k) / u(0)`` and ERA. No observer gain.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from numbers import Integral, Real
+from typing import Literal
+
+import numpy as np
+from numpy.typing import NDArray
+
+from stillframe.errors import InputError
+from stillframe.identification.era import (
+    EraDimensions,
+    HankelFactorization,
+    auto_order,
+    factorize,
+    order_gap,
+)
+from stillframe.identification.modal import ModalTable, modal_parameters
+from stillframe.identification.okid import minimum_samples, observer_gain, okid
+from stillframe.identification.pem import Refinement, bic, refine_prediction_error
+from stillframe.identification.quality import (
+    left_out_modes,
+    mode_consistency,
+    quality_warnings,
+    uncertain_modes,
+)
+
+Array = NDArray[np.float64]
+Method = Literal["okid-era", "okid-eradc", "era-impulse"]
+METHODS: tuple[str, ...] = ("okid-era", "okid-eradc", "era-impulse")
+
+DEFAULT_OBSERVER_ORDER = 20
+PULSE_TOLERANCE = 1e-9
+"""era-impulse: input samples after the first must be below this fraction of the pulse."""
+
+
+@dataclass(frozen=True)
+class Identification:
+    """An identified discrete model, how it was obtained and its modes."""
+
+    A: Array
+    B: Array
+    C: Array
+    D: Array
+    G: Array | None
+    """Observer gain (eq. 3.77 sign: ``Abar = A + G C``); None for ``era-impulse``."""
+    dt: float
+    order: int
+    order_gap: float
+    """``sigma_n / sigma_{n+1}`` at the chosen order (the auto criterion's value)."""
+    hankel_singular_values: Array
+    markov: Array
+    """System Markov parameters ``Y_0 .. Y_K``, ``(K + 1, m, r)``."""
+    modes: ModalTable
+    method: str
+    observer_order: int | None
+    dimensions: EraDimensions
+    factorization: HankelFactorization = field(repr=False)
+    """The Hankel SVD, reusable for other orders (e.g. a stabilization diagram)."""
+    consistent: NDArray[np.bool_]
+    """Per mode: persists at orders n + 2 and n + 4 (:mod:`stillframe.identification.quality`)."""
+    warnings: tuple[str, ...]
+    """The quality checks that failed (weak order gap, inconsistent, unstable, left-out or
+    uncertain modes)."""
+    refinement: Refinement | None = None
+    """The prediction-error refinement (``refine=True``): A, B, C, D and the modes above are
+    its; it holds the modes' 95 % intervals."""
+
+
+def _as_record(name: str, values: Array) -> Array:
+    arr = np.asarray(values, dtype=float)
+    if arr.ndim == 1:
+        arr = arr[:, None]
+    if arr.ndim != 2 or arr.shape[0] == 0 or arr.shape[1] == 0:
+        raise InputError(f"{name} must be a non-empty (samples, channels) array, got {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise InputError(f"{name} contains NaN or inf")
+    return arr
+
+
+def _pulse_markov(u: Array, y: Array) -> Array:
+    if u.shape[1] != 1:
+        raise InputError(f"era-impulse needs a single input, got {u.shape[1]}")
+    pulse = u[0, 0]
+    if pulse == 0 or np.max(np.abs(u[1:]), initial=0.0) > PULSE_TOLERANCE * abs(pulse):
+        raise InputError(
+            "era-impulse needs a single pulse at the first input sample and zeros after it; "
+            "use okid-era or okid-eradc for general inputs"
+        )
+    return (y / pulse)[:, :, None]
+
+
+def _impulse_factorization(u: Array, y: Array, order: int, alpha: int | None, beta: int | None,
+                           ) -> tuple[Array, EraDimensions, HankelFactorization]:
+    """Markov parameters of a pulse response, the Hankel sizes and the ERA Hankel SVD."""
+    markov = _pulse_markov(u, y)
+    n_samples, m = y.shape
+    a = alpha or min(50, max(1, (n_samples - 2) // 5))
+    b = beta or min(200, max(1, n_samples - 1 - a))
+    dims = EraDimensions(alpha=a, beta=b)
+    if dims.markov_count(False) > n_samples or a * m < order:
+        raise InputError(
+            f"record of {n_samples} samples too short for order {order} with alpha={a}, "
+            f"beta={b} (needs alpha*outputs >= order and alpha+beta+1 samples)"
+        )
+    markov = markov[: dims.markov_count(False)]
+    return markov, dims, factorize(markov, dims, correlated=False)
+
+
+def _observer_order(n_samples: int, r: int, m: int, order: int, requested: int | None) -> int:
+    """OKID's p: as requested, or the default lowered to what the record allows; checked."""
+    if requested is None:
+        p = DEFAULT_OBSERVER_ORDER
+        while p > max(1, math.ceil(order / m)) and n_samples < minimum_samples(r, m, p):
+            p -= 1
+    else:
+        p = requested
+    if p * m < order:
+        raise InputError(f"observer order {p} with {m} outputs bounds the model order by "
+                         f"{p * m} < {order} (thesis: m p >= n)")
+    if n_samples < minimum_samples(r, m, p):
+        raise InputError(
+            f"record of {n_samples} samples too short for order {order}: OKID with observer "
+            f"order {p} needs at least {minimum_samples(r, m, p)} samples"
+        )
+    return p
+
+
+def _check_request(u: Array, y: Array, dt: float, method: str, order: object,
+                   max_order: int | None, combined: bool) -> None:
+    if u.shape[0] != y.shape[0]:
+        raise InputError(f"input has {u.shape[0]} samples but output has {y.shape[0]}")
+    if isinstance(dt, bool) or not (isinstance(dt, Real) and math.isfinite(dt) and dt > 0):
+        raise InputError(f"sampling interval dt must be a positive number, got {dt!r}")
+    if method not in METHODS:
+        raise InputError(f"unknown method {method!r}; choose one of {', '.join(METHODS)}")
+    if order != "auto" and (isinstance(order, bool) or not isinstance(order, Integral)
+                            or order < 1):
+        raise InputError(f"order must be a positive integer or 'auto', got {order!r}")
+    if max_order is not None and (not isinstance(max_order, Integral) or max_order < 1):
+        raise InputError(f"max order must be a positive integer, got {max_order!r}")
+    if combined and method == "era-impulse":
+        raise InputError("combined realization needs OKID's observer gain: not with era-impulse")
+
+
+def identify(
+    u: Array,
+    y: Array,
+    dt: float,
+    method: Method = "okid-eradc",
+    order: int | Literal["auto"] = "auto",
+    *,
+    observer_order: int | None = None,
+    max_order: int | None = None,
+    alpha: int | None = None,
+    beta: int | None = None,
+    gamma: int = 2,
+    delta: int = 2,
+    tau: int = 1,
+    reference_sensor: int | None = None,
+    combined: bool = False,
+    refine: bool = False,
+) -> Identification:
+    """Identify a discrete state-space model of order ``order`` (or the largest singular-value
+    gap up to ``max_order`` when ``"auto"``; default: half the Hankel matrix's rank bound)
+    from inputs ``u (N, r)`` and outputs ``y (N, m)``.
+
+    ``observer_order`` is OKID's p (default 20, lowered to what the record allows); ``alpha`` and
+    ``beta`` are the Hankel block rows and columns (defaults: p and 4 p; for era-impulse, as many
+    as the record allows up to 50 and 200); ``gamma``, ``delta``, ``tau`` are the ERA/DC
+    correlation sizes (eq. 3.141). ``reference_sensor`` normalises the mode shapes (default: the
+    largest component). ``combined`` realizes ``[Y_k, Y^0_k]`` (eq. 3.165) for the OKID methods.
+    ``refine`` (OKID methods, not combined) refines the model by prediction-error least squares
+    (:func:`stillframe.identification.pem.refine_prediction_error`) and checks its modes' intervals.
+    Raises :class:`InputError` on bad input or a record too short.
+    """
+    u = _as_record("input", u)
+    y = _as_record("output", y)
+    _check_request(u, y, dt, method, order, max_order, combined)
+    if refine and (combined or method == "era-impulse"):
+        raise InputError("the refinement needs OKID's observer gain of the plain realization: "
+                         "not with era-impulse or combined")
+    n_samples, r = u.shape
+    m = y.shape[1]
+    needed_order = 2 if order == "auto" else int(order)
+
+    if method == "era-impulse":
+        markov, dims, fac = _impulse_factorization(u, y, needed_order, alpha, beta)
+        p = None
+    else:
+        correlated = method == "okid-eradc"
+        p = _observer_order(n_samples, r, m, needed_order, observer_order)
+        fit = okid(u, y, p)
+        dims = EraDimensions(alpha=alpha or p, beta=beta or 4 * p,
+                             gamma=gamma if correlated else 0, delta=delta if correlated else 0,
+                             tau=tau)
+        count = dims.markov_count(correlated)
+        markov = fit.system_markov(count)
+        gain_markov = fit.observer_gain_markov(max(count, p + 1))
+        params = np.concatenate([markov, gain_markov[:count]], axis=2) if combined else markov
+        fac = factorize(params, dims, correlated=correlated)
+
+    s = fac.singular_values
+    if order == "auto":
+        chosen, gap = auto_order(s, max_order or fac.max_rank // 2)
+    else:
+        chosen, gap = needed_order, order_gap(s, needed_order)
+    real = fac.realize(chosen)
+    if p is None:
+        B, G = real.B, None
+    elif combined:
+        B, G = real.B[:, :r], real.B[:, r:]  # eqs. 3.198, 3.199
+    else:
+        B, G = real.B, observer_gain(real.A, real.C, gain_markov[: p + 1])
+    A, C, D = real.A, real.C, real.D[:, :r]  # the combined Gamma_0 is [D, 0]
+    modes = modal_parameters(A, C, float(dt), reference=reference_sensor)
+    consistent = mode_consistency(fac, modes, chosen, float(dt))
+    left_out = left_out_modes(fac, modes, chosen, float(dt))
+    refinement, uncertain, order_note = None, None, None
+    if refine:
+        refinement = refine_prediction_error(A, B, C, D, G, u, y, float(dt))
+        if order == "auto" and chosen + 2 <= fac.numerical_rank:
+            larger = fac.realize(chosen + 2)
+            gain = observer_gain(larger.A, larger.C, gain_markov[: p + 1])
+            alternative = refine_prediction_error(larger.A, larger.B, larger.C, larger.D[:, :r],
+                                                  gain, u, y, float(dt))
+            if bic(alternative, n_samples) < bic(refinement, n_samples):
+                order_note = (f"ambiguous order: the Hankel gap chose {chosen}, the prediction "
+                              f"error (BIC) prefers {chosen + 2}, which is used")
+                chosen, refinement = chosen + 2, alternative
+                consistent = mode_consistency(fac, refinement.modes, chosen, float(dt))
+        A, B, C, D, G = refinement.A, refinement.B, refinement.C, refinement.D, -refinement.K
+        modes = modal_parameters(A, C, float(dt), reference=reference_sensor)
+        uncertain = uncertain_modes(modes, refinement.frequency_ci_hz, refinement.damping_ci)
+    return Identification(
+        A=A, B=B, C=C, D=D, G=G, dt=float(dt), order=chosen, order_gap=gap,
+        hankel_singular_values=s, markov=markov, method=method, observer_order=p,
+        dimensions=dims, factorization=fac, modes=modes, consistent=consistent,
+        warnings=tuple(([order_note] if order_note else [])
+                       + quality_warnings(modes, consistent, chosen, gap, left_out, uncertain)),
+        refinement=refinement,
+    )

@@ -1,0 +1,54 @@
+"""Sensor-stamp-to-command latency of the running loop, seen from one outside observer.
+
+The observer subscribes to a sensor topic and to the command topics. A command carries the stamp
+of the sample it was computed from (docs/architecture.md, topic contract), so for each stamp t_k
+the latency
+is (receive time of the command stamped t_k) − (receive time of the sample stamped t_k), both
+on the observer's wall clock: the time the estimator and controller took, plus one extra hop. A
+command arriving later than one sample period after its sample missed its deadline (the next
+sample is already due); a sample never answered is counted separately, except the samples that
+came after the last command seen (still in flight when the run ended).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+
+@dataclass
+class LatencyLog:
+    """Receive times (ns, observer's wall clock) by stamp (ns) of samples and commands."""
+
+    period_ns: int
+    samples: dict[int, int] = field(default_factory=dict)
+    commands: dict[int, int] = field(default_factory=dict)
+
+    def on_sample(self, stamp_ns: int, received_ns: int) -> None:
+        self.samples.setdefault(stamp_ns, received_ns)
+
+    def on_command(self, stamp_ns: int, received_ns: int) -> None:
+        """The first command for a stamp counts (EUK and LQG answer on one topic each)."""
+        self.commands.setdefault(stamp_ns, received_ns)
+
+    def summary(self) -> dict[str, float | int]:
+        """p50 / p99 / max latency in µs over the answered samples, deadline misses (latency
+        above one period), unanswered samples."""
+        answered = sorted(set(self.samples) & set(self.commands))
+        latency_us = np.array([(self.commands[s] - self.samples[s]) * 1e-3 for s in answered])
+        last = max(self.commands, default=-1)
+        unanswered = sum(1 for s in self.samples if s not in self.commands and s <= last)
+        if latency_us.size == 0:
+            return {"samples": len(self.samples), "answered": 0, "unanswered": unanswered,
+                    "p50_us": float("nan"), "p99_us": float("nan"), "max_us": float("nan"),
+                    "deadline_misses": 0}
+        return {
+            "samples": len(self.samples),
+            "answered": len(answered),
+            "unanswered": unanswered,
+            "p50_us": float(np.percentile(latency_us, 50)),
+            "p99_us": float(np.percentile(latency_us, 99)),
+            "max_us": float(latency_us.max()),
+            "deadline_misses": int(np.sum(latency_us > self.period_ns * 1e-3)),
+        }

@@ -1,0 +1,192 @@
+"""What the three loop nodes share: the scene parameters, ``/diagnostics``, timing statistics and
+waiting for the peers of the lock-step protocol (docs/nodes.md).
+
+Every node reads the same scene (``scene``, ``overrides``) so that it builds the same plant,
+estimator or controller as :func:`stillframe.loop.closed_loop.run_closed_loop`.
+"""
+
+from __future__ import annotations
+
+import time
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+from typing import Any
+
+import numpy as np
+
+from stillframe.config.scene import load_scene
+from stillframe.config.schema import Section
+from stillframe.contract import messages, topics
+from stillframe.errors import InputError
+from stillframe.fidelity.auto_model import resolve_model
+from stillframe.middleware import api
+from stillframe.middleware.params import Parameter, SetParametersResult
+from stillframe.middleware.qos import PROFILES, Durability, QoSProfile, Reliability
+
+MODES = ("lockstep", "realtime")
+#: After the peers are matched, spin this long so that the other side of every match (the
+#: remote writer's view) has caught up before the first sample (docs/nodes.md, start-up).
+SETTLE_S = 0.25
+OK, WARN, ERROR = 0, 1, 2
+
+
+@dataclass(frozen=True)
+class LoopParameters:
+    """The parameters every loop node declares."""
+
+    scene: Section
+    mode: str
+    lockstep_timeout_s: float
+    diagnostics_period_s: float
+
+    @property
+    def period(self) -> float:
+        return 1.0 / self.scene.sensors.rate_hz
+
+    @property
+    def lockstep(self) -> bool:
+        return self.mode == "lockstep"
+
+    def qos(self, spec: topics.TopicSpec) -> QoSProfile | str:
+        """The contract's QoS, except that sensor topics are RELIABLE and TRANSIENT_LOCAL in
+        lock-step.
+
+        Lock-step promises the same numbers as the one-process loop; a best-effort sample lost
+        under load would silently turn into a partial update. TRANSIENT_LOCAL closes the start:
+        the simulator sees its writers matched before the estimator's reader has matched them
+        (discovery is not symmetric), and a volatile Fast DDS reader then skips the first
+        sample a Cyclone writer sent (measured: 1 lock-step timeout in 6 mixed-vendor runs); a
+        transient-local reader is handed it on matching. A reliable transient-local writer still
+        matches the contract's best-effort volatile readers (``ros2 topic echo``, the recorder),
+        so only the loop's own readers ask for more than the contract.
+        """
+        if self.lockstep and spec.qos == "sensor_data":
+            return replace(PROFILES["sensor_data"], reliability=Reliability.RELIABLE,
+                           durability=Durability.TRANSIENT_LOCAL)
+        return spec.qos
+
+
+def _overrides(value: Any) -> list[str]:
+    if isinstance(value, list) and all(isinstance(v, str) for v in value):
+        return [v for v in value if v]
+    raise InputError(f"parameter 'overrides': expected a list of 'dotted.key=value' strings, "
+                     f"got {value!r}")
+
+
+def declare_loop_parameters(node: api.Node) -> LoopParameters:
+    """``scene`` (path), ``overrides`` (``--set`` strings), ``mode``, ``lockstep_timeout_s``,
+    ``diagnostics_period_s``; InputError naming the parameter when one is wrong."""
+    path = node.declare_parameter("scene", "", read_only=True).value
+    # a string list; the default [""] because a ROS parameter cannot be an empty list
+    overrides = _overrides(node.declare_parameter("overrides", [""], read_only=True).value)
+    mode = node.declare_parameter("mode", "lockstep", read_only=True).value
+    timeout = node.declare_parameter("lockstep_timeout_s", 1.0, read_only=True).value
+    diag = node.declare_parameter("diagnostics_period_s", 1.0, read_only=True).value
+    if not path:
+        raise InputError("parameter 'scene': give the scene file (--ros-args -p scene:=FILE)")
+    if mode not in MODES:
+        raise InputError(f"parameter 'mode': expected one of {', '.join(MODES)}, got {mode!r}")
+    if not timeout > 0:
+        raise InputError(f"parameter 'lockstep_timeout_s': must be > 0, got {timeout}")
+    if not diag > 0:
+        raise InputError(f"parameter 'diagnostics_period_s': must be > 0, got {diag}")
+    scene, _ = resolve_model(load_scene(path, overrides))
+    return LoopParameters(scene, mode, float(timeout), float(diag))
+
+
+def check_settable(parameters: list[Parameter],
+                   settable: frozenset[str] = frozenset()) -> SetParametersResult:
+    """An on-set-parameters check: refuse any parameter a loop node does not change while it
+    runs (the scene, mode, timeouts, ``use_sim_time``, and anything declared later)."""
+    for p in parameters:
+        if p.name not in settable:
+            return SetParametersResult(False, f"parameter {p.name!r} cannot change while the "
+                                              "node runs")
+    return SetParametersResult(True)
+
+
+class Diagnostics:
+    """One ``diagnostic_msgs/DiagnosticStatus`` per node on ``/diagnostics``, published at most
+    every ``period_s`` of wall time (and on :meth:`publish` with ``force``)."""
+
+    def __init__(self, node: api.Node, period_s: float) -> None:
+        self.pub = node.create_publisher(topics.DIAGNOSTICS.type_name, topics.DIAGNOSTICS.name,
+                                         topics.DIAGNOSTICS.qos)
+        self.name = f"{node.get_namespace().rstrip('/')}/{node.get_name()}"
+        self.period_s = period_s
+        self.next = time.monotonic() + period_s
+
+    def due(self) -> bool:
+        return time.monotonic() >= self.next
+
+    def publish(self, stamp_ns: int, values: dict[str, Any], level: int = OK,
+                message: str = "") -> None:
+        kv = messages.msg_class("diagnostic_msgs/msg/KeyValue")
+        values = {**values, "malformed_samples": sum(api.MALFORMED.values())}
+        status = messages.new(
+            "diagnostic_msgs/msg/DiagnosticStatus", level=level, name=self.name,
+            message=message or ("OK" if level == OK else "degraded"), hardware_id="stillframe",
+            values=[kv(key=k, value=_text(v)) for k, v in values.items()],
+        )
+        array = messages.new("diagnostic_msgs/msg/DiagnosticArray", status=[status])
+        array.header.stamp = messages.time_msg(stamp_ns)
+        self.pub.publish(array)
+        self.next = time.monotonic() + self.period_s
+
+
+def _text(value: Any) -> str:
+    return f"{value:.6g}" if isinstance(value, float) else str(value)
+
+
+def diagnostic_values(msg: Any) -> dict[str, str]:
+    """The key/value pairs of the first status of a DiagnosticArray (for tools and tests)."""
+    return {kv.key: kv.value for kv in msg.status[0].values} if msg.status else {}
+
+
+class Durations:
+    """Wall-clock durations [s] (latencies, compute times): percentiles in ms over the last
+    ``keep`` values."""
+
+    def __init__(self, keep: int = 100_000) -> None:
+        self.values: deque[float] = deque(maxlen=keep)
+
+    def add(self, seconds: float) -> None:
+        self.values.append(seconds)
+
+    def summary(self) -> dict[str, float]:
+        if not self.values:
+            return {"p50": float("nan"), "p99": float("nan"), "max": float("nan")}
+        v = 1e3 * np.asarray(self.values)
+        return {"p50": float(np.percentile(v, 50)), "p99": float(np.percentile(v, 99)),
+                "max": float(v.max())}
+
+
+class RateMeter:
+    """Events per second of wall time since the last reading."""
+
+    def __init__(self) -> None:
+        self.count = 0
+        self.since = time.monotonic()
+
+    def tick(self) -> None:
+        self.count += 1
+
+    def read(self) -> float:
+        now = time.monotonic()
+        rate = self.count / max(now - self.since, 1e-9)
+        self.count, self.since = 0, now
+        return rate
+
+
+def wait_for_peers(node: api.Node, ready: Callable[[], bool], timeout_s: float) -> bool:
+    """Spin until ``ready()`` (then :data:`SETTLE_S` more); False after ``timeout_s``."""
+    if not api.spin_until(node, ready, timeout_s):
+        return False
+    api.spin_until(node, lambda: False, SETTLE_S)
+    return api.ok()
+
+
+def has_publisher(node: api.Node, topic: str) -> bool:
+    """A publisher of ``topic`` is in the graph (the reader side of a match)."""
+    return bool(node.get_publishers_info_by_topic(topic))

@@ -1,0 +1,159 @@
+"""What the node API's backends implement and share: the :class:`Node` protocol and its value
+types, message delivery with the count of malformed samples, and the process's run state
+(:func:`ok`, :func:`shutdown`, signal handlers, the frozen set-up objects).
+
+The backends import this module; :mod:`stillframe.middleware.api` chooses a backend and re-exports
+these names for node code.
+"""
+
+from __future__ import annotations
+
+import gc
+import signal
+import threading
+from collections import Counter
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any, Protocol
+
+from stillframe.contract import messages
+from stillframe.middleware.clock import Clock
+from stillframe.middleware.logger import Logger
+from stillframe.middleware.params import Parameter, SetCallback
+from stillframe.middleware.qos import QoSProfile
+
+
+@dataclass(frozen=True)
+class MessageInfo:
+    """What a raw subscription learns about a sample besides its bytes (ns since the epoch;
+    ``received_timestamp`` on the node's clock, i.e. sim time with ``use_sim_time``).
+    ``publisher_gid``: the writer's GID (its DDS GUID, as ``endpoint_gid`` in the graph), empty
+    where the backend does not expose it (rclpy Jazzy's message info carries none)."""
+
+    source_timestamp: int
+    received_timestamp: int
+    publisher_gid: bytes = b""
+
+
+@dataclass(frozen=True)
+class TopicEndpointInfo:
+    """One publisher or subscription of a topic, as discovered (like rclpy's)."""
+
+    topic_name: str
+    topic_type: str
+    topic_type_hash: str
+    endpoint_gid: bytes
+    qos_profile: QoSProfile
+    node_name: str = ""
+    node_namespace: str = ""
+
+
+class Publisher(Protocol):
+    topic_name: str
+
+    def publish(self, msg: Any) -> None: ...
+    def get_subscription_count(self) -> int: ...
+    def wait_for_all_acked(self, timeout_sec: float) -> bool: ...
+
+
+class Subscription(Protocol):
+    topic_name: str
+
+
+class Timer(Protocol):
+    def cancel(self) -> None: ...
+    def reset(self) -> None: ...
+
+
+class Node(Protocol):
+    """What every backend's node offers."""
+
+    backend: str
+
+    def get_name(self) -> str: ...
+    def get_namespace(self) -> str: ...
+    def get_logger(self) -> Logger: ...
+    def get_clock(self) -> Clock: ...
+    def create_publisher(
+        self, msg_type: str | type, topic: str, qos: QoSProfile | str | int
+    ) -> Publisher: ...
+    def create_subscription(
+        self, msg_type: str | type, topic: str, callback: Callable[..., None],
+        qos: QoSProfile | str | int, raw: bool = False,
+    ) -> Subscription: ...
+    def create_timer(
+        self, period_s: float, callback: Callable[[], None], clock: Clock | None = None
+    ) -> Timer: ...
+    def declare_parameter(
+        self, name: str, default: Any = None, read_only: bool = False
+    ) -> Parameter: ...
+    def get_parameter(self, name: str) -> Parameter: ...
+    def add_on_set_parameters_callback(self, callback: SetCallback) -> None: ...
+    def call_service(
+        self, srv_type: str, service: str, request: Any, timeout_sec: float
+    ) -> Any | None: ...
+    def get_topic_names_and_types(self) -> list[tuple[str, list[str]]]: ...
+    def get_publishers_info_by_topic(self, topic: str) -> list[TopicEndpointInfo]: ...
+    def get_subscriptions_info_by_topic(self, topic: str) -> list[TopicEndpointInfo]: ...
+    def get_node_names_and_namespaces(self) -> list[tuple[str, str]]: ...
+    def spin_once(self, timeout_sec: float | None = None) -> None: ...
+    def destroy_node(self) -> None: ...
+
+
+#: samples per topic that did not decode (malformed CDR), dropped by the subscriptions of this
+#: process; the loop nodes report them in ``/diagnostics``
+MALFORMED: Counter[str] = Counter()
+
+
+def deliver(callback: Callable[[Any], None], data: bytes | memoryview, type_name: str,
+            topic: str) -> None:
+    """Decode ``data`` and hand it to ``callback``; a malformed sample is dropped and counted."""
+    msg = messages.decode_sample(data, type_name)
+    if msg is None:
+        MALFORMED[topic] += 1
+    else:
+        callback(msg)
+
+
+_shutdown = threading.Event()
+_handlers_installed = False
+_gc_frozen = False
+
+
+def ok() -> bool:
+    """False once SIGINT/SIGTERM arrived or :func:`shutdown` was called."""
+    return not _shutdown.is_set()
+
+
+def shutdown() -> None:
+    """Ask every :func:`spin` of this process to return."""
+    _shutdown.set()
+
+
+def _on_signal(signum: int, frame: Any) -> None:
+    if _shutdown.is_set():  # second Ctrl-C: the user insists
+        signal.default_int_handler(signum, frame)
+    _shutdown.set()
+
+
+def install_signal_handlers() -> None:
+    """Make SIGINT and SIGTERM request a clean shutdown (main thread only; idempotent)."""
+    global _handlers_installed
+    if _handlers_installed or threading.current_thread() is not threading.main_thread():
+        return
+    signal.signal(signal.SIGINT, _on_signal)
+    signal.signal(signal.SIGTERM, _on_signal)
+    _handlers_installed = True
+
+
+def freeze_setup_objects() -> None:
+    """Move every object alive now to the collector's permanent generation (once per process).
+
+    Called when a node starts spinning: the objects made while setting up (type store,
+    modules, models) live as long as the process, and a full collection pass over them takes
+    10-40 ms, a latency spike in the middle of a control loop. Objects made later are
+    collected as usual."""
+    global _gc_frozen
+    if not _gc_frozen:
+        gc.freeze()
+        _gc_frozen = True

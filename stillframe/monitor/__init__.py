@@ -1,0 +1,1 @@
+"""Live monitoring: the Foxglove bridge, its client and the built-in dashboard."""

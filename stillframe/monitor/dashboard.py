@@ -1,0 +1,181 @@
+"""The built-in live dashboard: decimated plot data from the loop's topics, served over HTTP.
+
+One page (``stillframe/data/dashboard.html``) of Plotly charts: per floor the true and
+estimated displacement (``state_truth``, ``state_estimate``) with the measured acceleration
+(``floorN/imu``); the pendulum angle; the command with its limits; and each node's counters from
+``/diagnostics``, red when an error counter is non-zero. The page polls ``/data`` twice a
+second. Decimation happens here, before decoding: a topic's sample is decoded and kept only
+if at least ``1 / rate_hz`` has passed (receive time, sim time with ``use_sim_time``) since the
+last one kept, and each series keeps its last ``points`` samples; so a 1 kHz topic costs a
+comparison per sample and the page always gets at most ``points`` points per series.
+
+Plotly's JavaScript is served from the ``plotly`` Python package (``plotly.min.js``), so the
+page needs no internet.
+"""
+
+from __future__ import annotations
+
+import json
+import threading
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass
+from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
+from importlib import resources
+from typing import Any
+
+from plotly.offline import get_plotlyjs
+
+from stillframe.contract import messages
+from stillframe.contract.topics import (
+    DIAGNOSTICS,
+    FLOOR_IMU,
+    FORCE_CMD,
+    PENDULUM_JOINT_STATES,
+    STATE_ESTIMATE,
+    STATE_TRUTH,
+    STATUS_KEYS,
+    TORQUE_CMD,
+    TopicSpec,
+)
+from stillframe.middleware.api import MessageInfo
+from stillframe.middleware.qos import QoSProfile, Reliability
+
+#: counters that are errors when non-zero (the rest of STATUS_KEYS are progress figures)
+ERROR_KEYS: tuple[str, ...] = tuple(k for k in STATUS_KEYS
+                                    if k not in ("sim_time_s", "step", "realtime_factor"))
+#: best effort with a short queue: the dashboard never back-pressures a publisher
+WATCH_QOS = QoSProfile(depth=10, reliability=Reliability.BEST_EFFORT)
+
+
+def _joint_positions(msg: Any) -> list[float]:
+    return [float(v) for v in msg.position[:4]]
+
+
+#: series name -> (topic, values of a message); the page knows these names
+SERIES: dict[str, tuple[TopicSpec, Callable[[Any], list[float]]]] = {
+    "truth": (STATE_TRUTH, _joint_positions),
+    "estimate": (STATE_ESTIMATE, _joint_positions),
+    **{f"imu{n + 1}": (spec, lambda m: [float(m.linear_acceleration.x)])
+       for n, spec in enumerate(FLOOR_IMU)},
+    "encoder": (PENDULUM_JOINT_STATES, lambda m: [float(m.position[0])]),
+    "torque_cmd": (TORQUE_CMD, lambda m: [float(m.wrench.torque.z)]),
+    "force_cmd": (FORCE_CMD, lambda m: [float(m.wrench.force.x)]),
+}
+
+
+class DecimatedSeries:
+    """The last ``points`` samples kept at most every ``period_ns`` of receive time."""
+
+    def __init__(self, points: int, period_ns: int) -> None:
+        self.period_ns = period_ns
+        self.samples: deque[tuple[float, list[float]]] = deque(maxlen=points)
+        self._last_ns: int | None = None
+        self.received = 0
+
+    def wants(self, received_ns: int) -> bool:
+        """Count a sample; True if it is to be decoded and kept."""
+        self.received += 1
+        if self._last_ns is not None and 0 <= received_ns - self._last_ns < self.period_ns:
+            return False
+        self._last_ns = received_ns
+        return True
+
+    def as_columns(self) -> dict[str, Any]:
+        """``{"t": [...], "y": [[first value ...], [second value ...], ...]}``."""
+        samples = list(self.samples)
+        width = len(samples[0][1]) if samples else 0
+        return {"t": [t for t, _ in samples],
+                "y": [[v[i] for _, v in samples] for i in range(width)],
+                "received": self.received}
+
+
+@dataclass
+class Limits:
+    """The command limits drawn on the command plot (None: not set in the scene)."""
+
+    command: float | None = None
+    torque: float | None = None
+    force: float | None = None
+
+
+class Dashboard:
+    """Subscribes ``node`` to the loop's topics under ``namespace`` and keeps decimated series
+    and the latest ``/diagnostics`` values; :meth:`snapshot` is what ``/data`` serves."""
+
+    def __init__(self, node: Any, namespace: str, limits: Limits, rate_hz: float = 50.0,
+                 points: int = 500) -> None:
+        self.limits = limits
+        self._lock = threading.Lock()
+        self.series = {name: DecimatedSeries(points, round(1e9 / rate_hz)) for name in SERIES}
+        self.diagnostics: dict[str, dict[str, str]] = {}
+        for name, (spec, values) in SERIES.items():
+            node.create_subscription(spec.type_name, f"{namespace}/{spec.name}",
+                                     self._keeper(name, spec.type_name, values), WATCH_QOS,
+                                     raw=True)
+        node.create_subscription(DIAGNOSTICS.type_name, DIAGNOSTICS.name, self._on_diagnostics,
+                                 WATCH_QOS)
+
+    def _keeper(self, name: str, msgtype: str,
+                values: Callable[[Any], list[float]]) -> Callable[[bytes, MessageInfo], None]:
+        series = self.series[name]
+
+        def keep(data: bytes, info: MessageInfo) -> None:
+            if not series.wants(info.received_timestamp):
+                return
+            msg = messages.deserialize(data, msgtype)
+            sample = (messages.stamp_ns(msg.header.stamp) * 1e-9, values(msg))
+            with self._lock:
+                series.samples.append(sample)
+
+        return keep
+
+    def _on_diagnostics(self, msg: Any) -> None:
+        with self._lock:
+            for status in msg.status:
+                self.diagnostics[status.name] = {kv.key: kv.value for kv in status.values
+                                                 if kv.key in STATUS_KEYS}
+
+    def snapshot(self) -> dict[str, Any]:
+        """Everything the page draws, JSON-ready."""
+        with self._lock:
+            return {"series": {name: s.as_columns() for name, s in self.series.items()},
+                    "diagnostics": {k: dict(v) for k, v in self.diagnostics.items()},
+                    "error_keys": list(ERROR_KEYS),
+                    "limits": {"command": self.limits.command, "torque": self.limits.torque,
+                               "force": self.limits.force}}
+
+
+def _asset(package: str, name: str) -> bytes:
+    return resources.files(package).joinpath(name).read_bytes()
+
+
+def serve(dashboard: Dashboard, host: str, port: int) -> ThreadingHTTPServer:
+    """Serve the page, ``plotly.min.js`` and ``/data`` on ``host:port`` from a daemon thread
+    (``server.server_address`` has the port when 0 was asked for)."""
+    files = {"/": ("text/html; charset=utf-8", _asset("stillframe", "data/dashboard.html")),
+             "/plotly.min.js": ("application/javascript", get_plotlyjs().encode())}
+
+    class Handler(BaseHTTPRequestHandler):
+        def do_GET(self) -> None:
+            if self.path == "/data":
+                kind, body = "application/json", json.dumps(dashboard.snapshot()).encode()
+            elif self.path in files:
+                kind, body = files[self.path]
+            else:
+                self.send_error(404)
+                return
+            self.send_response(200)
+            self.send_header("Content-Type", kind)
+            self.send_header("Content-Length", str(len(body)))
+            self.send_header("Cache-Control", "no-store")
+            self.end_headers()
+            self.wfile.write(body)
+
+        def log_message(self, format: str, *args: Any) -> None:
+            """Quiet: one line per poll would drown the launch's output."""
+
+    server = ThreadingHTTPServer((host, port), Handler)
+    server.daemon_threads = True
+    threading.Thread(target=server.serve_forever, name="dashboard", daemon=True).start()
+    return server

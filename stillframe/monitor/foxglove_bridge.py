@@ -1,0 +1,69 @@
+"""Bridge the ROS graph to the Foxglove WebSocket protocol (``foxglove.websocket.v1``).
+
+Like ``foxglove_bridge``, on whichever backend the node runs: every discovered topic
+(:class:`stillframe.middleware.topic_follower.TopicFollower`) becomes a ``foxglove-sdk`` channel
+with schema
+encoding ``ros2msg`` (the ``.msg`` definition with its dependencies, as ``rosbags`` writes it
+into MCAP bags) and message encoding ``cdr``; the CDR bytes pass through unconverted. With sim
+time, each ``/clock`` sample is broadcast as the server time (capability ``time``), which
+drives Foxglove's and Lichtblick's time cursor. The SDK keeps a bounded queue per client and
+drops a slow client's oldest messages, so no client can hold the node back.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import foxglove
+
+from stillframe.contract import messages
+from stillframe.middleware.api import MessageInfo
+from stillframe.middleware.qos import QoSProfile
+from stillframe.middleware.topic_follower import RawCallback, TopicFollower
+
+SCHEMA_ENCODING = "ros2msg"
+MESSAGE_ENCODING = "cdr"
+#: outgoing messages buffered per client before the oldest are dropped
+CLIENT_BACKLOG = 1024
+
+
+def ros2msg_schema(msgtype: str) -> foxglove.Schema:
+    """The ``ros2msg`` schema of a type: its definition and its dependencies' after
+    ``MSG:`` separators (``rosbags``'s ``generate_msgdef``, the text of rosbag2's MCAP files)."""
+    text, _ = messages.TYPESTORE.generate_msgdef(msgtype, ros_version=2)
+    return foxglove.Schema(name=msgtype, encoding=SCHEMA_ENCODING, data=text.encode())
+
+
+def start_server(host: str, port: int, context: foxglove.Context) -> foxglove.WebSocketServer:
+    """A Foxglove WebSocket server on ``host:port`` for ``context``'s channels."""
+    return foxglove.start_server(
+        name="stillframe monitor", host=host, port=port, context=context,
+        capabilities=[foxglove.Capability.Time], supported_encodings=[MESSAGE_ENCODING],
+        message_backlog_size=CLIENT_BACKLOG)
+
+
+class FoxgloveBridge(TopicFollower):
+    """Forwards ``topics`` (every topic if empty) of ``node`` to ``server``'s clients."""
+
+    def __init__(self, node: Any, server: foxglove.WebSocketServer, context: foxglove.Context,
+                 topics: Sequence[str] = ()) -> None:
+        self.server = server
+        self.context = context
+        self.channels: dict[str, foxglove.Channel] = {}
+        super().__init__(node, topics)
+        if node.get_parameter("use_sim_time").value:
+            node.create_subscription("rosgraph_msgs/msg/Clock", "/clock", self._on_clock, "clock")
+
+    def on_new_topic(self, topic: str, msgtype: str, offers: list[QoSProfile]) -> RawCallback:
+        channel = foxglove.Channel(topic, schema=ros2msg_schema(msgtype),
+                                   message_encoding=MESSAGE_ENCODING, context=self.context)
+        self.channels[topic] = channel
+
+        def forward(data: bytes, info: MessageInfo) -> None:
+            channel.log(data, log_time=info.received_timestamp)
+
+        return forward
+
+    def _on_clock(self, msg: Any) -> None:
+        self.server.broadcast_time(messages.stamp_ns(msg.clock))

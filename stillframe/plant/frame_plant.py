@@ -1,0 +1,140 @@
+"""The simulated rig, one sample period at a time: model + excitation + actuators + sensors.
+
+Per period k the caller takes :meth:`Plant.sample` at t_k (readings with the command of the
+previous period still applied) and then :meth:`Plant.advance` with the new command, which the
+actuators limit and hold over [t_k, t_k+1) while the scene's integrator takes its steps. The
+plant is the scene's nonlinear model (``plant.model: scene``) or the thesis's LQG plant, the linear
+second-order model of an identified structure with the linearised pendulum
+(``plant.model: file``, eq. 5.199–5.207). Process noise (eq. 5.215) is added to the physical
+state once per period. Ground truth is kept at every integrator step for the evaluation.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from stillframe.config.schema import Section
+from stillframe.contract.signals import Sample
+from stillframe.dynamics.excitation import floor_load
+from stillframe.dynamics.integrators import (
+    IntegrationError,
+    check_finite,
+    integrate,
+    make_integrator,
+)
+from stillframe.dynamics.models.identified import frame_for
+from stillframe.dynamics.simulation import initial_state
+from stillframe.dynamics.systems import LinearSystem, MechanicalSystem
+from stillframe.errors import InputError
+from stillframe.plant.actuators import Actuators
+from stillframe.plant.ph_plant import PHPlant
+from stillframe.plant.sensors import Sensors
+
+
+def sample_period(scene: Section) -> tuple[float, int]:
+    """The sample period 1/sensors.rate_hz and the integrator steps per period."""
+    period = 1.0 / scene.sensors.rate_hz
+    ratio = period / scene.integrator.dt
+    steps = round(ratio)
+    if steps < 1 or abs(ratio - steps) > 1e-6 * ratio:
+        raise InputError(
+            f"integrator.dt: {scene.integrator.dt:g} s does not divide the sample period "
+            f"{period:g} s (1/sensors.rate_hz)"
+        )
+    return period, steps
+
+
+def make_plant(scene: Section) -> Plant | PHPlant:
+    """The scene's plant: the frame pHDAE for ``model.type: ph`` (``plant.model: scene``),
+    else :class:`Plant`."""
+    if scene.model.type == "ph" and scene.plant.model == "scene":
+        return PHPlant(scene, *sample_period(scene))
+    return Plant(scene)
+
+
+class Plant:
+    """Scene-driven plant with seeded sensor and process noise."""
+
+    def __init__(self, scene: Section) -> None:
+        self.period, self.substeps = sample_period(scene)
+        self.h = self.period / self.substeps
+        model = frame_for(scene.plant.model, scene.plant.file, scene, "plant.file")
+        self.model = model
+        load = floor_load(scene.excitation, scene.duration + self.period)
+        self.load = load
+        self.excited_floor = scene.excitation.floor
+        self.system = (LinearSystem(model.linearized(), load) if scene.plant.model == "file"
+                       else MechanicalSystem(model, load))
+        self.integrator = make_integrator(scene.integrator.method)
+        self.x = initial_state(model, scene.initial)
+        n = model.n_dof
+        self.n_dof = n
+        picks = [*model.floor_index, model.phi_index]
+        self.physical_index = np.array([*picks, *(n + i for i in picks)])
+        self.process_std = np.asarray(scene.plant.process_noise_std, dtype=float)
+        self.process_rng = np.random.default_rng(scene.plant.seed)
+        self.sensors = Sensors(scene.sensors, np.random.default_rng(scene.sensors.seed))
+        self.actuators = Actuators(scene.actuators, self.period)
+        self.k = 0
+        n_steps = round(scene.duration / self.period) * self.substeps + 1
+        self._fine = np.empty((n_steps, 7))
+        self._rows = 0
+        self._record(0.0, self.x)
+
+    @property
+    def t(self) -> float:
+        return self.k * self.period
+
+    def physical(self) -> np.ndarray:
+        """True [x1, x2, x3, φ, ẋ1, ẋ2, ẋ3, φ̇]."""
+        return self.x[self.physical_index].copy()
+
+    def force(self, t: float) -> float:
+        return float(self.load(t)[self.excited_floor - 1]) if self.load else 0.0
+
+    def sample(self) -> Sample:
+        """Sensor readings and ground truth at the current time t_k."""
+        t = self.t
+        accelerations = self.system.derivative(t, self.x)[self.n_dof:][self.model.floor_index]
+        readings, force = self.sensors.read(accelerations, self.x[self.model.phi_index],
+                                            self.force(t))
+        applied = np.array([self.actuators.torque.value, self.actuators.force.value])
+        return Sample(t, readings, force, truth=self.physical(), applied=applied)
+
+    def advance(self, command: np.ndarray) -> np.ndarray:
+        """Apply [torque, floor-3 force] via the actuators for one period; the applied values."""
+        applied = self.actuators.apply(command)
+        self.system.control = np.array([0.0, 0.0, applied[1], applied[0]])
+        t0 = self.t
+        try:
+            self.x = integrate(self.system, self.x, self.h, self.substeps, self.integrator, t0,
+                               observer=self._observe)
+        except (ValueError, OverflowError) as exc:  # math.sin(inf) and the like
+            if isinstance(exc, IntegrationError):
+                raise
+            raise IntegrationError(
+                f"integrator.dt: the state left the finite range at t ≈ {t0:.6g} s (the command "
+                f"{applied} drove it away; limit the actuators or reduce integrator.dt)"
+            ) from None
+        if self.process_std.any():
+            self.x[self.physical_index] += self.process_std * self.process_rng.standard_normal(8)
+            self._fine[self._rows - 1, 1:] = self.x[self.physical_index][[0, 1, 2, 4, 5, 6]]
+        check_finite(self.x, t0 + self.period, self.h, self.integrator.name)
+        self.k += 1
+        return applied
+
+    def _observe(self, k: int, t: float, x: np.ndarray) -> None:
+        if k > 0:
+            self._record(t, x)
+
+    def _record(self, t: float, x: np.ndarray) -> None:
+        if self._rows == len(self._fine):
+            self._fine = np.vstack([self._fine, np.empty_like(self._fine)])
+        p = x[self.physical_index]
+        self._fine[self._rows] = (t, p[0], p[1], p[2], p[4], p[5], p[6])
+        self._rows += 1
+
+    def truth_history(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Times, floor displacements (N×3) and velocities (N×3) at every integrator step."""
+        r = self._fine[: self._rows]
+        return r[:, 0], r[:, 1:4], r[:, 4:7]

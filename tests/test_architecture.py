@@ -1,0 +1,107 @@
+"""The layering of docs/architecture.md, enforced: import-linter's contracts (pyproject.toml), no
+import cycle between any two modules, and a repository that stands alone."""
+
+from __future__ import annotations
+
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import grimp
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+LINT_IMPORTS = Path(sys.executable).with_name("lint-imports")
+PACKAGES = ("stillframe", "sim_node", "estimator_node", "controller_node")
+
+
+def lint_imports(cwd: Path) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([str(LINT_IMPORTS), "--no-cache"], cwd=cwd, capture_output=True,
+                          text=True, timeout=120, env={"PYTHONPATH": str(cwd), "PATH": ""})
+
+
+def test_the_import_contracts_are_kept() -> None:
+    done = lint_imports(ROOT)
+    assert done.returncode == 0, done.stdout[-3000:]
+    assert "4 kept, 0 broken" in done.stdout
+
+
+def test_the_contracts_catch_a_core_module_that_imports_a_node(tmp_path: Path) -> None:
+    """The check can fail: a copy of the tree where the scene loader imports sim_node breaks
+    the first and the layers contract."""
+    for name in (*PACKAGES, "pyproject.toml"):
+        copy = shutil.copytree if (ROOT / name).is_dir() else shutil.copy
+        copy(ROOT / name, tmp_path / name)
+    scene = tmp_path / "stillframe" / "config" / "scene.py"
+    scene.write_text(scene.read_text() + "\nimport sim_node.node  # noqa\n")
+    done = lint_imports(tmp_path)
+    assert done.returncode == 1
+    assert "the ROS-free library never imports a node package BROKEN" in done.stdout
+    assert "stillframe.config.scene -> sim_node.node" in done.stdout
+
+
+def strongly_connected(graph: dict[str, set[str]]) -> list[list[str]]:
+    """Tarjan's strongly connected components with more than one module (iterative)."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on_stack: set[str] = set()
+    found = []
+    for root in sorted(graph):
+        if root in index:
+            continue
+        work = [(root, iter(sorted(graph[root])))]
+        index[root] = low[root] = len(index)
+        stack.append(root)
+        on_stack.add(root)
+        while work:
+            node, children = work[-1]
+            child = next(children, None)
+            if child is not None:
+                if child not in index:
+                    index[child] = low[child] = len(index)
+                    stack.append(child)
+                    on_stack.add(child)
+                    work.append((child, iter(sorted(graph[child]))))
+                elif child in on_stack:
+                    low[node] = min(low[node], index[child])
+                continue
+            work.pop()
+            if work:
+                low[work[-1][0]] = min(low[work[-1][0]], low[node])
+            if low[node] == index[node]:
+                component = []
+                while True:
+                    member = stack.pop()
+                    on_stack.discard(member)
+                    component.append(member)
+                    if member == node:
+                        break
+                if len(component) > 1:
+                    found.append(sorted(component))
+    return found
+
+
+def test_tarjan_finds_a_planted_cycle() -> None:
+    graph = {"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}, "e": set()}
+    assert strongly_connected(graph) == [["a", "b", "c"]]
+
+
+def test_no_two_modules_import_each_other_even_inside_functions() -> None:
+    """grimp records imports in function bodies and under TYPE_CHECKING as well."""
+    graph = grimp.build_graph(*PACKAGES, include_external_packages=False, cache_dir=None)
+    imports = {m: set(graph.find_modules_directly_imported_by(m)) for m in graph.modules}
+    assert strongly_connected(imports) == []
+
+
+@pytest.mark.parametrize("text", ["../shared", "DESIGN.md"])
+def test_the_repository_stands_alone(text: str) -> None:
+    """No file points outside the checkout (the seeds are cited by full reference)."""
+    files = subprocess.run(["git", "ls-files", "-z"], cwd=ROOT, capture_output=True,
+                           check=True).stdout.decode().split("\0")
+    hits = [f for f in files if f and (ROOT / f).is_file()
+            and f.endswith((".py", ".md", ".toml", ".yaml", ".xml", ".cfg", ".txt", ".html"))
+            and text in (ROOT / f).read_text(errors="replace")
+            and f != "tests/test_architecture.py"]
+    assert hits == []
