@@ -29,6 +29,7 @@ COMMANDS: tuple[str, ...] = (
     "stillframe.commands.launch",
     "stillframe.commands.reproduce",
     "stillframe.commands.demo",
+    "stillframe.commands.experiment",
     "stillframe.commands.ph",
 )
 
