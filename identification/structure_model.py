@@ -53,8 +53,8 @@ def unresolved_pulse(u: Array) -> str | None:
     if np.any(share > PULSE_ENERGY_SHARE):
         return ("the input is a pulse within one sample: its sampled value need not be its "
                 "impulse per sample period (zero-order hold), so the scale of B and of M, K, R "
-                "is not trustworthy; excite with a force held over each sample period, or sample "
-                "the blow well within its width and --decimate")
+                "is not trustworthy; excite with a force held over each sample period (white "
+                "noise at the sampling rate, as `stillframe experiment` does)")
     return None
 
 

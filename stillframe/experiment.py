@@ -58,7 +58,7 @@ Progress = Callable[[str], None]
 
 
 @dataclass(frozen=True)
-class TestOptions:
+class IdentificationTest:
     """The identification test: force std [N], duration [s], noise seed."""
 
     force_std: float = 0.1
@@ -96,9 +96,11 @@ def integrator_override(scene: Section) -> list[str]:
     return [f"integrator.dt={period / math.ceil(ratio):.17g}"]
 
 
-def test_overrides(scene: Section, user: Sequence[str], test: TestOptions) -> list[str]:
-    """The identification test's overrides: white noise on floor 1 held over a sample period."""
-    return [*integrator_override(scene), *TEST_SENSORS, *user,
+def identification_test_overrides(scene: Section, user: Sequence[str],
+                                  test: IdentificationTest) -> list[str]:
+    """The identification test's overrides after ``user`` (the scene's own, with an integrator
+    step that divides the period): white noise on floor 1 held over a sample period."""
+    return [*TEST_SENSORS, *user,
             "excitation.type=white_noise", "excitation.floor=1",
             f"excitation.std={test.force_std:.17g}",
             f"excitation.rate_hz={scene.sensors.rate_hz:.17g}", f"excitation.seed={test.seed}",
@@ -114,7 +116,7 @@ def loop_overrides(scene: Section, user: Sequence[str]) -> list[str]:
         raise InputError("excitation.type: none; the closed loop needs a disturbance to reduce "
                          "(e.g. the thesis's harmonics of scenes/thesis_lumped.yaml)")
     loop = [] if scene.controller.type == "lqg" else list(LQG_LOOP)
-    return [*integrator_override(scene), *loop, *user]
+    return [*loop, *user]
 
 
 def true_design(scene: Section) -> list[str]:
@@ -158,7 +160,7 @@ def _stderr(message: str) -> None:
     print(f"experiment: {message}", file=sys.stderr, flush=True)
 
 
-def run_experiment(scene_path: Path, user: Sequence[str], out: Path, test: TestOptions,
+def run_experiment(scene_path: Path, user: Sequence[str], out: Path, test: IdentificationTest,
                    mode: str = "lockstep", lockstep_timeout_s: float | None = None,
                    backends: Sequence[str] = (), progress: Progress = _stderr
                    ) -> ExperimentResult:
@@ -168,8 +170,10 @@ def run_experiment(scene_path: Path, user: Sequence[str], out: Path, test: TestO
     from stillframe.launcher import run_scene
 
     test.check()
-    scene = load_scene(scene_path, list(user))
-    ident_set = test_overrides(scene, user, test)
+    probe = load_scene(scene_path, [*user, "controller.type=none"])  # rate and step only
+    user = [*integrator_override(probe), *user]
+    scene = load_scene(scene_path, user)
+    ident_set = identification_test_overrides(scene, user, test)
     loop_base = loop_overrides(scene, user)
     model_file = (out / "model.npz").resolve()
     designs = {"true_design": [*loop_base, *true_design(scene)],

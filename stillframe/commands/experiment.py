@@ -36,11 +36,11 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from stillframe.experiment import TestOptions, run_experiment, write_summary
+    from stillframe.experiment import IdentificationTest, run_experiment, write_summary
     from stillframe.experiment_report import document, plot_comparison, print_report
     from stillframe.launcher import NodeDiedError
 
-    test = TestOptions(args.test_force, args.test_duration, args.test_seed)
+    test = IdentificationTest(args.test_force, args.test_duration, args.test_seed)
     try:
         result = run_experiment(Path(args.scene), args.overrides, args.out, test, args.mode,
                                 args.lockstep_timeout, args.backends)
