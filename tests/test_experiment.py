@@ -167,3 +167,16 @@ def test_fe_experiment_through_the_nodes(tmp_path: Path, ros_domain: int) -> Non
     doc = run_experiment_cli(tmp_path, REPO_ROOT / "scenes" / "thesis_fe.yaml")
     assert doc["physical"]["true"] is None
     assert_goal(doc)
+
+
+@pytest.mark.parametrize("rate_hz", [32.0, 100.0, 1000.0 / 3.0])
+def test_held_noise_is_read_at_each_sample_time_as_the_value_it_holds(rate_hz: float) -> None:
+    """The load cell samples at t_k = k · (1 / rate): the value held from t_k on (at 100 Hz,
+    89 of 6400 products k · 0.01 · 100 round below k)."""
+    from stillframe.excitation import white_noise
+
+    force = white_noise(1.0, rate_hz, 3, 64.0)
+    period = 1.0 / rate_hz
+    held = np.array([force(k * period) for k in range(int(64 * rate_hz))])
+    mid = np.array([force((k + 0.5) * period) for k in range(int(64 * rate_hz))])
+    np.testing.assert_array_equal(held, mid)
