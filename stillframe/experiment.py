@@ -191,7 +191,11 @@ def run_experiment(scene_path: Path, user: Sequence[str], out: Path, test: Ident
               record_topics=[INPUT_TOPIC, *OUTPUT_TOPICS], backends=backends)
     progress("[2/5] OKID + ERA/DC (order 6) + MKR on the bag")
     record = read_record(out / "bag", [Channel(INPUT_TOPIC)], [Channel(t) for t in OUTPUT_TOPICS])
-    identified = identify_structure(record.u, record.y, record.dt, scene.rig)
+    try:
+        identified = identify_structure(record.u, record.y, record.dt, scene.rig)
+    except InputError as exc:
+        raise InputError(f"the test in {out / 'bag'} did not identify the structure ({exc}); "
+                         "a stronger or longer test may (--test-force, --test-duration)") from None
     save_structure(model_file, identified, [str(c) for c in record.inputs],
                    [str(c) for c in record.outputs], {"bag": str(out / "bag")})
     evaluation, histories = {}, {}
