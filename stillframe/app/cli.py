@@ -29,6 +29,7 @@ COMMANDS: tuple[str, ...] = (
     "stillframe.app.commands.launch",
     "stillframe.app.commands.reproduce",
     "stillframe.app.commands.demo",
+    "stillframe.app.commands.experiment",
     "stillframe.app.commands.ph",
 )
 

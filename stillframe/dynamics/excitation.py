@@ -38,8 +38,11 @@ def hammer(impulse: float, time: float, width: float) -> Force:
 
 
 def white_noise(std: float, rate_hz: float, seed: int, duration: float) -> Force:
+    """Value i holds over [i, i + 1) / rate_hz; a time k / rate_hz computed in floating point
+    (k · period) counts as the start of value k even when ``t * rate_hz`` rounds just below k."""
     samples = np.random.default_rng(seed).normal(0.0, std, int(np.ceil(duration * rate_hz)) + 2)
-    return lambda t: float(samples[min(int(t * rate_hz), samples.size - 1)]) if t >= 0 else 0.0
+    return lambda t: (float(samples[min(int(t * rate_hz * (1.0 + 1e-12)), samples.size - 1)])
+                      if t >= 0 else 0.0)
 
 
 def chirp(amplitude: float, f0_hz: float, f1_hz: float, sweep_s: float) -> Force:

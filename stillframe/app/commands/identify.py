@@ -148,6 +148,12 @@ def run(args: argparse.Namespace) -> int:
         progress(f"writing plots to {args.plots}")
         identification_plots(ident, record, args.plots)
     physical, physical_doc = _physical(args, ident)
+    if physical is not None:
+        from stillframe.identification.structure_model import unresolved_pulse
+
+        if (pulse := unresolved_pulse(record.u)) is not None:
+            physical_doc["scale_warning"] = pulse
+            print(f"stillframe identify: warning: {pulse}", file=sys.stderr)
     if args.save_model:
         from stillframe.identification.model_file import model_from_identification, save_model
 
