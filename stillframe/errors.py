@@ -1,9 +1,45 @@
-"""Errors that the command line reports as one clear line with exit code 2."""
+"""Errors by kind, each reported by the command line as one clear line with its exit code.
+
+- :class:`InputError` (exit code 2): what the user gave — a scene key or value, an argument, a
+  file name, a parameter;
+- :class:`BagError` (3): a bag that cannot be read or written (no metadata, truncated, corrupt);
+- :class:`IntegrationError` (4): a simulation that cannot go on (non-finite state, Newton
+  failure);
+- :class:`IdentificationError` (5): data that cannot identify a model (too short, unusable,
+  rank-deficient).
+
+The message names what is wrong (the key, the file, the time) and is printed without a traceback
+by :func:`stillframe.app.cli.main` and by the node executables.
+"""
 
 
-class InputError(ValueError):
-    """Bad input from a user: a scene value, a command-line argument, a file.
+class StillframeError(Exception):
+    """Base of the errors the user sees as one line; ``exit_code`` is the process's exit code."""
 
-    The message names what is wrong (the key, the file, the value) and is printed without a
-    traceback by :func:`stillframe.app.cli.main`.
-    """
+    exit_code = 1
+
+
+class InputError(StillframeError, ValueError):
+    """Bad input from a user: a scene value, a command-line argument, a file, a parameter."""
+
+    exit_code = 2
+
+
+class BagError(StillframeError):
+    """A rosbag2 bag that cannot be read or written; the message names the file at fault."""
+
+    exit_code = 3
+
+
+class IntegrationError(StillframeError, ArithmeticError):
+    """The time integration failed (non-finite state, Newton divergence); the message names the
+    step (``integrator.dt``) and the time."""
+
+    exit_code = 4
+
+
+class IdentificationError(StillframeError):
+    """The data cannot identify a model: too few samples for the order, no usable Hankel
+    singular values, a realization that breaks a method's assumptions."""
+
+    exit_code = 5

@@ -23,7 +23,7 @@ from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
 
 from stillframe.bags.storage import BagWriter, bag_summary, format_summary, read_bag
-from stillframe.errors import InputError
+from stillframe.errors import BagError, InputError
 
 ROOT = Path(__file__).resolve().parents[1]
 TS = get_typestore(Stores.ROS2_JAZZY)
@@ -276,18 +276,18 @@ def test_corrupt_bag_is_a_one_line_error_naming_the_file(tmp_path: Path, kind: s
     path = tmp_path / "foreign"
     write_with_rosbags(path)
     culprit = CORRUPTIONS[kind](path)
-    with pytest.raises(InputError, match=str(culprit)):
+    with pytest.raises(BagError, match=str(culprit)):
         list(read_bag(path, TS))
     out = run_cli("bag", "info", str(path))
-    assert out.returncode == 2
+    assert out.returncode == BagError.exit_code == 3
     assert "Traceback" not in out.stderr
     assert out.stderr.count("\n") == 1
     assert str(culprit) in out.stderr
 
 
-def test_missing_directory_is_an_input_error(tmp_path: Path) -> None:
+def test_missing_directory_is_a_bag_error(tmp_path: Path) -> None:
     out = run_cli("bag", "info", str(tmp_path / "nope"))
-    assert (out.returncode, out.stderr.count("\n")) == (2, 1)
+    assert (out.returncode, out.stderr.count("\n")) == (BagError.exit_code, 1)
     assert str(tmp_path / "nope") in out.stderr
 
 
@@ -389,8 +389,8 @@ def test_bag_as_ros2_bag_record_writes_it_reads_and_summarises(tmp_path: Path) -
     assert [(q.depth, q.durability.name) for q in topic.offered_qos] == [(7, "TRANSIENT_LOCAL")]
 
 
-def test_incomplete_qos_record_is_an_input_error_naming_the_mcap(tmp_path: Path) -> None:
+def test_incomplete_qos_record_is_a_bag_error_naming_the_mcap(tmp_path: Path) -> None:
     path = tmp_path / "partial"
     write_like_ros2_bag_record(path, channel_qos="- history: keep_last\n  depth: 7\n")
-    with pytest.raises(InputError, match=f"{path / 'partial_0.mcap'}: unreadable bag file"):
+    with pytest.raises(BagError, match=f"{path / 'partial_0.mcap'}: unreadable bag file"):
         bag_summary(path, TS)

@@ -12,14 +12,14 @@ import scipy.linalg as sla
 
 from stillframe.config.scene import scene_from_dict
 from stillframe.dynamics.excitation import floor_load
-from stillframe.dynamics.integrators import IntegrationError, reference_solution
+from stillframe.dynamics.integrators import reference_solution
 from stillframe.dynamics.kernels import CompiledFrame
 from stillframe.dynamics.models import build_model, build_structure
 from stillframe.dynamics.models.damping import undamped_modes
 from stillframe.dynamics.simulation import initial_state, simulate
 from stillframe.dynamics.stability import RK4_IMAGINARY_LIMIT, rk4_growth, rk4_stable_step
 from stillframe.dynamics.systems import MechanicalSystem
-from stillframe.errors import InputError
+from stillframe.errors import InputError, IntegrationError
 
 UNDAMPED = ["damping.model=none", "rig.pendulum.hinge_damping=0"]
 

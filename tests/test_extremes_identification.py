@@ -11,7 +11,7 @@ import pytest
 
 from stillframe.config.scene import load_scene
 from stillframe.dynamics.models import build_model
-from stillframe.errors import InputError
+from stillframe.errors import IdentificationError, InputError
 from stillframe.identification.hammer import SCENE, HammerRecord, hammer_test
 from stillframe.identification.pipeline import Identification, identify
 
@@ -64,7 +64,7 @@ def test_short_records_are_accurate_or_flagged(lin, samples: int, least_accurate
 
 def test_a_record_below_okids_minimum_is_refused_by_name(lin) -> None:
     rec = hammer_test(lin, 0, samples=40)
-    with pytest.raises(InputError, match="too short"):
+    with pytest.raises(IdentificationError, match="too short"):
         identify(rec.u, rec.y, rec.dt, "okid-eradc", 6, observer_order=20)
 
 

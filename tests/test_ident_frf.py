@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from ident_systems import MASS, STIFFNESS, continuous, discrete, simulate
 
-from stillframe.errors import InputError
+from stillframe.errors import IdentificationError, InputError
 from stillframe.identification.frf import h1_frf, model_frf
 
 DT = 0.02
@@ -60,7 +60,7 @@ def test_h1_refuses_bad_records():
     u = np.random.default_rng(0).standard_normal((1000, 2))
     with pytest.raises(InputError, match="samples"):
         h1_frf(u, u[:-1], DT)
-    with pytest.raises(InputError, match="singular"):
+    with pytest.raises(IdentificationError, match="singular"):
         h1_frf(np.column_stack([u[:, 0], u[:, 0]]), u, DT)  # two identical inputs
     with pytest.raises(InputError, match="segment"):
         h1_frf(u, u, DT, nperseg=4000)

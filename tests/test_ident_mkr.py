@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from ident_systems import DAMPING, MASS, STIFFNESS, continuous, discrete, simulate
 
-from stillframe.errors import InputError
+from stillframe.errors import IdentificationError, InputError
 from stillframe.identification.damping import proportional_damping_matrix
 from stillframe.identification.mkr import mkr
 from stillframe.identification.pipeline import identify
@@ -67,7 +67,7 @@ def test_mkr_refuses_what_it_cannot_do():
     with pytest.raises(InputError, match="number the DOFs"):
         mkr(A, B, C, DT, [0, 1, 3], [0])
     overdamped = np.diag([0.5, 0.6, 0.7, 0.8, 0.9, 0.95])
-    with pytest.raises(InputError, match="underdamped"):
+    with pytest.raises(IdentificationError, match="underdamped"):
         mkr(overdamped, B, C, DT, [0, 1, 2], [0])
 
 

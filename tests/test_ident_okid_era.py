@@ -18,7 +18,7 @@ from ident_systems import (
 )
 from scipy import linalg
 
-from stillframe.errors import InputError
+from stillframe.errors import IdentificationError, InputError
 from stillframe.identification.era import EraDimensions, factorize
 from stillframe.identification.okid import OkidResult, observer_gain, okid
 from stillframe.identification.pipeline import identify
@@ -159,7 +159,7 @@ def test_observer_gain_approaches_the_kalman_predictor_gain():
 
 def test_refuses_records_too_short_and_bad_requests(system):
     _, _, u, y = system
-    with pytest.raises(InputError, match="too short"):
+    with pytest.raises(IdentificationError, match="too short"):
         identify(u[:40], y[:40], DT, "okid-era", 6, observer_order=10)
     with pytest.raises(InputError, match="m p >= n"):
         identify(u, y, DT, "okid-era", 12, observer_order=3)

@@ -10,7 +10,7 @@ import pytest
 from rosbags.rosbag2 import StoragePlugin, Writer
 from scipy import signal
 
-from stillframe.errors import InputError
+from stillframe.errors import IdentificationError, InputError
 from stillframe.identification.bagdata import Channel, align, preprocess, read_record, read_series
 from tests.identify_support import FORCE_TOPIC, IMU_TOPICS, TYPESTORE, simulate, write_frame_bag
 
@@ -47,7 +47,7 @@ def test_a_channel_offset_by_half_a_step_is_refused(tmp_path: Path) -> None:
     half = int(DT * 1e9 / 2)
     bag = write_frame_bag(tmp_path / "bag", force, acc, DT,
                           stamp_edits={IMU_TOPICS[2]: dict.fromkeys(range(100), half)})
-    with pytest.raises(InputError, match="no sample within 5% of a step"):
+    with pytest.raises(IdentificationError, match="no sample within 5% of a step"):
         read_record(bag, INPUTS, OUTPUTS)
 
 
@@ -73,7 +73,7 @@ def test_different_rates_are_refused(tmp_path: Path) -> None:
     force, acc = simulate(200, DT, seed=3)
     every_other = {IMU_TOPICS[1]: {k: None for k in range(1, 200, 2)}}
     bag = write_frame_bag(tmp_path / "bag", force, acc, DT, stamp_edits=every_other)
-    with pytest.raises(InputError, match=r"different rates \(32 Hz, 16 Hz\)"):
+    with pytest.raises(IdentificationError, match=r"different rates \(32 Hz, 16 Hz\)"):
         read_record(bag, INPUTS, OUTPUTS)
 
 

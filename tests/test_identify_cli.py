@@ -20,6 +20,7 @@ import pytest
 from rosbags.rosbag2 import StoragePlugin
 
 from stillframe.app.cli import main
+from stillframe.errors import BagError, IdentificationError
 from stillframe.identification.model_file import load_model
 from tests.identify_support import (
     FORCE_TOPIC,
@@ -202,16 +203,17 @@ def test_plots_are_written(noisy_bag: Path, tmp_path: Path, extra: list[str]) ->
     assert "writing plots" in result.stderr  # progress on stderr
 
 
-# --- refusals: exit 2, one line naming what is wrong --------------------------------------
+# --- refusals: one line naming what is wrong; exit 2 for the arguments, 3 for an unreadable bag,
+# 5 for data that cannot identify a model (stillframe.errors) -----------------------------------
 
 
-def refuse(bag: Path, *args: str) -> str:
+def refuse(bag: Path, *args: str, exit_code: int = 2) -> str:
     """Run the command in this process (the same ``main`` as ``python -m stillframe``; one
     subprocess per refusal would only add interpreter start-ups)."""
     err = io.StringIO()
     with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
         code = main(["identify", str(bag), *args])
-    assert code == 2, err.getvalue()
+    assert code == exit_code, err.getvalue()
     lines = err.getvalue().strip().splitlines()
     assert len(lines) == 1, err.getvalue()
     assert lines[0].startswith("stillframe identify: error: ")
@@ -250,7 +252,7 @@ def test_refuses_non_uniform_sampling(tmp_path: Path) -> None:
     shift = int(0.4 * DT * 1e9)  # sample 300 of the load cell 40 % of a step late
     bag = write_frame_bag(tmp_path / "jitter", force, acc, DT,
                           stamp_edits={FORCE_TOPIC: {300: shift}})
-    msg = refuse(bag, *CHANNELS, "--order", "6")
+    msg = refuse(bag, *CHANNELS, "--order", "6", exit_code=IdentificationError.exit_code)
     assert "not uniform" in msg and FORCE_TOPIC in msg and "t = 9.34375 s" in msg
 
 
@@ -258,16 +260,17 @@ def test_refuses_gap(tmp_path: Path) -> None:
     force, acc = simulate(512, DT, seed=5)
     bag = write_frame_bag(tmp_path / "gap", force, acc, DT,
                           stamp_edits={IMU_TOPICS[1]: {100: None, 101: None, 102: None}})
-    msg = refuse(bag, *CHANNELS, "--order", "6")
+    msg = refuse(bag, *CHANNELS, "--order", "6", exit_code=IdentificationError.exit_code)
     assert f"{IMU_TOPICS[1]}:linear_acceleration.x: gap of 3 samples after t = 3.09375 s" in msg
 
 
 def test_refuses_record_too_short_for_order(tmp_path: Path) -> None:
     force, acc = simulate(60, DT, seed=6)
     bag = write_frame_bag(tmp_path / "short", force, acc, DT)
-    msg = refuse(bag, *CHANNELS, "--order", "40")
+    msg = refuse(bag, *CHANNELS, "--order", "40", exit_code=IdentificationError.exit_code)
     assert "60 samples too short for order 40" in msg
 
 
 def test_refuses_a_directory_that_is_no_bag(tmp_path: Path) -> None:
-    assert "cannot be read as a rosbag2 bag" in refuse(tmp_path, *CHANNELS)
+    assert "cannot be read as a rosbag2 bag" in refuse(tmp_path, *CHANNELS,
+                                                        exit_code=BagError.exit_code)

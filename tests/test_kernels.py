@@ -7,11 +7,12 @@ import pytest
 
 from stillframe.config.scene import scene_from_dict
 from stillframe.dynamics.excitation import floor_load
-from stillframe.dynamics.integrators import RK4, ImplicitMidpoint, IntegrationError, integrate
+from stillframe.dynamics.integrators import RK4, ImplicitMidpoint, integrate
 from stillframe.dynamics.kernels import CompiledFrame, banded_order, bandwidth
 from stillframe.dynamics.models import build_model
 from stillframe.dynamics.simulation import initial_state, simulate
 from stillframe.dynamics.systems import MechanicalSystem
+from stillframe.errors import IntegrationError
 
 CASES = {
     "lumped-harmonics-swing": ["excitation.type=harmonics", "initial.phi=1.2"],

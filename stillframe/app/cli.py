@@ -11,7 +11,7 @@ import argparse
 import importlib
 import sys
 
-from stillframe.errors import InputError
+from stillframe.errors import StillframeError
 
 COMMANDS: tuple[str, ...] = (
     "stillframe.app.commands.modes",
@@ -51,9 +51,9 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     try:
         return int(args.func(args) or 0)
-    except InputError as exc:
+    except StillframeError as exc:
         print(f"stillframe {args.command}: error: {exc}", file=sys.stderr)
-        return 2
+        return exc.exit_code
     except KeyboardInterrupt:
         return 130
 

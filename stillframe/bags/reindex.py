@@ -27,7 +27,7 @@ from rosbags.rosbag2.metadata import parse_qos
 from rosbags.typesys.store import Typestore
 
 from stillframe.bags.storage import BagWriter
-from stillframe.errors import InputError
+from stillframe.errors import BagError
 
 
 @dataclass(frozen=True)
@@ -45,10 +45,10 @@ class Recovered:
 
 def _mcap_file(bag: Path) -> Path:
     if not bag.is_dir():
-        raise InputError(f"{bag}: not a bag directory (no such directory)")
+        raise BagError(f"{bag}: not a bag directory (no such directory)")
     files = sorted(bag.glob("*.mcap"))
     if len(files) != 1:
-        raise InputError(f"{bag}: expected one .mcap file to reindex, found {len(files)}")
+        raise BagError(f"{bag}: expected one .mcap file to reindex, found {len(files)}")
     return files[0]
 
 

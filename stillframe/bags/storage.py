@@ -29,7 +29,7 @@ from rosbags.rosbag2 import Reader, ReaderError, StoragePlugin, Writer, WriterEr
 from rosbags.rosbag2.metadata import dump_qos_v9
 from rosbags.typesys.store import Typestore
 
-from stillframe.errors import InputError
+from stillframe.errors import BagError, InputError
 
 METADATA_VERSION = 9
 #: What reading a damaged bag can raise (rosbags lets KeyError/TypeError through for
@@ -105,7 +105,7 @@ class BagWriter:
         try:
             self._writer.open()
         except (OSError, WriterError) as exc:
-            raise InputError(f"{self.path}: cannot create bag: {exc}") from None
+            raise BagError(f"{self.path}: cannot create bag: {exc}") from None
         self._connections: dict[str, Connection] = {}
 
     def add_topic(self, topic: str, msgtype: str, offered_qos: Sequence[Qos] = ()) -> None:
@@ -171,9 +171,9 @@ def _first_line(exc: BaseException) -> str:
 
 def _check_dir(bag: Path) -> None:
     if not bag.is_dir():
-        raise InputError(f"{bag}: not a bag directory (no such directory)")
+        raise BagError(f"{bag}: not a bag directory (no such directory)")
     if not (bag / "metadata.yaml").is_file():
-        raise InputError(f"{bag / 'metadata.yaml'}: missing (not a rosbag2 directory?)")
+        raise BagError(f"{bag / 'metadata.yaml'}: missing (not a rosbag2 directory?)")
 
 
 @contextmanager
@@ -186,7 +186,7 @@ def open_bag(path: str | Path, default_typestore: Typestore) -> Iterator[AnyRead
     try:
         reader.open()
     except _BAG_ERRORS as exc:
-        raise InputError(f"{_culprit(bag)}: unreadable bag file: {_first_line(exc)}") from None
+        raise BagError(f"{_culprit(bag)}: unreadable bag file: {_first_line(exc)}") from None
     try:
         yield reader
     finally:
@@ -211,7 +211,7 @@ def read_bag(path: str | Path, default_typestore: Typestore, *, topics: Sequence
                 yield BagMessage(conn.topic, conn.msgtype, stamp, bytes(data), msg)
         except _BAG_ERRORS as exc:
             files = ", ".join(str(p) for p in _storage_files(bag))
-            raise InputError(f"{files}: corrupt message data: {_first_line(exc)}") from None
+            raise BagError(f"{files}: corrupt message data: {_first_line(exc)}") from None
 
 
 def _ext(conn: Connection) -> ConnectionExtRosbag2:

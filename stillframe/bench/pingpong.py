@@ -30,23 +30,22 @@ from collections.abc import Callable
 from typing import Any
 
 import numpy as np
-from cyclonedds.core import InstanceState, ReadCondition, SampleState, ViewState, WaitSet
+from cyclonedds.core import ReadCondition, WaitSet
 from cyclonedds.domain import Domain, DomainParticipant
 from cyclonedds.pub import DataWriter
 from cyclonedds.sub import DataReader
 from cyclonedds.topic import Topic
 
-from cyclonedds._clayer import ddspy_take, ddspy_write  # isort: skip
 from stillframe.contract import messages
 from stillframe.errors import InputError
 from stillframe.locations import REPO_ROOT
 from stillframe.middleware import api, dds_backend, dds_types, discovery
+from stillframe.middleware.cyclone_raw import ANY_SAMPLES, pad4, take_raw, write_raw
 from stillframe.middleware.qos import SENSOR_DATA
 
 IMU = "sensor_msgs/msg/Imu"
 #: raw and typed Cyclone, then the node API on each backend installed here
 VARIANTS = ("raw", "typed", *(b for b in api.BACKENDS if b == "dds" or api.has_rclpy()))
-ANY_SAMPLE = SampleState.Any | ViewState.Any | InstanceState.Any
 STAMP = struct.Struct("<iI")  # header.stamp right after the 4-byte CDR encapsulation header
 BLOCK_S = 1.0
 BLOCK_DRAIN_NS = 20_000_000
@@ -77,7 +76,7 @@ class CycloneEnd:
         self.reader = DataReader(
             self.participant, Topic(self.participant, dds_types.dds_topic(inp), self.struct), qos)
         self.waitset = WaitSet(self.participant)
-        self.waitset.attach(ReadCondition(self.reader, ANY_SAMPLE))
+        self.waitset.attach(ReadCondition(self.reader, ANY_SAMPLES))
 
     def ready(self) -> bool:
         return bool(self.writer.get_matched_subscriptions()) and bool(
@@ -88,18 +87,18 @@ class CycloneEnd:
 class RawPinger:
     def __init__(self) -> None:
         self.end = CycloneEnd(*topics("raw"), own_domain=False)
-        self.ping = bytearray(dds_backend.pad4(messages.serialize(messages.new(IMU))))
+        self.ping = bytearray(pad4(messages.serialize(messages.new(IMU))))
         self.rtts: list[int] = []
         self.ready = self.end.ready
 
     def send(self) -> None:
         STAMP.pack_into(self.ping, 4, *now_stamp())
-        ddspy_write(self.end.writer._ref, bytes(self.ping))
+        write_raw(self.end.writer, bytes(self.ping))
 
     def receive(self, timeout_ns: int) -> None:
         self.end.waitset.wait(timeout_ns)
         now = time.monotonic_ns()
-        for data, _info in ddspy_take(self.end.reader._ref, ANY_SAMPLE, 64):
+        for data, _info in take_raw(self.end.reader, 64):
             sec, nanosec = STAMP.unpack_from(data, 4)
             self.rtts.append(now - (sec * 1_000_000_000 + nanosec))
 
@@ -173,8 +172,8 @@ def raw_peer() -> None:
     end = CycloneEnd(pong, ping, own_domain=True)
     while api.ok():
         end.waitset.wait(100_000_000)
-        for data, _info in ddspy_take(end.reader._ref, ANY_SAMPLE, 64):
-            ddspy_write(end.writer._ref, data)
+        for data, _info in take_raw(end.reader, 64):
+            write_raw(end.writer, data)
 
 
 def typed_peer() -> None:

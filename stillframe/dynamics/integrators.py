@@ -1,4 +1,4 @@
-"""Time integration of descriptor systems behind one interface.
+"""Time integration of descriptor systems behind one interface, :class:`Integrator`.
 
 - :class:`RK4`: classical explicit Runge–Kutta, order 4, on ẋ = E⁻¹f.
 - :class:`ImplicitMidpoint`: E(x_m)(x₁ − x₀) = h f(t_m, x_m), x_m = (x₀ + x₁)/2; order 2,
@@ -11,20 +11,17 @@
 
 from __future__ import annotations
 
+from abc import ABC, abstractmethod
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import ClassVar
 
 import numpy as np
 import scipy.linalg as sla
 from scipy.integrate import solve_ivp
 
 from stillframe.dynamics.systems import DescriptorSystem, LinearSystem
-from stillframe.errors import InputError
-
-
-class IntegrationError(InputError):
-    """The integration failed (non-finite state, Newton divergence): the step or scene is at
-    fault, so it is reported like bad input."""
+from stillframe.errors import InputError, IntegrationError
 
 
 def not_converged(t: float, h: float) -> IntegrationError:
@@ -42,12 +39,50 @@ def non_finite(t: float, h: float, method: str) -> IntegrationError:
         "integrator.method: midpoint)")
 
 
-class RK4:
+class Integrator(ABC):
+    """One fixed step of a descriptor system E(x) ẋ = f(t, x), in the manner of scipy's
+    ``OdeSolver``: :meth:`step` is the contract, :meth:`_step_impl` the method.
+
+    Contract of ``step(system, t, x, h)``:
+
+    - ``h > 0`` and finite, else :class:`~stillframe.errors.InputError`;
+    - returns x(t + h) as a new array and never modifies ``x``;
+    - the result is finite, else :class:`~stillframe.errors.IntegrationError` naming t + h and
+      ``h`` (a step beyond the stability limit, or a failed Newton iteration);
+    - an integrator may keep state between calls (a factored iteration matrix, the previous
+      increment as predictor), so one instance serves one trajectory.
+
+    ``name`` is the ``integrator.method`` key, ``order`` the global order of accuracy,
+    ``explicit`` whether it evaluates f only at known states.
+    """
+
+    name: ClassVar[str]
+    order: ClassVar[int]
+    explicit: ClassVar[bool]
+
+    def step(self, system: DescriptorSystem, t: float, x: np.ndarray, h: float) -> np.ndarray:
+        if not (np.isfinite(h) and h > 0):
+            raise InputError(f"integrator.dt: the step must be > 0 and finite, got {h!r}")
+        with np.errstate(over="ignore", invalid="ignore"):  # checked below
+            x1 = self._step_impl(system, t, x, h)
+        check_finite(x1, t + h, h, self.name)
+        return x1
+
+    @abstractmethod
+    def _step_impl(self, system: DescriptorSystem, t: float, x: np.ndarray,
+                   h: float) -> np.ndarray:
+        """x(t + h) from x(t); may return non-finite values (``step`` checks them)."""
+
+
+class RK4(Integrator):
+    """Classical explicit Runge–Kutta of order 4 on ẋ = E⁻¹f."""
+
     name = "rk4"
     order = 4
     explicit = True
 
-    def step(self, system: DescriptorSystem, t: float, x: np.ndarray, h: float) -> np.ndarray:
+    def _step_impl(self, system: DescriptorSystem, t: float, x: np.ndarray,
+                   h: float) -> np.ndarray:
         f = system.derivative
         k1 = f(t, x)
         k2 = f(t + 0.5 * h, x + 0.5 * h * k1)
@@ -63,7 +98,9 @@ class _Factor:
     explicit_part: np.ndarray | None = None  # E + (h/2)A on a linear system
 
 
-class ImplicitMidpoint:
+class ImplicitMidpoint(Integrator):
+    """E(x_m)(x₁ − x₀) = h f(t_m, x_m), by simplified Newton (module docstring)."""
+
     name = "midpoint"
     order = 2
     explicit = False
@@ -92,7 +129,8 @@ class ImplicitMidpoint:
         rhs = self._factor.explicit_part @ x + h * (system.B @ system.inputs(t + 0.5 * h))
         return sla.lu_solve(self._factor.lu, rhs, check_finite=False)
 
-    def step(self, system: DescriptorSystem, t: float, x: np.ndarray, h: float) -> np.ndarray:
+    def _step_impl(self, system: DescriptorSystem, t: float, x: np.ndarray,
+                   h: float) -> np.ndarray:
         if getattr(system, "is_linear", False):
             return self._linear_step(system, t, x, h)
         tm = t + 0.5 * h
@@ -129,7 +167,7 @@ FIXED_STEP = {"rk4": RK4, "midpoint": ImplicitMidpoint}
 ADAPTIVE = {"dop853": "DOP853", "radau": "Radau"}
 
 
-def make_integrator(method: str) -> RK4 | ImplicitMidpoint:
+def make_integrator(method: str) -> Integrator:
     try:
         return FIXED_STEP[method]()
     except KeyError:
@@ -147,7 +185,7 @@ Observer = Callable[[int, float, np.ndarray], None]
 
 
 def integrate(system: DescriptorSystem, x0: np.ndarray, dt: float, n_steps: int,
-              integrator: RK4 | ImplicitMidpoint, t0: float = 0.0,
+              integrator: Integrator, t0: float = 0.0,
               observer: Observer | None = None) -> np.ndarray:
     """Advance ``n_steps`` fixed steps; ``observer(k, t_k, x_k)`` sees every state, k = 0..n.
 
@@ -158,9 +196,7 @@ def integrate(system: DescriptorSystem, x0: np.ndarray, dt: float, n_steps: int,
         observer(0, t0, x)
     for k in range(1, n_steps + 1):
         t = t0 + (k - 1) * dt
-        with np.errstate(over="ignore", invalid="ignore"):  # checked on the next line
-            x = integrator.step(system, t, x, dt)
-        check_finite(x, t + dt, dt, integrator.name)
+        x = integrator.step(system, t, x, dt)
         if observer:
             observer(k, t0 + k * dt, x)
     return x

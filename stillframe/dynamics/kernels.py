@@ -35,14 +35,17 @@ from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import reverse_cuthill_mckee
 
 from stillframe.dynamics.excitation import FloorLoad
-from stillframe.dynamics.integrators import IntegrationError, non_finite, not_converged
+from stillframe.dynamics.integrators import non_finite, not_converged
 from stillframe.dynamics.models.frame import FrameModel
 from stillframe.dynamics.models.structure import DampingParts
+from stillframe.errors import IntegrationError
 
 COMPILED_METHODS = ("rk4", "midpoint")
 _LOAD_KIND = {"none": 0, "harmonics": 1, "hammer": 2, "chirp": 3}
+#: the midpoint kernel's scalar Newton iteration on the pendulum row: relative step tolerance and
+#: iteration limit (numba folds both into the compiled code)
 NEWTON_TOL = 1e-14
-NEWTON_MAX_ITER = 30
+NEWTON_MAX_ITER = 50
 
 
 # --- loads ---------------------------------------------------------------------------------------
@@ -273,7 +276,7 @@ def _midpoint_run(x, t0, h, n_steps, stride, out, floor_index, i3, Mb, Kb, b, cb
         pm = dphi0
         converged = False
         sigma = 0.0
-        for _ in range(50):
+        for _ in range(NEWTON_MAX_ITER):
             phim = phi0 + 0.5 * h * pm
             s, c = math.sin(phim), math.cos(phim)
             cm = ml * c
@@ -290,7 +293,7 @@ def _midpoint_run(x, t0, h, n_steps, stride, out, floor_index, i3, Mb, Kb, b, cb
             pm -= delta
             if not math.isfinite(pm):
                 break
-            if abs(delta) <= 1e-14 * (1.0 + abs(pm)):
+            if abs(delta) <= NEWTON_TOL * (1.0 + abs(pm)):
                 converged = True
                 break
         if not converged:
@@ -360,7 +363,7 @@ class CompiledFrame:
     def _rk4(self, x, t0, h, n_steps, stride, out, u, load) -> int:
         m = self.model
         return _rk4_run(x, t0, h, n_steps, stride, out, self.floor_index, m.i3, m.k_struct,
-                        m.c_struct, m._m_const_inv, m._w, self.params, u, *load)
+                        m.c_struct, m.m_const_inv, m.floor3_column, self.params, u, *load)
 
     # banded midpoint ----------------------------------------------------------------------------
     def banded_step_matrix(self, h: float) -> tuple:

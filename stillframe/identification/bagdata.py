@@ -23,7 +23,7 @@ from rosbags.highlevel import AnyReader, AnyReaderError
 from rosbags.typesys import Stores, get_typestore
 from scipy import signal
 
-from stillframe.errors import InputError
+from stillframe.errors import BagError, IdentificationError, InputError
 
 #: Default field per message type (the contract's quantity for that type).
 DEFAULT_FIELDS: dict[str, str] = {
@@ -146,12 +146,12 @@ def read_series(bag: str | Path, channels: Sequence[Channel]) -> list[Series]:
     """Read each channel's samples from the bag (one pass over the needed topics)."""
     path = Path(bag)
     if not path.exists():
-        raise InputError(f"bag {bag}: no such file or directory")
+        raise BagError(f"bag {bag}: no such file or directory")
     try:
         reader = AnyReader([path], default_typestore=get_typestore(Stores.ROS2_JAZZY))
         reader.open()
     except (AnyReaderError, OSError) as exc:
-        raise InputError(f"bag {bag}: cannot be read as a rosbag2 bag ({exc})") from None
+        raise BagError(f"bag {bag}: cannot be read as a rosbag2 bag ({exc})") from None
     try:
         types: dict[str, set[str]] = {}
         for c in reader.connections:
@@ -186,7 +186,7 @@ def read_series(bag: str | Path, channels: Sequence[Channel]) -> list[Series]:
     for (full, _, _), vals in zip(resolved, values, strict=True):
         header = stamps[full.topic]
         if not header:
-            raise InputError(f"bag {bag}: topic {full.topic} has no messages")
+            raise IdentificationError(f"bag {bag}: topic {full.topic} has no messages")
         use_header = all(s is not None for s in header) and any(header)
         order_ns = np.asarray(header if use_header else logtimes[full.topic], dtype=np.int64)
         out.append(Series(full, order_ns, np.asarray(vals, dtype=float),
@@ -198,27 +198,27 @@ def _check_uniform(series: Series, max_jitter: float) -> float:
     """Median step [ns]; refuse duplicates, non-uniform steps and gaps, saying where."""
     ch, stamps = series.channel, series.stamps_ns
     if len(stamps) < 3:
-        raise InputError(f"channel {ch}: only {len(stamps)} samples")
+        raise IdentificationError(f"channel {ch}: only {len(stamps)} samples")
     order = np.argsort(stamps, kind="stable")
     stamps = stamps[order]
     steps = np.diff(stamps).astype(float)
     step = float(np.median(steps))
     if step <= 0:
-        raise InputError(f"channel {ch}: most {series.stamp_source} stamps are repeated")
+        raise IdentificationError(f"channel {ch}: most {series.stamp_source} stamps are repeated")
     ratio = steps / step
     nearest = np.rint(ratio)
     t0 = stamps[0]
     bad = np.flatnonzero((nearest < 1) | (np.abs(ratio - nearest) > max_jitter))
     if bad.size:
         k = bad[0]
-        raise InputError(
+        raise IdentificationError(
             f"channel {ch}: sampling is not uniform: step {steps[k] / 1e6:.6g} ms at "
             f"t = {(stamps[k] - t0) / 1e9:.6g} s ({series.stamp_source}) against a median of "
             f"{step / 1e6:.6g} ms ({bad.size} such steps; allowed jitter {max_jitter:.0%})")
     gaps = np.flatnonzero(nearest > 1)
     if gaps.size:
         k = gaps[0]
-        raise InputError(
+        raise IdentificationError(
             f"channel {ch}: gap of {int(nearest[k]) - 1} samples after t = "
             f"{(stamps[k] - t0) / 1e9:.6g} s ({series.stamp_source}; {gaps.size} gaps in all)")
     return step
@@ -235,13 +235,14 @@ def align(series: Sequence[Series], max_jitter: float = DEFAULT_JITTER
     ref = series[0]
     for s, step in zip(series, steps, strict=True):
         if abs(step - steps[0]) > max_jitter * steps[0]:
-            raise InputError(f"channels {ref.channel} and {s.channel} are sampled at different "
+            raise IdentificationError(
+                f"channels {ref.channel} and {s.channel} are sampled at different "
                              f"rates ({1e9 / steps[0]:.6g} Hz, {1e9 / step:.6g} Hz)")
     sorted_stamps = [np.sort(s.stamps_ns) for s in series]
     start = max(st[0] for st in sorted_stamps)
     stop = min(st[-1] for st in sorted_stamps)
     if stop <= start:
-        raise InputError("the channels' time spans do not overlap")
+        raise IdentificationError("the channels' time spans do not overlap")
     step = steps[0]
     base = sorted_stamps[0]
     grid = base[(base >= start - max_jitter * step) & (base <= stop + max_jitter * step)]
@@ -253,7 +254,7 @@ def align(series: Sequence[Series], max_jitter: float = DEFAULT_JITTER
         offset = np.abs(st[idx] - grid)
         bad = np.flatnonzero(offset > max_jitter * step)
         if bad.size:
-            raise InputError(
+            raise IdentificationError(
                 f"channel {s.channel}: no sample within {max_jitter:.0%} of a step of "
                 f"{ref.channel}'s sample at t = {(grid[bad[0]] - grid[0]) / 1e9:.6g} s "
                 f"(offset {offset[bad[0]] / 1e6:.6g} ms)")
@@ -303,7 +304,7 @@ def read_record(bag: str | Path, inputs: Sequence[Channel], outputs: Sequence[Ch
     for s in series:
         if not np.all(np.isfinite(s.values)):
             k = int(np.flatnonzero(~np.isfinite(s.values))[0])
-            raise InputError(f"channel {s.channel}: non-finite value in sample {k}")
+            raise IdentificationError(f"channel {s.channel}: non-finite value in sample {k}")
     stamps, data, dt = align(series, max_jitter)
     data, dt = preprocess(data, dt, detrend=detrend, lowpass_hz=lowpass_hz, decimate=decimate)
     m = len(inputs)

@@ -40,7 +40,7 @@ import numpy as np
 import scipy.io
 from scipy import signal
 
-from stillframe.errors import InputError
+from stillframe.errors import IdentificationError, InputError
 from stillframe.identification.frf import h1_frf
 from stillframe.identification.modal import modal_parameters
 from stillframe.identification.n4sid import identify_n4sid
@@ -106,7 +106,7 @@ def mean_fit(model: Model, u: np.ndarray, y: np.ndarray) -> float:
     try:
         return float(fit_percent(y, simulate_fitted(model.A, model.B, model.C, model.D, u, y))
                      .mean())
-    except InputError:
+    except IdentificationError:
         return -math.inf
 
 
@@ -124,7 +124,7 @@ def choose_observer_order(u: np.ndarray, y: np.ndarray, method: str) -> int:
     for p in range(math.ceil(ORDER / y.shape[1]), MAX_OBSERVER_ORDER + 1):
         try:
             model = okid_model(u[:cut], y[:cut], method, p)
-        except InputError:
+        except (InputError, IdentificationError):
             continue
         fit = mean_fit(model, u[cut:], y[cut:])
         if fit > best_fit:
@@ -190,7 +190,7 @@ def report(path: str | Path = DEFAULT_PATH,
         try:
             simulated = simulate_fitted(model.A, model.B, model.C, model.D, u[half:], y[half:])
             fit = fit_percent(y[half:], simulated).tolist()
-        except InputError:
+        except IdentificationError:
             simulated, fit = None, None
         methods[model.method] = {
             "fit_percent": fit, "mean_fit_percent": float(np.mean(fit)) if fit else None,

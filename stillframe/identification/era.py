@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from stillframe.errors import InputError
+from stillframe.errors import IdentificationError, InputError
 
 Array = NDArray[np.float64]
 
@@ -150,12 +150,13 @@ def auto_order(singular_values: Array, max_order: int) -> tuple[int, float]:
     """
     s = np.asarray(singular_values, dtype=float)
     if s.size < 2 or s[0] <= 0:
-        raise InputError("need at least two non-zero Hankel singular values to choose an order")
+        raise IdentificationError(
+            "need at least two non-zero Hankel singular values to choose an order")
     floor = RANK_TOLERANCE * s[0]
     last = min(max_order, s.size - 1)
     ratios = [s[n - 1] / max(s[n], floor) for n in range(1, last + 1) if s[n - 1] > floor]
     if not ratios:
-        raise InputError("no usable Hankel singular values to choose an order")
+        raise IdentificationError("no usable Hankel singular values to choose an order")
     best = int(np.argmax(ratios))
     return best + 1, float(ratios[best])
 

@@ -16,7 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import signal
 
-from stillframe.errors import InputError
+from stillframe.errors import IdentificationError, InputError
 
 Array = NDArray[np.float64]
 
@@ -63,7 +63,8 @@ def h1_frf(u: Array, y: Array, dt: float, nperseg: int = 256, window: str = "han
         g_yy[:, i] = spectrum(y[:, i], y[:, i])[1].real
     conds = np.linalg.cond(g_uu)
     if not np.all(np.isfinite(conds)) or np.any(conds > 1e12):
-        raise InputError("input spectral matrix is singular at some frequency: the inputs do not "
+        raise IdentificationError(
+            "input spectral matrix is singular at some frequency: the inputs do not "
                          "excite all frequencies independently")
     H = np.linalg.solve(g_uu.transpose(0, 2, 1), g_yu.transpose(0, 2, 1)).transpose(0, 2, 1)
     explained = np.einsum("fij,fjk,fik->fi", H, g_uu, H.conj()).real

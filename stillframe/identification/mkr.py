@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from stillframe.errors import InputError
+from stillframe.errors import IdentificationError, InputError
 from stillframe.identification.modal import continuous_eigenvalues
 
 Array = NDArray[np.float64]
@@ -47,7 +47,8 @@ def continuous_model(A: Array, B: Array, dt: float) -> tuple[Array, Array]:
     lam_c = continuous_eigenvalues(lam, dt)
     a_c = psi @ np.diag(lam_c) @ np.linalg.inv(psi)
     if np.max(np.abs(a_c.imag)) > IMAGINARY_TOLERANCE * max(np.max(np.abs(a_c.real)), 1.0):
-        raise InputError("the discrete model has negative real eigenvalues: no continuous model")
+        raise IdentificationError(
+            "the discrete model has negative real eigenvalues: no continuous model")
     a_c = a_c.real
     b_c = np.linalg.solve(A - np.eye(A.shape[0]), a_c @ B)
     return a_c, b_c
@@ -99,7 +100,8 @@ def mkr(A: Array, B: Array, C: Array, dt: float, sensor_dofs: Sequence[int],
     lam, psi = np.linalg.eig(a_c)
     upper = lam.imag > 1e-9 * np.abs(lam)
     if 2 * np.count_nonzero(upper) != order:
-        raise InputError("MKR needs all modes underdamped, but the model has a real eigenvalue")
+        raise IdentificationError(
+            "MKR needs all modes underdamped, but the model has a real eigenvalue")
     # conjugate pairs side by side, so that W, and hence M, K, R, come out real
     lam = np.concatenate([lam[upper], lam[upper].conj()])
     psi = np.hstack([psi[:, upper], psi[:, upper].conj()])
@@ -125,11 +127,13 @@ def mkr(A: Array, B: Array, C: Array, dt: float, sensor_dofs: Sequence[int],
     for name, mat in (("mass", mass), ("stiffness", stiffness), ("damping", damping)):
         scale = max(np.max(np.abs(mat.real)), np.finfo(float).tiny)
         if np.max(np.abs(mat.imag)) > IMAGINARY_TOLERANCE * scale:
-            raise InputError(f"MKR gave a complex {name} matrix: the model does not satisfy its "
+            raise IdentificationError(
+                f"MKR gave a complex {name} matrix: the model does not satisfy its "
                              "conditions (check sensor/actuator DOFs and output type)")
         out.append(0.5 * (mat.real + mat.real.T))
     if np.any(np.linalg.eigvalsh(out[0]) <= 0):
-        raise InputError("MKR gave a mass matrix that is not positive definite: check the sign of "
+        raise IdentificationError(
+            "MKR gave a mass matrix that is not positive definite: check the sign of "
                          "the inputs against the outputs (a force measured with the opposite "
                          "sign negates M, K and R)")
     return PhysicalModel(M=out[0], K=out[1], R=out[2])

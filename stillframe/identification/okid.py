@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from stillframe.errors import InputError
+from stillframe.errors import IdentificationError, InputError
 
 Array = NDArray[np.float64]
 
@@ -85,7 +85,7 @@ def okid(u: Array, y: Array, observer_order: int) -> OkidResult:
     if p < 1:
         raise InputError(f"observer order must be >= 1, got {p}")
     if n < minimum_samples(r, m, p):
-        raise InputError(
+        raise IdentificationError(
             f"record of {n} samples too short for observer order {p} with {r} inputs and "
             f"{m} outputs (needs at least {minimum_samples(r, m, p)})"
         )

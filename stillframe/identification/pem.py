@@ -34,7 +34,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import optimize
 
-from stillframe.errors import InputError
+from stillframe.errors import IdentificationError
 from stillframe.identification.modal import ModalTable, modal_parameters
 
 Array = NDArray[np.float64]
@@ -130,7 +130,8 @@ def real_modal_form(A: Array, B: Array, C: Array, K: Array) -> tuple[Array, Arra
         eig.append(lam[k].real)
     T = np.column_stack(cols)
     if T.shape[1] != A.shape[0] or np.linalg.cond(T) > 1e10:
-        raise InputError("the realized A has repeated or defective eigenvalues: cannot refine")
+        raise IdentificationError(
+            "the realized A has repeated or defective eigenvalues: cannot refine")
     Tinv = np.linalg.inv(T)
     return np.array(eig), Tinv @ B, C @ T, Tinv @ K, len(upper), len(real)
 
@@ -163,7 +164,7 @@ def refine_prediction_error(A: Array, B: Array, C: Array, D: Array, G: Array, u:
     theta0 = np.concatenate([eig, Bm.ravel(), Cm.ravel(), D.ravel(), gain, np.zeros(n)])
     e0 = _predict(layout, theta0[None], u, y)[0]
     if not np.all(np.isfinite(e0)):
-        raise InputError("the starting model's predictor diverges: cannot refine")
+        raise IdentificationError("the starting model's predictor diverges: cannot refine")
     weight = 1.0 / np.maximum(np.sqrt(np.mean(e0**2, axis=0)), 1e-300)
     scale = np.maximum(np.abs(theta0), 1e-3)
 

@@ -27,7 +27,7 @@ from typing import Literal
 import numpy as np
 from numpy.typing import NDArray
 
-from stillframe.errors import InputError
+from stillframe.errors import IdentificationError, InputError
 from stillframe.identification.era import (
     EraDimensions,
     HankelFactorization,
@@ -119,7 +119,7 @@ def _impulse_factorization(u: Array, y: Array, order: int, alpha: int | None, be
     b = beta or min(200, max(1, n_samples - 1 - a))
     dims = EraDimensions(alpha=a, beta=b)
     if dims.markov_count(False) > n_samples or a * m < order:
-        raise InputError(
+        raise IdentificationError(
             f"record of {n_samples} samples too short for order {order} with alpha={a}, "
             f"beta={b} (needs alpha*outputs >= order and alpha+beta+1 samples)"
         )
@@ -139,7 +139,7 @@ def _observer_order(n_samples: int, r: int, m: int, order: int, requested: int |
         raise InputError(f"observer order {p} with {m} outputs bounds the model order by "
                          f"{p * m} < {order} (thesis: m p >= n)")
     if n_samples < minimum_samples(r, m, p):
-        raise InputError(
+        raise IdentificationError(
             f"record of {n_samples} samples too short for order {order}: OKID with observer "
             f"order {p} needs at least {minimum_samples(r, m, p)} samples"
         )

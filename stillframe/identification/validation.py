@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 from scipy import signal
 
-from stillframe.errors import InputError
+from stillframe.errors import IdentificationError
 
 
 def simulate(A: np.ndarray, B: np.ndarray, C: np.ndarray, D: np.ndarray, u: np.ndarray,
@@ -36,7 +36,8 @@ def simulate_fitted(A: np.ndarray, B: np.ndarray, C: np.ndarray, D: np.ndarray, 
                     y: np.ndarray) -> np.ndarray:
     """Simulated output with the initial state that fits ``y`` best in least squares."""
     if np.max(np.abs(np.linalg.eigvals(A))) >= 1:
-        raise InputError("the identified model is unstable: it cannot be validated by simulation")
+        raise IdentificationError(
+            "the identified model is unstable: it cannot be validated by simulation")
     forced = simulate(A, B, C, D, u)
     obs = free_response(A, C, len(u)).reshape(-1, A.shape[0])
     x0 = np.linalg.lstsq(obs, (y - forced).ravel(), rcond=None)[0]

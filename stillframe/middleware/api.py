@@ -27,7 +27,7 @@ import sys
 from collections.abc import Callable
 from pathlib import Path
 
-from stillframe.errors import InputError
+from stillframe.errors import InputError, StillframeError
 from stillframe.middleware.clock import Clock, Time
 from stillframe.middleware.interface import (
     MALFORMED,
@@ -100,16 +100,17 @@ def create_node(name: str, namespace: str | None = None, argv: list[str] | None 
 
 
 def node_main(main: Callable[[], int | None]) -> Callable[[], int]:
-    """Wrap a node executable's ``main`` (a ``console_scripts`` entry point): bad input
-    (:class:`InputError`, e.g. a wrong parameter) prints one line and exits with code 2."""
+    """Wrap a node executable's ``main`` (a ``console_scripts`` entry point): a
+    :class:`~stillframe.errors.StillframeError` (e.g. a wrong parameter, exit code 2) prints one
+    line and exits with its code."""
 
     @functools.wraps(main)
     def wrapped() -> int:
         try:
             return int(main() or 0)
-        except InputError as exc:
+        except StillframeError as exc:
             print(f"{Path(sys.argv[0]).name}: error: {exc}", file=sys.stderr)
-            return 2
+            return exc.exit_code
 
     return wrapped
 

@@ -40,11 +40,11 @@ from cyclonedds.qos import Policy, Qos
 from cyclonedds.sub import DataReader
 from cyclonedds.topic import Topic
 
-from cyclonedds._clayer import ddspy_take, ddspy_write, ddspy_write_ts  # isort: skip
 from stillframe.contract import messages
 from stillframe.errors import InputError
 from stillframe.middleware import dds_types, discovery, interface, names, params
 from stillframe.middleware.clock import Clock
+from stillframe.middleware.cyclone_raw import ANY_SAMPLES, take_raw, write_raw
 from stillframe.middleware.logger import Logger
 from stillframe.middleware.qos import (
     CLOCK,
@@ -63,7 +63,6 @@ DISCOVERY_TYPE = "rmw_dds_common/msg/ParticipantEntitiesInfo"
 MAX_WAIT_NS = 100_000_000
 #: Samples taken from one reader per ``spin_once``.
 TAKE_BATCH = 256
-ANY_SAMPLES = SampleState.Any | ViewState.Any | InstanceState.Any
 _ALIVE = SampleState.Any | ViewState.Any | InstanceState.Alive
 _RELIABLE_BLOCKING_NS = 100_000_000  # rmw_cyclonedds' max_blocking_time
 
@@ -149,11 +148,6 @@ def delete(entity: Any) -> None:
     """Delete a Cyclone entity now (and its children) instead of at garbage collection."""
     if entity is not None:
         entity.__del__()
-
-
-def pad4(data: bytes) -> bytes:
-    """CDR padded to a multiple of 4 bytes, as Cyclone stores serialized samples."""
-    return data + b"\0" * (-len(data) % 4)
 
 
 class Context:
@@ -249,7 +243,7 @@ class Context:
             qos = QoSProfile(depth=1000, durability=Durability.TRANSIENT_LOCAL)
             topic = self.topic(DISCOVERY_TOPIC, DISCOVERY_TYPE)
             self._discovery_reader = DataReader(self.participant, topic, dds_qos(qos, writer=False))
-        for data, sample in ddspy_take(self._discovery_reader._ref, ANY_SAMPLES, 100_000):
+        for data, sample in take_raw(self._discovery_reader, 100_000):
             if sample.valid_data:
                 info = messages.deserialize(data, DISCOVERY_TYPE)
                 self._participant_nodes[bytes(info.gid.data)] = [
@@ -285,16 +279,6 @@ class Context:
 
 def _gid_array(gid: bytes) -> Any:
     return np.frombuffer(gid.ljust(16, b"\0")[:16], dtype=np.uint8).copy()
-
-
-def write_raw(writer: DataWriter, cdr: bytes, timestamp_ns: int | None = None) -> None:
-    """Write one serialized sample (CDR with encapsulation header)."""
-    data = pad4(cdr)
-    ret = ddspy_write(writer._ref, data) if timestamp_ns is None else ddspy_write_ts(
-        writer._ref, data, timestamp_ns
-    )
-    if ret < 0:
-        raise DDSException(ret, f"writing on {writer.topic.name}")
 
 
 class DdsPublisher:
@@ -371,7 +355,7 @@ class DdsSubscription:
 
     def take_and_dispatch(self) -> int:
         """Hand every waiting sample to the callback; the number handed."""
-        samples = ddspy_take(self._reader._ref, ANY_SAMPLES, TAKE_BATCH)
+        samples = take_raw(self._reader, TAKE_BATCH)
         count = 0
         for data, info in samples:
             if not info.valid_data:

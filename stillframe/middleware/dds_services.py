@@ -30,18 +30,11 @@ from cyclonedds.core import DDSException, ReadCondition, WaitSet
 from cyclonedds.pub import DataWriter
 from cyclonedds.sub import DataReader
 
-from cyclonedds._clayer import ddspy_take  # isort: skip
 from stillframe.contract import messages
 from stillframe.errors import InputError
 from stillframe.middleware import names, param_messages
-from stillframe.middleware.dds_backend import (
-    ANY_SAMPLES,
-    DdsNode,
-    dds_qos,
-    delete,
-    user_data_field,
-    write_raw,
-)
+from stillframe.middleware.cyclone_raw import ANY_SAMPLES, take_raw, write_raw
+from stillframe.middleware.dds_backend import DdsNode, dds_qos, delete, user_data_field
 from stillframe.middleware.qos import QoSProfile
 
 SERVICE_QOS = QoSProfile(depth=10)
@@ -116,7 +109,7 @@ class _Endpoints:
         return f"typehash={messages.type_hash(ros_type)};{role}={self.id};".encode()
 
     def take(self) -> list[tuple[bytes, Any]]:
-        return [(bytes(data), info) for data, info in ddspy_take(self.reader._ref, ANY_SAMPLES, 256)
+        return [(bytes(data), info) for data, info in take_raw(self.reader, 256)
                 if info.valid_data]
 
     def destroy(self) -> None:

@@ -16,16 +16,11 @@ import numpy as np
 from stillframe.config.schema import Section
 from stillframe.contract.signals import Sample
 from stillframe.dynamics.excitation import floor_load
-from stillframe.dynamics.integrators import (
-    IntegrationError,
-    check_finite,
-    integrate,
-    make_integrator,
-)
+from stillframe.dynamics.integrators import check_finite, integrate, make_integrator
 from stillframe.dynamics.models.identified import frame_for
 from stillframe.dynamics.simulation import initial_state
 from stillframe.dynamics.systems import LinearSystem, MechanicalSystem
-from stillframe.errors import InputError
+from stillframe.errors import InputError, IntegrationError
 from stillframe.plant.actuators import Actuators
 from stillframe.plant.ph_plant import PHPlant
 from stillframe.plant.sensors import Sensors

@@ -71,8 +71,10 @@ class FrameModel:
         m_const = structure.mass.copy()
         m_const[i3, i3] += self.m4
         self.m_const = m_const
-        self._m_const_inv = sla.inv(m_const, overwrite_a=False, check_finite=True)
-        self._w = self._m_const_inv[:, i3].copy()
+        #: (M_s + m4 e3 e3ᵀ)⁻¹ and its floor-3 column w: what the Schur-complement solve of
+        #: :meth:`accelerations` (and the compiled kernels) use
+        self.m_const_inv = sla.inv(m_const, overwrite_a=False, check_finite=True)
+        self.floor3_column = self.m_const_inv[:, i3].copy()
         self.input_matrix = np.zeros((self.n_dof, 4))
         self.input_matrix[self.floor_index, [0, 1, 2]] = 1.0
         self.input_matrix[self.phi_index, 3] = 1.0
@@ -104,10 +106,11 @@ class FrameModel:
         Q = self.forces(q, v, u)
         n = self.n_struct
         c = self.m4 * self.l4 * math.cos(q[n])
-        y = self._m_const_inv @ Q[:n]
-        a_phi = (Q[n] - c * y[self.i3]) / (self.pendulum_inertia - c * c * self._w[self.i3])
+        y = self.m_const_inv @ Q[:n]
+        w = self.floor3_column
+        a_phi = (Q[n] - c * y[self.i3]) / (self.pendulum_inertia - c * c * w[self.i3])
         a = np.empty(self.n_dof)
-        a[:n] = y - c * a_phi * self._w
+        a[:n] = y - c * a_phi * w
         a[n] = a_phi
         return a
 

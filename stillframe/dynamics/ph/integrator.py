@@ -25,7 +25,7 @@ import numpy as np
 import scipy.linalg as sla
 
 from stillframe.dynamics.ph.system import PHSystem
-from stillframe.errors import InputError
+from stillframe.errors import InputError, IntegrationError
 
 AVF_POINTS = 4
 NEWTON_TOL = 1e-13
@@ -134,7 +134,7 @@ class MidpointDAE:
             if size > 0.25 * previous:  # slow contraction: a fresh Jacobian (full Newton)
                 self._factor(x, e0, t0)
             previous = size
-        raise InputError(f"implicit midpoint: Newton did not converge at t = {t0:.6g} s; "
+        raise IntegrationError(f"implicit midpoint: Newton did not converge at t = {t0:.6g} s; "
                          "reduce the time step")
 
     def run(self, e0: np.ndarray, t_end: float, t0: float = 0.0,
@@ -156,7 +156,7 @@ class MidpointDAE:
             e1, lam = self.step(e, lam, t, guess=2 * e - previous if k else None)
             previous = e
             if not np.all(np.isfinite(e1)):
-                raise InputError(f"implicit midpoint: non-finite state at t = {t:.6g} s")
+                raise IntegrationError(f"implicit midpoint: non-finite state at t = {t:.6g} s")
             H1 = sys.hamiltonian(e1)
             em = 0.5 * (e + e1)
             _, _, rate = self._averages(e[:sys.n_q], e1[:sys.n_q], t)

@@ -1,0 +1,42 @@
+"""Raw CDR in and out of Cyclone DDS: the only place that calls cyclonedds' private C layer.
+
+The public cyclonedds Python API (de)serializes through IDL classes; ROS 2's wire format is
+handled here as bytes instead (``stillframe.contract.messages`` encodes it), so writing and
+taking go through ``cyclonedds._clayer`` on the entities' ``_ref`` handles. Used with
+cyclonedds 11.0.1 (the version ``make setup`` installs); if its private layer changes, this
+module is what to adapt.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from cyclonedds.core import DDSException, InstanceState, SampleState, ViewState
+from cyclonedds.pub import DataWriter
+from cyclonedds.sub import DataReader
+
+from cyclonedds._clayer import ddspy_take, ddspy_write, ddspy_write_ts  # isort: skip
+
+#: every sample, read or not, of every instance
+ANY_SAMPLES = SampleState.Any | ViewState.Any | InstanceState.Any
+
+
+def pad4(cdr: bytes) -> bytes:
+    """CDR padded to a multiple of 4 bytes, as Cyclone expects of a serialized sample."""
+    return cdr + b"\0" * (-len(cdr) % 4)
+
+
+def write_raw(writer: DataWriter, cdr: bytes, timestamp_ns: int | None = None) -> None:
+    """Write one serialized sample (CDR with encapsulation header), stamped ``timestamp_ns``
+    (source time) if given."""
+    data = pad4(cdr)
+    ret = ddspy_write(writer._ref, data) if timestamp_ns is None else ddspy_write_ts(
+        writer._ref, data, timestamp_ns
+    )
+    if ret < 0:
+        raise DDSException(ret, f"writing on {writer.topic.name}")
+
+
+def take_raw(reader: DataReader, limit: int) -> list[tuple[bytes, Any]]:
+    """Take up to ``limit`` samples as (serialized bytes, SampleInfo) pairs."""
+    return ddspy_take(reader._ref, ANY_SAMPLES, limit)
