@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from stillframe.config.schema import Section
+from stillframe.config.scene import Excitation
 
 Force = Callable[[float], float]
 
@@ -53,7 +53,7 @@ def chirp(amplitude: float, f0_hz: float, f1_hz: float, sweep_s: float) -> Force
     return force
 
 
-def excitation_force(excitation: Section, duration: float) -> Force | None:
+def excitation_force(excitation: Excitation, duration: float) -> Force | None:
     """The scalar force of the scene's excitation, or None for ``type: none``."""
     e = excitation
     match e.type:
@@ -77,7 +77,7 @@ class FloorLoad:
     can evaluate the same force without calling back into Python.
     """
 
-    excitation: Section
+    excitation: Excitation
     force: Force
 
     def __call__(self, t: float) -> np.ndarray:
@@ -86,7 +86,7 @@ class FloorLoad:
         return f
 
 
-def floor_load(excitation: Section, duration: float) -> FloorLoad | None:
+def floor_load(excitation: Excitation, duration: float) -> FloorLoad | None:
     """The scene's floor load, or None for ``type: none``."""
     force = excitation_force(excitation, duration)
     return None if force is None else FloorLoad(excitation, force)

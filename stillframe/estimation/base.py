@@ -9,7 +9,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from stillframe.config.schema import Section
+from stillframe.config.loop_sections import Estimator
 from stillframe.contract.signals import Estimate, Sample
 from stillframe.design.coordinates import design_map, physical_selector
 from stillframe.dynamics.models import FrameModel
@@ -32,7 +32,7 @@ class Counters:
 class Filter(ABC):
     """A recursive estimator on a design :class:`FrameModel`; state z = [q, q̇]."""
 
-    def __init__(self, model: FrameModel, config: Section, excited_floor: int,
+    def __init__(self, model: FrameModel, config: Estimator, excited_floor: int,
                  initial_physical: np.ndarray) -> None:
         self.model = model
         self.excited_floor = excited_floor

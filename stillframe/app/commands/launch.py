@@ -22,7 +22,7 @@ from stillframe.app.commands.common import (
     scene_from_args,
 )
 from stillframe.app.launcher import MODES
-from stillframe.config.schema import Section
+from stillframe.config.scene import Scene
 from stillframe.errors import InputError
 from stillframe.text_table import format_table
 
@@ -65,7 +65,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     parser.set_defaults(func=run)
 
 
-def evaluation_table(evaluation: dict[str, Any], scene: Section) -> str:
+def evaluation_table(evaluation: dict[str, Any], scene: Scene) -> str:
     """Floors as rows: peaks without and with control, the reductions, the scene's reference."""
     ev = scene.evaluation
     red = evaluation["reduction_pct"]
@@ -88,7 +88,7 @@ def evaluation_table(evaluation: dict[str, Any], scene: Section) -> str:
                          "v off [m/s]", "v on [m/s]", "v red. %", "thesis %"], rows)
 
 
-def print_evaluation(evaluation: dict[str, Any], scene: Section) -> None:
+def print_evaluation(evaluation: dict[str, Any], scene: Scene) -> None:
     ev = scene.evaluation
     baseline = (f"the {ev.window:g} s before control starts" if ev.baseline == "before_start"
                 else f"the last {ev.window:g} s of a run without control")
