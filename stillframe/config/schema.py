@@ -16,7 +16,6 @@ every problem raises :class:`~stillframe.errors.InputError` naming the dotted ke
 from __future__ import annotations
 
 import dataclasses
-import functools
 import math
 import types
 from collections.abc import Callable, Mapping
@@ -119,11 +118,15 @@ def _is_section(kind: Any) -> bool:
     return isinstance(kind, type) and issubclass(kind, Section)
 
 
-@functools.cache
+_SPECS: dict[type, tuple[_Spec, ...]] = {}
+
+
 def _specs(cls: type[Section]) -> tuple[_Spec, ...]:
-    """The keys of a section class, in declaration order."""
-    hints = get_type_hints(cls)
-    return tuple(_spec(f, hints[f.name]) for f in dataclasses.fields(cls))
+    """The keys of a section class, in declaration order (worked out once per class)."""
+    if cls not in _SPECS:
+        hints = get_type_hints(cls)
+        _SPECS[cls] = tuple(_spec(f, hints[f.name]) for f in dataclasses.fields(cls))
+    return _SPECS[cls]
 
 
 def _number(key: str, value: Any, kind: type) -> float | int:

@@ -10,7 +10,7 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -20,8 +20,8 @@ from stillframe.config.scene import Excitation
 Force = Callable[[float], float]
 
 
-def harmonics(amplitudes: list[float], frequencies_hz: list[float],
-              phases: list[float]) -> Force:
+def harmonics(amplitudes: Sequence[float], frequencies_hz: Sequence[float],
+              phases: Sequence[float]) -> Force:
     terms = list(zip(amplitudes, [2.0 * math.pi * f for f in frequencies_hz],
                      phases or [0.0] * len(amplitudes), strict=True))
     return lambda t: sum(a * math.sin(w * t + psi) for a, w, psi in terms)

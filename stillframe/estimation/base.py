@@ -5,6 +5,7 @@ update when some are missing), and report the estimate."""
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -46,8 +47,8 @@ class Filter(ABC):
         self.force = 0.0
         self.counters = Counters()
 
-    def noise_covariances(self, process_std: list[float],
-                          measurement_std: list[float]) -> tuple[np.ndarray, np.ndarray]:
+    def noise_covariances(self, process_std: Sequence[float],
+                          measurement_std: Sequence[float]) -> tuple[np.ndarray, np.ndarray]:
         """Q (per sample, physical stds mapped to the design state) and R (eq. 5.221–5.222)."""
         return (self.T @ np.diag(np.square(process_std)) @ self.T.T,
                 np.diag(np.square(measurement_std)))

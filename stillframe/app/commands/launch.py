@@ -13,6 +13,7 @@ from __future__ import annotations
 import argparse
 import sys
 import tempfile
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -72,7 +73,7 @@ def evaluation_table(evaluation: dict[str, Any], scene: Scene) -> str:
     before = evaluation.get("peak_uncontrolled", {})
     after = evaluation.get("peak_controlled", {})
 
-    def ref(values: list[float], i: int) -> str:
+    def ref(values: Sequence[float], i: int) -> str:
         return f"{values[i]:.2f}" if len(values) == 3 else "-"
 
     def peak(table: dict[str, list[float]], key: str, i: int) -> str:
