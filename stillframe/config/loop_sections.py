@@ -31,6 +31,8 @@ def _limit(doc: str) -> Any:
 
 @dataclass(frozen=True, kw_only=True)
 class Plant(Section):
+    """plant: what the closed loop simulates."""
+
     model: Literal["scene", "file"] = key("scene", doc=(
         "scene: the nonlinear model of the model section; file: the linear second-order "
         "model (identified structure + linearised pendulum) of plant.file"))
@@ -42,6 +44,8 @@ class Plant(Section):
 
 @dataclass(frozen=True, kw_only=True)
 class Sensors(Section):
+    """sensors: the floor accelerometers, the pendulum encoder and the load cell."""
+
     rate_hz: float = key(32.0, positive, doc="sample rate = control rate [Hz]")
     accelerometer_noise_std: float = key(0.0, non_negative, doc="[m/s^2]")
     accelerometer_bias: Floats3 = key((0.0, 0.0, 0.0), doc="[m/s^2]")
@@ -53,6 +57,8 @@ class Sensors(Section):
 
 @dataclass(frozen=True, kw_only=True)
 class Actuators(Section):
+    """actuators: saturation and slew limits (null: none)."""
+
     torque_limit: float | None = _limit("pendulum torque saturation [N m]")
     torque_rate_limit: float | None = _limit("pendulum torque slew limit [N m/s]")
     force_limit: float | None = _limit("floor-3 force saturation [N]")
@@ -61,6 +67,8 @@ class Actuators(Section):
 
 @dataclass(frozen=True, kw_only=True)
 class Design(Section):
+    """design: the model the estimator and the controller are designed on."""
+
     model: Literal["scene", "lumped", "file"] = key("scene", doc=(
         "model of the estimator and controller: the scene's model, the lumped model of the "
         "scene's rig, or the identified structure of design.file with the rig's pendulum "
@@ -70,6 +78,8 @@ class Design(Section):
 
 @dataclass(frozen=True, kw_only=True)
 class Estimator(Section):
+    """estimator: the state estimate the controller sees."""
+
     type: Literal["none", "truth", "kf", "tvkf", "ekf"] = key("none", doc=(
         "truth: the controller sees the true state; kf: steady-state Kalman filter; "
         "tvkf: time-varying Kalman filter; ekf: extended Kalman filter (nonlinear model)"))
@@ -86,6 +96,8 @@ class Estimator(Section):
 
 @dataclass(frozen=True, kw_only=True)
 class Controller(Section):
+    """controller: the control law and its supervisor."""
+
     type: Literal["none", "lqg", "euk_pendulum", "euk_floor", "passivity"] = key("none")
     start: float = key(0.0, non_negative, doc="enable time [s]")
     state_weights: Floats8 = key(THESIS_STATE_WEIGHTS, non_negative,
@@ -108,6 +120,8 @@ class Controller(Section):
 
 @dataclass(frozen=True, kw_only=True)
 class Evaluation(Section):
+    """evaluation: peak reductions with and without control."""
+
     baseline: Literal["before_start", "open_loop"] = key("before_start", doc=(
         "uncontrolled peaks from the window before controller.start of the same run (the "
         "thesis), or from the last window of a second run without control (same seeds)"))

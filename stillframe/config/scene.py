@@ -42,6 +42,8 @@ from stillframe.errors import InputError
 
 @dataclass(frozen=True, kw_only=True)
 class Columns(Section):
+    """rig.columns: the steel blades of each story (§5.2)."""
+
     lengths: Floats3 = key((0.23, 0.28, 0.23), positive, doc="L1..L3 [m]")
     width: float = key(0.035, positive, doc="b [m]")
     thickness: float = key(0.001, positive, doc="h [m]")
@@ -52,6 +54,8 @@ class Columns(Section):
 
 @dataclass(frozen=True, kw_only=True)
 class Pendulum(Section):
+    """rig.pendulum: the pendulum of the damper, hinged on floor 3."""
+
     half_length: float = key(0.0825, positive, doc="L4 [m]")
     mass: float = key(0.083, positive, doc="m4 [kg]")
     inertia: float = key(8.32e-4, positive, doc="Izz,4 about the centre of mass [kg m^2]")
@@ -60,6 +64,8 @@ class Pendulum(Section):
 
 @dataclass(frozen=True, kw_only=True)
 class Rig(Section):
+    """rig: the test rig; defaults are the thesis's (§5.2)."""
+
     floor_masses: Floats3 = key((1.281, 0.814, 1.380), positive, doc="m1..m3 [kg]")
     columns: Columns = section(Columns)
     pendulum: Pendulum = section(Pendulum)
@@ -68,6 +74,8 @@ class Rig(Section):
 
 @dataclass(frozen=True, kw_only=True)
 class Damping(Section):
+    """damping: structural damping of the frame."""
+
     model: Literal["rayleigh", "modal", "none"] = key("rayleigh")
     alpha: float = key(0.9751, doc="mass-proportional coefficient [1/s]")
     beta: float = key(-2.8815e-4, doc="stiffness-proportional coefficient [s]")
@@ -80,6 +88,8 @@ class Damping(Section):
 
 @dataclass(frozen=True, kw_only=True)
 class Excitation(Section):
+    """excitation: the force on one floor."""
+
     type: Literal["none", "harmonics", "hammer", "white_noise", "chirp"] = key("none")
     floor: int = key(1, in_range(1, 3), doc="floor the force acts on")
     amplitudes: Floats = key((0.1, 0.1, 0.1), doc="harmonics: force amplitudes [N]")
@@ -99,6 +109,8 @@ class Excitation(Section):
 
 @dataclass(frozen=True, kw_only=True)
 class Model(Section):
+    """model: which dynamics model simulates the rig."""
+
     type: Literal["lumped", "fe", "modal", "ph", "auto"] = key("lumped")
     elements_per_column: int = key(3, positive)
     modes: int = key(3, positive, doc="modal: retained fixed-interface column modes")
@@ -110,6 +122,8 @@ class Model(Section):
 
 @dataclass(frozen=True, kw_only=True)
 class Integrator(Section):
+    """integrator: the time integration of the model."""
+
     method: Literal["rk4", "midpoint", "dop853", "radau"] = key("rk4")
     dt: float = key(1e-3, positive, doc="fixed step, or output step of adaptive methods")
     rtol: float = key(1e-10, positive)
@@ -118,6 +132,8 @@ class Integrator(Section):
 
 @dataclass(frozen=True, kw_only=True)
 class Initial(Section):
+    """initial: the state at t = 0."""
+
     floors: Floats3 = key((0.0, 0.0, 0.0), doc="x1..x3 [m]")
     phi: float = key(0.0, doc="pendulum angle from hanging [rad]")
     floor_velocities: Floats3 = key((0.0, 0.0, 0.0), doc="[m/s]")

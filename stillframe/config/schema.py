@@ -98,6 +98,10 @@ class _Spec(NamedTuple):
     length: int | None = None
 
 
+def _is_section(kind: Any) -> bool:
+    return isinstance(kind, type) and issubclass(kind, Section)
+
+
 def _spec(f: dataclasses.Field, hint: Any) -> _Spec:
     spec = _Spec(f.name, hint, f.default, f.metadata.get("field", Field()))
     args = get_args(hint)
@@ -112,10 +116,6 @@ def _spec(f: dataclasses.Field, hint: Any) -> _Spec:
     if hint in (float, int, bool, str) or _is_section(hint):
         return spec
     raise TypeError(f"{f.name}: a scene key cannot have the type {hint!r}")
-
-
-def _is_section(kind: Any) -> bool:
-    return isinstance(kind, type) and issubclass(kind, Section)
 
 
 _SPECS: dict[type, tuple[_Spec, ...]] = {}
