@@ -6,18 +6,17 @@ from pathlib import Path
 
 import numpy as np
 
-from stillframe.config.scene import load_scene, scene_from_dict
-from stillframe.config.schema import Section
+from stillframe.config.scene import Scene, load_scene, scene_from_dict
 from stillframe.contract.signals import Sample
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def thesis_scene(name: str, overrides: list[str] | None = None) -> Section:
+def thesis_scene(name: str, overrides: list[str] | None = None) -> Scene:
     return load_scene(ROOT / "scenes" / f"{name}.yaml", overrides)
 
 
-def lumped_scene(overrides: list[str] | None = None) -> Section:
+def lumped_scene(overrides: list[str] | None = None) -> Scene:
     """Lumped rig, harmonic forcing, 32 Hz sensors with the thesis's noise levels."""
     return scene_from_dict({
         "name": "lumped_loop",

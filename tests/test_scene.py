@@ -23,8 +23,8 @@ def test_shipped_scenes_load(path: Path) -> None:
 
 def test_defaults_are_the_thesis_rig() -> None:
     scene = scene_from_dict({"name": "x"})
-    assert scene.rig.floor_masses == [1.281, 0.814, 1.380]
-    assert scene.rig.columns.lengths == [0.23, 0.28, 0.23]
+    assert scene.rig.floor_masses == (1.281, 0.814, 1.380)
+    assert scene.rig.columns.lengths == (0.23, 0.28, 0.23)
     assert scene.rig.pendulum.inertia == 8.32e-4
     assert scene.damping.beta == -2.8815e-4
 
@@ -37,8 +37,8 @@ def test_overrides_parse_numbers_lists_and_scientific_notation() -> None:
     )
     assert scene.model.type == "fe"
     assert scene.integrator.dt == 1e-4
-    assert scene.rig.floor_masses == [1.0, 2.0, 3.0]
-    assert scene.excitation.frequencies_hz == [1.5]
+    assert scene.rig.floor_masses == (1.0, 2.0, 3.0)
+    assert scene.excitation.frequencies_hz == (1.5,)
 
 
 ERRORS = [

@@ -27,8 +27,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from stillframe.config.scene import load_scene
-from stillframe.config.schema import Section
+from stillframe.config.scene import Scene, load_scene
 from stillframe.contract.topics import STATUS_KEYS
 from stillframe.errors import InputError
 from stillframe.locations import REPO_ROOT
@@ -106,7 +105,7 @@ def single_host_discovery() -> str:
     return discovery.discovery_range().value
 
 
-def nodes_for(scene: Section) -> list[str]:
+def nodes_for(scene: Scene) -> list[str]:
     """The nodes a scene uses: sim_node always, the estimator and the controller unless the
     scene sets their type to ``none`` (an open-loop run such as a hammer test)."""
     used = {"sim_node": True, "estimator_node": scene.estimator.type != "none",

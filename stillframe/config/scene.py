@@ -1,108 +1,165 @@
 """Scene files: what to simulate and with what fidelity (README, "Scenes").
 
-A scene is YAML validated against :data:`SCENE_SCHEMA`; every value can be overridden with
+A scene is YAML validated into a :class:`Scene`, frozen dataclasses whose fields declare every key
+with its type, default, check and doc; every value can be overridden with
 ``--set dotted.key=value``. Rig defaults are the thesis's test rig (§5.2).
 """
 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import yaml
 
-from stillframe.config.loop_sections import LOOP_SCHEMA, check_loop
+from stillframe.config.loop_sections import (
+    Actuators,
+    Controller,
+    Design,
+    Estimator,
+    Evaluation,
+    Plant,
+    Sensors,
+)
 from stillframe.config.schema import (
-    Field,
+    Floats,
+    Floats2,
+    Floats3,
     Section,
     in_range,
+    key,
     non_negative,
     positive,
+    section,
     set_dotted,
     validate,
 )
 from stillframe.config.yamlio import load_yaml
 from stillframe.errors import InputError
 
-RIG_SCHEMA: dict[str, Any] = {
-    "floor_masses": Field("floats", [1.281, 0.814, 1.380], positive, length=3, doc="m1..m3 [kg]"),
-    "columns": {
-        "lengths": Field("floats", [0.23, 0.28, 0.23], positive, length=3, doc="L1..L3 [m]"),
-        "width": Field(float, 0.035, positive, doc="b [m]"),
-        "thickness": Field(float, 0.001, positive, doc="h [m]"),
-        "density": Field(float, 7860.0, non_negative, doc="rho [kg/m^3]"),
-        "youngs_modulus": Field(float, 207e9, positive, doc="E [Pa]"),
-        "per_story": Field(int, 2, positive, doc="blades per story"),
-    },
-    "pendulum": {
-        "half_length": Field(float, 0.0825, positive, doc="L4 [m]"),
-        "mass": Field(float, 0.083, positive, doc="m4 [kg]"),
-        "inertia": Field(float, 8.32e-4, positive, doc="Izz,4 about the centre of mass [kg m^2]"),
-        "hinge_damping": Field(float, 2.432e-3, non_negative, doc="r4 [N m s/rad]"),
-    },
-    "gravity": Field(float, 9.81, non_negative, doc="g [m/s^2]"),
-}
 
-DAMPING_SCHEMA: dict[str, Any] = {
-    "model": Field(str, "rayleigh", choices=("rayleigh", "modal", "none")),
-    "alpha": Field(float, 0.9751, doc="mass-proportional coefficient [1/s]"),
-    "beta": Field(float, -2.8815e-4, doc="stiffness-proportional coefficient [s]"),
-    "modal_ratios": Field(
-        "floats", [0.0395, 0.0030, 0.0042], in_range(0.0, 1.0),
+@dataclass(frozen=True, kw_only=True)
+class Columns(Section):
+    """rig.columns: the steel blades of each story (§5.2)."""
+
+    lengths: Floats3 = key((0.23, 0.28, 0.23), positive, doc="L1..L3 [m]")
+    width: float = key(0.035, positive, doc="b [m]")
+    thickness: float = key(0.001, positive, doc="h [m]")
+    density: float = key(7860.0, non_negative, doc="rho [kg/m^3]")
+    youngs_modulus: float = key(207e9, positive, doc="E [Pa]")
+    per_story: int = key(2, positive, doc="blades per story")
+
+
+@dataclass(frozen=True, kw_only=True)
+class Pendulum(Section):
+    """rig.pendulum: the pendulum of the damper, hinged on floor 3."""
+
+    half_length: float = key(0.0825, positive, doc="L4 [m]")
+    mass: float = key(0.083, positive, doc="m4 [kg]")
+    inertia: float = key(8.32e-4, positive, doc="Izz,4 about the centre of mass [kg m^2]")
+    hinge_damping: float = key(2.432e-3, non_negative, doc="r4 [N m s/rad]")
+
+
+@dataclass(frozen=True, kw_only=True)
+class Rig(Section):
+    """rig: the test rig; defaults are the thesis's (§5.2)."""
+
+    floor_masses: Floats3 = key((1.281, 0.814, 1.380), positive, doc="m1..m3 [kg]")
+    columns: Columns = section(Columns)
+    pendulum: Pendulum = section(Pendulum)
+    gravity: float = key(9.81, non_negative, doc="g [m/s^2]")
+
+
+@dataclass(frozen=True, kw_only=True)
+class Damping(Section):
+    """damping: structural damping of the frame."""
+
+    model: Literal["rayleigh", "modal", "none"] = key("rayleigh")
+    alpha: float = key(0.9751, doc="mass-proportional coefficient [1/s]")
+    beta: float = key(-2.8815e-4, doc="stiffness-proportional coefficient [s]")
+    modal_ratios: Floats = key(
+        (0.0395, 0.0030, 0.0042), in_range(0.0, 1.0),
         doc="zeta of the first structural modes (thesis ERA/DC identification, §5.5)",
-    ),
-    "high_mode_ratio": Field(float, 0.005, in_range(0.0, 1.0), doc="zeta of the modes above"),
-}
+    )
+    high_mode_ratio: float = key(0.005, in_range(0.0, 1.0), doc="zeta of the modes above")
 
-EXCITATION_SCHEMA: dict[str, Any] = {
-    "type": Field(str, "none", choices=("none", "harmonics", "hammer", "white_noise", "chirp")),
-    "floor": Field(int, 1, in_range(1, 3), doc="floor the force acts on"),
-    "amplitudes": Field("floats", [0.1, 0.1, 0.1], doc="harmonics: force amplitudes [N]"),
-    "frequencies_hz": Field("floats", [1.9, 5.7, 8.8], non_negative, doc="harmonics [Hz]"),
-    "phases": Field("floats", [], doc="harmonics: phases [rad], zeros when empty"),
-    "impulse": Field(float, 0.05, doc="hammer: impulse [N s]"),
-    "time": Field(float, 0.0, non_negative, doc="hammer: time of the blow [s]"),
-    "width": Field(float, 5e-3, positive, doc="hammer: duration of the half-sine pulse [s]"),
-    "std": Field(float, 0.1, non_negative, doc="white noise: force std [N]"),
-    "rate_hz": Field(float, 1000.0, positive, doc="white noise: sample-and-hold rate [Hz]"),
-    "seed": Field(int, 0, doc="white noise: random seed"),
-    "amplitude": Field(float, 0.1, doc="chirp: amplitude [N]"),
-    "f0_hz": Field(float, 0.5, positive, doc="chirp: start frequency [Hz]"),
-    "f1_hz": Field(float, 12.0, positive, doc="chirp: end frequency [Hz]"),
-    "sweep_s": Field(float, 20.0, positive, doc="chirp: sweep duration [s]"),
-}
 
-SCENE_SCHEMA: dict[str, Any] = {
-    "name": Field(str, doc="scene name"),
-    "description": Field(str, ""),
-    "rig": RIG_SCHEMA,
-    "damping": DAMPING_SCHEMA,
-    "model": {
-        "type": Field(str, "lumped", choices=("lumped", "fe", "modal", "ph", "auto")),
-        "elements_per_column": Field(int, 3, positive),
-        "modes": Field(int, 3, positive, doc="modal: retained fixed-interface column modes"),
-        "band_hz": Field("floats", [0.0, 15.0], non_negative, length=2,
-                         doc="auto: frequency band the scene must reproduce [Hz]"),
-        "tolerance": Field(float, 0.01, in_range(1e-12, 1.0),
-                           doc="auto: relative error allowed in the band"),
-    },
-    "integrator": {
-        "method": Field(str, "rk4", choices=("rk4", "midpoint", "dop853", "radau")),
-        "dt": Field(float, 1e-3, positive, doc="fixed step, or output step of adaptive methods"),
-        "rtol": Field(float, 1e-10, positive),
-        "atol": Field(float, 1e-12, positive),
-    },
-    "excitation": EXCITATION_SCHEMA,
-    "initial": {
-        "floors": Field("floats", [0.0, 0.0, 0.0], length=3, doc="x1..x3 [m]"),
-        "phi": Field(float, 0.0, doc="pendulum angle from hanging [rad]"),
-        "floor_velocities": Field("floats", [0.0, 0.0, 0.0], length=3, doc="[m/s]"),
-        "phi_rate": Field(float, 0.0, doc="[rad/s]"),
-    },
-    "duration": Field(float, 10.0, positive, doc="[s]"),
-    **LOOP_SCHEMA,
-}
+@dataclass(frozen=True, kw_only=True)
+class Excitation(Section):
+    """excitation: the force on one floor."""
+
+    type: Literal["none", "harmonics", "hammer", "white_noise", "chirp"] = key("none")
+    floor: int = key(1, in_range(1, 3), doc="floor the force acts on")
+    amplitudes: Floats = key((0.1, 0.1, 0.1), doc="harmonics: force amplitudes [N]")
+    frequencies_hz: Floats = key((1.9, 5.7, 8.8), non_negative, doc="harmonics [Hz]")
+    phases: Floats = key((), doc="harmonics: phases [rad], zeros when empty")
+    impulse: float = key(0.05, doc="hammer: impulse [N s]")
+    time: float = key(0.0, non_negative, doc="hammer: time of the blow [s]")
+    width: float = key(5e-3, positive, doc="hammer: duration of the half-sine pulse [s]")
+    std: float = key(0.1, non_negative, doc="white noise: force std [N]")
+    rate_hz: float = key(1000.0, positive, doc="white noise: sample-and-hold rate [Hz]")
+    seed: int = key(0, doc="white noise: random seed")
+    amplitude: float = key(0.1, doc="chirp: amplitude [N]")
+    f0_hz: float = key(0.5, positive, doc="chirp: start frequency [Hz]")
+    f1_hz: float = key(12.0, positive, doc="chirp: end frequency [Hz]")
+    sweep_s: float = key(20.0, positive, doc="chirp: sweep duration [s]")
+
+
+@dataclass(frozen=True, kw_only=True)
+class Model(Section):
+    """model: which dynamics model simulates the rig."""
+
+    type: Literal["lumped", "fe", "modal", "ph", "auto"] = key("lumped")
+    elements_per_column: int = key(3, positive)
+    modes: int = key(3, positive, doc="modal: retained fixed-interface column modes")
+    band_hz: Floats2 = key((0.0, 15.0), non_negative,
+                                       doc="auto: frequency band the scene must reproduce [Hz]")
+    tolerance: float = key(0.01, in_range(1e-12, 1.0),
+                           doc="auto: relative error allowed in the band")
+
+
+@dataclass(frozen=True, kw_only=True)
+class Integrator(Section):
+    """integrator: the time integration of the model."""
+
+    method: Literal["rk4", "midpoint", "dop853", "radau"] = key("rk4")
+    dt: float = key(1e-3, positive, doc="fixed step, or output step of adaptive methods")
+    rtol: float = key(1e-10, positive)
+    atol: float = key(1e-12, positive)
+
+
+@dataclass(frozen=True, kw_only=True)
+class Initial(Section):
+    """initial: the state at t = 0."""
+
+    floors: Floats3 = key((0.0, 0.0, 0.0), doc="x1..x3 [m]")
+    phi: float = key(0.0, doc="pendulum angle from hanging [rad]")
+    floor_velocities: Floats3 = key((0.0, 0.0, 0.0), doc="[m/s]")
+    phi_rate: float = key(0.0, doc="[rad/s]")
+
+
+@dataclass(frozen=True, kw_only=True)
+class Scene(Section):
+    """A validated scene: each section's class is its key in CamelCase."""
+
+    name: str = key(doc="scene name")
+    description: str = key("")
+    rig: Rig = section(Rig)
+    damping: Damping = section(Damping)
+    model: Model = section(Model)
+    integrator: Integrator = section(Integrator)
+    excitation: Excitation = section(Excitation)
+    initial: Initial = section(Initial)
+    duration: float = key(10.0, positive, doc="[s]")
+    plant: Plant = section(Plant)
+    sensors: Sensors = section(Sensors)
+    actuators: Actuators = section(Actuators)
+    design: Design = section(Design)
+    estimator: Estimator = section(Estimator)
+    controller: Controller = section(Controller)
+    evaluation: Evaluation = section(Evaluation)
 
 
 def _read(path: Path) -> dict[str, Any]:
@@ -124,17 +181,17 @@ def _read(path: Path) -> dict[str, Any]:
 def apply_overrides(data: dict[str, Any], overrides: list[str]) -> None:
     """Apply ``dotted.key=value`` overrides; values are parsed as YAML (numbers, lists)."""
     for item in overrides:
-        key, sep, text = item.partition("=")
-        if not sep or not key:
+        dotted, sep, text = item.partition("=")
+        if not sep or not dotted:
             raise InputError(f"--set {item}: expected dotted.key=value")
         try:
             value = load_yaml(text) if text else ""
         except yaml.YAMLError:
             raise InputError(f"--set {item}: value is not valid YAML") from None
-        set_dotted(data, key.strip(), value)
+        set_dotted(data, dotted.strip(), value)
 
 
-def _check_consistency(scene: Section) -> None:
+def _check_consistency(scene: Scene) -> None:
     exc = scene.excitation
     if exc.type == "harmonics":
         n = len(exc.amplitudes)
@@ -149,20 +206,45 @@ def _check_consistency(scene: Section) -> None:
         )
     if abs(scene.initial.phi) > 100 * math.pi:
         raise InputError("initial.phi: more than 50 turns; give the angle in rad")
-    check_loop(scene)
+    _check_loop(scene)
 
 
-def scene_from_dict(data: dict[str, Any], overrides: list[str] | None = None) -> Section:
+def _check_loop(scene: Scene) -> None:
+    """Cross-field checks of the closed-loop sections (only for scenes with a controller)."""
+    c, window = scene.controller, scene.evaluation.window
+    if c.type == "none":
+        return
+    period = 1.0 / scene.sensors.rate_hz
+    if period > scene.duration:
+        raise InputError(f"sensors.rate_hz: one period ({period:g} s) is longer than duration")
+    ratio = period / scene.integrator.dt
+    if abs(ratio - round(ratio)) > 1e-6 * ratio:
+        raise InputError(
+            f"integrator.dt: {scene.integrator.dt:g} s does not divide the sample period "
+            f"{period:g} s (1/sensors.rate_hz)"
+        )
+    if c.start - window < -1e-9 or c.start + window > scene.duration + 1e-9:
+        raise InputError(
+            f"evaluation.window: {window:g} s does not fit before controller.start ({c.start:g} s) "
+            f"and after it within duration {scene.duration:g} s"
+        )
+    if c.type == "lqg" and scene.estimator.type == "ekf":
+        raise InputError("estimator.type: LQG works on a linear model; use kf, tvkf or truth")
+    if scene.estimator.type == "none":
+        raise InputError(f"estimator.type: {c.type} needs a state (kf, tvkf, ekf or truth)")
+
+
+def scene_from_dict(data: dict[str, Any], overrides: list[str] | None = None) -> Scene:
     """Validate a scene given as a dict (after applying ``--set`` overrides).
 
     ``model.type: auto`` stays as given: :func:`stillframe.fidelity.auto_model.resolve_model` is
     the step that replaces it with a measured choice."""
     apply_overrides(data, overrides or [])
-    scene = validate(SCENE_SCHEMA, data)
+    scene = validate(Scene, data)
     _check_consistency(scene)
     return scene
 
 
-def load_scene(path: str | Path, overrides: list[str] | None = None) -> Section:
+def load_scene(path: str | Path, overrides: list[str] | None = None) -> Scene:
     """Load, override and validate a scene file; raise InputError naming the key on any problem."""
     return scene_from_dict(_read(Path(path)), overrides)

@@ -1,84 +1,132 @@
-"""A small declarative schema for nested YAML documents, with errors that name the dotted key.
+"""Scene sections as frozen dataclasses, validated from nested YAML with errors naming the key.
 
-A schema is a dict whose values are either :class:`Field` (a leaf) or another schema dict (a
-section). :func:`validate` fills defaults, converts numbers, runs each field's check and returns
-nested :class:`Section` objects with attribute access. Every problem raises
-:class:`~stillframe.errors.InputError` naming the key and what is wrong.
+A section is a ``@dataclass(frozen=True, kw_only=True)`` subclass of :class:`Section`. Each key is
+a field: its annotation is its type, and :func:`key` gives its default and a :class:`Field` with
+the physical check and the documentation::
+
+    half_length: float = key(0.0825, positive, doc="L4 [m]")
+
+The annotations understood: ``float``, ``int``, ``bool``, ``str``, ``Literal["a", "b"]`` (one of
+these strings), ``tuple[float, ...]`` (a list of numbers), ``tuple[float, float, float]`` (a list
+of exactly three), ``float | None`` (may be null) and another section (a nested mapping).
+:func:`validate` fills defaults, converts numbers, runs each check and builds the instances;
+every problem raises :class:`~stillframe.errors.InputError` naming the dotted key.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
+import types
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field
-from typing import Any
+from dataclasses import MISSING, dataclass
+from typing import Any, Literal, NamedTuple, TypeVar, get_args, get_origin, get_type_hints
 
 from stillframe.errors import InputError
 
-REQUIRED = object()
 Check = Callable[[Any], str | None]
+Floats = tuple[float, ...]
+Floats2 = tuple[float, float]
+Floats3 = tuple[float, float, float]
+Floats4 = tuple[float, float, float, float]
+Floats8 = tuple[float, float, float, float, float, float, float, float]
+S = TypeVar("S", bound="Section")
 
 
 @dataclass(frozen=True)
 class Field:
-    """A leaf value: its kind, default (or REQUIRED) and an optional physical check.
+    """What a key's annotation cannot say: its physical check (an error text or None) and doc."""
 
-    kind is one of ``float``, ``int``, ``bool``, ``str``, ``"floats"`` (list of numbers),
-    ``"any"``; ``choices`` restricts strings; ``length`` fixes a list's length; ``check`` returns
-    an error text or None.
-    """
-
-    kind: Any
-    default: Any = REQUIRED
     check: Check | None = None
-    choices: tuple[str, ...] | None = None
-    length: int | None = None
     doc: str = ""
-    nullable: bool = False
 
 
-@dataclass
-class Section(Mapping):
-    """A validated section; read values as attributes (``scene.rig.gravity``)."""
+def key(default: Any = MISSING, check: Check | None = None, *, doc: str = "") -> Any:
+    """A section field with its default (none: the key is required), check and doc."""
+    return dataclasses.field(default=default, metadata={"field": Field(check, doc)})
 
-    _values: dict[str, Any] = field(default_factory=dict)
 
-    def __getattr__(self, name: str) -> Any:
-        try:
-            return self.__dict__["_values"][name]
-        except KeyError:
-            raise AttributeError(name) from None
+def section(cls: type[S]) -> S:
+    """A nested section field; its defaults are those of ``cls``."""
+    return dataclasses.field(default_factory=cls)
 
-    def __getitem__(self, key: str) -> Any:
-        return self._values[key]
 
-    def __iter__(self):
-        return iter(self._values)
-
-    def __len__(self) -> int:
-        return len(self._values)
+@dataclass(frozen=True)
+class Section:
+    """Base of the scene's sections (frozen dataclasses whose fields are declared with key())."""
 
     def to_dict(self) -> dict[str, Any]:
-        return {k: v.to_dict() if isinstance(v, Section) else v for k, v in self._values.items()}
+        """Plain nested dicts and lists, as YAML or JSON would hold them."""
+        return {f.name: _plain(getattr(self, f.name)) for f in dataclasses.fields(self)}
+
+
+def _plain(value: Any) -> Any:
+    if isinstance(value, Section):
+        return value.to_dict()
+    return list(value) if isinstance(value, tuple) else value
+
+
+def _values(value: Any) -> tuple:
+    return value if isinstance(value, tuple) else (value,)
 
 
 def positive(value: Any) -> str | None:
-    values = value if isinstance(value, list) else [value]
-    return None if all(v > 0 for v in values) else "must be > 0"
+    return None if all(v > 0 for v in _values(value)) else "must be > 0"
 
 
 def non_negative(value: Any) -> str | None:
-    values = value if isinstance(value, list) else [value]
-    return None if all(v >= 0 for v in values) else "must be >= 0"
+    return None if all(v >= 0 for v in _values(value)) else "must be >= 0"
 
 
 def in_range(low: float, high: float) -> Check:
     def check(value: Any) -> str | None:
-        values = value if isinstance(value, list) else [value]
-        ok = all(low <= v <= high for v in values)
+        ok = all(low <= v <= high for v in _values(value))
         return None if ok else f"must lie in [{low:g}, {high:g}]"
 
     return check
+
+
+class _Spec(NamedTuple):
+    """One key as its annotation and :func:`key` declare it."""
+
+    name: str
+    kind: Any  # float, int, bool, str, tuple (a list of numbers) or a Section subclass
+    default: Any  # MISSING: required; nested sections: unused
+    field: Field
+    nullable: bool = False
+    choices: tuple[str, ...] | None = None
+    length: int | None = None
+
+
+def _is_section(kind: Any) -> bool:
+    return isinstance(kind, type) and issubclass(kind, Section)
+
+
+def _spec(f: dataclasses.Field, hint: Any) -> _Spec:
+    spec = _Spec(f.name, hint, f.default, f.metadata.get("field", Field()))
+    args = get_args(hint)
+    if get_origin(hint) is types.UnionType and type(None) in args:
+        (inner,) = (a for a in args if a is not type(None))
+        return _spec(f, inner)._replace(nullable=True)
+    if get_origin(hint) is Literal:
+        return spec._replace(kind=str, choices=args)
+    if get_origin(hint) is tuple:
+        length = None if args[-1] is Ellipsis else len(args)
+        return spec._replace(kind=tuple, length=length)
+    if hint in (float, int, bool, str) or _is_section(hint):
+        return spec
+    raise TypeError(f"{f.name}: a scene key cannot have the type {hint!r}")
+
+
+_SPECS: dict[type, tuple[_Spec, ...]] = {}
+
+
+def _specs(cls: type[Section]) -> tuple[_Spec, ...]:
+    """The keys of a section class, in declaration order (worked out once per class)."""
+    if cls not in _SPECS:
+        hints = get_type_hints(cls)
+        _SPECS[cls] = tuple(_spec(f, hints[f.name]) for f in dataclasses.fields(cls))
+    return _SPECS[cls]
 
 
 def _number(key: str, value: Any, kind: type) -> float | int:
@@ -94,60 +142,58 @@ def _number(key: str, value: Any, kind: type) -> float | int:
     return value
 
 
-def _leaf(key: str, spec: Field, value: Any) -> Any:
+def _leaf(key: str, spec: _Spec, value: Any) -> Any:
     if value is None and spec.nullable:
         return None
     if spec.kind in (float, int):
         out: Any = _number(key, value, spec.kind)
-    elif spec.kind == "floats":
-        if not isinstance(value, list):
+    elif spec.kind is tuple:
+        if not isinstance(value, list | tuple):
             raise InputError(f"{key}: expected a list of numbers, got {value!r}")
-        out = [_number(f"{key}[{i}]", v, float) for i, v in enumerate(value)]
+        out = tuple(_number(f"{key}[{i}]", v, float) for i, v in enumerate(value))
         if spec.length is not None and len(out) != spec.length:
             raise InputError(f"{key}: expected {spec.length} values, got {len(out)}")
     elif spec.kind is bool:
         if not isinstance(value, bool):
             raise InputError(f"{key}: expected true or false, got {value!r}")
         out = value
-    elif spec.kind is str:
+    else:
         if not isinstance(value, str):
             raise InputError(f"{key}: expected text, got {value!r}")
         if spec.choices and value not in spec.choices:
             raise InputError(f"{key}: {value!r} is not one of {', '.join(spec.choices)}")
         out = value
-    else:
-        out = value
-    if spec.check is not None and out is not None:
-        problem = spec.check(out)
-        if problem:
-            raise InputError(f"{key}: {problem} (got {out!r})")
+    problem = spec.field.check(out) if spec.field.check is not None else None
+    if problem:
+        raise InputError(f"{key}: {problem} (got {out!r})")
     return out
 
 
-def validate(schema: Mapping[str, Any], data: Any, prefix: str = "") -> Section:
-    """Validate ``data`` against ``schema``, fill defaults; InputError on the first problem."""
+def validate(cls: type[S], data: Any, prefix: str = "") -> S:
+    """Validate ``data`` against the section ``cls``, fill defaults; InputError on the first
+    problem."""
     where = prefix.rstrip(".") or "scene"
     if data is None:
         data = {}
     if not isinstance(data, Mapping):
         raise InputError(f"{where}: expected a mapping of keys, got {data!r}")
-    unknown = sorted(set(data) - set(schema))
+    keys = _specs(cls)
+    unknown = sorted(set(data) - {s.name for s in keys}, key=str)
     if unknown:
-        known = ", ".join(sorted(schema))
+        known = ", ".join(sorted(s.name for s in keys))
         raise InputError(f"{prefix}{unknown[0]}: unknown key (known here: {known})")
     values: dict[str, Any] = {}
-    for name, spec in schema.items():
-        key = f"{prefix}{name}"
-        if isinstance(spec, Mapping):
-            values[name] = validate(spec, data.get(name), prefix=f"{key}.")
-            continue
-        if name not in data:
-            if spec.default is REQUIRED:
-                raise InputError(f"{key}: missing required field")
-            values[name] = list(spec.default) if isinstance(spec.default, list) else spec.default
-            continue
-        values[name] = _leaf(key, spec, data[name])
-    return Section(values)
+    for spec in keys:
+        dotted = f"{prefix}{spec.name}"
+        if _is_section(spec.kind):
+            values[spec.name] = validate(spec.kind, data.get(spec.name), prefix=f"{dotted}.")
+        elif spec.name in data:
+            values[spec.name] = _leaf(dotted, spec, data[spec.name])
+        elif spec.default is MISSING:
+            raise InputError(f"{dotted}: missing required field")
+        else:
+            values[spec.name] = spec.default
+    return cls(**values)
 
 
 def set_dotted(data: dict[str, Any], dotted: str, value: Any) -> None:

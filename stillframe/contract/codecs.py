@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from stillframe.config.schema import Section
+from stillframe.config.loop_sections import Sensors
 from stillframe.contract import messages, topics
 from stillframe.contract.signals import Command, Estimate, Sample
 
@@ -63,7 +63,7 @@ class SensorMessages:
     """The rig's sensor messages for one :class:`Sample`: floor IMUs, encoder, load cell, and
     the ground truth (``state_truth``); covariances from the scene's ``sensors`` section."""
 
-    def __init__(self, sensors: Section) -> None:
+    def __init__(self, sensors: Sensors) -> None:
         var_a = float(sensors.accelerometer_noise_std) ** 2
         self.imus = []
         for n in (1, 2, 3):

@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from stillframe.config.schema import Section
+from stillframe.config.scene import Scene
 
 
 @dataclass
@@ -67,7 +67,7 @@ class Command:
 ACTUATOR = {"lqg": 0, "euk_pendulum": 0, "euk_floor": 1, "passivity": 0}
 
 
-def actuator_of(scene: Section) -> int | None:
+def actuator_of(scene: Scene) -> int | None:
     """The index in [torque, floor-3 force] the scene's controller drives (None: no controller)."""
     return ACTUATOR.get(scene.controller.type)
 

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from stillframe.config.schema import Section
+from stillframe.config.scene import Scene
 from stillframe.contract.signals import ACTUATOR
 from stillframe.control.euk import EUKLaw
 from stillframe.control.lqg import LQGLaw, design_lqr
@@ -26,7 +26,7 @@ def check_sampled_injection(damping: float, period: float, inertia: float) -> No
             f"{2 * inertia / period:.3g} or a higher sensors.rate_hz")
 
 
-def make_controller(scene: Section, design: FrameModel) -> Controller:
+def make_controller(scene: Scene, design: FrameModel) -> Controller:
     """The controller of ``scene.controller.type`` (not ``none``)."""
     c = scene.controller
     period = 1.0 / scene.sensors.rate_hz

@@ -13,6 +13,7 @@ the quasi-static approximation.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -35,7 +36,7 @@ class LQRDesign:
     E: np.ndarray
 
 
-def design_lqr(model: FrameModel, period: float, state_weights: list[float],
+def design_lqr(model: FrameModel, period: float, state_weights: Sequence[float],
                input_weight: float, input_index: int, excited_floor: int) -> LQRDesign:
     """DLQR for input ``input_index`` of u = [f1, f2, f3, torque] (3: the pendulum torque)."""
     A_c, B_c = model.linearized().state_space()

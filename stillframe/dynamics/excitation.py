@@ -10,18 +10,18 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
-from stillframe.config.schema import Section
+from stillframe.config.scene import Excitation
 
 Force = Callable[[float], float]
 
 
-def harmonics(amplitudes: list[float], frequencies_hz: list[float],
-              phases: list[float]) -> Force:
+def harmonics(amplitudes: Sequence[float], frequencies_hz: Sequence[float],
+              phases: Sequence[float]) -> Force:
     terms = list(zip(amplitudes, [2.0 * math.pi * f for f in frequencies_hz],
                      phases or [0.0] * len(amplitudes), strict=True))
     return lambda t: sum(a * math.sin(w * t + psi) for a, w, psi in terms)
@@ -56,7 +56,7 @@ def chirp(amplitude: float, f0_hz: float, f1_hz: float, sweep_s: float) -> Force
     return force
 
 
-def excitation_force(excitation: Section, duration: float) -> Force | None:
+def excitation_force(excitation: Excitation, duration: float) -> Force | None:
     """The scalar force of the scene's excitation, or None for ``type: none``."""
     e = excitation
     match e.type:
@@ -80,7 +80,7 @@ class FloorLoad:
     can evaluate the same force without calling back into Python.
     """
 
-    excitation: Section
+    excitation: Excitation
     force: Force
 
     def __call__(self, t: float) -> np.ndarray:
@@ -89,7 +89,7 @@ class FloorLoad:
         return f
 
 
-def floor_load(excitation: Section, duration: float) -> FloorLoad | None:
+def floor_load(excitation: Excitation, duration: float) -> FloorLoad | None:
     """The scene's floor load, or None for ``type: none``."""
     force = excitation_force(excitation, duration)
     return None if force is None else FloorLoad(excitation, force)

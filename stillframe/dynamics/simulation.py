@@ -9,7 +9,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from stillframe.config.schema import Section
+from stillframe.config.scene import Initial, Scene
 from stillframe.dynamics.excitation import floor_load
 from stillframe.dynamics.integrators import ADAPTIVE, integrate, make_integrator, reference_solution
 from stillframe.dynamics.kernels import compiled_integrate, compiles
@@ -23,7 +23,7 @@ log = logging.getLogger("stillframe.dynamics.simulation")
 Progress = Callable[[float], None]
 
 
-def initial_state(model: FrameModel, initial: Section) -> np.ndarray:
+def initial_state(model: FrameModel, initial: Initial) -> np.ndarray:
     """[q, q̇] from floor displacements/velocities and φ, φ̇; inner DOFs in static equilibrium."""
     q = np.zeros(model.n_dof)
     v = np.zeros(model.n_dof)
@@ -78,7 +78,7 @@ class _Recorder:
                        r[:, 13], meta)
 
 
-def simulate(scene: Section, duration: float | None = None,
+def simulate(scene: Scene, duration: float | None = None,
              progress: Progress | None = None) -> History:
     """Integrate the scene open loop and record floor motion, φ, the load and the energy."""
     duration = scene.duration if duration is None else duration
@@ -125,7 +125,7 @@ def simulate(scene: Section, duration: float | None = None,
     return history
 
 
-def _ph_history(scene: Section, duration: float, progress: Progress | None) -> History:
+def _ph_history(scene: Scene, duration: float, progress: Progress | None) -> History:
     """``model.type: ph``: the frame pHDAE (:mod:`stillframe.dynamics.ph.scene_model`)."""
     start = time.perf_counter()
     run = ph_scene.simulate(scene, duration, progress)

@@ -10,6 +10,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 
 from stillframe.dynamics.models import FrameModel
@@ -46,7 +48,7 @@ def check_rk4_step(model: FrameModel, dt: float) -> None:
             "integrator.method: midpoint")
 
 
-def drift_warning(model: FrameModel, floors: np.ndarray, lengths: list[float]) -> str | None:
+def drift_warning(model: FrameModel, floors: np.ndarray, lengths: Sequence[float]) -> str | None:
     """A warning text if a story drift exceeds DRIFT_LIMIT of its height, else None."""
     drift = np.diff(np.column_stack([np.zeros(len(floors)), floors]), axis=1)
     ratio = np.max(np.abs(drift), axis=0) / np.asarray(lengths)

@@ -5,11 +5,12 @@ update when some are missing), and report the estimate."""
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
-from stillframe.config.schema import Section
+from stillframe.config.loop_sections import Estimator
 from stillframe.contract.signals import Estimate, Sample
 from stillframe.design.coordinates import design_map, physical_selector
 from stillframe.dynamics.models import FrameModel
@@ -32,7 +33,7 @@ class Counters:
 class Filter(ABC):
     """A recursive estimator on a design :class:`FrameModel`; state z = [q, q̇]."""
 
-    def __init__(self, model: FrameModel, config: Section, excited_floor: int,
+    def __init__(self, model: FrameModel, config: Estimator, excited_floor: int,
                  initial_physical: np.ndarray) -> None:
         self.model = model
         self.excited_floor = excited_floor
@@ -46,8 +47,8 @@ class Filter(ABC):
         self.force = 0.0
         self.counters = Counters()
 
-    def noise_covariances(self, process_std: list[float],
-                          measurement_std: list[float]) -> tuple[np.ndarray, np.ndarray]:
+    def noise_covariances(self, process_std: Sequence[float],
+                          measurement_std: Sequence[float]) -> tuple[np.ndarray, np.ndarray]:
         """Q (per sample, physical stds mapped to the design state) and R (eq. 5.221–5.222)."""
         return (self.T @ np.diag(np.square(process_std)) @ self.T.T,
                 np.diag(np.square(measurement_std)))

@@ -20,7 +20,7 @@ import math
 
 import numpy as np
 
-from stillframe.config.schema import Section
+from stillframe.config.loop_sections import Estimator
 from stillframe.contract.signals import full_inputs
 from stillframe.dynamics.models import FrameModel
 from stillframe.estimation.base import Filter
@@ -29,7 +29,7 @@ from stillframe.estimation.base import Filter
 class ExtendedKalman(Filter):
     """EKF with state z = [q, q̇] of the design :class:`FrameModel`."""
 
-    def __init__(self, model: FrameModel, config: Section, excited_floor: int,
+    def __init__(self, model: FrameModel, config: Estimator, excited_floor: int,
                  initial_physical: np.ndarray, period: float) -> None:
         super().__init__(model, config, excited_floor, initial_physical)
         self.max_substep = config.max_substep

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from stillframe.config.schema import Section
+from stillframe.config.scene import Scene
 from stillframe.contract.signals import Estimate, Sample
 from stillframe.design.coordinates import to_design
 from stillframe.dynamics.models import FrameModel
@@ -33,13 +33,13 @@ class TruthEstimator:
         return Estimate(sample.t, to_design(self.model, sample.truth), sample.truth.copy())
 
 
-def initial_physical(scene: Section) -> np.ndarray:
+def initial_physical(scene: Scene) -> np.ndarray:
     """The scene's initial [x1, x2, x3, φ, ẋ1, ẋ2, ẋ3, φ̇]."""
     i = scene.initial
     return np.array([*i.floors, i.phi, *i.floor_velocities, i.phi_rate], dtype=float)
 
 
-def make_estimator(scene: Section, design: FrameModel) -> TruthEstimator | Filter:
+def make_estimator(scene: Scene, design: FrameModel) -> TruthEstimator | Filter:
     """The estimator of ``scene.estimator.type`` (not ``none``)."""
     kind = scene.estimator.type
     if kind == "truth":

@@ -22,7 +22,7 @@ import numpy as np
 import scipy.linalg as sla
 from filterpy.kalman import KalmanFilter
 
-from stillframe.config.schema import Section
+from stillframe.config.loop_sections import Estimator
 from stillframe.contract.signals import Sample, full_inputs
 from stillframe.design.discrete import Discrete, first_order_hold
 from stillframe.design.riccati import solve_dare
@@ -33,7 +33,7 @@ from stillframe.estimation.base import Filter
 class LinearFilter(Filter):
     """Shared linear model: Φ, Γ0, Γ1 per interval length, and y = C z + D u."""
 
-    def __init__(self, model: FrameModel, config: Section, excited_floor: int,
+    def __init__(self, model: FrameModel, config: Estimator, excited_floor: int,
                  initial_physical: np.ndarray, period: float) -> None:
         super().__init__(model, config, excited_floor, initial_physical)
         self.A, self.B = model.linearized().state_space()
@@ -84,7 +84,7 @@ class LinearFilter(Filter):
 class SteadyStateKalman(LinearFilter):
     """Stationary Kalman filter (fixed covariance P∞ at the nominal period)."""
 
-    def __init__(self, model: FrameModel, config: Section, excited_floor: int,
+    def __init__(self, model: FrameModel, config: Estimator, excited_floor: int,
                  initial_physical: np.ndarray, period: float) -> None:
         super().__init__(model, config, excited_floor, initial_physical, period)
         self.design(self.Q, self.R)
@@ -120,7 +120,7 @@ class SteadyStateKalman(LinearFilter):
 class TimeVaryingKalman(LinearFilter):
     """Kalman filter with the covariance propagated every sample (filterpy ``KalmanFilter``)."""
 
-    def __init__(self, model: FrameModel, config: Section, excited_floor: int,
+    def __init__(self, model: FrameModel, config: Estimator, excited_floor: int,
                  initial_physical: np.ndarray, period: float) -> None:
         super().__init__(model, config, excited_floor, initial_physical, period)
         self.kf = KalmanFilter(dim_x=self.x.size, dim_z=4)

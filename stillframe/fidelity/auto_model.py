@@ -27,8 +27,7 @@ from typing import Any
 import numpy as np
 import scipy.linalg as sla
 
-from stillframe.config.scene import apply_overrides, scene_from_dict
-from stillframe.config.schema import Section
+from stillframe.config.scene import Scene, apply_overrides, scene_from_dict
 from stillframe.dynamics.models import build_model
 from stillframe.errors import InputError
 from stillframe.fidelity.work_precision import MODELS, REFERENCE_MODEL, SCENE_BANDS_HZ
@@ -163,7 +162,7 @@ def choose(scene_data: dict, band: list[float], tolerance: float,
     return Choice(overrides, run["model"], run["method"], run["dt"], reason)
 
 
-def resolve_model(scene: Section) -> tuple[Section, Choice | None]:
+def resolve_model(scene: Scene) -> tuple[Scene, Choice | None]:
     """The step after loading: a scene with ``model.type: auto`` becomes the scene with the chosen
     model, integrator and step (and the choice, with its reason); any other scene is returned
     unchanged with None."""
@@ -171,7 +170,8 @@ def resolve_model(scene: Section) -> tuple[Section, Choice | None]:
         return scene, None
     band = scene.model.band_hz
     if band[0] >= band[1]:
-        raise InputError(f"model.band_hz: the lower edge must be below the upper (got {band})")
+        raise InputError(
+            f"model.band_hz: the lower edge must be below the upper (got {list(band)})")
     data = scene.to_dict()
     choice = choose(copy.deepcopy(data), list(band), scene.model.tolerance)
     apply_overrides(data, choice.overrides)

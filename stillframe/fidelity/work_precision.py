@@ -16,8 +16,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from stillframe.config.scene import scene_from_dict
-from stillframe.config.schema import Section
+from stillframe.config.scene import Scene, scene_from_dict
 from stillframe.dynamics.excitation import floor_load
 from stillframe.dynamics.kernels import CompiledFrame
 from stillframe.dynamics.models import FrameModel, build_model
@@ -69,7 +68,7 @@ class Point:
     note: str = ""
 
 
-def scene_for(scene: str, model: str, duration: float) -> Section:
+def scene_for(scene: str, model: str, duration: float) -> Scene:
     return scene_from_dict({"name": f"{scene}-{model}"}, [
         "damping.model=modal", *SCENES[scene], *MODELS[model], f"duration={duration}"])
 
@@ -79,7 +78,7 @@ def outputs(model: FrameModel, states: np.ndarray) -> np.ndarray:
     return states[:, [*model.floor_index, model.phi_index]]
 
 
-def run_outputs(frame: CompiledFrame, scene: Section, method: str, dt: float,
+def run_outputs(frame: CompiledFrame, scene: Scene, method: str, dt: float,
                 repeat_until: float = 0.0) -> tuple[np.ndarray, float]:
     """Outputs on the 10 ms grid and the CPU time per run (repeated to ``repeat_until`` s) of
     ``frame`` (built from ``scene``'s model)."""

@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from stillframe.config.schema import Section
+from stillframe.config.scene import Scene
 from stillframe.contract.signals import Command
 from stillframe.control.factory import make_controller
 from stillframe.dynamics.models.identified import frame_for
@@ -64,7 +64,7 @@ def reduction_pct(uncontrolled: np.ndarray, controlled: np.ndarray) -> list[floa
     return (100.0 * (1.0 - controlled / uncontrolled)).tolist()
 
 
-def open_loop_truth(scene: Section) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def open_loop_truth(scene: Scene) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The plant's fine truth history with no command (same scene and seeds)."""
     plant = make_plant(scene)
     for _ in range(round(scene.duration / plant.period)):
@@ -72,7 +72,7 @@ def open_loop_truth(scene: Section) -> tuple[np.ndarray, np.ndarray, np.ndarray]
     return plant.truth_history()
 
 
-def evaluate(history: LoopHistory, scene: Section) -> dict:
+def evaluate(history: LoopHistory, scene: Scene) -> dict:
     """Steady-state peaks with and without control and their reductions (module docstring)."""
     start, end, window = scene.controller.start, history.fine_t[-1], scene.evaluation.window
     d0, d1 = steady_state_peaks(history.fine_t, history.fine_floors, start, end, window)
@@ -90,7 +90,7 @@ def evaluate(history: LoopHistory, scene: Section) -> dict:
     }
 
 
-def run_closed_loop(scene: Section, progress: Progress | None = None) -> LoopHistory:
+def run_closed_loop(scene: Scene, progress: Progress | None = None) -> LoopHistory:
     """Run the scene's plant, estimator and controller lock-step for ``scene.duration``."""
     started = time.perf_counter()
     plant = make_plant(scene)

@@ -15,8 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from stillframe.config.scene import load_scene
-from stillframe.config.schema import Section
+from stillframe.config.scene import Scene, load_scene
 from stillframe.contract import messages, topics
 from stillframe.errors import InputError
 from stillframe.fidelity.auto_model import resolve_model
@@ -35,7 +34,7 @@ OK, WARN, ERROR = 0, 1, 2
 class LoopParameters:
     """The parameters every loop node declares."""
 
-    scene: Section
+    scene: Scene
     mode: str
     lockstep_timeout_s: float
     diagnostics_period_s: float

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from stillframe.config.schema import Section
+from stillframe.config import loop_sections
 
 
 @dataclass
@@ -40,7 +40,7 @@ class Actuator:
 class Actuators:
     """The pendulum torque and the floor-3 force, in the order [torque, force]."""
 
-    def __init__(self, actuators: Section, period: float) -> None:
+    def __init__(self, actuators: loop_sections.Actuators, period: float) -> None:
         a = actuators
         self.torque = Actuator(a.torque_limit, a.torque_rate_limit, period)
         self.force = Actuator(a.force_limit, a.force_rate_limit, period)

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from stillframe.config.schema import Section
+from stillframe.config.scene import Scene
 from stillframe.contract.signals import Sample
 from stillframe.dynamics.excitation import floor_load
 from stillframe.dynamics.integrators import check_finite, integrate, make_integrator
@@ -26,7 +26,7 @@ from stillframe.plant.ph_plant import PHPlant
 from stillframe.plant.sensors import Sensors
 
 
-def sample_period(scene: Section) -> tuple[float, int]:
+def sample_period(scene: Scene) -> tuple[float, int]:
     """The sample period 1/sensors.rate_hz and the integrator steps per period."""
     period = 1.0 / scene.sensors.rate_hz
     ratio = period / scene.integrator.dt
@@ -39,7 +39,7 @@ def sample_period(scene: Section) -> tuple[float, int]:
     return period, steps
 
 
-def make_plant(scene: Section) -> Plant | PHPlant:
+def make_plant(scene: Scene) -> Plant | PHPlant:
     """The scene's plant: the frame pHDAE for ``model.type: ph`` (``plant.model: scene``),
     else :class:`Plant`."""
     if scene.model.type == "ph" and scene.plant.model == "scene":
@@ -50,7 +50,7 @@ def make_plant(scene: Section) -> Plant | PHPlant:
 class Plant:
     """Scene-driven plant with seeded sensor and process noise."""
 
-    def __init__(self, scene: Section) -> None:
+    def __init__(self, scene: Scene) -> None:
         self.period, self.substeps = sample_period(scene)
         self.h = self.period / self.substeps
         model = frame_for(scene.plant.model, scene.plant.file, scene, "plant.file")

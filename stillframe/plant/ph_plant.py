@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from stillframe.config.schema import Section
+from stillframe.config.scene import Scene
 from stillframe.contract.signals import Sample
 from stillframe.dynamics.excitation import floor_load
 from stillframe.dynamics.ph import frame, scene_model
@@ -27,7 +27,7 @@ from stillframe.plant.sensors import Sensors
 class PHPlant:
     """The frame pHDAE with seeded sensor noise and limited actuators."""
 
-    def __init__(self, scene: Section, period: float, substeps: int) -> None:
+    def __init__(self, scene: Scene, period: float, substeps: int) -> None:
         if any(scene.plant.process_noise_std):
             raise InputError("plant.process_noise_std: model.type ph takes no process noise")
         self.period, self.substeps = period, substeps

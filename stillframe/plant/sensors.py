@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from stillframe.config.schema import Section
+from stillframe.config import loop_sections
 
 
 def quantise(angle: float, resolution: float) -> float:
@@ -20,7 +20,7 @@ def quantise(angle: float, resolution: float) -> float:
 class Sensors:
     """Turns the true floor accelerations, φ and excitation force into readings."""
 
-    def __init__(self, sensors: Section, rng: np.random.Generator) -> None:
+    def __init__(self, sensors: loop_sections.Sensors, rng: np.random.Generator) -> None:
         self.config = sensors
         self.rng = rng
         self.bias = np.asarray(sensors.accelerometer_bias, dtype=float)

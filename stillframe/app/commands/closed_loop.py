@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from collections.abc import Sequence
 
 from stillframe.app.commands.common import (
     add_scene_arguments,
@@ -30,7 +31,8 @@ def _progress(fraction: float) -> None:
     print(f"\rclosed loop {fraction:6.1%}", end="", file=sys.stderr, flush=True)
 
 
-def reduction_table(evaluation: dict, reference_d: list[float], reference_v: list[float]) -> str:
+def reduction_table(evaluation: dict, reference_d: Sequence[float],
+                    reference_v: Sequence[float]) -> str:
     """Floors as rows: our displacement and velocity reductions and the reference ones."""
     red = evaluation["reduction_pct"]
     rows = []

@@ -7,8 +7,7 @@ import json
 import sys
 from typing import Any
 
-from stillframe.config.scene import load_scene
-from stillframe.config.schema import Section
+from stillframe.config.scene import Scene, load_scene
 from stillframe.fidelity.auto_model import Choice, resolve_model
 
 
@@ -26,12 +25,12 @@ def add_json_argument(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--json", action="store_true", help="print one JSON document")
 
 
-def scene_from_args(args: argparse.Namespace) -> Section:
+def scene_from_args(args: argparse.Namespace) -> Scene:
     """The scene of SCENE and ``--set``, with ``model.type: auto`` resolved."""
     return scene_and_choice(args)[0]
 
 
-def scene_and_choice(args: argparse.Namespace) -> tuple[Section, Choice | None]:
+def scene_and_choice(args: argparse.Namespace) -> tuple[Scene, Choice | None]:
     """The scene as :func:`scene_from_args` and the ``model.type: auto`` choice (None if none)."""
     return resolve_model(load_scene(args.scene, args.overrides))
 

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from stillframe.app.commands.launch import add_launch_arguments, print_evaluation, report_death
-from stillframe.config.schema import Section
+from stillframe.config.scene import Scene
 from stillframe.errors import InputError
 from stillframe.locations import SCENES_DIR
 
@@ -49,7 +49,7 @@ def clear_previous(out: Path) -> None:
 
 
 def plot_floors(path: Path, controlled: tuple[np.ndarray, np.ndarray],
-                uncontrolled: tuple[np.ndarray, np.ndarray], scene: Section) -> None:
+                uncontrolled: tuple[np.ndarray, np.ndarray], scene: Scene) -> None:
     """One panel per floor: displacement over time without and with control (mm)."""
     import matplotlib
 

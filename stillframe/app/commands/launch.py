@@ -13,6 +13,7 @@ from __future__ import annotations
 import argparse
 import sys
 import tempfile
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -22,7 +23,7 @@ from stillframe.app.commands.common import (
     scene_from_args,
 )
 from stillframe.app.launcher import MODES
-from stillframe.config.schema import Section
+from stillframe.config.scene import Scene
 from stillframe.errors import InputError
 from stillframe.text_table import format_table
 
@@ -65,14 +66,14 @@ def register(sub: argparse._SubParsersAction) -> None:
     parser.set_defaults(func=run)
 
 
-def evaluation_table(evaluation: dict[str, Any], scene: Section) -> str:
+def evaluation_table(evaluation: dict[str, Any], scene: Scene) -> str:
     """Floors as rows: peaks without and with control, the reductions, the scene's reference."""
     ev = scene.evaluation
     red = evaluation["reduction_pct"]
     before = evaluation.get("peak_uncontrolled", {})
     after = evaluation.get("peak_controlled", {})
 
-    def ref(values: list[float], i: int) -> str:
+    def ref(values: Sequence[float], i: int) -> str:
         return f"{values[i]:.2f}" if len(values) == 3 else "-"
 
     def peak(table: dict[str, list[float]], key: str, i: int) -> str:
@@ -88,7 +89,7 @@ def evaluation_table(evaluation: dict[str, Any], scene: Section) -> str:
                          "v off [m/s]", "v on [m/s]", "v red. %", "thesis %"], rows)
 
 
-def print_evaluation(evaluation: dict[str, Any], scene: Section) -> None:
+def print_evaluation(evaluation: dict[str, Any], scene: Scene) -> None:
     ev = scene.evaluation
     baseline = (f"the {ev.window:g} s before control starts" if ev.baseline == "before_start"
                 else f"the last {ev.window:g} s of a run without control")

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from stillframe.config.schema import Section
+from stillframe.config.scene import Scene
 from stillframe.dynamics.models.damping import damping_parts
 from stillframe.dynamics.models.frame import INPUT_NAMES, FrameModel, LinearModel
 from stillframe.dynamics.models.structure import (
@@ -18,7 +18,7 @@ from stillframe.errors import InputError
 __all__ = ["INPUT_NAMES", "FrameModel", "LinearModel", "build_model", "build_structure"]
 
 
-def build_structure(scene: Section) -> Structure:
+def build_structure(scene: Scene) -> Structure:
     """The scene's undamped structure: lumped, FE or Craig–Bampton-reduced FE."""
     model = scene.model
     if model.type == "ph":
@@ -36,7 +36,7 @@ def build_structure(scene: Section) -> Structure:
 MAX_MASS_CONDITION = 1e12
 
 
-def build_model(scene: Section) -> FrameModel:
+def build_model(scene: Scene) -> FrameModel:
     """Structure + damping + pendulum, as the scene's ``model`` and ``damping`` sections say."""
     structure = build_structure(scene)
     condition = np.linalg.cond(structure.mass)

@@ -15,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.linalg as sla
 
-from stillframe.config.schema import Section
+from stillframe.config.scene import Damping
 from stillframe.dynamics.models.structure import DampingParts, Structure
 from stillframe.errors import InputError
 
@@ -44,7 +44,7 @@ def rayleigh_ratio(omega: np.ndarray, alpha: float, beta: float) -> np.ndarray:
     return alpha / (2.0 * omega) + beta * omega / 2.0
 
 
-def damping_parts(structure: Structure, damping: Section) -> DampingParts:
+def damping_parts(structure: Structure, damping: Damping) -> DampingParts:
     """The scene's ``damping`` section as :class:`DampingParts` of the structure."""
     n = structure.n_dof
     if damping.model == "none":

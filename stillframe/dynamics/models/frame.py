@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.linalg as sla
 
-from stillframe.config.schema import Section
+from stillframe.config.scene import Rig
 from stillframe.dynamics.models.structure import Structure
 
 INPUT_NAMES = ("f1", "f2", "f3", "torque")
@@ -48,7 +48,7 @@ class LinearModel:
 class FrameModel:
     """Nonlinear structure + pendulum model; q = [q_s, φ] (the structure's DOFs, then φ)."""
 
-    def __init__(self, structure: Structure, rig: Section) -> None:
+    def __init__(self, structure: Structure, rig: Rig) -> None:
         if structure.damping is None:
             raise ValueError(
                 "the structure needs its damping matrix (stillframe.dynamics.models.damping)")

@@ -12,14 +12,14 @@ Two file kinds:
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from pathlib import Path
 
 import numpy as np
 import yaml
 
-from stillframe.config.scene import scene_from_dict
-from stillframe.config.schema import Section
+from stillframe.config.scene import Rig, Scene
 from stillframe.config.yamlio import load_yaml
 from stillframe.dynamics.models import build_model
 from stillframe.dynamics.models.frame import FrameModel
@@ -83,7 +83,7 @@ def load_identified_structure(path: Path) -> Structure:
                      ("x1", "x2", "x3"), arrays["damping"])
 
 
-def identified_frame(name: str, rig: Section, key: str) -> FrameModel:
+def identified_frame(name: str, rig: Rig, key: str) -> FrameModel:
     """Identified structure + the rig's nonlinear pendulum on floor 3 (eq. 5.200–5.205)."""
     structure = load_identified_structure(resolve_model_file(name, key))
     model = FrameModel(structure, rig)
@@ -91,13 +91,11 @@ def identified_frame(name: str, rig: Section, key: str) -> FrameModel:
     return model
 
 
-def frame_for(source: str, file: str, scene: Section, key: str) -> FrameModel:
+def frame_for(source: str, file: str, scene: Scene, key: str) -> FrameModel:
     """The scene's own model (``scene``), the lumped model of the scene's rig and damping
     (``lumped``), or the identified one of ``file`` (``file``)."""
     if source == "file":
         return identified_frame(file, scene.rig, key)
     if source == "lumped" and scene.model.type != "lumped":
-        data = scene.to_dict()
-        data["model"]["type"] = "lumped"
-        scene = scene_from_dict(data)
+        scene = dataclasses.replace(scene, model=dataclasses.replace(scene.model, type="lumped"))
     return build_model(scene)

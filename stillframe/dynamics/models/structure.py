@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.linalg as sla
 
-from stillframe.config.schema import Section
+from stillframe.config.scene import Rig
 from stillframe.errors import InputError
 
 
@@ -57,7 +57,7 @@ class Structure:
                          self.dof_names, parts.matrix(self.mass, self.stiffness), parts)
 
 
-def story_stiffness(rig: Section) -> np.ndarray:
+def story_stiffness(rig: Rig) -> np.ndarray:
     """k_i = n 12 E J / L_i^3 for n blades clamped in non-rotating floors (thesis eq. 5.41–5.43)."""
     c = rig.columns
     inertia = c.width * c.thickness**3 / 12.0
@@ -65,7 +65,7 @@ def story_stiffness(rig: Section) -> np.ndarray:
     return c.per_story * 12.0 * c.youngs_modulus * inertia / lengths**3
 
 
-def lumped_structure(rig: Section) -> Structure:
+def lumped_structure(rig: Rig) -> Structure:
     """Three rigid floors on massless springs (thesis eq. 5.48, floor masses of eq. 5.57)."""
     k1, k2, k3 = story_stiffness(rig)
     stiffness = np.array([[k1 + k2, -k2, 0.0], [-k2, k2 + k3, -k3], [0.0, -k3, k3]])
@@ -122,7 +122,7 @@ def column_matrices(length: float, n_elements: int, ei: float,
     return mass, stiffness
 
 
-def fe_structure(rig: Section, elements_per_column: int) -> Structure:
+def fe_structure(rig: Rig, elements_per_column: int) -> Structure:
     """Euler–Bernoulli columns, ``elements_per_column`` elements per story (thesis §5.4).
 
     Assumptions: the ``per_story`` blades of a story bend alike and are lumped into one beam of

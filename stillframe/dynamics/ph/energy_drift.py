@@ -16,8 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from stillframe.config.scene import scene_from_dict
-from stillframe.config.schema import Section
+from stillframe.config.scene import Scene, scene_from_dict
 from stillframe.dynamics.kernels import CompiledFrame
 from stillframe.dynamics.models import build_model
 from stillframe.dynamics.ph import frame
@@ -47,7 +46,7 @@ class DriftRow:
     note: str = ""
 
 
-def _scene(model: str, duration: float) -> Section:
+def _scene(model: str, duration: float) -> Scene:
     return scene_from_dict({"name": f"free-{model}"},
                            [*FREE_VIBRATION, *MODEL_OVERRIDES[model], f"duration={duration}"])
 

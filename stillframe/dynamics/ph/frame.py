@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from stillframe.config.schema import Section
+from stillframe.config.scene import Rig
 from stillframe.dynamics.ph.body import BeamSection, floating_beam, rigid_body
 from stillframe.dynamics.ph.joints import Link, Support, fixed
 from stillframe.dynamics.ph.system import BodyDamping, PHSystem, PortInput, RotaryDamper
@@ -26,18 +26,18 @@ UP = np.pi / 2
 FLOOR_INERTIA = 1.0  # kg m²; the floors do not rotate, so this value never enters the motion
 
 
-def column_section(rig: Section) -> BeamSection:
+def column_section(rig: Rig) -> BeamSection:
     c = rig.columns
     area = c.per_story * c.width * c.thickness
     return BeamSection(c.density * area, c.youngs_modulus * area,
                        c.per_story * c.youngs_modulus * c.width * c.thickness**3 / 12.0)
 
 
-def floor_heights(rig: Section) -> np.ndarray:
+def floor_heights(rig: Rig) -> np.ndarray:
     return np.cumsum(rig.columns.lengths)
 
 
-def frame_system(rig: Section, elements: int, rayleigh: tuple[float, float] | None = None,
+def frame_system(rig: Rig, elements: int, rayleigh: tuple[float, float] | None = None,
                  ) -> PHSystem:
     """The frame as blocks and connections; ``rayleigh`` = (α, β) adds R = αM + βDᵀC⁻¹D per
     column and αm per floor (both ≥ 0: R ⪰ 0)."""
@@ -79,7 +79,7 @@ def frame_system(rig: Section, elements: int, rayleigh: tuple[float, float] | No
     return PHSystem(bodies, connections, inputs, dampers, name=f"ph{elements}")
 
 
-def rest_configuration(system: PHSystem, rig: Section, floors: np.ndarray | None = None,
+def rest_configuration(system: PHSystem, rig: Rig, floors: np.ndarray | None = None,
                        phi: float = 0.0) -> np.ndarray:
     """q with the floors displaced by ``floors``, the pendulum at φ (θ = φ − π/2) and the column
     deflections in static equilibrium (the stresses follow from :func:`static_stresses`)."""

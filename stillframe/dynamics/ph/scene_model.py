@@ -13,7 +13,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from stillframe.config.schema import Section
+from stillframe.config.scene import Scene
 from stillframe.dynamics.excitation import floor_load
 from stillframe.dynamics.ph import frame
 from stillframe.dynamics.ph.integrator import MidpointDAE, balance_error
@@ -22,7 +22,7 @@ from stillframe.dynamics.ph.system import PHSystem
 from stillframe.errors import InputError
 
 
-def scene_system(scene: Section) -> PHSystem:
+def scene_system(scene: Scene) -> PHSystem:
     d = scene.damping
     if d.model == "modal":
         raise InputError("damping.model: model.type ph takes rayleigh (alpha, beta >= 0) or none")
@@ -30,7 +30,7 @@ def scene_system(scene: Section) -> PHSystem:
     return frame.frame_system(scene.rig, scene.model.elements_per_column, rayleigh)
 
 
-def modal_table(scene: Section) -> dict:
+def modal_table(scene: Scene) -> dict:
     """Frequencies, damping ratios and shapes (floors, φ; normalised to floor 1) at rest, in the
     format of :func:`stillframe.dynamics.modal_analysis.modal_table`."""
     system = scene_system(scene)
@@ -54,7 +54,7 @@ def modal_table(scene: Section) -> dict:
             "mode_shapes": (rows / rows[0]).T.tolist()}
 
 
-def initial_state(system: PHSystem, scene: Section) -> np.ndarray:
+def initial_state(system: PHSystem, scene: Scene) -> np.ndarray:
     init = scene.initial
     q = frame.rest_configuration(system, scene.rig, np.asarray(init.floors), init.phi)
     guess = np.zeros(system.n_q)
@@ -65,7 +65,7 @@ def initial_state(system: PHSystem, scene: Section) -> np.ndarray:
     return system.state(q, nu, frame.static_stresses(system, q))
 
 
-def simulate(scene: Section, duration: float,
+def simulate(scene: Scene, duration: float,
              progress: Callable[[float], None] | None = None) -> dict:
     """Time histories (floors, velocities, accelerations, φ, φ̇, load, energy above rest) and the
     run's largest relative discrete power-balance residual."""
