@@ -91,8 +91,9 @@ class SimNode:
         self.grid = SampleGrid(self.plant.period)
         self.active = actuator_of(scene)
         self.clock = ClockPublisher(node)
-        self.publishers = [node.create_publisher(s.type_name, s.name, params.qos(s))
-                           for s in (*SAMPLE_TOPICS, topics.STATE_TRUTH)]
+        # by topic, in the order of SensorMessages.fill and then the truth
+        self.publishers = {s.name: node.create_publisher(s.type_name, s.name, params.qos(s))
+                           for s in (*SAMPLE_TOPICS, topics.STATE_TRUTH)}
         self.messages = SensorMessages(scene.sensors)
         self.diagnostics = Diagnostics(node, params.diagnostics_period_s)
         limits = (scene.actuators.torque_limit, scene.actuators.force_limit)
@@ -140,11 +141,9 @@ class SimNode:
         """The estimator reads every sensor (and the truth when it is the ``truth`` estimator),
         and the controller publishes the scene's command topic."""
         scene = self.params.scene
-        read = {spec.name for spec in estimator_inputs(scene)}
         command = command_topic(scene)
-        return (all(pub.get_subscription_count() > 0 for pub, spec in
-                    zip(self.publishers, (*SAMPLE_TOPICS, topics.STATE_TRUTH), strict=True)
-                    if spec.name in read)
+        return (all(self.publishers[spec.name].get_subscription_count() > 0
+                    for spec in estimator_inputs(scene))
                 and (command is None or has_publisher(self.node, command.name))
                 and self.recorder_ready())
 
@@ -169,7 +168,7 @@ class SimNode:
         self.clock.publish(ns)
         msgs = [*self.messages.fill(sample, ns), self.messages.fill_truth(sample, ns)]
         cdrs = [messages.serialize(msg) for msg in msgs]
-        for pub, cdr in zip(self.publishers, cdrs, strict=True):
+        for pub, cdr in zip(self.publishers.values(), cdrs, strict=True):
             pub.publish(cdr)
         self.published_at = time.monotonic()
 
