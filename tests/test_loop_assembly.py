@@ -163,6 +163,3 @@ def test_the_scene_inputs_decide_completeness() -> None:
     ready = a.pop_ready(4)
     assert ready.complete and ready.sample.truth is truth
     np.testing.assert_array_equal(ready.control, [0.0, -2.0])   # the torque is not driven
-    assert estimator_inputs(thesis_scene("thesis_lqg")) == SENSOR_TOPICS
-    open_loop = ["estimator.type=none", "controller.type=none"]
-    assert estimator_inputs(thesis_scene("thesis_lqg", open_loop)) == ()
