@@ -128,9 +128,9 @@ class SampleAssembly:
         del self.pending[p.ns]
         return Ready(p.ns, Sample(self.grid.seconds(p.ns), p.values[:4].copy(), float(p.values[4]),
                                   p.present.copy(), p.truth),
-                     self.control(p), complete)
+                     self._control(p), complete)
 
-    def control(self, p: Pending) -> np.ndarray:
+    def _control(self, p: Pending) -> np.ndarray:
         """The actuation in effect over the period before ``p``: what the simulator reports
         it applied, else the newest command; zero for the actuator not driven."""
         reported = np.isfinite(p.applied)
