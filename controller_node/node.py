@@ -28,16 +28,14 @@ import sys
 import time
 from typing import Any
 
-import numpy as np
-
 from stillframe.contract import messages, topics
 from stillframe.contract.codecs import COMMAND_TOPICS, CommandMessage, SampleGrid, physical_state
 from stillframe.contract.signals import Command, Estimate
 from stillframe.control.factory import make_controller
 from stillframe.control.supervisor import RUNAWAY_FACTOR
 from stillframe.design.coordinates import design_map
-from stillframe.dynamics.models.identified import frame_for
 from stillframe.errors import InputError
+from stillframe.loop.matching import ForceMatching
 from stillframe.loop.node_support import (
     ERROR,
     OK,
@@ -50,10 +48,11 @@ from stillframe.loop.node_support import (
     declare_loop_parameters,
     wait_for_peers,
 )
+from stillframe.loop.watchdog import EstimateWatchdog
+from stillframe.loop.wiring import design_model
 from stillframe.middleware import api
 from stillframe.middleware.params import Parameter, SetParametersResult, finite_floats
 
-FORCES_KEPT = 256  # load-cell readings kept for matching estimates by stamp
 RUN_TIME_PARAMETERS = frozenset({"enabled", "command_limit"})
 
 
@@ -64,7 +63,7 @@ class ControllerNode:
         self.node = node
         self.params = params
         scene = params.scene
-        design = frame_for(scene.design.model, scene.design.file, scene, "design.file")
+        design = design_model(scene)
         self.controller = make_controller(scene, design)
         self.to_design = design_map(design)    # z = T · physical, built once
         self.grid = SampleGrid(params.period)
@@ -72,16 +71,10 @@ class ControllerNode:
         self.pub = node.create_publisher(spec.type_name, spec.name, spec.qos)
         self.out = CommandMessage(self.controller.actuator)
         self.diagnostics = Diagnostics(node, params.diagnostics_period_s)
-        self.force_wait_s = params.lockstep_timeout_s / 4
         self.sim_time = bool(node.get_parameter("use_sim_time").value)
-        self.forces: dict[int, float] = {}
-        self.force = 0.0
-        self.pending: list[tuple[int, np.ndarray, float]] = []   # (ns, physical, arrival)
-        self.sample_ns = -1     # newest load-cell stamp
-        self.last_ns = -1
-        self.watchdog_ns = -1
+        self.matching = ForceMatching(round(params.lockstep_timeout_s / 4 * 1e9), params.lockstep)
+        self.watchdog = EstimateWatchdog(self.controller, self.grid)
         self.last_command = Command(0.0)
-        self.counts = {"stale_estimates": 0, "rejected_estimates": 0, "force_waits_timed_out": 0}
         self.compute = Durations()
         self.rate = RateMeter()
         self.declare_run_time_parameters()
@@ -121,41 +114,19 @@ class ControllerNode:
                                       self.params.qos(wrench))
 
     def on_force(self, msg: Any) -> None:
-        value = float(msg.wrench.force.x)
-        if np.isfinite(value):
-            self.force = value
-            ns = messages.stamp_ns(msg.header.stamp)
-            self.forces[ns] = value
-            self.sample_ns = max(self.sample_ns, ns)
-            if len(self.forces) > FORCES_KEPT:
-                self.forces.pop(next(iter(self.forces)))
+        self.matching.add_force(messages.stamp_ns(msg.header.stamp), float(msg.wrench.force.x))
 
     def on_estimate(self, msg: Any) -> None:
-        ns = messages.stamp_ns(msg.header.stamp)
-        physical = physical_state(msg)
-        if ns <= self.last_ns:
-            self.counts["stale_estimates"] += 1
-        elif not np.all(np.isfinite(physical)):
-            self.counts["rejected_estimates"] += 1
-        else:
-            self.pending.append((ns, physical, time.monotonic()))
-            self.last_ns = ns
+        self.matching.add_estimate(messages.stamp_ns(msg.header.stamp), physical_state(msg),
+                                   time.monotonic_ns())
 
     def process_ready(self) -> None:
         """Answer pending estimates in order; in lock-step each waits for its load cell."""
-        while self.pending:
-            ns, physical, arrival = self.pending[0]
-            lockstep, timeout = self.params.lockstep, self.force_wait_s
-            if ns not in self.forces:
-                if lockstep and time.monotonic() - arrival < timeout:
-                    return
-                self.counts["force_waits_timed_out"] += lockstep
-            self.pending.pop(0)
+        while (m := self.matching.pop_ready(time.monotonic_ns())) is not None:
             started = time.perf_counter()
-            t = self.grid.seconds(ns)
-            estimate = Estimate(t, self.to_design @ physical, physical)
-            self.send(self.controller.command(t, estimate, self.forces.get(ns, self.force)))
-            self.forces = {k: v for k, v in self.forces.items() if k > ns}
+            t = self.grid.seconds(m.ns)
+            estimate = Estimate(t, self.to_design @ m.physical, m.physical)
+            self.send(self.controller.command(t, estimate, m.force))
             self.compute.add(time.perf_counter() - started)
             self.rate.tick()
 
@@ -163,26 +134,19 @@ class ControllerNode:
         self.pub.publish(self.out.fill(command, self.grid.ns(command.t)))
         self.last_command = command
 
-    def now(self) -> float | None:
-        """The newest sample time seen (None before the first estimate or sample)."""
-        ns = self.sample_ns
+    def check_watchdog(self) -> None:
+        """Command zero at the newest sample time seen (load cell, or ``/clock`` with
+        ``use_sim_time``) when the estimates are stale (module docstring)."""
+        ns = self.matching.sample_ns
         if self.sim_time:
             ns = max(ns, self.node.get_clock().now().nanoseconds)
-        if self.controller.latest is None or ns < 0:
-            return None
-        return self.grid.seconds(ns)
-
-    def check_watchdog(self) -> None:
-        t = self.now()
-        if t is None or self.pending or not self.controller.stale(t):
+        t = self.watchdog.due(ns, self.matching.waiting)
+        if t is None:
             return
-        ns = self.grid.ns(t)
-        if ns > self.watchdog_ns:
-            self.watchdog_ns = ns
-            if not self.last_command.watchdog:
-                self.node.get_logger().warning(f"watchdog: no fresh estimate at t = {t:.4g} s; "
-                                               "commanding zero")
-            self.send(self.controller.command(t, None, self.force))
+        if not self.last_command.watchdog:
+            self.node.get_logger().warning(f"watchdog: no fresh estimate at t = {t:.4g} s; "
+                                           "commanding zero")
+        self.send(self.controller.command(t, None, self.matching.force))
 
     def publish_status(self) -> None:
         c = self.controller.counters
@@ -192,7 +156,8 @@ class ControllerNode:
                   "watchdog": c.watchdog, "watchdog_active": cmd.watchdog,
                   "runaway": c.runaway,
                   "enabled": cmd.enabled,
-                  "last_command": float(cmd.vector[self.controller.actuator]), **self.counts,
+                  "last_command": float(cmd.vector[self.controller.actuator]),
+                  **self.matching.counts,
                   **{f"compute_ms_{k}": v for k, v in self.compute.summary().items()}}
         problems = [text for flag, text in (
             (cmd.watchdog, f"watchdog: no fresh estimate for {self.controller.watchdog_periods} "
@@ -201,7 +166,7 @@ class ControllerNode:
                         f"limit {c.runaway} times"),
         ) if flag]
         level = ERROR if cmd.watchdog else WARN if problems else OK
-        self.diagnostics.publish(max(self.last_ns, 0), values, level, "; ".join(problems))
+        self.diagnostics.publish(max(self.matching.last_ns, 0), values, level, "; ".join(problems))
 
     def peers_ready(self) -> bool:
         return self.pub.get_subscription_count() > 0
@@ -210,15 +175,11 @@ class ControllerNode:
         """Wait for the command's subscribers in lock-step, then control until shutdown."""
         if self.params.lockstep:
             self.node.get_logger().info("lock-step: waiting for the simulator")
-            while api.ok() and not wait_for_peers(self.node, self.peers_ready, 1.0):
-                pass
+            wait_for_peers(self.node, self.peers_ready)
         self.subscribe_inputs()
         while api.ok():
-            wait = 0.05
-            if self.pending and self.params.lockstep:
-                wait = max(0.0, self.pending[0][2] + self.force_wait_s
-                           - time.monotonic())
-            self.node.spin_once(min(wait, 0.05))
+            left = self.matching.wait_ns_left(time.monotonic_ns())
+            self.node.spin_once(0.05 if left is None else min(left * 1e-9, 0.05))
             self.process_ready()
             self.check_watchdog()
             if self.diagnostics.due():

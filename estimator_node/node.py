@@ -42,6 +42,7 @@ from __future__ import annotations
 import functools
 import sys
 import time
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -49,6 +50,8 @@ import numpy as np
 from stillframe.contract import messages, topics
 from stillframe.contract.codecs import (
     COMMAND_TOPICS,
+    ENCODER_CHANNEL,
+    SENSOR_TOPICS,
     EstimateMessages,
     SampleGrid,
     applied_torque,
@@ -56,12 +59,12 @@ from stillframe.contract.codecs import (
     physical_state,
     sensor_reading,
 )
-from stillframe.contract.signals import Sample, actuator_of
-from stillframe.dynamics.models.identified import frame_for
+from stillframe.contract.signals import actuator_of
 from stillframe.errors import InputError
 from stillframe.estimation.base import Filter
 from stillframe.estimation.factory import make_estimator
 from stillframe.estimation.kalman import LinearFilter
+from stillframe.loop.assembly import Ready, SampleAssembly
 from stillframe.loop.node_support import (
     OK,
     WARN,
@@ -74,23 +77,9 @@ from stillframe.loop.node_support import (
     has_publisher,
     wait_for_peers,
 )
+from stillframe.loop.wiring import command_topic, design_model, estimator_inputs
 from stillframe.middleware import api
 from stillframe.middleware.params import Parameter, SetParametersResult, finite_floats
-
-SENSOR_TOPICS = (*topics.FLOOR_IMU, topics.PENDULUM_JOINT_STATES, topics.EXCITATION_WRENCH)
-ENCODER_CHANNEL = SENSOR_TOPICS.index(topics.PENDULUM_JOINT_STATES)
-
-
-class Pending:
-    """The channels of one stamp received so far."""
-
-    def __init__(self, ns: int) -> None:
-        self.ns = ns
-        self.values = np.full(5, np.nan)
-        self.present = np.zeros(5, dtype=bool)
-        self.truth: np.ndarray | None = None
-        self.applied = np.full(2, np.nan)    # [torque, force] applied over the previous period
-        self.first = time.monotonic()
 
 
 class EstimatorNode:
@@ -100,12 +89,12 @@ class EstimatorNode:
         self.node = node
         self.params = params
         scene = params.scene
-        design = frame_for(scene.design.model, scene.design.file, scene, "design.file")
-        self.estimator = make_estimator(scene, design)
-        self.needs_truth = scene.estimator.type == "truth"
+        self.estimator = make_estimator(scene, design_model(scene))
+        self.inputs = estimator_inputs(scene)
         self.active = actuator_of(scene)
-        self.grid = SampleGrid(params.period)
-        self.wait_s = params.lockstep_timeout_s / 2 if params.lockstep else partial_after_s
+        wait_s = params.lockstep_timeout_s / 2 if params.lockstep else partial_after_s
+        self.assembly = SampleAssembly(self.inputs, self.active, SampleGrid(params.period),
+                                       round(wait_s * 1e9), params.lockstep)
         spec, cov = topics.STATE_ESTIMATE, topics.STATE_COVARIANCE
         self.state_pub = node.create_publisher(spec.type_name, spec.name, spec.qos)
         self.cov_pub = node.create_publisher(cov.type_name, cov.name, cov.qos)
@@ -114,13 +103,7 @@ class EstimatorNode:
         for i, spec in enumerate(COMMAND_TOPICS):
             node.create_subscription(spec.type_name, spec.name,
                                      functools.partial(self.on_command, i), spec.qos)
-        self.command = np.zeros(2)
-        self.command_ns = [-1, -1]
-        self.pending: dict[int, Pending] = {}
-        self.last_ns = -1
-        self.counts = {"estimates": 0, "stale_messages": 0, "partial_updates": 0,
-                       "rejected_commands": 0, "command_waits_timed_out": 0,
-                       "applied_reported": 0, "initialised_from_measurements": 0,
+        self.counts = {"estimates": 0, "initialised_from_measurements": 0,
                        "skipped_before_initialisation": 0}
         self.compute = Durations()
         self.rate = RateMeter()
@@ -168,95 +151,58 @@ class EstimatorNode:
         return SetParametersResult(True)
 
     # -- inputs --------------------------------------------------------------------------
-    def subscribe_sensors(self) -> None:
-        for channel, spec in enumerate(SENSOR_TOPICS):
-            self.node.create_subscription(spec.type_name, spec.name,
-                                          functools.partial(self.on_sensor, channel),
+    def subscribe_inputs(self) -> None:
+        """The scene's estimator inputs (:func:`stillframe.loop.wiring.estimator_inputs`)."""
+        handlers: dict[str, Callable[[Any], None]] = {
+            topics.FLOOR3_LOAD_CELL.name: self.on_applied_force,
+            topics.STATE_TRUTH.name: self.on_truth,
+            **{spec.name: functools.partial(self.on_sensor, channel)
+               for channel, spec in enumerate(SENSOR_TOPICS)},
+        }
+        for spec in self.inputs:
+            self.node.create_subscription(spec.type_name, spec.name, handlers[spec.name],
                                           self.params.qos(spec))
-        if self.active == 1:    # the applied floor-3 force matters only when it is driven
-            spec = topics.FLOOR3_LOAD_CELL
-            self.node.create_subscription(spec.type_name, spec.name, self.on_applied_force,
-                                          self.params.qos(spec))
-        if self.needs_truth:
-            spec = topics.STATE_TRUTH
-            self.node.create_subscription(spec.type_name, spec.name, self.on_truth, spec.qos)
-
-    def slot(self, msg: Any) -> Pending | None:
-        ns = messages.stamp_ns(msg.header.stamp)
-        if ns <= self.last_ns:
-            self.counts["stale_messages"] += 1
-            return None
-        return self.pending.setdefault(ns, Pending(ns))
 
     def on_sensor(self, channel: int, msg: Any) -> None:
-        if (p := self.slot(msg)) is not None:
-            p.values[channel] = sensor_reading(channel, msg)
-            p.present[channel] = True
-            if channel == ENCODER_CHANNEL:
-                p.applied[0] = applied_torque(msg)
+        torque = applied_torque(msg) if channel == ENCODER_CHANNEL else float("nan")
+        self.assembly.reading(channel, messages.stamp_ns(msg.header.stamp),
+                              sensor_reading(channel, msg), time.monotonic_ns(), torque)
 
     def on_applied_force(self, msg: Any) -> None:
-        if (p := self.slot(msg)) is not None:
-            p.applied[1] = float(msg.wrench.force.x)
+        self.assembly.applied_force(messages.stamp_ns(msg.header.stamp),
+                                    float(msg.wrench.force.x), time.monotonic_ns())
 
     def on_truth(self, msg: Any) -> None:
-        if (p := self.slot(msg)) is not None:
-            p.truth = physical_state(msg)
+        self.assembly.truth(messages.stamp_ns(msg.header.stamp), physical_state(msg),
+                            time.monotonic_ns())
 
     def on_command(self, actuator: int, msg: Any) -> None:
-        ns = messages.stamp_ns(msg.header.stamp)
-        value = command_value(actuator, msg)
-        if not np.isfinite(value) or ns < self.command_ns[actuator]:
-            self.counts["rejected_commands"] += 1
-            return
-        self.command[actuator], self.command_ns[actuator] = value, ns
+        self.assembly.command_received(actuator, messages.stamp_ns(msg.header.stamp),
+                                       command_value(actuator, msg))
 
     # -- stepping ------------------------------------------------------------------------
-    def complete(self, p: Pending) -> bool:
-        return (bool(p.present.all()) and (p.truth is not None or not self.needs_truth)
-                and (self.active != 1 or not np.isnan(p.applied[1])))
-
-    def command_in(self) -> bool:
-        """In lock-step, the answer to the previous stamp has arrived (or none is expected)."""
-        return (not self.params.lockstep or self.active is None or self.last_ns < 0
-                or self.command_ns[self.active] >= self.last_ns)
-
     def process_ready(self) -> None:
         """Use every pending stamp that is ready, oldest first."""
-        while self.pending:
-            ns = min(self.pending)
-            p = self.pending[ns]
-            newer = len(self.pending) > 1
-            timed_out = time.monotonic() - p.first >= self.wait_s
-            complete = self.complete(p)
-            if not (newer or timed_out or (complete and self.command_in())):
-                return
-            if complete and not self.command_in():
-                self.counts["command_waits_timed_out"] += 1
-            self.use(self.pending.pop(ns), complete)
+        while (ready := self.assembly.pop_ready(time.monotonic_ns())) is not None:
+            self.use(ready)
 
-    def use(self, p: Pending, complete: bool) -> None:
+    def use(self, ready: Ready) -> None:
         started = time.perf_counter()
-        self.counts["partial_updates"] += not complete
-        sample = Sample(self.grid.seconds(p.ns), p.values[:4].copy(), float(p.values[4]),
-                        p.present.copy(), p.truth)
-        reported = np.isfinite(p.applied)
-        control = np.where(reported, p.applied, self.command)
-        control[[i for i in (0, 1) if i != self.active]] = 0.0   # the sim drives only this one
-        self.counts["applied_reported"] += bool(reported[self.active or 0])
-        if self.last_ns < 0 and p.ns > 0 and isinstance(self.estimator, LinearFilter):
+        sample, control = ready.sample, ready.control
+        if (self.assembly.last_ns < 0 and ready.ns > 0
+                and isinstance(self.estimator, LinearFilter)):
             # joined a running loop (restarted): start from the measurements, not the scene,
             # at the first sample that carries all of them
-            if not (p.present[:4].all() and np.isfinite(p.values[:4]).all()):
+            if not (sample.present[:4].all() and np.isfinite(sample.measurements).all()):
                 self.counts["skipped_before_initialisation"] += 1
                 return
             self.estimator.initialise_from(sample, control)
             self.counts["initialised_from_measurements"] += 1
         estimate = self.estimator.step(sample, control)
-        self.last_ns = p.ns
+        self.assembly.used(ready.ns)
         if estimate is None:
             return
-        state, cov = self.out.fill(estimate, p.ns)
+        state, cov = self.out.fill(estimate, ready.ns)
         self.state_pub.publish(state)
         self.cov_pub.publish(cov)
         self.compute.add(time.perf_counter() - started)
@@ -264,32 +210,30 @@ class EstimatorNode:
         self.rate.tick()
 
     def next_wait(self) -> float:
-        if not self.pending:
-            return 0.1
-        first = min(p.first for p in self.pending.values())
-        return min(0.1, max(0.0, first + self.wait_s - time.monotonic()))
+        left = self.assembly.wait_ns_left(time.monotonic_ns())
+        return 0.1 if left is None else min(0.1, left * 1e-9)
 
     def publish_status(self) -> None:
-        c = self.estimator.counters
+        c, a = self.estimator.counters, self.assembly
         values = {"mode": self.params.mode, "rate_hz": self.rate.read(), **self.counts,
-                  "updates": c.updates, "stale": c.stale, "non_finite": c.non_finite,
-                  "missing": c.missing, "rejected": c.rejected + self.counts["stale_messages"],
+                  **a.counts, "updates": c.updates, "stale": c.stale,
+                  "non_finite": c.non_finite, "missing": c.missing,
+                  "rejected": c.rejected + a.counts["stale_messages"],
                   **{f"compute_ms_{k}": v for k, v in self.compute.summary().items()}}
-        level = WARN if values["rejected"] or self.counts["partial_updates"] else OK
-        self.diagnostics.publish(max(self.last_ns, 0), values, level)
+        level = WARN if values["rejected"] or a.counts["partial_updates"] else OK
+        self.diagnostics.publish(max(a.last_ns, 0), values, level)
 
     def peers_ready(self) -> bool:
         """The controller reads the estimates and publishes the scene's command topic."""
         return self.state_pub.get_subscription_count() > 0 and has_publisher(
-            self.node, COMMAND_TOPICS[self.active].name)
+            self.node, command_topic(self.params.scene).name)
 
     def run(self) -> None:
         """Wait for the controller in lock-step, then estimate until shutdown."""
         if self.params.lockstep and self.active is not None:
             self.node.get_logger().info("lock-step: waiting for the controller")
-            while api.ok() and not wait_for_peers(self.node, self.peers_ready, 1.0):
-                pass
-        self.subscribe_sensors()
+            wait_for_peers(self.node, self.peers_ready)
+        self.subscribe_inputs()
         while api.ok():
             self.node.spin_once(self.next_wait())
             self.process_ready()

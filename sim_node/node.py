@@ -41,7 +41,13 @@ from typing import Any
 import numpy as np
 
 from stillframe.contract import messages, topics
-from stillframe.contract.codecs import COMMAND_TOPICS, SampleGrid, SensorMessages, command_value
+from stillframe.contract.codecs import (
+    COMMAND_TOPICS,
+    SAMPLE_TOPICS,
+    SampleGrid,
+    SensorMessages,
+    command_value,
+)
 from stillframe.contract.signals import Sample, actuator_of
 from stillframe.errors import InputError
 from stillframe.loop.closed_loop import LoopHistory, evaluate
@@ -56,13 +62,14 @@ from stillframe.loop.node_support import (
     has_publisher,
     wait_for_peers,
 )
+from stillframe.loop.pacing import Pacer
+from stillframe.loop.watchdog import command_expired
+from stillframe.loop.wiring import command_topic, estimator_inputs
 from stillframe.middleware import api
 from stillframe.middleware.clock import ClockPublisher
 from stillframe.plant.command_gate import CommandGate
 from stillframe.plant.frame_plant import make_plant
 
-SENSOR_TOPICS = (*topics.FLOOR_IMU, topics.PENDULUM_JOINT_STATES, topics.EXCITATION_WRENCH,
-                 topics.FLOOR3_LOAD_CELL)
 LOOP_NODES = ("sim_node", "estimator_node", "controller_node")
 #: the node name of ``stillframe record``
 RECORDER_NODE = "stillframe_recorder"
@@ -84,12 +91,10 @@ class SimNode:
         self.grid = SampleGrid(self.plant.period)
         self.active = actuator_of(scene)
         self.clock = ClockPublisher(node)
-        self.sensor_pubs = [node.create_publisher(s.type_name, s.name, params.qos(s))
-                            for s in SENSOR_TOPICS]
-        spec = topics.STATE_TRUTH
-        self.truth_pub = node.create_publisher(spec.type_name, spec.name, spec.qos)
+        # by topic, in the order of SensorMessages.fill and then the truth
+        self.publishers = {s.name: node.create_publisher(s.type_name, s.name, params.qos(s))
+                           for s in (*SAMPLE_TOPICS, topics.STATE_TRUTH)}
         self.messages = SensorMessages(scene.sensors)
-        self.publishers = [*self.sensor_pubs, self.truth_pub]
         self.diagnostics = Diagnostics(node, params.diagnostics_period_s)
         limits = (scene.actuators.torque_limit, scene.actuators.force_limit)
         self.gates = [CommandGate(limit, command_writer, functools.partial(self.writers, spec.name),
@@ -103,11 +108,11 @@ class SimNode:
         self.now_ns = 0
         self.published_at = 0.0
         self.latency = Durations()
-        self.counts = {"lockstep_timeouts": 0, "deadline_misses": 0, "overruns": 0,
-                       "rejected_commands": 0, "safe_state_samples": 0}
-        self.max_lateness = 0.0
+        self.pacer = Pacer(self.grid.ns(self.plant.period), params.lockstep,
+                           round(params.lockstep_timeout_s * 1e9))
+        self.counts = {"rejected_commands": 0, "safe_state_samples": 0}
         self.k = 0
-        self.started = time.monotonic()   # reset when the first sample is due
+        self.pacer.start(time.monotonic_ns())   # again when the first sample is due
         node.add_on_set_parameters_callback(check_settable)   # nothing changes while it runs
 
     def writers(self, topic: str) -> list[tuple[bytes, str]]:
@@ -136,14 +141,10 @@ class SimNode:
         """The estimator reads every sensor (and the truth when it is the ``truth`` estimator),
         and the controller publishes the scene's command topic."""
         scene = self.params.scene
-        pubs = self.sensor_pubs if scene.estimator.type != "none" else []
-        if self.active != 1:    # the floor-3 load cell is read only when that force is driven
-            pubs = pubs[:-1]
-        if scene.estimator.type == "truth":
-            pubs = [*pubs, self.truth_pub]
-        return (all(p.get_subscription_count() > 0 for p in pubs)
-                and (self.active is None
-                     or has_publisher(self.node, COMMAND_TOPICS[self.active].name))
+        command = command_topic(scene)
+        return (all(self.publishers[spec.name].get_subscription_count() > 0
+                    for spec in estimator_inputs(scene))
+                and (command is None or has_publisher(self.node, command.name))
                 and self.recorder_ready())
 
     def recorder_ready(self) -> bool:
@@ -167,17 +168,17 @@ class SimNode:
         self.clock.publish(ns)
         msgs = [*self.messages.fill(sample, ns), self.messages.fill_truth(sample, ns)]
         cdrs = [messages.serialize(msg) for msg in msgs]
-        for pub, cdr in zip(self.publishers, cdrs, strict=True):
+        for pub, cdr in zip(self.publishers.values(), cdrs, strict=True):
             pub.publish(cdr)
         self.published_at = time.monotonic()
 
-    def wait_command(self, deadline: float) -> bool:
-        """Spin until the command stamped now arrives (True) or the wall-clock ``deadline``."""
+    def wait_command(self, deadline_ns: int) -> bool:
+        """Spin until the command stamped now arrives (True) or the monotonic ``deadline_ns``."""
         if self.active is None:
             self.node.spin_once(0.0)
             return True
         while api.ok() and self.command_ns[self.active] != self.now_ns:
-            remaining = deadline - time.monotonic()
+            remaining = (deadline_ns - time.monotonic_ns()) * 1e-9
             if remaining <= 0:
                 return False
             self.node.spin_once(remaining)
@@ -186,30 +187,30 @@ class SimNode:
     def command_timed_out(self) -> bool:
         """The newest command taken is ``command_timeout_periods`` periods older than the
         current sample (or none came for as long): the controller is gone or stuck."""
-        if self.active is None:
-            return False
-        age = self.now_ns - max(self.command_ns[self.active], 0)
-        return age >= self.command_timeout_periods * self.grid.ns(self.plant.period)
+        return self.active is not None and command_expired(
+            self.now_ns, self.command_ns[self.active],
+            self.command_timeout_periods * self.pacer.period_ns)
 
-    def sleep_until(self, when: float) -> None:
-        while api.ok() and (remaining := when - time.monotonic()) > 0:
+    def sleep_until(self, when_ns: int) -> None:
+        while api.ok() and (remaining := (when_ns - time.monotonic_ns()) * 1e-9) > 0:
             self.node.spin_once(remaining)
 
     def status(self) -> tuple[dict[str, Any], int]:
         lat = self.latency.summary()
-        elapsed = time.monotonic() - self.started
+        elapsed = (time.monotonic_ns() - self.pacer.started_ns) * 1e-9
         values = {
             "mode": self.params.mode, "step": self.k, "sim_time_s": self.k * self.plant.period,
             "loop_rate_hz": self.k / max(elapsed, 1e-9),
             "realtime_factor": self.k * self.plant.period / max(elapsed, 1e-9),
             **{f"latency_ms_{key}": value for key, value in lat.items()},
-            **self.counts, "max_lateness_ms": 1e3 * self.max_lateness,
+            **self.pacer.counts, **self.counts,
+            "max_lateness_ms": 1e-6 * self.pacer.max_lateness_ns,
             "saturated_commands": self.plant.actuators.limited,
         }
         for gate, spec in zip(self.gates, COMMAND_TOPICS, strict=True):
             prefix = spec.name.rsplit("/", 1)[-1]
             values.update({f"{prefix}_{key}": value for key, value in gate.report().items()})
-        bad = sum(self.counts.values())
+        bad = sum(self.pacer.counts.values()) + sum(self.counts.values())
         return values, WARN if bad else OK
 
     def intruder_message(self) -> str:
@@ -226,24 +227,20 @@ class SimNode:
     def step(self, k: int) -> np.ndarray | None:
         """Sample k: publish, wait for its command, advance. The row [t, truth (8), command
         (2), load cell], or None on shutdown."""
-        p, plant = self.params, self.plant
+        plant, pacer = self.plant, self.pacer
         self.k = k
-        due = self.started + k * plant.period
-        if not p.lockstep:
-            self.sleep_until(due)
-            lateness = time.monotonic() - due
-            self.max_lateness = max(self.max_lateness, lateness)
-            self.counts["overruns"] += lateness > plant.period
+        if not pacer.lockstep:
+            self.sleep_until(pacer.due_ns(k))
+        pacer.begin(k, time.monotonic_ns())
         if not api.ok():
             return None
         sample = plant.sample()
         self.now_ns = self.grid.ns(sample.t)
         self.publish(sample, self.now_ns)
-        deadline = time.monotonic() + p.lockstep_timeout_s if p.lockstep else due + plant.period
-        if not self.wait_command(deadline):
+        if not self.wait_command(pacer.deadline_ns(k, time.monotonic_ns())):
             if not api.ok():
                 return None
-            self.counts["lockstep_timeouts" if p.lockstep else "deadline_misses"] += 1
+            pacer.missed()
         control = self.command.copy()
         if self.command_timed_out():
             control[self.active] = 0.0      # the safe state: no actuation
@@ -265,7 +262,7 @@ class SimNode:
                         " starting anyway")
         n = round(p.scene.duration / plant.period)
         rows = np.empty((n, 12))
-        self.started = time.monotonic()
+        self.pacer.start(time.monotonic_ns())
         wall = time.perf_counter()
         for k in range(n):
             row = self.step(k)
@@ -282,10 +279,10 @@ class SimNode:
         history.evaluation.update({
             "mode": p.mode, "steps": n, "wall_s": time.perf_counter() - wall,
             "malformed_samples": sum(api.MALFORMED.values()),
-            **self.counts, "latency_ms": self.latency.summary(),
+            **self.pacer.counts, **self.counts, "latency_ms": self.latency.summary(),
             "command_gates": {spec.name: gate.report()
                               for gate, spec in zip(self.gates, COMMAND_TOPICS, strict=True)},
-            "max_lateness_ms": 1e3 * self.max_lateness,
+            "max_lateness_ms": 1e-6 * self.pacer.max_lateness_ns,
             "plant": {"model": plant.model.name, "integrator": plant.integrator.name,
                       "dt": plant.h, "actuator_limited": plant.actuators.limited},
         })

@@ -15,8 +15,8 @@ from stillframe.contract.codecs import EstimateMessages
 from stillframe.contract.signals import Estimate
 from stillframe.control.factory import make_controller
 from stillframe.design.coordinates import to_design
-from stillframe.dynamics.models.identified import frame_for
 from stillframe.loop.node_support import LoopParameters, diagnostic_values
+from stillframe.loop.wiring import design_model
 from stillframe.middleware.api import create_node, spin_until
 from stillframe.middleware.clock import ClockPublisher
 from tests.loop_helpers import thesis_scene
@@ -86,7 +86,7 @@ def test_commands_and_watchdog(ros_domain: int, tmp_path: Path, time_source: str
         code, err = stop(proc)
     assert code == 0, err[-2000:]
 
-    design = frame_for(scene.design.model, scene.design.file, scene, "design.file")
+    design = design_model(scene)
     reference = make_controller(scene, design)
     for k in range(ESTIMATED):
         t = k * period

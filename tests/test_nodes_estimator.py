@@ -15,9 +15,9 @@ import numpy as np
 from stillframe.contract import messages, topics
 from stillframe.contract.codecs import SensorMessages
 from stillframe.contract.signals import Sample
-from stillframe.dynamics.models.identified import frame_for
 from stillframe.estimation.factory import make_estimator
 from stillframe.loop.node_support import LoopParameters, diagnostic_values
+from stillframe.loop.wiring import design_model
 from stillframe.middleware.api import create_node, spin_until
 from stillframe.plant.frame_plant import Plant
 from tests.loop_helpers import thesis_scene
@@ -92,7 +92,7 @@ def test_estimates_nan_stale_and_missing_channels(ros_domain: int, tmp_path: Pat
         code, err = stop(proc, signal.SIGTERM)
     assert code == 0, err[-2000:]
 
-    design = frame_for(scene.design.model, scene.design.file, scene, "design.file")
+    design = design_model(scene)
     reference = make_estimator(scene, design)
     for k, s in enumerate(samples):
         # the missing encoder carried no effort: the command in effect then

@@ -28,7 +28,7 @@ from stillframe.config.scene import load_scene
 from stillframe.contract import messages, topics
 from stillframe.control.supervisor import Controller
 from stillframe.design.coordinates import design_map, physical_selector
-from stillframe.dynamics.models.identified import frame_for
+from stillframe.loop.wiring import design_model
 from stillframe.middleware import api, dds_services, dds_types
 from tests.mw_support import (  # noqa: F401
     finish,
@@ -94,7 +94,7 @@ def test_supervisor_enable_and_limit() -> None:
 def stationary_posterior(measurement_std: list[float]) -> np.ndarray:
     """The physical 8×8 covariance the steady-state filter publishes after a full update."""
     scene = load_scene(SCENES / "thesis_lqg.yaml", OVERRIDES)
-    model = frame_for(scene.design.model, scene.design.file, scene, "design.file")
+    model = design_model(scene)
     A, _ = model.linearized().state_space()
     n = model.n_dof
     C = np.vstack([A[[n + i for i in model.floor_index]], np.eye(2 * n)[model.phi_index]])

@@ -19,9 +19,13 @@ from stillframe.contract.signals import Command, Estimate, Sample
 
 STATE_NAMES = ["x1", "x2", "x3", "phi"]
 PENDULUM_JOINT = "pendulum"
-#: Index of each sensor topic's reading in [a1, a2, a3, φ, load cell] (``Sample.present``).
-SENSOR_CHANNELS = (*(spec.name for spec in topics.FLOOR_IMU),
-                   topics.PENDULUM_JOINT_STATES.name, topics.EXCITATION_WRENCH.name)
+#: The sensor topics in the order of their readings [a1, a2, a3, φ, load cell]
+#: (``Sample.present``): a topic's index is its channel.
+SENSOR_TOPICS = (*topics.FLOOR_IMU, topics.PENDULUM_JOINT_STATES, topics.EXCITATION_WRENCH)
+ENCODER_CHANNEL = SENSOR_TOPICS.index(topics.PENDULUM_JOINT_STATES)
+#: What the simulator publishes per sample besides the truth, in the order of
+#: :meth:`SensorMessages.fill`: the sensor topics and the floor-3 actuator's load cell.
+SAMPLE_TOPICS = (*SENSOR_TOPICS, topics.FLOOR3_LOAD_CELL)
 #: Command topics in the order of ``Command.vector`` = [pendulum torque, floor-3 force].
 COMMAND_TOPICS = (topics.TORQUE_CMD, topics.FORCE_CMD)
 
@@ -103,7 +107,7 @@ class SensorMessages:
 
 
 def sensor_reading(channel: int, msg: Any) -> float:
-    """The reading of sensor channel ``channel`` (index in :data:`SENSOR_CHANNELS`) in ``msg``;
+    """The reading of sensor channel ``channel`` (index in :data:`SENSOR_TOPICS`) in ``msg``;
     NaN when the encoder message carries no ``pendulum`` position."""
     if channel < 3:
         return float(msg.linear_acceleration.x)

@@ -28,8 +28,8 @@ import numpy as np
 from stillframe.config.scene import Scene
 from stillframe.contract.signals import Command
 from stillframe.control.factory import make_controller
-from stillframe.dynamics.models.identified import frame_for
 from stillframe.estimation.factory import make_estimator
+from stillframe.loop.wiring import design_model
 from stillframe.plant.frame_plant import make_plant
 
 Progress = Callable[[float], None]
@@ -94,7 +94,7 @@ def run_closed_loop(scene: Scene, progress: Progress | None = None) -> LoopHisto
     """Run the scene's plant, estimator and controller lock-step for ``scene.duration``."""
     started = time.perf_counter()
     plant = make_plant(scene)
-    design = frame_for(scene.design.model, scene.design.file, scene, "design.file")
+    design = design_model(scene)
     estimator = make_estimator(scene, design) if scene.estimator.type != "none" else None
     controller = make_controller(scene, design) if scene.controller.type != "none" else None
     n = round(scene.duration / plant.period)

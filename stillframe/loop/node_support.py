@@ -7,6 +7,7 @@ estimator or controller as :func:`stillframe.loop.closed_loop.run_closed_loop`.
 
 from __future__ import annotations
 
+import math
 import time
 from collections import deque
 from collections.abc import Callable
@@ -178,10 +179,14 @@ class RateMeter:
         return rate
 
 
-def wait_for_peers(node: api.Node, ready: Callable[[], bool], timeout_s: float) -> bool:
-    """Spin until ``ready()`` (then :data:`SETTLE_S` more); False after ``timeout_s``."""
-    if not api.spin_until(node, ready, timeout_s):
-        return False
+def wait_for_peers(node: api.Node, ready: Callable[[], bool],
+                   timeout_s: float = math.inf) -> bool:
+    """Spin until ``ready()`` (then :data:`SETTLE_S` more); False after ``timeout_s`` (default:
+    no limit) or on shutdown."""
+    deadline = time.monotonic() + timeout_s
+    while not api.spin_until(node, ready, max(0.0, min(1.0, deadline - time.monotonic()))):
+        if not api.ok() or time.monotonic() >= deadline:
+            return False
     api.spin_until(node, lambda: False, SETTLE_S)
     return api.ok()
 

@@ -1,0 +1,151 @@
+"""The sample of one stamp, assembled from the topics that carry it (estimator_node; docs/nodes.md,
+lock-step protocol, step 3). No clock is read here: the caller passes ``now_ns`` (monotonic
+nanoseconds in the node, any integer in a test).
+
+A stamp is used, oldest first, when it is complete (every input arrived, and in lock-step the
+command answering the previous stamp too), when a newer stamp has arrived, or ``wait_ns`` after
+its first message; anything but complete is a partial update and counted. Messages stamped at or
+before the last stamp used are rejected and counted (``stale_messages``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from stillframe.contract import topics
+from stillframe.contract.codecs import ENCODER_CHANNEL, SENSOR_TOPICS, SampleGrid
+from stillframe.contract.signals import Sample
+
+
+class Pending:
+    """The inputs of one stamp received so far."""
+
+    def __init__(self, ns: int, first_ns: int) -> None:
+        self.ns = ns
+        self.first_ns = first_ns        # when its first message arrived
+        self.values = np.full(len(SENSOR_TOPICS), np.nan)
+        self.present = np.zeros(len(SENSOR_TOPICS), dtype=bool)
+        self.truth: np.ndarray | None = None
+        self.applied = np.full(2, np.nan)    # [torque, force] applied over the previous period
+
+
+@dataclass
+class Ready:
+    """A stamp to estimate: its sample, the actuation in effect over the period before it
+    ([torque, force]) and whether every input arrived."""
+
+    ns: int
+    sample: Sample
+    control: np.ndarray
+    complete: bool
+
+
+class SampleAssembly:
+    """Readings of ``inputs`` (:func:`stillframe.loop.wiring.estimator_inputs`) gathered by stamp.
+
+    ``active`` is the actuator the controller drives (None: none); the other is taken as zero.
+    ``grid`` maps the stamps back to the exact sample times.
+    """
+
+    def __init__(self, inputs: tuple[topics.TopicSpec, ...], active: int | None,
+                 grid: SampleGrid, wait_ns: int, lockstep: bool) -> None:
+        self.needs_truth = topics.STATE_TRUTH in inputs
+        self.needs_force = topics.FLOOR3_LOAD_CELL in inputs
+        self.active = active
+        self.grid = grid
+        self.wait_ns = wait_ns
+        self.lockstep = lockstep
+        self.pending: dict[int, Pending] = {}
+        self.last_ns = -1               # the last stamp used
+        self.command = np.zeros(2)      # the newest command received, [torque, force]
+        self.command_ns = [-1, -1]
+        self.counts = {"stale_messages": 0, "partial_updates": 0, "rejected_commands": 0,
+                       "command_waits_timed_out": 0, "applied_reported": 0}
+
+    # -- inputs --------------------------------------------------------------------------
+    def _slot(self, ns: int, now_ns: int) -> Pending | None:
+        if ns <= self.last_ns:
+            self.counts["stale_messages"] += 1
+            return None
+        return self.pending.setdefault(ns, Pending(ns, now_ns))
+
+    def reading(self, channel: int, ns: int, value: float, now_ns: int,
+                applied_torque: float = np.nan) -> None:
+        """Sensor ``channel`` (index in ``SENSOR_TOPICS``) read ``value`` at stamp ``ns``; the
+        encoder also reports the torque applied over the previous period."""
+        if (p := self._slot(ns, now_ns)) is not None:
+            p.values[channel] = value
+            p.present[channel] = True
+            if channel == ENCODER_CHANNEL:
+                p.applied[0] = applied_torque
+
+    def applied_force(self, ns: int, value: float, now_ns: int) -> None:
+        """The floor-3 force applied over the period before stamp ``ns``."""
+        if (p := self._slot(ns, now_ns)) is not None:
+            p.applied[1] = value
+
+    def truth(self, ns: int, physical: np.ndarray, now_ns: int) -> None:
+        """The simulator's true physical state at stamp ``ns``."""
+        if (p := self._slot(ns, now_ns)) is not None:
+            p.truth = physical
+
+    def command_received(self, actuator: int, ns: int, value: float) -> bool:
+        """A command stamped ``ns``; rejected and counted when non-finite or older than the
+        newest one."""
+        if not np.isfinite(value) or ns < self.command_ns[actuator]:
+            self.counts["rejected_commands"] += 1
+            return False
+        self.command[actuator], self.command_ns[actuator] = value, ns
+        return True
+
+    # -- stepping ------------------------------------------------------------------------
+    def complete(self, p: Pending) -> bool:
+        """Every input of the stamp arrived."""
+        return (bool(p.present.all()) and (p.truth is not None or not self.needs_truth)
+                and (not self.needs_force or not np.isnan(p.applied[1])))
+
+    def command_in(self) -> bool:
+        """In lock-step, the answer to the previous stamp has arrived (or none is expected)."""
+        return (not self.lockstep or self.active is None or self.last_ns < 0
+                or self.command_ns[self.active] >= self.last_ns)
+
+    def pop_ready(self, now_ns: int) -> Ready | None:
+        """The oldest stamp if it is ready to use (removed from the pending ones), else None.
+        Call :meth:`used` once it has been used."""
+        if not self.pending:
+            return None
+        p = self.pending[min(self.pending)]
+        newer = len(self.pending) > 1
+        timed_out = now_ns - p.first_ns >= self.wait_ns
+        complete = self.complete(p)
+        command_in = self.command_in()
+        if not (newer or timed_out or (complete and command_in)):
+            return None
+        self.counts["command_waits_timed_out"] += complete and not command_in
+        self.counts["partial_updates"] += not complete
+        del self.pending[p.ns]
+        return Ready(p.ns, Sample(self.grid.seconds(p.ns), p.values[:4].copy(), float(p.values[4]),
+                                  p.present.copy(), p.truth),
+                     self._control(p), complete)
+
+    def _control(self, p: Pending) -> np.ndarray:
+        """The actuation in effect over the period before ``p``: what the simulator reports
+        it applied, else the newest command; zero for the actuator not driven."""
+        reported = np.isfinite(p.applied)
+        control = np.where(reported, p.applied, self.command)
+        control[[i for i in (0, 1) if i != self.active]] = 0.0
+        self.counts["applied_reported"] += bool(reported[self.active or 0])
+        return control
+
+    def used(self, ns: int) -> None:
+        """The stamp ``ns`` went into the estimate: older messages are stale from now on."""
+        self.last_ns = ns
+
+    def wait_ns_left(self, now_ns: int) -> int | None:
+        """Nanoseconds until the first pending stamp times out (None: nothing pending)."""
+        if not self.pending:
+            return None
+        first = min(p.first_ns for p in self.pending.values())
+        return max(0, first + self.wait_ns - now_ns)

@@ -1,0 +1,89 @@
+"""Each state estimate matched with the excitation force measured at its stamp (controller_node;
+docs/nodes.md, lock-step protocol, step 4). No clock is read here: the caller passes ``now_ns``
+(monotonic nanoseconds in the node, any integer in a test).
+
+In lock-step an estimate waits for the load-cell reading of its stamp, at most ``wait_ns`` after
+it arrived (then it takes the newest reading, counted in ``force_waits_timed_out``); in real time
+it takes the reading of its stamp if there is one, else the newest at once.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+#: Load-cell readings kept for matching estimates by stamp.
+FORCES_KEPT = 256
+
+
+@dataclass
+class Matched:
+    """An estimate (its stamp and physical state) with the force to control it with."""
+
+    ns: int
+    physical: np.ndarray
+    force: float
+
+
+class ForceMatching:
+    """Estimates waiting for their load-cell reading, answered in stamp order."""
+
+    def __init__(self, wait_ns: int, lockstep: bool, kept: int = FORCES_KEPT) -> None:
+        self.wait_ns = wait_ns
+        self.lockstep = lockstep
+        self.kept = kept
+        self.forces: dict[int, float] = {}
+        self.force = 0.0            # the newest finite reading
+        self.sample_ns = -1         # the newest load-cell stamp: the newest sample time seen
+        self.pending: list[tuple[int, np.ndarray, int]] = []   # (ns, physical, arrival ns)
+        self.last_ns = -1           # the newest estimate accepted
+        self.counts = {"stale_estimates": 0, "rejected_estimates": 0,
+                       "force_waits_timed_out": 0}
+
+    def add_force(self, ns: int, value: float) -> None:
+        """The load cell read ``value`` at stamp ``ns`` (a non-finite reading is ignored)."""
+        if not np.isfinite(value):
+            return
+        self.force = value
+        self.forces[ns] = value
+        self.sample_ns = max(self.sample_ns, ns)
+        if len(self.forces) > self.kept:
+            self.forces.pop(next(iter(self.forces)))
+
+    def add_estimate(self, ns: int, physical: np.ndarray, now_ns: int) -> None:
+        """An estimate stamped ``ns`` arrived; one not newer than the last, or non-finite, is
+        rejected and counted."""
+        if ns <= self.last_ns:
+            self.counts["stale_estimates"] += 1
+        elif not np.all(np.isfinite(physical)):
+            self.counts["rejected_estimates"] += 1
+        else:
+            self.pending.append((ns, physical, now_ns))
+            self.last_ns = ns
+
+    @property
+    def waiting(self) -> bool:
+        """An estimate has not been answered yet."""
+        return bool(self.pending)
+
+    def pop_ready(self, now_ns: int) -> Matched | None:
+        """The oldest estimate with its force, when it may be answered now (else None)."""
+        if not self.pending:
+            return None
+        ns, physical, arrival = self.pending[0]
+        if ns not in self.forces:
+            if self.lockstep and now_ns - arrival < self.wait_ns:
+                return None
+            self.counts["force_waits_timed_out"] += self.lockstep
+        self.pending.pop(0)
+        force = self.forces.get(ns, self.force)
+        self.forces = {k: v for k, v in self.forces.items() if k > ns}
+        return Matched(ns, physical, force)
+
+    def wait_ns_left(self, now_ns: int) -> int | None:
+        """Nanoseconds until the oldest estimate stops waiting for its force (None: none waits
+        for a force)."""
+        if not self.pending or not self.lockstep:
+            return None
+        return max(0, self.pending[0][2] + self.wait_ns - now_ns)

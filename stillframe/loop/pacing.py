@@ -1,0 +1,48 @@
+"""The simulator's timing per sample (sim_node; docs/nodes.md, lock-step protocol and real-time
+mode), with no clock: every call that needs the time takes ``now_ns`` (monotonic nanoseconds in
+the node, any integer in a test).
+
+- lock-step: the command for sample k is awaited until ``timeout_ns`` after the sample was
+  published; a command not in by then is a ``lockstep_timeouts``.
+- real time: sample k is due ``k · period_ns`` after the start and its command by the next due
+  time, else a ``deadline_misses``; a sample that starts more than a period late is an
+  ``overruns``, and the worst start delay is ``max_lateness_ns``.
+"""
+
+from __future__ import annotations
+
+
+class Pacer:
+    """Due times, deadlines and what was missed, for one run."""
+
+    def __init__(self, period_ns: int, lockstep: bool, timeout_ns: int) -> None:
+        self.period_ns = period_ns
+        self.lockstep = lockstep
+        self.timeout_ns = timeout_ns
+        self.started_ns = 0
+        self.max_lateness_ns = 0
+        self.counts = {"lockstep_timeouts": 0, "deadline_misses": 0, "overruns": 0}
+
+    def start(self, now_ns: int) -> None:
+        """Sample 0 is due now."""
+        self.started_ns = now_ns
+
+    def due_ns(self, k: int) -> int:
+        """When sample k is due in real time."""
+        return self.started_ns + k * self.period_ns
+
+    def begin(self, k: int, now_ns: int) -> None:
+        """Sample k starts now: in real time, count its lateness."""
+        if self.lockstep:
+            return
+        lateness = now_ns - self.due_ns(k)
+        self.max_lateness_ns = max(self.max_lateness_ns, lateness)
+        self.counts["overruns"] += lateness > self.period_ns
+
+    def deadline_ns(self, k: int, now_ns: int) -> int:
+        """Until when the command for sample k (published at ``now_ns``) is awaited."""
+        return now_ns + self.timeout_ns if self.lockstep else self.due_ns(k + 1)
+
+    def missed(self) -> None:
+        """The command for the current sample did not come by its deadline."""
+        self.counts["lockstep_timeouts" if self.lockstep else "deadline_misses"] += 1
