@@ -10,7 +10,8 @@ import sys
 import numpy as np
 import pytest
 
-from stillframe.dynamics.models.identified import frame_for, identified_frame
+from stillframe.contract.model_file import write_archive
+from stillframe.design.identified import frame_for, identified_frame
 from stillframe.dynamics.simulation import simulate
 from stillframe.errors import InputError
 from stillframe.loop.closed_loop import run_closed_loop
@@ -143,15 +144,26 @@ def test_pendulum_variant_stays_bounded_through_the_thesis_span() -> None:
 
 
 def test_identified_npz_file_loads_like_the_bundled_yaml(tmp_path) -> None:
+    """An identified-model file (the one format of stillframe.contract.model_file) with MKR
+    matrices gives the same structure; a file missing the state-space part is refused."""
     scene = thesis_scene("thesis_lqg")
     bundled = identified_frame("thesis_mkr", scene.rig, "plant.file").structure
     path = tmp_path / "model.npz"
-    np.savez(path, M=bundled.mass, K=bundled.stiffness, R=bundled.damping,
-             meta=np.array(json.dumps({"format": "stillframe-identified-model",
-                                       "provenance": {"method": "test"}})))
+    modes = {"mode_frequency_hz": np.array([1.0, 2.0, 3.0]),
+             "mode_damping_ratio": np.full(3, 0.01), "mode_eigenvalue": np.full(3, -0.1 + 6j),
+             "mode_shape": np.ones((3, 3), dtype=complex)}
+    write_archive(path, {"A": 0.5 * np.eye(6), "B": np.zeros((6, 1)), "C": np.zeros((3, 6)),
+                         "D": np.zeros((3, 1)), **modes, "M": bundled.mass,
+                         "K": bundled.stiffness, "R": bundled.damping},
+                  {"dt": 1 / 32, "inputs": ["u"], "outputs": ["y1", "y2", "y3"],
+                   "provenance": {"method": "test", "order": 6}})
     loaded = identified_frame(str(path), scene.rig, "plant.file").structure
     np.testing.assert_array_equal(loaded.mass, bundled.mass)
     np.testing.assert_array_equal(loaded.damping, bundled.damping)
+    np.savez(path, M=bundled.mass, K=bundled.stiffness, R=bundled.damping,
+             meta=np.array(json.dumps({"format": "stillframe-identified-model", "version": 1})))
+    with pytest.raises(InputError, match=r"missing arrays \['A', 'B', 'C', 'D'"):
+        identified_frame(str(path), scene.rig, "plant.file")
 
 
 @pytest.mark.parametrize(("overrides", "key"), [

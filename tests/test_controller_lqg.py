@@ -11,7 +11,7 @@ from stillframe.contract.signals import Estimate
 from stillframe.control.factory import TORQUE_INPUT, make_controller
 from stillframe.control.lqg import design_lqr
 from stillframe.design.coordinates import physical_selector
-from stillframe.dynamics.models.identified import frame_for
+from stillframe.design.identified import frame_for
 from tests.loop_helpers import thesis_scene
 
 PERIOD = 1.0 / 32

@@ -12,8 +12,8 @@ from scipy.signal import cont2discrete
 
 from stillframe.contract.signals import full_inputs
 from stillframe.design.discrete import first_order_hold
+from stillframe.design.identified import frame_for
 from stillframe.dynamics.models import build_model
-from stillframe.dynamics.models.identified import frame_for
 from stillframe.estimation.factory import initial_physical, make_estimator
 from stillframe.estimation.kalman import SteadyStateKalman, TimeVaryingKalman
 from stillframe.plant.frame_plant import Plant

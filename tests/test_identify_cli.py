@@ -272,5 +272,5 @@ def test_refuses_record_too_short_for_order(tmp_path: Path) -> None:
 
 
 def test_refuses_a_directory_that_is_no_bag(tmp_path: Path) -> None:
-    assert "cannot be read as a rosbag2 bag" in refuse(tmp_path, *CHANNELS,
-                                                        exit_code=BagError.exit_code)
+    assert "metadata.yaml: missing (not a rosbag2 directory?)" in refuse(
+        tmp_path, *CHANNELS, exit_code=BagError.exit_code)

@@ -34,11 +34,19 @@ from typing import Any
 
 import numpy as np
 
+from stillframe.app.launcher import run_scene
+from stillframe.bags.channels import Channel, read_record
 from stillframe.config.scene import load_scene
 from stillframe.config.schema import Section
 from stillframe.contract import topics
+from stillframe.design.identified import load_identified_structure, resolve_model_file
+from stillframe.dynamics.models import build_model
 from stillframe.errors import InputError
-from stillframe.identification.structure_model import IdentifiedStructure
+from stillframe.identification.structure_model import (
+    IdentifiedStructure,
+    identify_structure,
+    save_structure,
+)
 
 #: the thesis's LQG loop (scenes/thesis_lqg.yaml) on the scene's plant, torque limited
 LQG_LOOP: tuple[str, ...] = (
@@ -129,8 +137,6 @@ def true_design(scene: Section) -> list[str]:
 
 def true_structure(scene: Section) -> dict[str, np.ndarray] | None:
     """The plant's floors-only M, K, R where they exist (lumped or an identified plant file)."""
-    from stillframe.dynamics.models import build_model
-    from stillframe.dynamics.models.identified import load_identified_structure, resolve_model_file
 
     if scene.plant.model == "file":
         s = load_identified_structure(resolve_model_file(scene.plant.file, "plant.file"))
@@ -166,9 +172,6 @@ def run_experiment(scene_path: Path, user: Sequence[str], out: Path, test: Ident
                    backends: Sequence[str] = (), progress: Progress = _stderr
                    ) -> ExperimentResult:
     """Steps 1–5 of the module docstring; files go to ``out``."""
-    from stillframe.app.launcher import run_scene
-    from stillframe.identification.bagdata import Channel, read_record
-    from stillframe.identification.structure_model import identify_structure, save_structure
 
     test.check()
     probe = load_scene(scene_path, [*user, "controller.type=none"])  # rate and step only

@@ -31,7 +31,7 @@ from stillframe.config.scene import Scene, load_scene
 from stillframe.contract.topics import STATUS_KEYS
 from stillframe.errors import InputError
 from stillframe.locations import REPO_ROOT
-from stillframe.middleware import names
+from stillframe.middleware import api, discovery, names
 
 NODES: tuple[str, ...] = ("sim_node", "estimator_node", "controller_node")
 #: the children whose middleware backend ``--backend NAME=BACKEND`` can choose
@@ -82,7 +82,6 @@ def parse_backends(specs: Sequence[str]) -> dict[str, str]:
     ``NAME=BACKEND`` for one (later values win); unset children use the process's default
     (``STILLFRAME_RMW``, else rclpy where importable). InputError names a bad value or a
     backend this machine lacks, before any process starts."""
-    from stillframe.middleware import api
 
     chosen = dict.fromkeys(BACKEND_TARGETS, api.backend_name())
     for spec in specs:
@@ -99,7 +98,6 @@ def single_host_discovery() -> str:
     """The discovery range of the launch: ``ROS_AUTOMATIC_DISCOVERY_RANGE`` if set (checked),
     else ``LOCALHOST``, set in this process's environment so the children inherit it: a launch
     runs every node on this host, and nothing beyond it needs to find them unless asked."""
-    from stillframe.middleware import discovery
 
     os.environ.setdefault(discovery.RANGE_ENV, discovery.DiscoveryRange.LOCALHOST.value)
     return discovery.discovery_range().value
@@ -289,7 +287,6 @@ class Launcher:
     domain) may be given more subscriptions before :meth:`run` (the loop benchmark does)."""
 
     def __init__(self, options: LaunchOptions) -> None:
-        from stillframe.middleware import api
 
         if options.mode not in MODES:
             raise InputError(f"--mode {options.mode}: expected one of {', '.join(MODES)}")
@@ -338,7 +335,6 @@ class Launcher:
     def run(self) -> LaunchResult:
         """Start everything, wait for sim_node's result, stop the rest. Raises NodeDiedError,
         or KeyboardInterrupt after a clean stop when SIGINT/SIGTERM reached the launcher."""
-        from stillframe.middleware import api
 
         self.options.result_file.unlink(missing_ok=True)
         try:
@@ -381,7 +377,6 @@ class Launcher:
         a Cyclone and a Fast DDS participant created in the same instant can take the same
         participant index and then never discover each other (measured: 3 of 4 simultaneous
         starts)."""
-        from stillframe.middleware import api
 
         deadline = time.monotonic() + timeout_s
         while not any(text in line for line in child.tail):

@@ -13,12 +13,16 @@ DEFAULT_NAMESPACE = "/frame"
 
 @dataclass(frozen=True)
 class TopicSpec:
-    """One row of the contract: name, message type, QoS profile name and what it carries."""
+    """One row of the contract: name, message type, QoS profile name, what it carries, and
+    ``field``, the message field that carries its scalar quantity (a dotted path with ``[i]``
+    for array elements; empty where the message carries several). :mod:`~.codecs` writes and
+    reads those fields; :mod:`stillframe.bags.channels` reads them by default."""
 
     name: str
     type_name: str
     qos: str
     content: str
+    field: str = ""
 
 
 CLOCK = TopicSpec(
@@ -29,30 +33,32 @@ FLOOR_IMU = tuple(
         f"floor{n}/imu", "sensor_msgs/msg/Imu", "sensor_data",
         f"linear_acceleration.x = floor {n} horizontal acceleration; covariances filled; "
         "orientation and angular velocity absent (covariance[0] = -1)",
+        "linear_acceleration.x",
     )
     for n in (1, 2, 3)
 )
 PENDULUM_JOINT_STATES = TopicSpec(
     "pendulum/joint_states", "sensor_msgs/msg/JointState", "sensor_data",
     "encoder: name 'pendulum', position = phi; effort = hinge torque the motor applied over the "
-    "previous sample period (after saturation and slew limits)",
+    "previous sample period (after saturation and slew limits)", "position[0]",
 )
 EXCITATION_WRENCH = TopicSpec(
     "excitation/wrench", "geometry_msgs/msg/WrenchStamped", "sensor_data",
-    "load cell on floor 1: force.x",
+    "load cell on the excited floor: force.x", "wrench.force.x",
 )
 FLOOR3_LOAD_CELL = TopicSpec(
     "floor3/load_cell", "geometry_msgs/msg/WrenchStamped", "sensor_data",
     "load cell of the floor-3 actuator: force.x = force applied over the previous sample period "
-    "(after saturation and slew limits)",
+    "(after saturation and slew limits)", "wrench.force.x",
 )
 TORQUE_CMD = TopicSpec(
     "pendulum/torque_cmd", "geometry_msgs/msg/WrenchStamped", "default",
     "command torque on the pendulum hinge: torque.z; stamp = stamp of the estimate used",
+    "wrench.torque.z",
 )
 FORCE_CMD = TopicSpec(
     "floor3/force_cmd", "geometry_msgs/msg/WrenchStamped", "default",
-    "command force on floor 3 (EUK variant 2): force.x",
+    "command force on floor 3 (EUK variant 2): force.x", "wrench.force.x",
 )
 STATE_ESTIMATE = TopicSpec(
     "state_estimate", "sensor_msgs/msg/JointState", "default",

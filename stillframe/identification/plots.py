@@ -13,7 +13,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
-from stillframe.identification.bagdata import Record
+from stillframe.bags.channels import Record
 from stillframe.identification.frf import h1_frf, model_frf
 from stillframe.identification.pipeline import Identification
 from stillframe.identification.stabilization import stabilization_diagram as stabilization_rows

@@ -26,6 +26,7 @@ from numpy.typing import NDArray
 from stillframe.config.schema import Section
 from stillframe.identification.damping import fit_proportional_damping, proportional_damping_matrix
 from stillframe.identification.mkr import PhysicalModel, mkr
+from stillframe.identification.model_file import model_from_identification, save_model
 from stillframe.identification.pipeline import Identification, identify
 
 Array = NDArray[np.float64]
@@ -90,7 +91,6 @@ def identify_structure(u: Array, y: Array, dt: float, rig: Section) -> Identifie
 def save_structure(path: Path, result: IdentifiedStructure, inputs: list[str],
                    outputs: list[str], provenance: dict) -> None:
     """Write the model file the design reads (``design.model: file``), M, K, R the structure's."""
-    from stillframe.identification.model_file import model_from_identification, save_model
 
     provenance = {**provenance, "mkr": {"dofs": "0,1,2:0", "output": "acceleration"},
                   "rayleigh_alpha": result.rayleigh_alpha, "rayleigh_beta": result.rayleigh_beta,

@@ -8,8 +8,8 @@ from stillframe.config.schema import Section
 from stillframe.contract import topics
 from stillframe.contract.codecs import COMMAND_TOPICS, SENSOR_TOPICS
 from stillframe.contract.signals import actuator_of
+from stillframe.design.identified import frame_for
 from stillframe.dynamics.models.frame import FrameModel
-from stillframe.dynamics.models.identified import frame_for
 
 
 def design_model(scene: Section) -> FrameModel:

@@ -15,9 +15,9 @@ import numpy as np
 
 from stillframe.config.scene import Scene
 from stillframe.contract.signals import Sample
+from stillframe.design.identified import frame_for
 from stillframe.dynamics.excitation import floor_load
 from stillframe.dynamics.integrators import check_finite, integrate, make_integrator
-from stillframe.dynamics.models.identified import frame_for
 from stillframe.dynamics.simulation import initial_state
 from stillframe.dynamics.systems import LinearSystem, MechanicalSystem
 from stillframe.errors import InputError, IntegrationError

@@ -1,6 +1,6 @@
 """``stillframe identify BAG``: a state-space model and its modes from a rosbag2 recording.
 
-Inputs and outputs are ``TOPIC[:FIELD]`` channels (see :mod:`stillframe.identification.bagdata`);
+Inputs and outputs are ``TOPIC[:FIELD]`` channels (see :mod:`stillframe.bags.channels`);
 the
 model comes from :func:`stillframe.identification.pipeline.identify` (OKID + ERA or ERA/DC, thesis
 ch. 3).
@@ -122,7 +122,7 @@ def _physical(args: argparse.Namespace, ident: Identification
 
 
 def run(args: argparse.Namespace) -> int:
-    from stillframe.identification.bagdata import DEFAULT_JITTER, Channel, read_record
+    from stillframe.bags.channels import DEFAULT_JITTER, Channel, read_record
     from stillframe.identification.pipeline import identify
     from stillframe.identification.report import format_matrix, identification_document, modes_table
 

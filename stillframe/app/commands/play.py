@@ -22,9 +22,9 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from stillframe.bags.player import Player
     from stillframe.errors import InputError
     from stillframe.middleware.api import create_node, ok
+    from stillframe.recording.player import Player
 
     if not args.delay >= 0:
         raise InputError(f"--delay must be >= 0 s, got {args.delay}")

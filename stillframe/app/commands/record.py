@@ -20,12 +20,12 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from stillframe.bags.recorder import Recorder
     from stillframe.bags.storage import BagWriter
     from stillframe.contract import messages
     from stillframe.errors import InputError
     from stillframe.middleware.api import create_node, spin
     from stillframe.middleware.names import resolve_topic
+    from stillframe.recording.recorder import Recorder
 
     if args.all == bool(args.topics):
         raise InputError("give either --all or one or more TOPICs")

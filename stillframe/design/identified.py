@@ -21,6 +21,7 @@ import yaml
 
 from stillframe.config.scene import Rig, Scene
 from stillframe.config.yamlio import load_yaml
+from stillframe.contract.model_file import read_archive
 from stillframe.dynamics.models import build_model
 from stillframe.dynamics.models.frame import FrameModel
 from stillframe.dynamics.models.structure import Structure
@@ -57,15 +58,12 @@ def _matrices_from_yaml(path: Path) -> tuple[dict[str, np.ndarray], str]:
 
 
 def _matrices_from_npz(path: Path) -> tuple[dict[str, np.ndarray], str]:
-    try:
-        with np.load(path, allow_pickle=False) as archive:
-            if not {"M", "K", "R"} <= set(archive.files):
-                raise InputError(f"{path}: the identified model holds no MKR matrices M, K, R")
-            arrays = {"mass": archive["M"], "stiffness": archive["K"], "damping": archive["R"]}
-            meta = json.loads(str(archive["meta"])) if "meta" in archive.files else {}
-    except (OSError, ValueError) as exc:
-        raise InputError(f"{path}: cannot read the identified model ({exc})") from None
-    return arrays, json.dumps(meta.get("provenance", {"file": path.name}))
+    archive = read_archive(path)
+    if not archive.has_mkr:
+        raise InputError(f"{path}: the identified model holds no MKR matrices M, K, R")
+    arrays = {"mass": archive.arrays["M"], "stiffness": archive.arrays["K"],
+              "damping": archive.arrays["R"]}
+    return arrays, json.dumps(archive.meta["provenance"])
 
 
 def load_identified_structure(path: Path) -> Structure:

@@ -19,23 +19,17 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-from rosbags.highlevel import AnyReader, AnyReaderError
-from rosbags.typesys import Stores, get_typestore
 from scipy import signal
 
-from stillframe.errors import BagError, IdentificationError, InputError
+from stillframe.bags.storage import open_bag
+from stillframe.contract.messages import TYPESTORE
+from stillframe.contract.topics import CONTRACT
+from stillframe.errors import IdentificationError, InputError
 
-#: Default field per message type (the contract's quantity for that type).
-DEFAULT_FIELDS: dict[str, str] = {
-    "sensor_msgs/msg/Imu": "linear_acceleration.x",
-    "geometry_msgs/msg/WrenchStamped": "wrench.force.x",
-    "sensor_msgs/msg/JointState": "position[0]",
-    "std_msgs/msg/Float64": "data",
-}
-#: Topics whose contract quantity differs from their type's default (matched by suffix).
-DEFAULT_FIELDS_BY_TOPIC: dict[str, str] = {
-    "pendulum/torque_cmd": "wrench.torque.z",
-}
+#: Default field per message type: that of the first contract topic of the type, and std_msgs'
+#: Float64's ``data``.
+DEFAULT_FIELDS: dict[str, str] = {"std_msgs/msg/Float64": "data"} | {
+    spec.type_name: spec.field for spec in reversed(CONTRACT) if spec.field}
 #: Largest deviation of one sampling step from the median step, relative to the median step.
 DEFAULT_JITTER = 0.05
 
@@ -105,9 +99,11 @@ def _split_path(path: str, spec: str) -> list[tuple[str, list[int]]]:
 
 
 def _default_field(topic: str, msgtype: str) -> str:
-    for suffix, path in DEFAULT_FIELDS_BY_TOPIC.items():
-        if topic.endswith("/" + suffix):
-            return path
+    """The contract's field for a contract topic (matched by its name under any namespace),
+    else the type's default."""
+    for spec in CONTRACT:
+        if spec.field and spec.type_name == msgtype and topic.endswith("/" + spec.name):
+            return spec.field
     if msgtype not in DEFAULT_FIELDS:
         raise InputError(f"topic {topic} has type {msgtype}, which has no default field; "
                          f"give one as {topic}:FIELD")
@@ -144,15 +140,7 @@ def _stamp_ns(msg: object) -> int | None:
 
 def read_series(bag: str | Path, channels: Sequence[Channel]) -> list[Series]:
     """Read each channel's samples from the bag (one pass over the needed topics)."""
-    path = Path(bag)
-    if not path.exists():
-        raise BagError(f"bag {bag}: no such file or directory")
-    try:
-        reader = AnyReader([path], default_typestore=get_typestore(Stores.ROS2_JAZZY))
-        reader.open()
-    except (AnyReaderError, OSError) as exc:
-        raise BagError(f"bag {bag}: cannot be read as a rosbag2 bag ({exc})") from None
-    try:
+    with open_bag(bag, TYPESTORE) as reader:
         types: dict[str, set[str]] = {}
         for c in reader.connections:
             types.setdefault(c.topic, set()).add(c.msgtype)
@@ -180,8 +168,6 @@ def read_series(bag: str | Path, channels: Sequence[Channel]) -> list[Series]:
             for i, (full, items, msgtype) in enumerate(resolved):
                 if full.topic == connection.topic:
                     values[i].append(_extract(msg, items, full, msgtype))
-    finally:
-        reader.close()
     out = []
     for (full, _, _), vals in zip(resolved, values, strict=True):
         header = stamps[full.topic]

@@ -1,4 +1,4 @@
-"""stillframe.identification.bagdata: channels from real rosbag2 files, alignment, refusals,
+"""stillframe.bags.channels: channels from real rosbag2 files, alignment, refusals,
 preprocessing."""
 
 from __future__ import annotations
@@ -10,8 +10,8 @@ import pytest
 from rosbags.rosbag2 import StoragePlugin, Writer
 from scipy import signal
 
+from stillframe.bags.channels import Channel, align, preprocess, read_record, read_series
 from stillframe.errors import IdentificationError, InputError
-from stillframe.identification.bagdata import Channel, align, preprocess, read_record, read_series
 from tests.identify_support import FORCE_TOPIC, IMU_TOPICS, TYPESTORE, simulate, write_frame_bag
 
 DT = 1 / 32
