@@ -1,4 +1,9 @@
-"""Settings for the whole suite.
+"""Settings and shared fixtures for the whole suite.
+
+Layout: ``unit/<layer>/`` holds the tests of one layer of the library (docs/architecture.md);
+``integration/`` the tests that start DDS participants, node processes or the ``stillframe``
+command, all marked ``processes`` here (``pytest -m "not processes"`` runs the numerical core);
+``support/`` the helpers they share.
 
 Every DDS participant a test starts (in this process or a child) discovers only this machine:
 ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``, so no discovery traffic leaves the host. Tests of the
@@ -6,7 +11,29 @@ other ranges set their own, inside network namespaces of their own.
 """
 
 import os
+from pathlib import Path
 
 os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
 os.environ.pop("ROS_STATIC_PEERS", None)
 os.environ.pop("ROS_LOCALHOST_ONLY", None)
+
+
+import pytest
+
+from tests.support.middleware import isolate_domain
+
+INTEGRATION = Path(__file__).with_name("integration")
+
+
+@pytest.fixture
+def ros_domain(monkeypatch: pytest.MonkeyPatch) -> int:
+    """A random ROS_DOMAIN_ID (1..200) so parallel test runs never see each other; discovery
+    on this machine only (no multicast leaves it)."""
+    return isolate_domain(monkeypatch)
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """Every test under integration/ starts processes or DDS participants."""
+    for item in items:
+        if INTEGRATION in Path(str(item.fspath)).parents:
+            item.add_marker(pytest.mark.processes)

@@ -11,7 +11,9 @@ from pathlib import Path
 import grimp
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
+from stillframe.locations import REPO_ROOT
+
+ROOT = REPO_ROOT
 LINT_IMPORTS = Path(sys.executable).with_name("lint-imports")
 PACKAGES = ("stillframe", "sim_node", "estimator_node", "controller_node")
 

@@ -1,0 +1,65 @@
+"""``stillframe bench loop``'s bookkeeping (no wall-clock asserts): the latency log against
+numbers worked out by hand and numpy's percentiles, the scene overrides it runs, bad input."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from stillframe.app.commands.bench_loop import realtime_overrides
+from stillframe.config.scene import load_scene
+from stillframe.locations import REPO_ROOT
+from stillframe.loop.latency import LatencyLog
+from tests.support.middleware import run_stillframe
+
+MS = 1_000_000
+
+
+def test_latency_pairs_commands_with_their_samples_by_stamp() -> None:
+    log = LatencyLog(period_ns=10 * MS)  # 100 Hz
+    # samples k = 0..5 received at 10 k ms + 0.1 ms; commands for k = 0..3 after 2, 4, 12, 3 ms
+    for k in range(6):
+        log.on_sample(k * 10 * MS, k * 10 * MS + 100_000)
+    for k, delay_ms in enumerate([2, 4, 12, 3]):
+        log.on_command(k * 10 * MS, k * 10 * MS + 100_000 + delay_ms * MS)
+    log.on_command(0, 10**12)               # a second command for stamp 0: the first counts
+    log.on_sample(0, 5)                     # a repeated sample: the first receipt counts
+    s = log.summary()
+    expected = np.array([2.0, 4.0, 12.0, 3.0]) * 1e3
+    assert s["samples"] == 6 and s["answered"] == 4
+    assert s["p50_us"] == pytest.approx(3500.0)
+    assert s["p99_us"] == pytest.approx(np.percentile(expected, 99))
+    assert s["max_us"] == pytest.approx(12000.0)
+    assert s["deadline_misses"] == 1         # 12 ms > one 10 ms period
+    assert s["unanswered"] == 0              # k = 4, 5 came after the last command: in flight
+
+
+def test_unanswered_samples_before_the_last_command_are_counted() -> None:
+    log = LatencyLog(period_ns=MS)
+    for k in range(4):
+        log.on_sample(k * MS, k * MS)
+    log.on_command(0, 100)
+    log.on_command(3 * MS, 3 * MS + 100)
+    s = log.summary()
+    assert (s["answered"], s["unanswered"], s["deadline_misses"]) == (2, 2, 0)
+
+
+def test_empty_log_reports_nan_not_an_error() -> None:
+    s = LatencyLog(period_ns=MS).summary()
+    assert s["answered"] == 0 and math.isnan(s["p50_us"])
+
+
+@pytest.mark.parametrize(("rate", "steps_per_sample"), [(100.0, 10), (1000.0, 1)])
+def test_realtime_overrides_make_a_valid_scene(rate: float, steps_per_sample: int) -> None:
+    scene = load_scene(REPO_ROOT / "scenes" / "thesis_lqg.yaml", realtime_overrides(rate, 6.0))
+    assert scene.sensors.rate_hz == rate
+    assert scene.integrator.dt * steps_per_sample == pytest.approx(1.0 / rate, rel=1e-12)
+    assert scene.duration == 6.0 and scene.controller.start == 3.0
+
+
+def test_bench_loop_rejects_a_short_duration() -> None:
+    done = run_stillframe("bench", "loop", "--duration", "0.5")
+    assert done.returncode == 2
+    assert done.stderr.strip() == "stillframe bench: error: bench loop: --duration must be >= 1 s"

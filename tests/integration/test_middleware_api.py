@@ -1,0 +1,116 @@
+"""Node API details: QoS profiles as rmw defines them, remaps, destroying endpoints, logging."""
+
+from __future__ import annotations
+
+import re
+import time
+
+import pytest
+
+from stillframe.contract import messages
+from stillframe.middleware import qos
+from stillframe.middleware.api import create_node, spin_until
+from stillframe.middleware.logger import Logger
+
+
+def test_profiles_are_rmws() -> None:
+    """rmw/qos_profiles.h (Jazzy) and rclcpp's ClockQoS, with rmw's enum values."""
+    sensor = (qos.History.KEEP_LAST, 5, qos.Reliability.BEST_EFFORT, qos.Durability.VOLATILE)
+    default = (qos.History.KEEP_LAST, 10, qos.Reliability.RELIABLE, qos.Durability.VOLATILE)
+    fields = ("history", "depth", "reliability", "durability")
+    assert tuple(getattr(qos.SENSOR_DATA, f) for f in fields) == sensor
+    assert tuple(getattr(qos.DEFAULT, f) for f in fields) == default
+    assert qos.CLOCK.depth == 1 and qos.CLOCK.reliability == qos.Reliability.BEST_EFFORT
+    assert qos.PARAMETERS.depth == 1000
+    assert (int(qos.Reliability.RELIABLE), int(qos.Reliability.BEST_EFFORT)) == (1, 2)
+    assert (int(qos.Durability.TRANSIENT_LOCAL), int(qos.Durability.VOLATILE)) == (1, 2)
+    assert qos.as_profile(3) == qos.DEFAULT.with_depth(3)
+
+
+def test_offered_qos_is_discovered_as_offered(ros_domain: int) -> None:
+    node = create_node("offer", namespace="/frame", argv=["test"])
+    try:
+        latched = qos.QoSProfile(depth=1, durability=qos.Durability.TRANSIENT_LOCAL,
+                                 deadline_ns=250_000_000)
+        node.create_publisher("std_msgs/msg/Header", "latched", latched)
+        node.create_publisher("sensor_msgs/msg/Imu", "floor1/imu", "sensor_data")
+        found: dict = {}
+
+        def discovered() -> bool:
+            for topic in ("/frame/latched", "/frame/floor1/imu"):
+                found[topic] = node.get_publishers_info_by_topic(topic)
+            return all(found.values())
+
+        assert spin_until(node, discovered, 10)
+        assert found["/frame/latched"][0].qos_profile == latched
+        assert found["/frame/floor1/imu"][0].qos_profile == qos.SENSOR_DATA
+        assert found["/frame/floor1/imu"][0].topic_type_hash == messages.TYPESTORE.hash_rihs01(
+            "sensor_msgs/msg/Imu")
+        assert ("offer", "/frame") in node.get_node_names_and_namespaces()
+    finally:
+        node.destroy_node()
+
+
+def test_remap_and_destroy(ros_domain: int) -> None:
+    node = create_node("remapper", namespace="/frame",
+                       argv=["test", "--ros-args", "-r", "floor1/imu:=/rig/imu_a"])
+    try:
+        pub = node.create_publisher("sensor_msgs/msg/Imu", "floor1/imu", "sensor_data")
+        assert pub.topic_name == "/rig/imu_a"
+        got: list = []
+        sub = node.create_subscription("sensor_msgs/msg/Imu", "/rig/imu_a", got.append,
+                                       "sensor_data")
+        assert spin_until(node, lambda: pub.get_subscription_count() == 1, 10)
+        node.destroy_subscription(sub)
+        assert spin_until(node, lambda: pub.get_subscription_count() == 0, 10)
+        node.destroy_publisher(pub)
+        assert spin_until(node, lambda: not node.get_publishers_info_by_topic("/rig/imu_a"), 10)
+    finally:
+        node.destroy_node()
+
+
+def test_message_helpers() -> None:
+    assert messages.type_name("sensor_msgs/Imu") == "sensor_msgs/msg/Imu"
+    js = messages.new("sensor_msgs/msg/JointState", name=["phi"], position=[1])
+    assert js.position.dtype == float and js.position.tolist() == [1.0]
+    assert messages.to_plain(js)["header"] == {"stamp": {"sec": 0, "nanosec": 0}, "frame_id": ""}
+    stamp = messages.time_msg(3_000_000_007)
+    assert (stamp.sec, stamp.nanosec) == (3, 7) and messages.stamp_ns(stamp) == 3_000_000_007
+    back = messages.deserialize(messages.serialize(js), "sensor_msgs/msg/JointState")
+    assert back.name == ["phi"] and back.position.tolist() == [1.0]
+
+
+def test_logger_format_and_once(capsys: pytest.CaptureFixture[str]) -> None:
+    log = Logger("frame.sim_node", level="info")
+    assert log.info("started") is True
+    assert log.debug("hidden") is False
+    assert log.warning("bad sample", once=True) is True
+    assert log.warning("bad sample", once=True) is False
+    lines = capsys.readouterr().err.splitlines()
+    assert len(lines) == 2
+    assert re.fullmatch(r"\[INFO\] \[\d+\.\d{9}\] \[frame\.sim_node\]: started", lines[0])
+    assert lines[1].startswith("[WARN] ")
+
+
+def test_raw_subscription_gets_cdr_and_timestamps(ros_domain: int) -> None:
+    node = create_node("raw", namespace="/frame", argv=["test"])
+    try:
+        got: list = []
+        node.create_subscription("sensor_msgs/msg/JointState", "js",
+                                 lambda data, info: got.append((data, info)), 10, raw=True)
+        pub = node.create_publisher("sensor_msgs/msg/JointState", "js", 10)
+        assert spin_until(node, lambda: pub.get_subscription_count() == 1, 10)
+        msg = messages.new("sensor_msgs/msg/JointState", name=["phi"], position=[0.25])
+        before = time.time_ns()
+        pub.publish(msg)
+        after = time.time_ns()
+        assert spin_until(node, lambda: got, 10)
+        data, info = got[0]
+        cdr = bytes(messages.TYPESTORE.serialize_cdr(msg, "sensor_msgs/msg/JointState"))
+        assert data == cdr + b"\0" * (-len(cdr) % 4)
+        assert before <= info.source_timestamp <= after <= info.received_timestamp
+        pub.publish(data)  # CDR bytes are published as they are
+        assert spin_until(node, lambda: len(got) == 2, 10)
+        assert got[1][0] == data
+    finally:
+        node.destroy_node()

@@ -1,0 +1,245 @@
+"""``stillframe monitor`` during real launches: a real ``foxglove.websocket.v1`` client against
+the recorder's bag, slow and churning clients, and the dashboard in headless Chromium."""
+
+from __future__ import annotations
+
+import asyncio
+import io
+import itertools
+import json
+import re
+import signal
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import matplotlib.pyplot as plt
+import numpy as np
+import pytest
+
+from stillframe.app.commands.bench_loop import realtime_overrides
+from stillframe.bags.storage import read_bag
+from stillframe.contract import messages
+from stillframe.locations import REPO_ROOT
+from stillframe.monitor.dashboard import ERROR_KEYS
+from stillframe.monitor.foxglove_client import Capture, capture, churn, stall
+from tests.support.middleware import child_env, isolate_domain
+
+pytestmark = pytest.mark.slow
+
+SCENE = REPO_ROOT / "scenes" / "thesis_lqg.yaml"
+#: 12 s of the LQG scene at 32 Hz: control from 6 s, peaks over 6 s windows
+SHORT = ["--set", "duration=12", "--set", "controller.start=6", "--set", "evaluation.window=6"]
+IMU = "/frame/floor1/imu"
+READY = re.compile(r"Monitor ready: foxglove (ws://\S+?)(?:, dashboard (http://\S+))?$")
+
+
+@dataclass
+class Launch:
+    """A ``stillframe launch --monitor`` child whose stderr is read by a thread."""
+
+    proc: subprocess.Popen
+    lines: list[str] = field(default_factory=list)
+    ready: threading.Event = field(default_factory=threading.Event)
+    urls: tuple[str, str | None] = ("", None)
+
+    @classmethod
+    def start(cls, *args: str) -> Launch:
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "stillframe", "launch", str(SCENE), "--monitor",
+             "--monitor-port", "0", "--dashboard-port", "0", *args],
+            env=child_env(), cwd=REPO_ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+            text=True)
+        launch = cls(proc)
+        threading.Thread(target=launch._read, daemon=True).start()
+        assert launch.ready.wait(120), "".join(launch.lines[-30:])
+        return launch
+
+    def _read(self) -> None:
+        for line in self.proc.stderr:
+            self.lines.append(line)
+            if (found := READY.search(line.rstrip())) is not None:
+                self.urls = (found[1], found[2])
+                self.ready.set()
+        self.ready.set()
+
+    def finish(self, timeout: float = 180) -> dict:
+        out, _ = self.proc.communicate(timeout=timeout)
+        assert self.proc.returncode == 0, "".join(self.lines[-30:])
+        return json.loads(out)
+
+
+@pytest.fixture(scope="module")
+def lockstep_run(tmp_path_factory: pytest.TempPathFactory, ros_domain_module: int) -> dict:
+    """One lock-step launch with the monitor and a recorder of the IMU topic and ``/clock``;
+    meanwhile a subscribing client, a client that stops reading, and clients that come and
+    go."""
+    bag = tmp_path_factory.mktemp("monitor") / "bag"
+    launch = Launch.start(*SHORT, "--json", "--record", str(bag), "--record-topic", IMU,
+                          "--record-topic", "/clock")
+    url = launch.urls[0]
+
+    async def clients() -> tuple[Capture, int, int]:
+        done = asyncio.Event()
+        seen = Capture()
+        tasks = [asyncio.create_task(capture(url, [IMU], done, seen)),
+                 asyncio.create_task(stall(url, IMU, done)),
+                 asyncio.create_task(churn(url, done))]
+        await asyncio.to_thread(launch.proc.wait)
+        done.set()
+        _, slow, churned = await asyncio.gather(*tasks)
+        return seen, slow, churned
+
+    seen, slow, churned = asyncio.run(clients())
+    return {"seen": seen, "slow": slow, "churned": churned, "evaluation": launch.finish(),
+            "bag": bag, "lines": launch.lines}
+
+
+@pytest.fixture(scope="module")
+def ros_domain_module() -> Iterator[int]:
+    """A random ROS_DOMAIN_ID for the module's launches (as the ``ros_domain`` fixture)."""
+    with pytest.MonkeyPatch.context() as patch:
+        yield isolate_domain(patch)
+
+
+def test_a_foxglove_client_decodes_what_the_recorder_recorded(lockstep_run: dict) -> None:
+    """The IMU channel carries the ros2msg schema; decoded with it alone, every message the
+    client got equals the bag's message of the same stamp, and none is missing in between."""
+    seen: Capture = lockstep_run["seen"]
+    assert seen.subprotocol == "foxglove.sdk.v1"
+    channel = seen.channels[IMU]
+    assert (channel["schemaName"], channel["schemaEncoding"], channel["encoding"]) == (
+        "sensor_msgs/msg/Imu", "ros2msg", "cdr")
+    recorded = {messages.stamp_ns(m.msg.header.stamp): m.msg
+                for m in read_bag(lockstep_run["bag"], messages.TYPESTORE, topics=[IMU],
+                                  decode=True)}
+    got = seen.messages.get(IMU, [])
+    assert len(got) >= 50, f"{len(got)} of {len(recorded)} messages reached the client"
+    stamps = [messages.stamp_ns(m.header.stamp) for m in got]
+    assert set(stamps) <= set(recorded)
+    for msg, stamp in zip(got, stamps, strict=True):
+        mine = recorded[stamp]
+        assert msg.linear_acceleration.x == mine.linear_acceleration.x
+        assert list(msg.linear_acceleration_covariance) == list(
+            mine.linear_acceleration_covariance)
+    # consecutive samples at 32 Hz: the slow client made the server drop nothing for this one
+    period = round(1e9 / 32)
+    assert all(abs(b - a - period) <= 1 for a, b in itertools.pairwise(stamps))
+
+
+def test_clock_drives_the_server_time(lockstep_run: dict) -> None:
+    """With sim time the server has the ``time`` capability and broadcasts /clock's times."""
+    seen: Capture = lockstep_run["seen"]
+    assert "time" in seen.server_info["capabilities"]
+    clock = {messages.stamp_ns(m.msg.clock)
+             for m in read_bag(lockstep_run["bag"], messages.TYPESTORE, topics=["/clock"],
+                               decode=True)}
+    # every broadcast time is a sample time of the scene's 32 Hz grid (what /clock carries);
+    # the recorder takes /clock best-effort, so the bag need not hold every one of them
+    assert len(seen.times) >= 10
+    assert all(t % 31_250_000 == 0 and 0 <= t <= 12 * 10**9 for t in seen.times)
+    assert len(set(seen.times) & clock) >= 0.9 * len(set(seen.times))
+    assert seen.times == sorted(seen.times)
+
+
+def test_slow_and_churning_clients_do_not_stop_the_loop(lockstep_run: dict) -> None:
+    """A client that never reads and clients that come and go: the launch still ends with
+    every sample of the scene (12 s at 32 Hz) and the monitor exits cleanly (exit code 0,
+    else the launch would fail naming it)."""
+    assert lockstep_run["slow"] >= 5
+    assert lockstep_run["churned"] >= 3
+    assert lockstep_run["evaluation"]["steps"] == 12 * 32
+    assert any("[monitor]" in line and "Forwarded" in line for line in lockstep_run["lines"])
+
+
+CHROMIUM, CHROMEDRIVER = Path("/usr/bin/chromium"), Path("/usr/bin/chromedriver")
+CHROMIUM_FLAGS = ("--headless", "--no-sandbox", "--disable-gpu", "--disable-quic",
+                  "--no-first-run", "--disable-background-networking",
+                  "--disable-component-update", "--disable-sync", "--window-size=1500,900")
+#: plotly's first trace colour (#1f77b4): the true displacements and angle
+TRACE_RGB = np.array([0x1F, 0x77, 0xB4])
+
+
+def browser(profile: Path) -> Any:
+    """Debian's headless Chromium through its chromedriver, browser console logged."""
+    from selenium import webdriver
+    from selenium.webdriver.chrome.service import Service
+
+    options = webdriver.ChromeOptions()
+    options.binary_location = str(CHROMIUM)
+    for flag in (*CHROMIUM_FLAGS, f"--user-data-dir={profile}"):
+        options.add_argument(flag)
+    options.set_capability("goog:loggingPrefs", {"browser": "ALL"})
+    return webdriver.Chrome(options=options, service=Service(str(CHROMEDRIVER)))
+
+
+def trace_pixels(png: bytes) -> int:
+    """Pixels of the first trace colour in a screenshot."""
+    image = (plt.imread(io.BytesIO(png))[..., :3] * 255).round()
+    return int((np.abs(image - TRACE_RGB).max(axis=-1) <= 8).sum())
+
+
+def plotted_ends(driver: Any) -> list[float]:
+    """The last time plotted by each chart's first trace (None while it is empty)."""
+    return driver.execute_script(
+        "return ['floor1', 'floor2', 'floor3', 'pendulum', 'command'].map(id => {"
+        "  const d = document.getElementById(id).data;"
+        "  return d && d[0].x.length ? d[0].x[d[0].x.length - 1] : null; });")
+
+
+@pytest.mark.skipif(not (CHROMIUM.exists() and CHROMEDRIVER.exists()),
+                    reason="needs Debian's chromium and chromium-driver "
+                           "(apt-get install -y chromium chromium-driver)")
+def test_dashboard_in_headless_chromium(tmp_path: Path, ros_domain_module: int) -> None:
+    """The dashboard during a real-time launch at 1 kHz: every chart has data, the first trace
+    colour is on the page, two screenshots 1.5 s apart differ in the plotted data, exactly the
+    non-zero error counters are red (saturation is forced), and the browser logs no error."""
+    overrides = [*realtime_overrides(1000.0, 12.0), "controller.limit=0.5",
+                 "controller.start=1.5", "evaluation.window=1"]
+    launch = Launch.start("--mode", "realtime", *(a for o in overrides for a in ("--set", o)))
+    driver = browser(tmp_path / "profile")
+    try:
+        driver.get(launch.urls[1])
+        deadline = time.monotonic() + 60
+        # until every chart has data and the controller has been saturating for a while
+        while not all(t is not None and t > 2 for t in plotted_ends(driver)):
+            assert time.monotonic() < deadline, plotted_ends(driver)
+            time.sleep(0.2)
+        first, first_ends = driver.get_screenshot_as_png(), plotted_ends(driver)
+        time.sleep(1.5)
+        second, second_ends = driver.get_screenshot_as_png(), plotted_ends(driver)
+        cells = driver.execute_script(
+            "return [...document.querySelectorAll('td[data-key]')].map("
+            "  td => [td.dataset.key, td.textContent, td.classList.contains('error')]);")
+        errors = [e for e in driver.get_log("browser") if e["level"] == "SEVERE"]
+    finally:
+        driver.quit()
+        launch.proc.send_signal(signal.SIGINT)
+        launch.proc.communicate(timeout=120)
+    (tmp_path / "dashboard.png").write_bytes(second)
+    assert not errors, errors
+    assert trace_pixels(first) > 500 and trace_pixels(second) > 500
+    assert first != second
+    assert all(b > a for a, b in zip(first_ends, second_ends, strict=True)), (first_ends,
+                                                                             second_ends)
+    # red exactly where an error counter is non-zero; saturation is forced (0.5 N m from 1.5 s)
+    for key, value, red in cells:
+        assert red == (key in ERROR_KEYS and value not in ("", "0", "False")), (key, value)
+    assert any(key == "saturated" and red for key, _, red in cells), cells
+
+
+@pytest.mark.parametrize(("args", "message"), [
+    (["monitor", "--port", "70000"], "--port 70000: expected 0..65535"),
+    (["monitor", "--dashboard", "--scene", "no/such.yaml"], "no/such.yaml"),
+    (["bench", "monitor", "--repeats", "0"], "--repeats must be >= 1"),
+])
+def test_bad_monitor_arguments_are_one_line(args: list[str], message: str) -> None:
+    done = subprocess.run([sys.executable, "-m", "stillframe", *args], env=child_env(),
+                          cwd=REPO_ROOT, capture_output=True, text=True, timeout=60)
+    assert done.returncode == 2
+    assert message in done.stderr and len(done.stderr.strip().splitlines()) == 1, done.stderr

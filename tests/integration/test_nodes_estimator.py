@@ -1,0 +1,109 @@
+"""estimator_node as a process, fed by a probe playing simulator and controller: its estimates
+equal the in-process estimator's on the same samples and commands, including a NaN reading
+(dropped and counted), a stale message (rejected and counted) and a missing channel (partial
+update after half the lock-step timeout). The probe's "simulator" saturates the torque at
+:data:`TORQUE_LIMIT` and reports the applied torque in the encoder's ``effort``: the estimator
+uses that, not the command (no windup), and the command where no effort is reported."""
+
+from __future__ import annotations
+
+import signal
+from pathlib import Path
+
+import numpy as np
+
+from stillframe.contract import messages, topics
+from stillframe.contract.codecs import SensorMessages
+from stillframe.contract.signals import Sample
+from stillframe.estimation.factory import make_estimator
+from stillframe.loop.node_support import LoopParameters, diagnostic_values
+from stillframe.loop.wiring import design_model
+from stillframe.middleware.api import create_node, spin_until
+from stillframe.plant.frame_plant import Plant
+from tests.support.nodes import SHORT_LQG, params_file, start_node, stop
+from tests.support.scenes import thesis_scene
+
+STEPS = 6
+NAN_STEP, MISSING_STEP = 2, 4   # floor-2 reading NaN; encoder not sent
+TORQUE_LIMIT = 0.12
+
+
+def _samples() -> list[Sample]:
+    plant = Plant(thesis_scene("thesis_lqg", SHORT_LQG))
+    out = []
+    for _ in range(STEPS):
+        s = plant.sample()
+        out.append(s)
+        plant.advance(np.zeros(2))
+    out[NAN_STEP].measurements[1] = np.nan
+    out[MISSING_STEP].present[3] = False
+    return out
+
+
+def test_estimates_nan_stale_and_missing_channels(ros_domain: int, tmp_path: Path) -> None:
+    scene = thesis_scene("thesis_lqg", SHORT_LQG)
+    samples = _samples()
+    commands = [0.05 * (k + 1) for k in range(STEPS)]
+    applied = [0.0, *np.minimum(commands[:-1], TORQUE_LIMIT)]   # over the period before k
+    for s, torque in zip(samples, applied, strict=True):
+        s.applied = np.array([torque, 0.0])
+    proc = start_node("estimator_node", params_file(tmp_path, "thesis_lqg", SHORT_LQG,
+                                                    lockstep_timeout_s=1.0,
+                                                    diagnostics_period_s=0.2))
+    probe = create_node("probe", namespace=topics.DEFAULT_NAMESPACE, argv=["test"])
+    try:
+        loop = LoopParameters(scene, "lockstep", 1.0, 0.2)   # the sim's sensor QoS
+        sensors = [probe.create_publisher(s.type_name, s.name, loop.qos(s)) for s in
+                   (*topics.FLOOR_IMU, topics.PENDULUM_JOINT_STATES, topics.EXCITATION_WRENCH)]
+        cmd = probe.create_publisher(topics.TORQUE_CMD.type_name, topics.TORQUE_CMD.name,
+                                     topics.TORQUE_CMD.qos)
+        estimates, covariances, diagnostics = [], [], []
+        for spec, sink in ((topics.STATE_ESTIMATE, estimates),
+                           (topics.STATE_COVARIANCE, covariances),
+                           (topics.DIAGNOSTICS, diagnostics)):
+            probe.create_subscription(spec.type_name, spec.name, sink.append, spec.qos)
+        assert spin_until(probe, lambda: all(p.get_subscription_count() for p in sensors), 60)
+        spin_until(probe, lambda: False, 0.3)
+        wire = SensorMessages(scene.sensors)
+        for k, s in enumerate(samples):
+            ns = round(s.t * 1e9)
+            for channel, (pub, msg) in enumerate(zip(sensors, wire.fill(s, ns)[:5], strict=True)):
+                if s.present[channel]:
+                    pub.publish(msg)
+            if k == NAN_STEP:   # a late floor-1 reading of the previous stamp: stale
+                stale = wire.fill(samples[k - 1], round(samples[k - 1].t * 1e9))[0]
+                sensors[0].publish(stale)
+            assert spin_until(probe, lambda k=k: len(estimates) == k + 1, 10), k
+            answer = messages.new("geometry_msgs/msg/WrenchStamped")
+            answer.header.stamp = messages.time_msg(ns)
+            answer.wrench.torque.z = commands[k]
+            cmd.publish(answer)
+
+        def counted() -> bool:
+            return len(covariances) == STEPS and bool(diagnostics) and diagnostic_values(
+                diagnostics[-1]).get("estimates") == str(STEPS)
+
+        assert spin_until(probe, counted, 5)
+    finally:
+        probe.destroy_node()
+        code, err = stop(proc, signal.SIGTERM)
+    assert code == 0, err[-2000:]
+
+    design = design_model(scene)
+    reference = make_estimator(scene, design)
+    for k, s in enumerate(samples):
+        # the missing encoder carried no effort: the command in effect then
+        torque = commands[k - 1] if k == MISSING_STEP else applied[k]
+        e = reference.step(s, np.array([torque, 0.0]))
+        msg = estimates[k]
+        assert messages.stamp_ns(msg.header.stamp) == round(s.t * 1e9)
+        assert list(msg.name) == ["x1", "x2", "x3", "phi"]
+        np.testing.assert_array_equal(np.r_[msg.position, msg.velocity], e.physical)
+        np.testing.assert_array_equal(covariances[k].data.reshape(8, 8), e.covariance)
+    values = diagnostic_values(diagnostics[-1])
+    assert values["non_finite"] == "1" and reference.counters.non_finite == 1
+    assert values["stale_messages"] == "1"
+    assert values["missing"] == "1" and values["estimates"] == str(STEPS)
+    assert values["rejected"] == "2"
+    assert values["applied_reported"] == str(STEPS - 1)
+    assert diagnostics[-1].status[0].level == 1   # WARN

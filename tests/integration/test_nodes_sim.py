@@ -1,0 +1,153 @@
+"""sim_node as a process against a probe in the test process that plays estimator and
+controller: the wire content of every contract topic equals the in-process plant's samples
+under the same commands, and a missing command is counted and the previous one held."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from stillframe.contract import messages, topics
+from stillframe.loop.node_support import diagnostic_values
+from stillframe.middleware.api import create_node, spin_until
+from stillframe.plant.frame_plant import Plant
+from tests.support.middleware import finish
+from tests.support.nodes import params_file, start_node
+from tests.support.scenes import thesis_scene
+
+OVERRIDES = ["duration=1", "controller.start=0.5", "evaluation.window=0.25"]  # 32 samples
+STEPS = 32
+RATE_HZ = 32
+SENSORS = (*topics.FLOOR_IMU, topics.PENDULUM_JOINT_STATES, topics.EXCITATION_WRENCH,
+           topics.STATE_TRUTH, topics.CLOCK, topics.DIAGNOSTICS)
+
+
+def torque(k: int) -> float:
+    """The probe's answer to sample k (different every step, so a held value shows)."""
+    return 0.02 * np.sin(0.7 * k) + 0.01
+
+
+class Probe:
+    """Raw subscriptions to everything sim_node publishes (decoded with rosbags' typestore
+    directly) and a torque publisher answering the first ``answers`` samples."""
+
+    def __init__(self, answers: int) -> None:
+        self.node = create_node("probe", namespace=topics.DEFAULT_NAMESPACE, argv=["test"])
+        self.received: dict[str, list] = {spec.name: [] for spec in SENSORS}
+        for spec in SENSORS:
+            self.node.create_subscription(
+                spec.type_name, spec.name,
+                lambda data, _info, spec=spec: self.received[spec.name].append(
+                    messages.TYPESTORE.deserialize_cdr(data, spec.type_name)),
+                spec.qos, raw=True)
+        self.cmd = self.node.create_publisher(topics.TORQUE_CMD.type_name, topics.TORQUE_CMD.name,
+                                              topics.TORQUE_CMD.qos)
+        self.answers = answers
+        self.node.create_subscription(topics.STATE_TRUTH.type_name, topics.STATE_TRUTH.name,
+                                      self.answer, topics.STATE_TRUTH.qos)
+
+    def answer(self, truth: object) -> None:
+        k = round(messages.stamp_ns(truth.header.stamp) * 1e-9 * RATE_HZ)
+        if k < self.answers:
+            msg = messages.new("geometry_msgs/msg/WrenchStamped")
+            msg.header.stamp = truth.header.stamp
+            msg.wrench.torque.z = torque(k)
+            self.cmd.publish(msg)
+
+    def run(self, sim) -> None:
+        assert spin_until(self.node, lambda: sim.poll() is not None, 120)
+        spin_until(self.node, lambda: False, 0.3)   # the last diagnostics
+
+
+def _run_sim(tmp_path: Path, answers: int, **params: object) -> tuple[Probe, dict, dict]:
+    result = tmp_path / "result.json"
+    probe = Probe(answers)
+    try:
+        sim = start_node("sim_node", params_file(tmp_path, "thesis_lqg", OVERRIDES,
+                                                 result_file=str(result), **params))
+        probe.run(sim)
+        _out, err = finish(sim)
+        assert sim.returncode == 0, err[-2000:]
+    finally:
+        probe.node.destroy_node()
+    with np.load(result.with_suffix(".npz")) as data:
+        return probe, json.loads(result.read_text()), dict(data)
+
+
+def _reference(commands: list[float]) -> list:
+    """The in-process plant's samples under the given torque commands."""
+    plant = Plant(thesis_scene("thesis_lqg", OVERRIDES))
+    samples = []
+    for u in commands:
+        samples.append(plant.sample())
+        plant.advance(np.array([u, 0.0]))
+    return samples
+
+
+def test_contract_topics_carry_the_plant_samples(ros_domain: int, tmp_path: Path) -> None:
+    probe, result, hist = _run_sim(tmp_path, answers=STEPS)
+    commands = [torque(k) for k in range(STEPS)]
+    ref = _reference(commands)
+    got = probe.received
+    stamps = [round(s.t * 1e9) for s in ref]
+    assert [messages.stamp_ns(m.clock) for m in got["/clock"]] == stamps
+    var = thesis_scene("thesis_lqg").sensors.accelerometer_noise_std ** 2
+    for n, spec in enumerate(topics.FLOOR_IMU):
+        imus = got[spec.name]
+        assert [messages.stamp_ns(m.header.stamp) for m in imus] == stamps
+        assert [m.linear_acceleration.x for m in imus] == [s.measurements[n] for s in ref]
+        assert all(m.header.frame_id == f"floor{n + 1}" and m.orientation_covariance[0] == -1
+                   and m.angular_velocity_covariance[0] == -1
+                   and m.linear_acceleration_covariance[0] == var for m in imus)
+    enc = got[topics.PENDULUM_JOINT_STATES.name]
+    assert [list(m.name) for m in enc] == [["pendulum"]] * STEPS
+    assert [m.position[0] for m in enc] == [s.measurements[3] for s in ref]
+    wrench = got[topics.EXCITATION_WRENCH.name]
+    assert [m.wrench.force.x for m in wrench] == [s.force for s in ref]
+    truth = got[topics.STATE_TRUTH.name]
+    assert [list(m.name) for m in truth] == [["x1", "x2", "x3", "phi"]] * STEPS
+    np.testing.assert_array_equal([np.r_[m.position, m.velocity] for m in truth],
+                                  [s.truth for s in ref])
+    # The sim applied exactly the commands it received, one per step, no timeouts.
+    np.testing.assert_array_equal(hist["command"][:, 0], commands)
+    np.testing.assert_array_equal(hist["truth"], [s.truth for s in ref])
+    assert result["lockstep_timeouts"] == 0 and result["steps"] == STEPS
+    final = diagnostic_values(got["/diagnostics"][-1])
+    assert final["step"] == str(STEPS) and final["lockstep_timeouts"] == "0"
+    assert got["/diagnostics"][-1].status[0].name == "/frame/sim_node"
+
+
+def test_missing_command_times_out_held_then_safe_state(ros_domain: int,
+                                                        tmp_path: Path) -> None:
+    """The last command is held until it is ``command_timeout_periods`` (3) periods old, then
+    the sim applies zero (the safe state when the controller is gone)."""
+    answered, timeout = 8, 3
+    probe, result, hist = _run_sim(tmp_path, answers=answered, lockstep_timeout_s=0.15)
+    last = answered - 1
+    commands = [torque(min(k, last)) if k - last < timeout else 0.0 for k in range(STEPS)]
+    assert result["lockstep_timeouts"] == STEPS - answered
+    assert result["safe_state_samples"] == STEPS - last - timeout
+    np.testing.assert_array_equal(hist["command"][:, 0], commands)
+    np.testing.assert_array_equal(hist["truth"], [s.truth for s in _reference(commands)])
+    status = probe.received["/diagnostics"][-1].status[0]
+    assert diagnostic_values(probe.received["/diagnostics"][-1])["lockstep_timeouts"] == str(
+        STEPS - answered)
+    assert status.level == 1  # WARN
+
+
+def test_sensor_topics_are_reliable_in_lockstep_only() -> None:
+    """A lost best-effort sample would break lock-step's promise of identical numbers."""
+    from stillframe.loop.node_support import LoopParameters
+    from stillframe.middleware.qos import PROFILES, Reliability
+
+    scene = thesis_scene("thesis_lqg")
+    lockstep = LoopParameters(scene, "lockstep", 1.0, 1.0)
+    realtime = LoopParameters(scene, "realtime", 1.0, 1.0)
+    for spec in (*topics.FLOOR_IMU, topics.PENDULUM_JOINT_STATES, topics.EXCITATION_WRENCH):
+        qos = lockstep.qos(spec)
+        assert qos.reliability == Reliability.RELIABLE
+        assert qos.depth == PROFILES["sensor_data"].depth
+        assert realtime.qos(spec) == "sensor_data"
+    assert lockstep.qos(topics.STATE_ESTIMATE) == "default"

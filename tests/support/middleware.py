@@ -1,0 +1,71 @@
+"""Helpers for the middleware tests: an isolated ROS domain per test and node subprocesses."""
+
+from __future__ import annotations
+
+import os
+import random
+import select
+import subprocess
+import sys
+import time
+
+import pytest
+
+from stillframe.locations import REPO_ROOT
+
+
+def isolate_domain(monkeypatch: pytest.MonkeyPatch) -> int:
+    """Set a random ROS_DOMAIN_ID (1..200), discovery on this machine only and the dds backend
+    for this test or module."""
+    domain = random.SystemRandom().randint(1, 200)
+    monkeypatch.setenv("ROS_DOMAIN_ID", str(domain))
+    monkeypatch.delenv("CYCLONEDDS_URI", raising=False)
+    monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    monkeypatch.setenv("STILLFRAME_RMW", "dds")
+    return domain
+
+
+def child_env() -> dict[str, str]:
+    """The environment for a subprocess: this one (with ROS_DOMAIN_ID) plus the repo on the path."""
+    return dict(os.environ, PYTHONPATH=str(REPO_ROOT), PYTHONUNBUFFERED="1")
+
+
+def start_python(code: str, *args: str) -> subprocess.Popen:
+    """Run ``python -c code args...`` in the background, text pipes for stdout and stderr."""
+    return subprocess.Popen(
+        [sys.executable, "-c", code, *args], env=child_env(), cwd=REPO_ROOT,
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )
+
+
+def run_stillframe(*args: str, timeout: float = 60) -> subprocess.CompletedProcess:
+    """``python -m stillframe args...`` to completion."""
+    return subprocess.run(
+        [sys.executable, "-m", "stillframe", *args], env=child_env(), cwd=REPO_ROOT,
+        capture_output=True, text=True, timeout=timeout,
+    )
+
+
+def wait_for_line(proc: subprocess.Popen, text: str, timeout: float = 30) -> str:
+    """Read the process's stdout until a line containing ``text`` (fails on exit or timeout)."""
+    deadline = time.monotonic() + timeout
+    while (remaining := deadline - time.monotonic()) > 0:
+        if not select.select([proc.stdout], [], [], remaining)[0]:
+            break
+        line = proc.stdout.readline()
+        if text in line:
+            return line
+        if not line and proc.poll() is not None:
+            break
+    proc.kill()
+    raise AssertionError(f"no line with {text!r}; stderr: {proc.stderr.read()[-2000:]}")
+
+
+def finish(proc: subprocess.Popen, timeout: float = 30) -> tuple[str, str]:
+    """Wait for the process, killing it on timeout; its remaining stdout and stderr."""
+    try:
+        return proc.communicate(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        _out, err = proc.communicate()
+        raise AssertionError(f"process did not finish; stderr: {err[-2000:]}") from None

@@ -1,0 +1,99 @@
+"""Helpers for the loop-node tests: parameter files, node processes, a full three-node run."""
+
+from __future__ import annotations
+
+import json
+import select
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from stillframe.locations import REPO_ROOT
+from tests.support.middleware import child_env, finish, start_python
+
+SCENES = REPO_ROOT / "scenes"
+SHORT_LQG = ["duration=6", "controller.start=3", "evaluation.window=2"]
+
+
+def params_file(tmp_path: Path, scene: str, overrides: list[str], **params: Any) -> Path:
+    """A ROS 2 parameter file giving every node (``/**``) the scene and ``params``."""
+    path = tmp_path / "params.yaml"
+    body = {"scene": str(SCENES / f"{scene}.yaml"), **params}
+    if overrides:   # a ROS parameter cannot be an empty list
+        body["overrides"] = overrides
+    path.write_text(yaml.safe_dump({"/**": {"ros__parameters": body}}))
+    return path
+
+
+def start_node(package: str, params: Path, *args: str) -> subprocess.Popen:
+    """``python -m PACKAGE.node --ros-args --params-file PARAMS ARGS...`` in the background."""
+    return subprocess.Popen(
+        [sys.executable, "-m", f"{package}.node", "--ros-args", "--params-file", str(params),
+         *args],
+        env=child_env(), cwd=REPO_ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+        text=True,
+    )
+
+
+def wait_for_log(proc: subprocess.Popen, text: str, timeout: float = 30) -> str:
+    """Read the node's log (stderr) until a line containing ``text``."""
+    deadline = time.monotonic() + timeout
+    while (remaining := deadline - time.monotonic()) > 0:
+        if not select.select([proc.stderr], [], [], remaining)[0]:
+            break
+        line = proc.stderr.readline()
+        if text in line:
+            return line
+        if not line and proc.poll() is not None:
+            break
+    proc.kill()
+    raise AssertionError(f"no log line with {text!r}")
+
+
+def stop(proc: subprocess.Popen, sig: int = signal.SIGINT) -> tuple[int, str]:
+    """Send ``sig``, wait; the exit code and stderr."""
+    if proc.poll() is None:
+        proc.send_signal(sig)
+    _out, err = finish(proc, timeout=20)
+    return proc.returncode, err
+
+
+def run_loop(tmp_path: Path, scene: str, overrides: list[str],
+             **params: Any) -> tuple[dict, dict[str, np.ndarray]]:
+    """The three nodes as processes; the sim's result JSON and histories. Fails unless every
+    node exits 0 (the estimator and controller on SIGINT after the sim finished)."""
+    result = tmp_path / "result.json"
+    pfile = params_file(tmp_path, scene, overrides, result_file=str(result), **params)
+    peers = [start_node(name, pfile) for name in ("estimator_node", "controller_node")]
+    sim = start_node("sim_node", pfile)
+    try:
+        _out, sim_err = finish(sim, timeout=300)
+    finally:
+        codes = [stop(p) for p in peers]
+    assert sim.returncode == 0, sim_err[-2000:]
+    for code, err in codes:
+        assert code == 0, err[-2000:]
+    with np.load(result.with_suffix(".npz")) as data:
+        histories = dict(data)
+    return json.loads(result.read_text()), histories
+
+
+def run_loop_beside(tmp_path: Path, writer_code: str, scene: str, overrides: list[str],
+                    **params: Any) -> tuple[dict, dict[str, np.ndarray], int]:
+    """:func:`run_loop` while another process runs ``writer_code`` (a Python script that prints
+    ``ready``, writes until SIGTERM and then prints ``sent N``); also returns N."""
+    writer = start_python(writer_code)
+    assert writer.stdout.readline().strip() == "ready"
+    try:
+        result, hist = run_loop(tmp_path, scene, overrides, **params)
+    finally:
+        writer.send_signal(signal.SIGTERM)
+        out, err = finish(writer, timeout=20)
+    assert writer.returncode == 0, err[-2000:]
+    return result, hist, int(out.split()[-1])
