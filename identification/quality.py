@@ -16,7 +16,11 @@ from the one Hankel factorization (thesis §3.6):
   counterpart within 1 % in the chosen model, is a physical candidate the order dropped;
 - **uncertain modes** (with the prediction-error refinement, :mod:`identification.pem`): a mode
   whose 95 % interval is wider than ± 1 % in frequency or ± 30 % in damping ratio is not known to
-  that accuracy from this record.
+  that accuracy from this record;
+- **a mode dropped by BIC** (with the refinement and ``--order auto``): BIC keeps order n, but
+  AIC (a smaller penalty per parameter, Ljung §16.4) prefers n + 2, whose model adds a mode that
+  is stable and whose 95 % intervals are within the limits above. The record then does not
+  decide whether that mode is physical.
 """
 
 from __future__ import annotations
@@ -26,6 +30,7 @@ from numpy.typing import NDArray
 
 from identification.era import HankelFactorization
 from identification.modal import ModalTable, modal_parameters
+from identification.pem import Refinement, aic
 from identification.stabilization import matching_modes
 
 GAP_WARNING = 15.0
@@ -86,6 +91,24 @@ def uncertain_modes(modes: ModalTable, frequency_ci_hz: np.ndarray, damping_ci: 
     z_half = 0.5 * (damping_ci[:, 1] - damping_ci[:, 0])
     return ((f_half > FREQUENCY_CI_LIMIT * modes.frequency_hz)
             | (z_half > DAMPING_CI_LIMIT * np.abs(modes.damping_ratio)))
+
+
+def dropped_by_bic(chosen: Refinement, larger: Refinement, samples: int) -> str | None:
+    """The warning when BIC keeps ``chosen`` but AIC prefers ``larger`` and ``larger`` holds a
+    credible mode that ``chosen`` lacks (module docstring); None otherwise."""
+    if aic(larger, samples) >= aic(chosen, samples):
+        return None
+    modes = larger.modes
+    present, _ = matching_modes(modes, chosen.modes, FREQUENCY_TOL, 1.0, 0.0)
+    credible = (~present & (modes.damping_ratio > 0) & (modes.frequency_hz > 0)
+                & ~uncertain_modes(modes, larger.frequency_ci_hz, larger.damping_ci))
+    if not credible.any():
+        return None
+    listed = ", ".join(f"{f:.4g} Hz" for f in modes.frequency_hz[credible])
+    order = chosen.A.shape[0]
+    return (f"ambiguous order: BIC keeps order {order}, AIC prefers {order + 2}, which adds a "
+            f"well-determined mode at {listed} (a physical mode may have been dropped; try "
+            f"--order {order + 2})")
 
 
 def quality_warnings(modes: ModalTable, consistent: NDArray[np.bool_], order: int,
