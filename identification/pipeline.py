@@ -38,7 +38,7 @@ from identification.quality import (
     quality_warnings,
     uncertain_modes,
 )
-from identification.residual_tests import LOW_SNR_DB, snr_db, whiteness
+from identification.residual_tests import residual_warnings
 from stillframe.errors import InputError
 
 Array = NDArray[np.float64]
@@ -233,7 +233,7 @@ def identify(
     consistent = mode_consistency(fac, modes, chosen, float(dt))
     left_out = left_out_modes(fac, modes, chosen, float(dt))
     refinement, uncertain = None, None
-    order_note, residual_note, snr_note = None, None, None
+    order_note, residual_notes = None, []
     if refine:
         refinement = refine_prediction_error(A, B, C, D, G, u, y, float(dt))
         if order == "auto" and chosen + 2 <= fac.numerical_rank:
@@ -251,21 +251,12 @@ def identify(
         A, B, C, D, G = refinement.A, refinement.B, refinement.C, refinement.D, -refinement.K
         modes = modal_parameters(A, C, float(dt), reference=reference_sensor)
         uncertain = uncertain_modes(modes, refinement.frequency_ci_hz, refinement.damping_ci)
-        white = whiteness(refinement.errors)
-        if not white.white:
-            residual_note = (f"prediction errors are not white (portmanteau test over "
-                             f"{white.lags} lags, p = {white.p_value:.2g}): the model leaves "
-                             "dynamics unexplained; a mode may be missing")
-        best_snr = float(np.max(snr_db(y, refinement.errors)))
-        if best_snr < LOW_SNR_DB:
-            snr_note = (f"low signal-to-noise ratio: {best_snr:.3g} dB on the best output "
-                        f"(below {LOW_SNR_DB:g}); modes whose response is weaker than the noise "
-                        "cannot be found, so a mode may be missing")
+        residual_notes = residual_warnings(y, refinement.errors)
     return Identification(
         A=A, B=B, C=C, D=D, G=G, dt=float(dt), order=chosen, order_gap=gap,
         hankel_singular_values=s, markov=markov, method=method, observer_order=p,
         dimensions=dims, factorization=fac, modes=modes, consistent=consistent,
-        warnings=tuple([note for note in (order_note, residual_note, snr_note) if note]
+        warnings=tuple(([order_note] if order_note else []) + residual_notes
                        + quality_warnings(modes, consistent, chosen, gap, left_out, uncertain)),
         refinement=refinement,
     )

@@ -71,3 +71,19 @@ def snr_db(y: Array, errors: Array) -> Array:
     with np.errstate(divide="ignore"):
         return np.where(signal_var > 0, 10 * np.log10(np.maximum(signal_var, 1e-300)
                                                       / np.maximum(var_e, 1e-300)), -np.inf)
+
+
+def residual_warnings(y: Array, errors: Array) -> list[str]:
+    """One sentence per failed check of the prediction errors (whiteness, SNR)."""
+    found = []
+    white = whiteness(errors)
+    if not white.white:
+        found.append(f"prediction errors are not white (portmanteau test over {white.lags} "
+                     f"lags, p = {white.p_value:.2g}): the model leaves dynamics unexplained; a "
+                     "mode may be missing")
+    best = float(np.max(snr_db(y, errors)))
+    if best < LOW_SNR_DB:
+        found.append(f"low signal-to-noise ratio: {best:.3g} dB on the best output (below "
+                     f"{LOW_SNR_DB:g}); modes whose response is weaker than the noise cannot be "
+                     "found, so a mode may be missing")
+    return found
