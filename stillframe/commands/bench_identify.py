@@ -153,10 +153,11 @@ def run(args: argparse.Namespace) -> int:
                          _percent(cell["frequency_error_p90"]),
                          _percent(cell["damping_error_median"]),
                          _percent(cell["damping_error_p90"]),
-                         f"{cell['wrong']}/{row['runs']}", cell["silently_wrong"],
+                         f"{cell['wrong']}/{row['runs']}", f"{cell['warned']}/{row['runs']}",
+                         cell["silently_wrong"],
                          _coverage(cell)])
     print(format_table(["SNR [dB]", "samples", "method", "freq err med [%]", "freq p90 [%]",
-                        "damp err med [%]", "damp p90 [%]", "wrong", "silently wrong",
+                        "damp err med [%]", "damp p90 [%]", "wrong", "warned", "silently wrong",
                         "95 % CI coverage f/z [%]"], rows))
     print(f"{len(results)} runs in {elapsed:.0f} s")
     for path in paths:
