@@ -3,10 +3,12 @@
 The cases and their scoring are in :mod:`identification.sweep`.
 
 Random shear buildings (2–5 modes, some closely spaced), SNR × record length cells, several seeds
-per cell; stillframe (OKID + ERA/DC, order auto), N4SID (``nfoursid``) and python-control
-(``markov`` + ``era``) on the same records. Per cell and method: median and 90th-percentile
-worst-mode frequency and damping errors and the count of silently wrong runs. Terminal table,
-``--json``, heat maps with ``--plots DIR``; ``--quick`` runs a small subset. The sweep's
+per cell; stillframe (OKID + ERA/DC, order auto, prediction-error refinement), the same without
+the refinement, N4SID (``nfoursid``) and python-control (``markov`` + ``era``) on the same
+records. Per cell and method: median and 90th-percentile worst-mode frequency and damping errors,
+wrong, warned and silently wrong runs, and stillframe's 95 % interval coverage. Terminal table,
+``--json``, heat maps with ``--plots DIR``; ``--quick`` runs a small subset, ``--snr`` and
+``--samples`` pick cells. The sweep's
 modules (python-control, nfoursid, matplotlib) are imported in ``run``: every CLI command
 registers this module at start-up.
 """
