@@ -154,7 +154,7 @@ def _levenberg_marquardt(residuals: Callable[[Array], Array],
                          jacobian: Callable[[Array], Array], theta: Array, scale: Array
                          ) -> Array:
     """Minimise ``|residuals(θ)|²`` by Gauss–Newton steps with Levenberg–Marquardt damping on
-    the normal equations (Ljung §10.2, eq. 10.40): ``(JᵀJ + μ diag JᵀJ) δ = -Jᵀε`` in the
+    the normal equations (Ljung §10.2; Marquardt 1963): ``(JᵀJ + μ diag JᵀJ) δ = -Jᵀε`` in the
     scaled parameters ``θ / scale``; μ shrinks after a step that lowers the cost and grows until
     one does. Stops after :data:`MAX_ITERATIONS` steps or when the cost stalls."""
     res = residuals(theta)
@@ -249,7 +249,7 @@ def bic(refinement: Refinement, samples: int) -> float:
 
 
 def aic(refinement: Refinement, samples: int) -> float:
-    """Akaike's criterion (Ljung §16.4, eq. 16.33 with the penalty 2): ``N ln det Λ̂ + 2 d``.
+    """Akaike's criterion (Akaike 1974; Ljung §16.4): ``N ln det Λ̂ + 2 d``.
     It penalises parameters less than :func:`bic`; where the two choose different orders, the
     record does not decide between them."""
     return samples * refinement.log_det_covariance + 2.0 * refinement.parameter_count

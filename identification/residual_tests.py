@@ -3,7 +3,8 @@
 A model that has every mode the record resolves leaves innovations ``e(k)`` that are white
 (Ljung, *System Identification*, 2nd ed. 1999, §16.6). A physical mode the order left out stays in
 ``e`` as a narrow-band, hence autocorrelated, component, whatever the modes found look like. The
-test per output i is the portmanteau statistic of Ljung eq. 16.63 (Box & Pierce 1970):
+test per output i is the portmanteau statistic of the residual analysis in Ljung §16.6 (Box &
+Pierce 1970):
 
     ζ_i = N Σ_{τ=1..M} (R̂_i(τ) / R̂_i(0))²,    R̂_i(τ) = (1/N) Σ_k e_i(k) e_i(k - τ),
 
