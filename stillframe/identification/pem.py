@@ -10,7 +10,7 @@ so that the one-step predictor is (Ljung eq. 4.86)
 
 The refinement minimises ``sum_k |W e(k)|^2`` (W: one weight per output, the inverse RMS of the
 starting model's prediction errors) over the parameters by nonlinear least squares
-(``scipy.optimize.least_squares``, Levenberg–Marquardt; Ljung §7.2, §10.2), starting from the
+(Gauss–Newton with Levenberg–Marquardt damping; Ljung §7.2, §10.2), starting from the
 OKID/ERA realization (A, B, C, D) with K = -G (OKID's observer gain, thesis eq. 3.77 sign).
 
 Parameters: A in real modal form — one 2 x 2 block ``[[a, b], [-b, a]]`` per complex pair
@@ -28,22 +28,29 @@ interval is ± 1.96 standard deviations.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import optimize
 
 from stillframe.errors import IdentificationError
 from stillframe.identification.modal import ModalTable, modal_parameters
+from stillframe.identification.predictor import prediction_errors
 
 Array = NDArray[np.float64]
 
 Z95 = 1.959963984540054
+DIVERGED = 1e6
+"""Weighted prediction errors beyond this (or not finite) are clipped: a diverging trial step."""
 FD_STEP = 1e-7
 """Relative forward-difference step of the Jacobian."""
-MAX_EVALUATIONS = 20
-"""Jacobian evaluations at most (each costs one batched pass over the record)."""
+MAX_ITERATIONS = 25
+"""Gauss–Newton steps at most (each costs one batched pass over the record for the Jacobian)."""
+STALL = 0.5
+"""The search stops when a step lowers the cost by less than this many residual variances
+``σ² = cost / (N m)``: the optimum is then closer than about ``sqrt(STALL)`` standard deviations
+along the step (the cost rises by σ² one standard deviation away, Ljung §9.3)."""
 
 
 @dataclass(frozen=True)
@@ -70,6 +77,8 @@ class Refinement:
     """``ln det`` of the innovations' sample covariance (for order selection)."""
     parameter_count: int
     """Rank of the Jacobian: the identifiable parameters."""
+    errors: Array
+    """``(N, m)``: the one-step prediction errors of the refined model (unweighted)."""
 
 
 @dataclass(frozen=True)
@@ -138,15 +147,43 @@ def real_modal_form(A: Array, B: Array, C: Array, K: Array) -> tuple[Array, Arra
 
 def _predict(layout: _Layout, theta: Array, u: Array, y: Array) -> Array:
     """One-step prediction errors ``e (b, N, m)`` of each parameter vector in ``theta (b, .)``."""
-    A, B, C, D, K, x = layout.unpack(theta)
-    abar = A - K @ C
-    drive = u @ (B - K @ D).transpose(0, 2, 1) + y @ K.transpose(0, 2, 1)  # (b, N, n)
-    states = np.empty((theta.shape[0], u.shape[0], layout.n))
-    x = x[:, :, None]
-    for k in range(u.shape[0]):
-        states[:, k] = x[:, :, 0]
-        x = abar @ x + drive[:, k, :, None]
-    return y[None] - states @ C.transpose(0, 2, 1) - u @ D.transpose(0, 2, 1)
+    A, B, C, D, K, x0 = layout.unpack(theta)
+    return prediction_errors(A, B, C, D, K, x0, u, y)
+
+
+def _levenberg_marquardt(residuals: Callable[[Array], Array],
+                         jacobian: Callable[[Array], Array], theta: Array, scale: Array
+                         ) -> Array:
+    """Minimise ``|residuals(θ)|²`` by Gauss–Newton steps with Levenberg–Marquardt damping on
+    the normal equations (Ljung §10.2; Marquardt 1963): ``(JᵀJ + μ diag JᵀJ) δ = -Jᵀε`` in the
+    scaled parameters ``θ / scale``; μ shrinks after a step that lowers the cost and grows until
+    one does. Stops after :data:`MAX_ITERATIONS` steps or when the cost stalls."""
+    res = residuals(theta)
+    cost = float(res @ res)
+    mu = 1e-3
+    for _ in range(MAX_ITERATIONS):
+        J = jacobian(theta) * scale
+        H, g = J.T @ J, J.T @ res
+        diag = np.maximum(np.diag(H), 1e-12 * max(float(np.max(np.diag(H))), 1e-300))
+        while mu < 1e12:
+            try:
+                step = np.linalg.solve(H + mu * np.diag(diag), -g)
+            except np.linalg.LinAlgError:
+                mu *= 10
+                continue
+            trial = theta + scale * step
+            res_t = residuals(trial)
+            cost_t = float(res_t @ res_t)
+            if cost_t < cost:
+                break
+            mu *= 10
+        else:
+            break
+        decrease = cost - cost_t
+        theta, res, cost, mu = trial, res_t, cost_t, max(mu / 10, 1e-12)
+        if decrease < STALL * cost / res.size:
+            break
+    return theta
 
 
 def refine_prediction_error(A: Array, B: Array, C: Array, D: Array, G: Array, u: Array, y: Array,
@@ -171,26 +208,24 @@ def refine_prediction_error(A: Array, B: Array, C: Array, D: Array, G: Array, u:
     def residuals(theta: Array) -> Array:
         with np.errstate(over="ignore", invalid="ignore"):  # a diverging trial step
             e = _predict(layout, theta[None], u, y)[0] * weight
-        return np.where(np.isfinite(e), e, 1e6).ravel()
+        return np.where(np.abs(e) < DIVERGED, e, DIVERGED).ravel()
 
     def jacobian(theta: Array) -> Array:
         steps = FD_STEP * scale
         batch = np.vstack([theta, theta + np.diag(steps)])
         with np.errstate(over="ignore", invalid="ignore"):
             e = _predict(layout, batch, u, y) * weight
-        e = np.where(np.isfinite(e), e, 1e6).reshape(batch.shape[0], -1)
+        e = np.where(np.abs(e) < DIVERGED, e, DIVERGED).reshape(batch.shape[0], -1)
         return ((e[1:] - e[0]) / steps[:, None]).T
 
-    fit = optimize.least_squares(residuals, theta0, jac=jacobian, method="lm",
-                                 x_scale=scale, max_nfev=MAX_EVALUATIONS)
-    theta = fit.x
-    if residuals(theta) @ residuals(theta) > residuals(theta0) @ residuals(theta0):
-        theta = theta0  # keep the start when the search went astray
+    theta = _levenberg_marquardt(residuals, jacobian, theta0, scale)
     res = residuals(theta)
     J = jacobian(theta)
-    rank = int(np.linalg.matrix_rank(J))
+    H = J.T @ J
+    singular = np.sqrt(np.maximum(np.linalg.eigvalsh(H), 0.0))  # of J
+    rank = int(np.sum(singular > singular.max() * max(J.shape) * np.finfo(float).eps))
     sigma2 = float(res @ res) / max(res.size - rank, 1)
-    cov = sigma2 * np.linalg.pinv(J.T @ J)
+    cov = sigma2 * np.linalg.pinv(H, hermitian=True)
     A1, B1, C1, D1, K1, x01 = (a[0] for a in layout.unpack(theta[None]))
     e = res.reshape(-1, m) / weight
     modes = modal_parameters(A1, C1, dt)
@@ -204,7 +239,7 @@ def refine_prediction_error(A: Array, B: Array, C: Array, D: Array, G: Array, u:
         frequency_std_hz=f_std, damping_std=z_std,
         cost_start=float(residuals(theta0) @ residuals(theta0)), cost=float(res @ res),
         log_det_covariance=float(np.linalg.slogdet(e.T @ e / e.shape[0])[1]),
-        parameter_count=rank,
+        parameter_count=rank, errors=e,
     )
 
 
@@ -212,6 +247,13 @@ def bic(refinement: Refinement, samples: int) -> float:
     """Bayesian information criterion of a refined model (Ljung §16.4, eq. 16.33 with the
     log N penalty): ``N ln det Λ̂ + d ln N``, d the identifiable parameters."""
     return samples * refinement.log_det_covariance + refinement.parameter_count * np.log(samples)
+
+
+def aic(refinement: Refinement, samples: int) -> float:
+    """Akaike's criterion (Akaike 1974; Ljung §16.4): ``N ln det Λ̂ + 2 d``.
+    It penalises parameters less than :func:`bic`; where the two choose different orders, the
+    record does not decide between them."""
+    return samples * refinement.log_det_covariance + 2.0 * refinement.parameter_count
 
 
 def _frequency_damping(a: float, b: float, dt: float) -> Array:

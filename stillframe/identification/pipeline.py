@@ -37,13 +37,16 @@ from stillframe.identification.era import (
 )
 from stillframe.identification.modal import ModalTable, modal_parameters
 from stillframe.identification.okid import minimum_samples, observer_gain, okid
-from stillframe.identification.pem import Refinement, bic, refine_prediction_error
+from stillframe.identification.order_selection import refine_candidates
+from stillframe.identification.pem import Refinement, refine_prediction_error
 from stillframe.identification.quality import (
     left_out_modes,
     mode_consistency,
+    persists,
     quality_warnings,
     uncertain_modes,
 )
+from stillframe.identification.residual_tests import residual_warnings
 
 Array = NDArray[np.float64]
 Method = Literal["okid-era", "okid-eradc", "era-impulse"]
@@ -236,27 +239,28 @@ def identify(
     modes = modal_parameters(A, C, float(dt), reference=reference_sensor)
     consistent = mode_consistency(fac, modes, chosen, float(dt))
     left_out = left_out_modes(fac, modes, chosen, float(dt))
-    refinement, uncertain, order_note = None, None, None
+    refinement, uncertain = None, None
+    order_note, residual_notes = None, []
     if refine:
-        refinement = refine_prediction_error(A, B, C, D, G, u, y, float(dt))
-        if order == "auto" and chosen + 2 <= fac.numerical_rank:
-            larger = fac.realize(chosen + 2)
-            gain = observer_gain(larger.A, larger.C, gain_markov[: p + 1])
-            alternative = refine_prediction_error(larger.A, larger.B, larger.C, larger.D[:, :r],
-                                                  gain, u, y, float(dt))
-            if bic(alternative, n_samples) < bic(refinement, n_samples):
-                order_note = (f"ambiguous order: the Hankel gap chose {chosen}, the prediction "
-                              f"error (BIC) prefers {chosen + 2}, which is used")
-                chosen, refinement = chosen + 2, alternative
-                consistent = mode_consistency(fac, refinement.modes, chosen, float(dt))
+        if order == "auto":
+            choice = refine_candidates(fac, gain_markov[: p + 1], r, u, y, float(dt), chosen)
+            chosen, refinement, order_note = choice.order, choice.refinement, choice.note
+        else:
+            refinement = refine_prediction_error(A, B, C, D, G, u, y, float(dt))
         A, B, C, D, G = refinement.A, refinement.B, refinement.C, refinement.D, -refinement.K
         modes = modal_parameters(A, C, float(dt), reference=reference_sensor)
+        if order == "auto" and choice.larger is not None:
+            consistent = persists(modes, choice.larger.modes)
+        else:
+            consistent = mode_consistency(fac, modes, chosen, float(dt))
+        left_out = left_out_modes(fac, modes, chosen, float(dt))
         uncertain = uncertain_modes(modes, refinement.frequency_ci_hz, refinement.damping_ci)
+        residual_notes = residual_warnings(y, refinement.errors)
     return Identification(
         A=A, B=B, C=C, D=D, G=G, dt=float(dt), order=chosen, order_gap=gap,
         hankel_singular_values=s, markov=markov, method=method, observer_order=p,
         dimensions=dims, factorization=fac, modes=modes, consistent=consistent,
-        warnings=tuple(([order_note] if order_note else [])
+        warnings=tuple(([order_note] if order_note else []) + residual_notes
                        + quality_warnings(modes, consistent, chosen, gap, left_out, uncertain)),
         refinement=refinement,
     )

@@ -8,7 +8,9 @@ from the one Hankel factorization (thesis §3.6):
   truncation). Below :data:`GAP_WARNING` the record does not single out this order;
 - **consistency**: a mode is *consistent* when the realizations of order n + 2 and n + 4 each
   hold a mode within 1 % in frequency, 20 % in damping ratio and MAC 0.9 of it (a stabilization
-  diagram read forwards from the chosen order). Modes fitted to noise move when the order grows;
+  diagram read forwards from the chosen order). Modes fitted to noise move when the order grows.
+  For a refined model the comparison is with the refined model of the next larger candidate
+  order (:func:`persists`): ERA's own modes are biased at low SNR, the refined ones are not;
 - **stability**: a mode with a negative damping ratio makes the model unstable, which a passive
   structure is not;
 - **modes left out** (issue 12): a mode that is stable (1 % frequency, 20 % damping, MAC 0.9)
@@ -17,7 +19,13 @@ from the one Hankel factorization (thesis §3.6):
 - **uncertain modes** (with the prediction-error refinement, :mod:`stillframe.identification.pem`):
 a mode
   whose 95 % interval is wider than ± 1 % in frequency or ± 30 % in damping ratio is not known to
-  that accuracy from this record.
+  that accuracy from this record;
+- **a mode dropped by BIC** (with the refinement and ``--order auto``,
+  :mod:`stillframe.identification.order_selection`): BIC keeps order n, but AIC (a smaller penalty
+  per
+  parameter, Ljung §16.4) prefers a larger candidate, whose model adds a mode that
+  is stable and whose 95 % intervals are within the limits above. The record then does not
+  decide whether that mode is physical.
 """
 
 from __future__ import annotations
@@ -27,6 +35,7 @@ from numpy.typing import NDArray
 
 from stillframe.identification.era import HankelFactorization
 from stillframe.identification.modal import ModalTable, modal_parameters
+from stillframe.identification.pem import Refinement, aic
 from stillframe.identification.stabilization import matching_modes
 
 GAP_WARNING = 15.0
@@ -52,6 +61,11 @@ def mode_consistency(factorization: HankelFactorization, modes: ModalTable, orde
                                   FREQUENCY_TOL, DAMPING_TOL, MAC_MIN)
         consistent &= close
     return consistent
+
+
+def persists(modes: ModalTable, larger: ModalTable) -> NDArray[np.bool_]:
+    """Per mode: does the larger model hold one within the consistency tolerances?"""
+    return matching_modes(modes, larger, FREQUENCY_TOL, DAMPING_TOL, MAC_MIN)[1]
 
 
 def left_out_modes(factorization: HankelFactorization, modes: ModalTable, order: int,
@@ -87,6 +101,24 @@ def uncertain_modes(modes: ModalTable, frequency_ci_hz: np.ndarray, damping_ci: 
     z_half = 0.5 * (damping_ci[:, 1] - damping_ci[:, 0])
     return ((f_half > FREQUENCY_CI_LIMIT * modes.frequency_hz)
             | (z_half > DAMPING_CI_LIMIT * np.abs(modes.damping_ratio)))
+
+
+def dropped_by_bic(chosen: Refinement, larger: Refinement, samples: int) -> str | None:
+    """The warning when BIC keeps ``chosen`` but AIC prefers ``larger`` and ``larger`` holds a
+    credible mode that ``chosen`` lacks (module docstring); None otherwise."""
+    if aic(larger, samples) >= aic(chosen, samples):
+        return None
+    modes = larger.modes
+    present, _ = matching_modes(modes, chosen.modes, FREQUENCY_TOL, 1.0, 0.0)
+    credible = (~present & (modes.damping_ratio > 0) & (modes.frequency_hz > 0)
+                & ~uncertain_modes(modes, larger.frequency_ci_hz, larger.damping_ci))
+    if not credible.any():
+        return None
+    listed = ", ".join(f"{f:.4g} Hz" for f in modes.frequency_hz[credible])
+    order, other = chosen.A.shape[0], larger.A.shape[0]
+    return (f"ambiguous order: BIC keeps order {order}, AIC prefers {other}, which adds a "
+            f"well-determined mode at {listed} (a physical mode may have been dropped; try "
+            f"--order {other})")
 
 
 def quality_warnings(modes: ModalTable, consistent: NDArray[np.bool_], order: int,

@@ -1,10 +1,11 @@
 """The identification benchmark sweep (issue 12): random shear buildings, three methods, errors.
 
 A *case* is one random building, one record length, one signal-to-noise ratio and one seed.
-:func:`run_case` simulates it and identifies it with stillframe (OKID + ERA/DC, order ``auto``),
-stillframe with the prediction-error refinement (``refine=True``, which also gives 95 % intervals),
-N4SID (``nfoursid``, PO-MOESP) and python-control (``markov`` + ``eigensys_realization``); the
-last two are given the true order, stillframe chooses its own. :func:`run_cases` maps it over a
+:func:`run_case` simulates it and identifies it with stillframe (OKID + ERA/DC, order ``auto``,
+then the prediction-error refinement, ``refine=True``, which also gives 95 % intervals), the same
+without the refinement (``stillframe_okid``), N4SID (``nfoursid``, PO-MOESP) and python-control
+(``markov`` + ``eigensys_realization``); the last two are given the true order, stillframe
+chooses its own. :func:`run_cases` maps it over a
 list of cases (serially, with progress); the function is top-level and picklable so a parallel
 executor can map it instead.
 
@@ -48,7 +49,7 @@ SEEDS = 10
 QUICK_SNR_DB: tuple[float, ...] = (40.0, 15.0)
 QUICK_LENGTHS: tuple[int, ...] = (1024, 256)
 QUICK_SEEDS = 3
-METHODS: tuple[str, ...] = ("stillframe", "stillframe_pem", "n4sid", "python_control")
+METHODS: tuple[str, ...] = ("stillframe", "stillframe_okid", "n4sid", "python_control")
 
 FREQUENCY_LIMIT, DAMPING_LIMIT = 0.01, 0.30
 """A run is wrong beyond these relative errors (issue 12)."""
@@ -184,15 +185,15 @@ Identified = tuple[Array, Array, list[str], Array | None, Array | None]
 
 
 def _stillframe(record: Record, order: int) -> Identified:
-    ident = identify(record.u, record.y, record.dt, "okid-eradc", "auto")
-    return ident.modes.frequency_hz, ident.modes.damping_ratio, list(ident.warnings), None, None
-
-
-def _stillframe_pem(record: Record, order: int) -> Identified:
     ident = identify(record.u, record.y, record.dt, "okid-eradc", "auto", refine=True)
     ref = ident.refinement
     return (ident.modes.frequency_hz, ident.modes.damping_ratio, list(ident.warnings),
             ref.frequency_ci_hz, ref.damping_ci)
+
+
+def _stillframe_okid(record: Record, order: int) -> Identified:
+    ident = identify(record.u, record.y, record.dt, "okid-eradc", "auto")
+    return ident.modes.frequency_hz, ident.modes.damping_ratio, list(ident.warnings), None, None
 
 
 def _n4sid(record: Record, order: int) -> Identified:
@@ -212,7 +213,7 @@ def _python_control(record: Record, order: int) -> Identified:
 
 
 IDENTIFIERS: dict[str, Callable[[Record, int], Identified]] = {
-    "stillframe": _stillframe, "stillframe_pem": _stillframe_pem, "n4sid": _n4sid,
+    "stillframe": _stillframe, "stillframe_okid": _stillframe_okid, "n4sid": _n4sid,
     "python_control": _python_control,
 }
 

@@ -61,15 +61,30 @@ def test_clean_case_is_identified_by_every_method() -> None:
 
 @pytest.mark.slow
 def test_bench_json_cells_count_their_runs() -> None:
+    """Two cells picked with --snr / --samples, two seeds each: every cell's figures are those
+    of its runs (the median of two is the lower one, ``inverted_cdf``)."""
     out = io.StringIO()
     with contextlib.redirect_stdout(out):
-        assert main(["bench", "identify", "--quick", "--seeds", "1", "--json"]) == 0
+        assert main(["bench", "identify", "--snr", "30", "--samples", "512", "256",
+                     "--seeds", "2", "--json"]) == 0
     doc = json.loads(out.getvalue())
-    assert len(doc["cells"]) == 4 and len(doc["runs"]) == 4
+    assert len(doc["cells"]) == 2 and len(doc["runs"]) == 4
     for cell in doc["cells"]:
         runs = [r for r in doc["runs"]
                 if (r["snr_db"], r["samples"]) == (cell["snr_db"], cell["samples"])]
-        for method in ("stillframe", "stillframe_pem", "n4sid", "python_control"):
+        assert cell["snr_db"] == 30 and len(runs) == 2
+        for method in ("stillframe", "stillframe_okid", "n4sid", "python_control"):
             assert cell[method]["silently_wrong"] == sum(r[method]["silently_wrong"]
                                                          for r in runs)
-            assert cell[method]["frequency_error_median"] == runs[0][method]["frequency_error"]
+            assert cell[method]["frequency_error_median"] == min(r[method]["frequency_error"]
+                                                                 for r in runs)
+        paired = sum(r["stillframe"]["ci_covered"]["paired"] for r in runs)
+        covered = sum(r["stillframe"]["ci_covered"]["frequency"] for r in runs)
+        assert cell["stillframe"]["ci_coverage_frequency"] == pytest.approx(covered / paired)
+
+
+def test_bench_refuses_a_cell_that_is_not_in_the_sweep() -> None:
+    err = io.StringIO()
+    with contextlib.redirect_stderr(err):
+        assert main(["bench", "identify", "--snr", "25"]) == 2
+    assert "--snr 25: not a cell of the sweep" in err.getvalue()

@@ -1,0 +1,74 @@
+"""Order selection with the prediction-error refinement (issue 12): the Hankel gap proposes, the
+refined models' fit decides, and a disagreement between criteria is reported.
+
+The Hankel gap (largest σ_n / σ_{n+1}, :func:`stillframe.identification.era.auto_order`) gives n.
+The ERA
+realizations of orders n - 2, n and n + 2 (those within the Hankel matrix's numerical rank) are
+each refined (:func:`stillframe.identification.pem.refine_prediction_error`), and the order of
+least BIC
+(Ljung §16.4, eq. 16.33 with penalty ``d ln N``) is kept: a spurious mode that the gap let in
+costs more parameters than it gains in fit, a weak physical mode that the gap left out gains more.
+Where AIC (penalty ``2 d``) prefers a larger candidate whose model holds a well-determined mode the
+kept one lacks (:func:`stillframe.identification.quality.dropped_by_bic`), the record does not
+decide, and
+the returned note says so.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from stillframe.errors import InputError
+from stillframe.identification.era import HankelFactorization
+from stillframe.identification.okid import observer_gain
+from stillframe.identification.pem import Refinement, aic, bic, refine_prediction_error
+from stillframe.identification.quality import dropped_by_bic
+
+Array = NDArray[np.float64]
+STEPS = (-2, 0, 2)
+"""Candidate orders around the Hankel gap's choice."""
+
+
+@dataclass(frozen=True)
+class OrderChoice:
+    """The kept order, its refined model, every candidate's BIC and the ambiguity note."""
+
+    order: int
+    refinement: Refinement
+    bic: dict[int, float]
+    note: str | None
+    larger: Refinement | None
+    """The refined model of the next larger candidate order, if any (for the consistency check
+    of :func:`stillframe.identification.quality.persists`)."""
+
+
+def refine_candidates(factorization: HankelFactorization, gain_markov: Array, r: int, u: Array,
+                      y: Array, dt: float, hankel_order: int) -> OrderChoice:
+    """Refine the candidate orders around ``hankel_order`` and keep the one of least BIC
+    (module docstring). ``gain_markov`` are OKID's observer-gain Markov parameters ``(p + 1, m,
+    m)`` that give each realization its starting Kalman gain; ``r`` is the number of inputs."""
+    samples = u.shape[0]
+    fits: dict[int, Refinement] = {}
+    for step in STEPS:
+        n = hankel_order + step
+        if not 1 <= n <= factorization.numerical_rank:
+            continue
+        real = factorization.realize(n)
+        gain = observer_gain(real.A, real.C, gain_markov)
+        try:
+            fits[n] = refine_prediction_error(real.A, real.B[:, :r], real.C, real.D[:, :r],
+                                              gain, u, y, dt)
+        except InputError:
+            if n == hankel_order:
+                raise
+    scores = {n: bic(fit, samples) for n, fit in fits.items()}
+    order = min(scores, key=scores.__getitem__)
+    notes = [dropped_by_bic(fits[order], fits[n], samples) for n in sorted(fits) if n > order
+             and aic(fits[n], samples) < aic(fits[order], samples)]
+    larger = [n for n in sorted(fits) if n > order]
+    return OrderChoice(order=order, refinement=fits[order], bic=scores,
+                       note=next((note for note in notes if note), None),
+                       larger=fits[larger[0]] if larger else None)
