@@ -30,6 +30,7 @@ COMMANDS: tuple[str, ...] = (
     "stillframe.commands.reproduce",
     "stillframe.commands.demo",
     "stillframe.commands.ph",
+    "stillframe.commands.montecarlo",
 )
 
 
