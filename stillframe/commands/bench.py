@@ -16,6 +16,7 @@ BENCHES: tuple[str, ...] = (
     "stillframe.commands.bench_monitor",
     "stillframe.commands.bench_fidelity",
     "stillframe.commands.bench_speed",
+    "stillframe.commands.bench_montecarlo",
 )
 
 

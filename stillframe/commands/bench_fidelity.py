@@ -13,6 +13,7 @@ from dataclasses import asdict
 from pathlib import Path
 
 from stillframe.commands.common import add_json_argument, emit_json, format_table
+from stillframe.commands.montecarlo import add_executor_arguments
 from stillframe.errors import InputError
 
 
@@ -25,6 +26,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     parser.add_argument("--duration", type=float, help="simulated seconds per run")
     parser.add_argument("--write-table", type=Path, metavar="FILE",
                         help="write the model.type: auto table (JSON) here")
+    add_executor_arguments(parser)
     parser.set_defaults(func=run)
 
 
@@ -81,7 +83,10 @@ def run(args: argparse.Namespace) -> int:
         if args.duration <= 0 or abs(grid_steps - round(grid_steps)) > 1e-9:
             raise InputError(f"--duration: must be a positive multiple of {GRID_DT:g} s "
                              f"(got {args.duration:g})")
-    result = sweep(quick=args.quick, duration=args.duration, progress=_progress)
+    from stillframe.studies.executor import mapper
+
+    result = sweep(quick=args.quick, duration=args.duration, progress=_progress,
+                   mapper=mapper(args.workers, args.scheduler, "bench fidelity"))
     result["energy_drift"] = [asdict(r) for r in energy_drift_rows(
         duration=0.5 if args.quick else 2.0, progress=_progress)]
     if args.plots:

@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from stillframe.commands.common import add_json_argument, emit_json, format_table
+from stillframe.commands.montecarlo import add_executor_arguments
 from stillframe.errors import InputError
 
 FIGURES: tuple[tuple[str, str, float], ...] = (
@@ -42,6 +43,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     parser.add_argument("--plots", type=Path, default=None, metavar="DIR",
                         help="write one heat-map PNG per method and figure")
     add_json_argument(parser)
+    add_executor_arguments(parser)
     parser.set_defaults(func=run)
 
 
@@ -117,7 +119,11 @@ def run(args: argparse.Namespace) -> int:
     if args.seeds is not None and args.seeds < 1:
         raise InputError(f"--seeds {args.seeds}: must be a positive integer")
     seeds = args.seeds or seeds
-    results = run_cases(run_case, cases(snrs, lengths, seeds))
+    from stillframe.studies.executor import mapper
+
+    spread = mapper(args.workers, args.scheduler, "bench identify")
+    items = cases(snrs, lengths, seeds)
+    results = spread(run_case, items) if spread else run_cases(run_case, items)
     table = summarize(results)
     paths = heat_maps(table, args.plots) if args.plots else []
     if args.json:

@@ -62,7 +62,7 @@ def _connect(scheduler: str | None, workers: int | None) -> tuple[Any, Any]:
 
     if scheduler is None:
         cluster = LocalCluster(n_workers=check_workers(workers), threads_per_worker=1,
-                               processes=True, dashboard_address=None,
+                               processes=True, dashboard_address="127.0.0.1:0",
                                silence_logs=logging.ERROR)
         return Client(cluster), cluster
     if not scheduler.startswith(("tcp://", "tls://", "inproc://", "ws://", "wss://")):
@@ -132,3 +132,25 @@ def run_tasks(fn: Callable[[Any], Any], items: Sequence[Any], *, workers: int | 
     execution.outcomes = sorted(finished, key=lambda o: o.index)
     execution.wall_s = time.perf_counter() - started
     return execution
+
+
+def mapper(workers: int | None, scheduler: str | None, label: str
+           ) -> Callable[[Callable[[Any], Any], Sequence[Any]], list[Any]] | None:
+    """A ``map(fn, items)`` on Dask for the benchmark sweeps (None: neither option given, so
+    they stay serial in this process). Every task must succeed: the first error is raised as
+    one line, Ctrl-C as KeyboardInterrupt."""
+    if workers is None and scheduler is None:
+        return None
+
+    def run(fn: Callable[[Any], Any], items: Sequence[Any]) -> list[Any]:
+        execution = run_tasks(fn, items, workers=workers, scheduler=scheduler, label=label,
+                              progress=sys.stderr.isatty())
+        if execution.interrupted:
+            raise KeyboardInterrupt
+        for o in execution.outcomes:
+            if o.error is not None:
+                raise InputError(f"{label}: {execution.failed} of {len(items)} tasks failed; "
+                                 f"task {o.index}: {o.error_type}: {o.error}")
+        return [o.value for o in execution.outcomes]
+
+    return run
