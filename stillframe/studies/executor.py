@@ -11,9 +11,12 @@ from __future__ import annotations
 
 import logging
 import os
+import signal
 import sys
+import threading
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -56,14 +59,29 @@ def check_workers(workers: int | None) -> int:
     return workers
 
 
+@contextmanager
+def _workers_ignore_ctrl_c() -> Iterator[None]:
+    """Ignore SIGINT while the local workers start: they inherit it (Python keeps an ignored
+    SIGINT), so Ctrl-C reaches only this process, which then stops them in order."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
 def _connect(scheduler: str | None, workers: int | None) -> tuple[Any, Any]:
     """A Client on the given scheduler, or on a new LocalCluster (returned for closing)."""
     from distributed import Client, LocalCluster
 
     if scheduler is None:
-        cluster = LocalCluster(n_workers=check_workers(workers), threads_per_worker=1,
-                               processes=True, dashboard_address="127.0.0.1:0",
-                               silence_logs=logging.ERROR)
+        with _workers_ignore_ctrl_c():
+            cluster = LocalCluster(n_workers=check_workers(workers), threads_per_worker=1,
+                                   processes=True, dashboard_address="127.0.0.1:0",
+                                   silence_logs=logging.ERROR)
         return Client(cluster), cluster
     if not scheduler.startswith(("tcp://", "tls://", "inproc://", "ws://", "wss://")):
         raise InputError(f"--scheduler {scheduler}: expected an address like tcp://HOST:8786")
