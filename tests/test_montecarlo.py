@@ -169,3 +169,17 @@ def test_bench_sweeps_give_the_same_results_on_the_executor():
 
     assert errors(fidelity) == errors(serial) and len(errors(serial)) == 3 * 4 * 2 * 3
     assert mapper(None, None, "test") is None
+
+
+def test_an_identify_run_finds_the_models_modes():
+    """--what identify, noise-free: OKID + ERA/DC recovers the eigenvalue analysis's four modes
+    (modal_table) to 0.1 % in frequency and 5 % in damping."""
+    from stillframe.studies.montecarlo import run_one
+
+    scene = load_scene(str(Path(SCENE).with_name("hammer_test.yaml")), [
+        "excitation.type=white_noise", "excitation.rate_hz=32", "duration=30",
+        "sensors.accelerometer_noise_std=0"])
+    study = plan(scene, ["sensors.seed=1"], [], seed=0, what="identify")
+    figures = run_one(study.task(0))
+    assert figures["modes_scored"] == 4 and figures["order"] == 8 and figures["missed"] == 0
+    assert figures["frequency_error"] < 1e-3 and figures["damping_error"] < 0.05
