@@ -136,8 +136,9 @@ def test_bad_study_input_is_one_line_exit_2(capsys):
     assert main(["montecarlo", SCENE, "--runs", "0"]) == 2
     assert main(["montecarlo", SCENE, "--scheduler", "localhost:1"]) == 2
     assert main(["montecarlo", SCENE, "--runs", "3", "--only", "3"]) == 2
+    assert main(["montecarlo", SCENE, "--target", "displacement>50"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 4 and all(line.startswith("stillframe montecarlo: error: ") for line in err)
+    assert len(err) == 5 and all(line.startswith("stillframe montecarlo: error: ") for line in err)
 
 
 @pytest.mark.long

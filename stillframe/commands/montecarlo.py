@@ -93,6 +93,7 @@ def run(args: argparse.Namespace) -> int:
     scene = load_scene(args.scene, args.overrides)
     study = plan(scene, args.overrides, variations, args.seed, args.what)
     n = _runs(args, study.combinations, bool(variations) and all(v.discrete for v in variations))
+    targets = _targets(args, scene.name)
     if args.only is not None:
         if not 0 <= args.only < n:
             raise InputError(f"--only {args.only}: runs are numbered 0..{n - 1}")
@@ -118,8 +119,8 @@ def run(args: argparse.Namespace) -> int:
         "interrupted": execution.interrupted, "workers": execution.workers,
         "scheduler": execution.address, "wall_s": execution.wall_s,
         "targets": [f"{q} >= {p:g} % on floors {', '.join(map(str, f))}"
-                    for q, f, p in _targets(args, scene.name)],
-        "fractions": report.fractions(rows, _met(_targets(args, scene.name))),
+                    for q, f, p in targets],
+        "fractions": report.fractions(rows, _met(targets)),
         "quantiles": report.quantiles(rows, args.what),
         "errors": {r["run"]: r["error"] for r in rows if r["error"]},
         "table": str(table), "plots": [str(p) for p in plots],
