@@ -2,10 +2,12 @@
 and all local workers (embedded ``LocalCluster``) and on a ``dask scheduler`` + 2 ``dask
 worker`` processes started here (the stand-in for two machines).
 
-Efficiency on k workers is T1 / (k Tk), T1 the one-worker time of the same run. Wall times
+Efficiency on k workers is T1 / (k Tk), T1 the one-worker time of the same run; busy is the
+runs' own CPU time over k Tk (the rest is start-up, scheduling and other processes). Wall times
 include starting the local cluster (and its workers' first imports); the external cluster is
 started before its clock starts, as an existing cluster would be. Every configuration must give
-the same table (timing columns aside); the bench says whether it did.
+the same table (timing columns aside); the bench says whether it did. A load average above the
+core count during the bench gives a warning: other processes then took part of the cores.
 """
 
 from __future__ import annotations
@@ -62,6 +64,7 @@ def run(args: argparse.Namespace) -> int:
     results, tables = [], []
     for kind, k in configs:
         print(f"bench montecarlo: {args.runs} runs on {kind} {k} workers", file=sys.stderr)
+        load = os.getloadavg()[0]
         if kind == "local":
             execution = run_tasks(run_one, tasks, workers=k, progress=sys.stderr.isatty())
         else:
@@ -70,8 +73,11 @@ def run(args: argparse.Namespace) -> int:
                                       progress=sys.stderr.isatty())
         rows = [row(study.spec(o.index), o) for o in execution.outcomes]
         tables.append(_timing_free(rows))
+        cpu = sum(r.get("cpu_s", 0.0) for r in rows if r["status"] == "ok")
         results.append({"cluster": kind, "workers": execution.workers,
-                        "wall_s": execution.wall_s, "failed": execution.failed})
+                        "wall_s": execution.wall_s, "failed": execution.failed,
+                        "busy": cpu / (execution.workers * execution.wall_s),
+                        "load_average": max(load, os.getloadavg()[0])})
     base = results[0]["wall_s"]
     for r in results:
         r["speedup"] = base / r["wall_s"]
@@ -79,13 +85,21 @@ def run(args: argparse.Namespace) -> int:
     document = {"scene": scene.name, "overrides": overrides, "runs": args.runs,
                 "cores": cores, "results": results,
                 "same_table": all(t == tables[0] for t in tables)}
+    busiest = max(r["load_average"] for r in results)
+    if busiest > cores:
+        document["warning"] = (f"load average up to {busiest:.1f} on {cores} cores: other "
+                               "processes competed for the cores, so the wall times and "
+                               "efficiencies understate what free cores give")
     if args.json:
         emit_json(document)
         return 0
     print(f"{args.runs} closed-loop runs of {scene.name} ({' '.join(overrides)}) on "
           f"{cores} cores")
-    print(format_table(["cluster", "workers", "wall [s]", "speed-up", "efficiency", "failed"],
+    print(format_table(["cluster", "workers", "wall [s]", "speed-up", "efficiency", "busy",
+                        "load avg", "failed"],
                        [[r["cluster"], r["workers"], r["wall_s"], r["speedup"], r["efficiency"],
-                         r["failed"]] for r in results]))
+                         r["busy"], r["load_average"], r["failed"]] for r in results]))
     print(f"same table in every configuration: {'yes' if document['same_table'] else 'NO'}")
+    if "warning" in document:
+        print(f"warning: {document['warning']}")
     return 0

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import copy
 import math
+import time
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -42,7 +43,7 @@ from stillframe.studies.vary import (
 
 WHATS: tuple[str, ...] = ("closed-loop", "simulate", "identify")
 NOISE_SEEDS: tuple[str, ...] = ("plant.seed", "sensors.seed", "excitation.seed")
-TIMING: tuple[str, ...] = ("wall_s", "steps_per_s")
+TIMING: tuple[str, ...] = ("wall_s", "steps_per_s", "cpu_s")
 """Figures that measure the machine, not the run (left out of comparisons)."""
 
 
@@ -164,8 +165,10 @@ RUNNERS = {"closed-loop": _closed_loop, "simulate": _simulate, "identify": _iden
 def run_one(task: tuple[dict[str, Any], tuple[str, ...], str]) -> dict[str, Any]:
     """One run on a worker: the scene with its overrides, then its figures (flattened)."""
     data, overrides, what = task
+    started = time.process_time()
     scene = scene_from_dict(copy.deepcopy(data), list(overrides))
     figures = flatten(RUNNERS[what](scene))
+    figures["cpu_s"] = time.process_time() - started
     bad = [k for k, v in figures.items() if isinstance(v, float) and not math.isfinite(v)]
     if bad and what != "identify":  # there inf means a missed mode (score)
         figures["non_finite"] = ",".join(bad)
