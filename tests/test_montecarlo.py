@@ -137,14 +137,15 @@ def test_bad_study_input_is_one_line_exit_2(capsys):
     assert main(["montecarlo", SCENE, "--scheduler", "localhost:1"]) == 2
     assert main(["montecarlo", SCENE, "--runs", "3", "--only", "3"]) == 2
     assert main(["montecarlo", SCENE, "--target", "displacement>50"]) == 2
+    assert main(["montecarlo", SCENE, "--seed", "-1"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 5 and all(line.startswith("stillframe montecarlo: error: ") for line in err)
+    assert len(err) == 6 and all(line.startswith("stillframe montecarlo: error: ") for line in err)
 
 
 @pytest.mark.long
 def test_bench_sweeps_give_the_same_results_on_the_executor():
     """bench identify's cases and bench fidelity's work-precision errors, serial here and on an
-    external two-worker cluster: equal (CPU times aside; the identification's SVDs to 1e-6, as
+    external two-worker cluster: equal (CPU times aside; the identification to 1e-4 relative, as
     this process's BLAS may use threads where the single-threaded workers do not)."""
     from identification.sweep import METHODS, cases, run_case
     from stillframe.fidelity import sweep
@@ -160,8 +161,8 @@ def test_bench_sweeps_give_the_same_results_on_the_executor():
         for method in METHODS:
             a, b = spread_case[method], here[method]
             assert a["missed"] == b["missed"]
-            assert a["frequency_error"] == pytest.approx(b["frequency_error"], rel=1e-6)
-            assert a["damping_error"] == pytest.approx(b["damping_error"], rel=1e-6)
+            assert a["frequency_error"] == pytest.approx(b["frequency_error"], rel=1e-4)
+            assert a["damping_error"] == pytest.approx(b["damping_error"], rel=1e-4)
     serial = sweep(quick=True, duration=0.1)
 
     def errors(result: dict) -> list:

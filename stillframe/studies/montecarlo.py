@@ -89,6 +89,8 @@ def plan(scene: Section, set_overrides: list[str], variations: list[Variation], 
     """Check the study before any run: known keys, numeric nominals for relative spreads."""
     if what not in WHATS:
         raise InputError(f"--what {what}: one of {', '.join(WHATS)}")
+    if seed < 0:
+        raise InputError(f"--seed {seed}: must be a whole number >= 0")
     if what == "closed-loop" and scene.controller.type == "none":
         raise InputError("controller.type: the scene has no controller; use --what simulate")
     keys = [v.key for v in variations]
