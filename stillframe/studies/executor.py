@@ -81,7 +81,7 @@ def _connect(scheduler: str | None, workers: int | None) -> tuple[Any, Any]:
         with _workers_ignore_ctrl_c():
             cluster = LocalCluster(n_workers=check_workers(workers), threads_per_worker=1,
                                    processes=True, dashboard_address="127.0.0.1:0",
-                                   silence_logs=logging.ERROR)
+                                   silence_logs=logging.CRITICAL)
         return Client(cluster), cluster
     if not scheduler.startswith(("tcp://", "tls://", "inproc://", "ws://", "wss://")):
         raise InputError(f"--scheduler {scheduler}: expected an address like tcp://HOST:8786")
