@@ -31,6 +31,7 @@ COMMANDS: tuple[str, ...] = (
     "stillframe.app.commands.demo",
     "stillframe.app.commands.experiment",
     "stillframe.app.commands.ph",
+    "stillframe.app.commands.montecarlo",
 )
 
 

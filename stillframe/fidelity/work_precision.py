@@ -111,6 +111,10 @@ class Reference:
     cpu_s: float
 
 
+def _reference_job(job: tuple[str, float]) -> Reference:
+    return reference(*job)
+
+
 def reference(scene: str, duration: float) -> Reference:
     """FE 40 by the implicit midpoint at REFERENCE_DT, Richardson-checked against 2·REFERENCE_DT."""
     s = scene_for(scene, f"fe{REFERENCE_MODEL[1]}", duration)
@@ -120,34 +124,53 @@ def reference(scene: str, duration: float) -> Reference:
     return Reference(scene, fine, relative_error(coarse, fine) / 3.0, cpu)
 
 
+def model_points(job: tuple[str, str, float, tuple[float, ...], np.ndarray]) -> list[Point]:
+    """One scene × model of the sweep: every method and step against the reference outputs."""
+    scene, name, duration, steps, ref_outputs = job
+    s = scene_for(scene, name, duration)
+    model = build_model(s)
+    frame = CompiledFrame(model)
+    limit = rk4_stable_step(model)
+    points = []
+    for method in METHODS:
+        for dt in steps:
+            if method == "rk4" and dt > limit:
+                points.append(Point(scene, name, model.n_dof, method, dt, None, None,
+                                    f"beyond RK4 stability limit {limit:.3g} s"))
+                continue
+            y, cpu = run_outputs(frame, s, method, dt, repeat_until=0.02)
+            points.append(Point(scene, name, model.n_dof, method, dt,
+                                relative_error(y, ref_outputs), cpu / duration))
+    return points
+
+
+Mapper = Callable[[Callable, list], list]
+
+
 def sweep(quick: bool = False, duration: float | None = None,
-          progress: Progress | None = None) -> dict:
-    """The whole work-precision sweep: references, points, Pareto fronts, model frequencies."""
+          progress: Progress | None = None, mapper: Mapper | None = None) -> dict:
+    """The whole work-precision sweep: references, points, Pareto fronts, model frequencies.
+
+    ``mapper(fn, items)`` runs the per-scene references and then the per-model jobs (default:
+    one after the other here; :func:`stillframe.studies.executor.run_tasks` spreads them)."""
     duration = duration or (1.0 if quick else 4.0)
     steps = QUICK_STEPS if quick else STEPS
     models = QUICK_MODELS if quick else tuple(MODELS)
     say = progress or (lambda _text: None)
-    points: list[Point] = []
-    references: dict[str, dict] = {}
-    for scene in SCENES:
-        say(f"{scene}: reference fe40 midpoint dt={REFERENCE_DT:g}")
-        ref = reference(scene, duration)
-        references[scene] = {"richardson_error": ref.richardson_error, "cpu_s": ref.cpu_s}
-        for name in models:
-            s = scene_for(scene, name, duration)
-            model = build_model(s)
-            frame = CompiledFrame(model)
-            limit = rk4_stable_step(model)
-            for method in METHODS:
-                for dt in steps:
-                    if method == "rk4" and dt > limit:
-                        points.append(Point(scene, name, model.n_dof, method, dt, None, None,
-                                            f"beyond RK4 stability limit {limit:.3g} s"))
-                        continue
-                    say(f"{scene}: {name} {method} dt={dt:g}")
-                    y, cpu = run_outputs(frame, s, method, dt, repeat_until=0.02)
-                    points.append(Point(scene, name, model.n_dof, method, dt,
-                                        relative_error(y, ref.outputs), cpu / duration))
+
+    def serial(fn: Callable, items: list) -> list:
+        out = []
+        for item in items:
+            say(f"{item[0]}: {item[1] if isinstance(item[1], str) else 'reference'}")
+            out.append(fn(item))
+        return out
+
+    run = mapper or serial
+    refs = run(_reference_job, [(scene, duration) for scene in SCENES])
+    references = {r.scene: {"richardson_error": r.richardson_error, "cpu_s": r.cpu_s}
+                  for r in refs}
+    jobs = [(r.scene, name, duration, steps, r.outputs) for r in refs for name in models]
+    points: list[Point] = [p for group in run(model_points, jobs) for p in group]
     return {
         "reference": {
             "model": f"fe{REFERENCE_MODEL[1]}", "method": "midpoint (compiled)",

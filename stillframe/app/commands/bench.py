@@ -16,6 +16,7 @@ BENCHES: tuple[str, ...] = (
     "stillframe.app.commands.bench_monitor",
     "stillframe.app.commands.bench_fidelity",
     "stillframe.app.commands.bench_speed",
+    "stillframe.app.commands.bench_montecarlo",
 )
 
 

@@ -13,6 +13,7 @@ from dataclasses import asdict
 from pathlib import Path
 
 from stillframe.app.commands.common import add_json_argument, emit_json
+from stillframe.app.commands.montecarlo import add_executor_arguments
 from stillframe.errors import InputError
 from stillframe.text_table import format_table
 
@@ -26,6 +27,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     parser.add_argument("--duration", type=float, help="simulated seconds per run")
     parser.add_argument("--write-table", type=Path, metavar="FILE",
                         help="write the model.type: auto table (JSON) here")
+    add_executor_arguments(parser)
     parser.set_defaults(func=run)
 
 
@@ -74,15 +76,18 @@ def plot(result: dict, directory: Path) -> list[Path]:
 
 def run(args: argparse.Namespace) -> int:
     from stillframe.dynamics.ph.energy_drift import FREE_VIBRATION, energy_drift_rows
-    from stillframe.fidelity.auto_model import write_table
     from stillframe.fidelity.work_precision import GRID_DT, sweep
+    from stillframe.fidelity.work_precision.auto_model import write_table
 
     if args.duration is not None:
         grid_steps = args.duration / GRID_DT
         if args.duration <= 0 or abs(grid_steps - round(grid_steps)) > 1e-9:
             raise InputError(f"--duration: must be a positive multiple of {GRID_DT:g} s "
                              f"(got {args.duration:g})")
-    result = sweep(quick=args.quick, duration=args.duration, progress=_progress)
+    from stillframe.studies.executor import mapper
+
+    result = sweep(quick=args.quick, duration=args.duration, progress=_progress,
+                   mapper=mapper(args.workers, args.scheduler, "bench fidelity"))
     result["energy_drift"] = [asdict(r) for r in energy_drift_rows(
         duration=0.5 if args.quick else 2.0, progress=_progress)]
     if args.plots:

@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from stillframe.app.commands.common import add_json_argument, emit_json
+from stillframe.app.commands.montecarlo import add_executor_arguments
 from stillframe.errors import InputError
 from stillframe.text_table import format_table
 
@@ -50,6 +51,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     parser.add_argument("--plots", type=Path, default=None, metavar="DIR",
                         help="write one heat-map PNG per method and figure")
     add_json_argument(parser)
+    add_executor_arguments(parser)
     parser.set_defaults(func=run)
 
 
@@ -136,10 +138,14 @@ def run(args: argparse.Namespace) -> int:
     if args.seeds is not None and args.seeds < 1:
         raise InputError(f"--seeds {args.seeds}: must be a positive integer")
     seeds = args.seeds or seeds
+    from stillframe.studies.executor import mapper
+
     snrs = _subset("--snr", args.snr, snrs)
     lengths = _subset("--samples", args.samples, lengths)
+    spread = mapper(args.workers, args.scheduler, "bench identify")
+    items = cases(snrs, lengths, seeds)
     start = time.perf_counter()
-    results = run_cases(run_case, cases(snrs, lengths, seeds))
+    results = spread(run_case, items) if spread else run_cases(run_case, items)
     elapsed = time.perf_counter() - start
     table = summarize(results)
     paths = heat_maps(table, args.plots) if args.plots else []

@@ -47,6 +47,8 @@ TARGETS: tuple[Target, ...] = (
     Target("thesis_lqg", "displacement", (1, 2, 3), 50.0),
     Target("thesis_lqg", "velocity", (1, 2, 3), 50.0),
     Target("thesis_euk_ekf", "displacement", (3,), 85.0),
+    Target("lqg_mismatch", "displacement", (1, 2, 3), 50.0),
+    Target("lqg_mismatch", "velocity", (1, 2, 3), 50.0),
 )
 
 

@@ -1,0 +1,113 @@
+"""The report of a study: the run table (CSV), quantiles of the headline figures with the worst
+run, the fractions that met the targets or went unstable, and PNG plots (docs/montecarlo.md)."""
+
+from __future__ import annotations
+
+import csv
+import math
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+QUANTILES: tuple[float, ...] = (0.05, 0.25, 0.5, 0.75, 0.95)
+HEADLINES: dict[str, tuple[tuple[str, ...], str]] = {
+    "closed-loop": (("reduction_pct.",), "min"),
+    "simulate": (("peak_displacement_m.", "peak_acceleration_m_s2."), "max"),
+    "identify": (("frequency_error", "damping_error"), "max"),
+}
+"""Per kind of run: the column prefixes summarised and which end is the worst case."""
+
+
+def write_table(rows: Sequence[dict[str, Any]], path: Path) -> Path:
+    """One CSV row per run; columns in first-seen order; floats as their shortest exact text."""
+    columns = list(dict.fromkeys(k for r in rows for k in r))
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with path.open("w", newline="") as handle:
+        writer = csv.DictWriter(handle, fieldnames=columns)
+        writer.writeheader()
+        writer.writerows([{k: repr(v) if isinstance(v, float) else v for k, v in r.items()}
+                          for r in rows])
+    return path
+
+
+def headline_columns(rows: Sequence[dict[str, Any]], what: str) -> list[str]:
+    prefixes = HEADLINES[what][0]
+    columns = dict.fromkeys(k for r in rows for k in r if k.startswith(prefixes))
+    return [c for c in columns if all(isinstance(r.get(c, 0.0), int | float) for r in rows)]
+
+
+def quantiles(rows: Sequence[dict[str, Any]], what: str) -> dict[str, dict[str, Any]]:
+    """Per headline column, over the runs that finished: quantiles, mean, worst value and run."""
+    worst_is_min = HEADLINES[what][1] == "min"
+    out = {}
+    for column in headline_columns(rows, what):
+        pairs = [(r[column], r["run"]) for r in rows
+                 if r["status"] == "ok" and math.isfinite(r.get(column, math.nan))]
+        if not pairs:
+            continue
+        values = np.array([v for v, _ in pairs])
+        worst = (min if worst_is_min else max)(pairs)
+        out[column] = {f"q{round(100 * q):02d}": float(np.quantile(values, q))
+                       for q in QUANTILES} | {
+            "mean": float(values.mean()), "worst": float(worst[0]), "worst_run": worst[1],
+            "runs": len(pairs)}
+    return out
+
+
+def fractions(rows: Sequence[dict[str, Any]],
+              met: Callable[[dict[str, Any]], bool] | None) -> dict[str, float | None]:
+    """Fractions of all runs that met the targets (None without targets), went unstable or
+    failed."""
+    n = max(len(rows), 1)
+    return {
+        "met_targets": (sum(r["status"] == "ok" and met(r) for r in rows) / n
+                        if met is not None else None),
+        "unstable": sum(r["status"] == "unstable" for r in rows) / n,
+        "failed": sum(r["status"] == "failed" for r in rows) / n,
+    }
+
+
+def plot(rows: Sequence[dict[str, Any]], what: str, varied: Sequence[str],
+         directory: Path) -> list[Path]:
+    """Histograms of the headline figures; each headline figure against each varied column."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    ok = [r for r in rows if r["status"] == "ok"]
+    columns = headline_columns(ok, what)
+    if not ok or not columns:
+        return []
+    directory.mkdir(parents=True, exist_ok=True)
+    paths = []
+    cols = min(3, len(columns))
+    grid = (math.ceil(len(columns) / cols), cols)
+    fig, axes = plt.subplots(*grid, figsize=(4 * cols, 3 * grid[0]), squeeze=False)
+    for ax, column in zip(axes.flat, columns, strict=False):
+        ax.hist([r[column] for r in ok], bins="auto", color="C0")
+        ax.set_title(column, fontsize=8)
+        ax.set_ylabel("runs")
+    for ax in list(axes.flat)[len(columns):]:
+        ax.set_visible(False)
+    fig.tight_layout()
+    paths.append(directory / "histograms.png")
+    fig.savefig(paths[-1], dpi=100)
+    plt.close(fig)
+    for key in varied:
+        if not all(isinstance(r.get(key), int | float) for r in ok):
+            continue
+        fig, axes = plt.subplots(*grid, figsize=(4 * cols, 3 * grid[0]), squeeze=False)
+        for ax, column in zip(axes.flat, columns, strict=False):
+            ax.plot([r[key] for r in ok], [r[column] for r in ok], ".", ms=3)
+            ax.set_xlabel(key, fontsize=8)
+            ax.set_ylabel(column, fontsize=8)
+        for ax in list(axes.flat)[len(columns):]:
+            ax.set_visible(False)
+        fig.tight_layout()
+        paths.append(directory / f"vs_{key}.png")
+        fig.savefig(paths[-1], dpi=100)
+        plt.close(fig)
+    return paths
