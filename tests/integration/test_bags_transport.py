@@ -29,6 +29,7 @@ from rosbags.interfaces import QosTime as T
 from rosbags.rosbag2 import Reader, StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
 
+from stillframe.errors import BagError
 from stillframe.locations import REPO_ROOT as ROOT
 from stillframe.middleware.discovery import cyclone_config
 from tests.support.middleware import child_env
@@ -282,23 +283,23 @@ def test_play_loop_at_rate_repeats_the_bag_faster(env: dict[str, str], tmp_path:
         assert 0.9 * span / 4 <= stamps[-1] - stamps[0] <= span
 
 
-@pytest.mark.parametrize(("args", "named"), [
-    (["play", "{tmp}/nope"], "{tmp}/nope"),
-    (["play", "{tmp}/A", "--rate", "0"], "--rate"),
-    (["play", "{tmp}/A", "--clock", "-1"], "--clock"),
-    (["record", "-o", "{tmp}/new"], "--all"),
-    (["record", "-o", "{tmp}/new", "--all", "/x"], "--all"),
-    (["record", "-o", "{tmp}/A", "--all"], "{tmp}/A"),
-    (["record", "-o", "{tmp}/new", "bad topic"], "bad topic"),
+@pytest.mark.parametrize(("args", "named", "code"), [
+    (["play", "{tmp}/nope"], "{tmp}/nope", BagError.exit_code),
+    (["play", "{tmp}/A", "--rate", "0"], "--rate", 2),
+    (["play", "{tmp}/A", "--clock", "-1"], "--clock", 2),
+    (["record", "-o", "{tmp}/new"], "--all", 2),
+    (["record", "-o", "{tmp}/new", "--all", "/x"], "--all", 2),
+    (["record", "-o", "{tmp}/A", "--all"], "{tmp}/A", 2),
+    (["record", "-o", "{tmp}/new", "bad topic"], "bad topic", 2),
 ])
 def test_bad_arguments_are_one_line_errors(env: dict[str, str], tmp_path: Path,
-                                           args: list[str], named: str) -> None:
+                                           args: list[str], named: str, code: int) -> None:
     write_source(tmp_path / "A", n_imu=3, n_js=0, period_ns=1_000_000)
     argv = [a.format(tmp=tmp_path) for a in args]
     out = subprocess.run([sys.executable, "-m", "stillframe", *argv],
                          cwd=ROOT, env=env, capture_output=True, text=True, timeout=60)
     errors = [line for line in out.stderr.splitlines() if "error" in line]
-    assert out.returncode == 2, out.stderr
+    assert out.returncode == code, out.stderr
     assert "Traceback" not in out.stderr
     assert len(errors) == 1 and named.format(tmp=tmp_path) in errors[0], out.stderr
     assert not (tmp_path / "new").exists()

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from stillframe.errors import InputError
+from stillframe.errors import IdentificationError
 from stillframe.identification.mkr import mkr
 from stillframe.identification.modal import modal_parameters
 
@@ -44,7 +44,7 @@ def test_mkr_of_the_thesis_model():
     """Eqs. 5.177–5.179. The printed D̂ (eq. 5.171) has D̂₁ = −2.574 < 0, i.e. the load cell's
     sign is opposite to the accelerometers' (D = C_a M⁻¹ B₂ > 0 for floor 1): as printed, MKR
     refuses (a negative mass); with the force sign corrected it gives the thesis's matrices."""
-    with pytest.raises(InputError, match="sign"):
+    with pytest.raises(IdentificationError, match="sign"):
         mkr(A, B, C, DT, [0, 1, 2], [0])
     model = mkr(A, -B, C, DT, [0, 1, 2], [0])
     M = np.array([[0.3871, -0.0156, 0.0011], [-0.0156, 0.2621, -0.0323],
