@@ -76,8 +76,8 @@ def plot(result: dict, directory: Path) -> list[Path]:
 
 def run(args: argparse.Namespace) -> int:
     from stillframe.dynamics.ph.energy_drift import FREE_VIBRATION, energy_drift_rows
-    from stillframe.fidelity.work_precision import GRID_DT, sweep
     from stillframe.fidelity.auto_model import write_table
+    from stillframe.fidelity.work_precision import GRID_DT, sweep
 
     if args.duration is not None:
         grid_steps = args.duration / GRID_DT
