@@ -3,6 +3,7 @@ import cycle between any two modules, and a repository that stands alone."""
 
 from __future__ import annotations
 
+import os
 import shutil
 import subprocess
 import sys
@@ -97,13 +98,17 @@ def test_no_two_modules_import_each_other_even_inside_functions() -> None:
     assert strongly_connected(imports) == []
 
 
-@pytest.mark.parametrize("text", ["../shared", "DESIGN.md"])
+#: a path beside the checkout, and the design file that stayed outside it (built, so that this file
+#: does not itself name them)
+OUTSIDE = [os.path.join("..", "shared"), "DESIGN" + ".md"]
+
+
+@pytest.mark.parametrize("text", OUTSIDE)
 def test_the_repository_stands_alone(text: str) -> None:
     """No file points outside the checkout (the seeds are cited by full reference)."""
     files = subprocess.run(["git", "ls-files", "-z"], cwd=ROOT, capture_output=True,
                            check=True).stdout.decode().split("\0")
     hits = [f for f in files if f and (ROOT / f).is_file()
             and f.endswith((".py", ".md", ".toml", ".yaml", ".xml", ".cfg", ".txt", ".html"))
-            and text in (ROOT / f).read_text(errors="replace")
-            and f != "tests/test_architecture.py"]
+            and text in (ROOT / f).read_text(errors="replace")]
     assert hits == []
