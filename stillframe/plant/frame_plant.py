@@ -132,7 +132,7 @@ class Plant:
         self.system.control = np.array([0.0, 0.0, applied[1], applied[0]])
         t0 = self.t
         if self.linear is not None:
-            self._advance_linear(t0)
+            self._advance_linear(self.linear, t0)
             return applied
         try:
             self.x = integrate(self.system, self.x, self.h, self.substeps, self.integrator, t0,
@@ -149,9 +149,9 @@ class Plant:
         self.k += 1
         return applied
 
-    def _advance_linear(self, t0: float) -> None:
+    def _advance_linear(self, linear: LinearPeriod, t0: float) -> None:
         """``advance`` of a linear plant: the substeps as one product, recorded alike."""
-        recorded, x = self.linear.step(self.x, t0, self.system.control)
+        recorded, x = linear.step(self.x, t0, self.system.control)
         if not np.all(np.isfinite(x)):
             first = int(np.argmax(~np.isfinite(recorded).all(axis=1)))
             raise non_finite(t0 + (first + 1) * self.h, self.h, self.method)

@@ -73,15 +73,16 @@ class LinearPeriod:
         self.substeps = substeps
         n, r = system.n, len(recorded)
         offsets = sorted({j + c for j in range(substeps) for c, _ in recurrence.taps})
-        column = {o: n + 4 + i for i, o in enumerate(offsets)}
+        column: dict[float, int] = {o: n + 4 + i for i, o in enumerate(offsets)}
+        taps = [(c, L[:, load.excitation.floor - 1]) for c, L in recurrence.taps] if load else []
         self.offsets = np.array(offsets)
         state = np.hstack([np.eye(n), np.zeros((n, 4 + len(offsets)))])
         rows = []
         for j in range(substeps):
             state = recurrence.M @ state
             state[:, n : n + 4] += recurrence.N
-            for c, L in recurrence.taps if load is not None else ():
-                state[:, column[j + c]] += L[:, load.excitation.floor - 1]
+            for c, column_of_load in taps:
+                state[:, column[j + c]] += column_of_load
             rows.append(state[recorded])
         self.W = np.vstack([*rows, state])
         self.n, self.n_recorded = n, r
