@@ -18,6 +18,7 @@ from stillframe.contract.signals import Sample
 from stillframe.design.identified import frame_for
 from stillframe.dynamics.excitation import floor_load
 from stillframe.dynamics.integrators import check_finite, integrate, make_integrator, non_finite
+from stillframe.dynamics.kernels import CompiledFrame, compiles
 from stillframe.dynamics.simulation import initial_state
 from stillframe.dynamics.systems import LinearSystem, MechanicalSystem
 from stillframe.errors import InputError, IntegrationError
@@ -25,6 +26,9 @@ from stillframe.plant.actuators import Actuators
 from stillframe.plant.linear_period import LinearPeriod, make_linear_period
 from stillframe.plant.ph_plant import PHPlant
 from stillframe.plant.sensors import Sensors
+
+#: the truth kept at every substep, in the physical state: floor displacements and velocities
+RECORDED = np.array([0, 1, 2, 4, 5, 6])
 
 
 def sample_period(scene: Scene) -> tuple[float, int]:
@@ -68,6 +72,9 @@ class Plant:
         picks = [*model.floor_index, model.phi_index]
         self.physical_index = np.array([*picks, *(n + i for i in picks)])
         self.linear = self._linear_period(scene)
+        #: the nonlinear model's substeps on the compiled kernels where they handle its load
+        self.compiled = (CompiledFrame(model) if isinstance(self.system, MechanicalSystem)
+                         and compiles(load, self.integrator.name) else None)
         self._acceleration_rows = None
         if isinstance(self.system, LinearSystem):
             rows = [n + i for i in model.floor_index]
@@ -96,7 +103,7 @@ class Plant:
         if not isinstance(self.system, LinearSystem) or (
                 discretization == "substeps" and self.integrator.name != "midpoint"):
             return None
-        recorded = self.physical_index[[0, 1, 2, 4, 5, 6]]
+        recorded = self.physical_index[RECORDED]
         return make_linear_period(self.system, self.load, discretization, self.h,
                                   self.substeps, recorded)
 
@@ -135,8 +142,14 @@ class Plant:
             self._advance_linear(self.linear, t0)
             return applied
         try:
-            self.x = integrate(self.system, self.x, self.h, self.substeps, self.integrator, t0,
-                               observer=self._observe)
+            if self.compiled is not None:
+                states = self.compiled.run(self.integrator.name, self.x, self.h, self.substeps,
+                                           self.load, control=self.system.control, t0=t0)
+                self._record_period(t0, states[1:, self.physical_index[RECORDED]])
+                self.x = states[-1].copy()
+            else:
+                self.x = integrate(self.system, self.x, self.h, self.substeps, self.integrator,
+                                   t0, observer=self._observe)
         except (ValueError, OverflowError) as exc:  # math.sin(inf) and the like
             if isinstance(exc, IntegrationError):
                 raise
@@ -155,6 +168,13 @@ class Plant:
         if not np.all(np.isfinite(x)):
             first = int(np.argmax(~np.isfinite(recorded).all(axis=1)))
             raise non_finite(t0 + (first + 1) * self.h, self.h, self.method)
+        self._record_period(t0, recorded)
+        self.x = x
+        self._add_process_noise()
+        self.k += 1
+
+    def _record_period(self, t0: float, recorded: np.ndarray) -> None:
+        """The truth after each substep of the period from t0 (rows of ``recorded``)."""
         s, rows = self.substeps, self._rows
         if rows + s > len(self._fine):
             self._fine = np.vstack([self._fine, np.empty_like(self._fine)])
@@ -162,15 +182,12 @@ class Plant:
         fine[:, 0] = t0 + np.arange(1, s + 1) * self.h
         fine[:, 1:] = recorded
         self._rows = rows + s
-        self.x = x
-        self._add_process_noise()
-        self.k += 1
 
     def _add_process_noise(self) -> None:
         """Eq. 5.215, once per period; the last recorded row follows."""
         if self.process_std.any():
             self.x[self.physical_index] += self.process_std * self.process_rng.standard_normal(8)
-            self._fine[self._rows - 1, 1:] = self.x[self.physical_index][[0, 1, 2, 4, 5, 6]]
+            self._fine[self._rows - 1, 1:] = self.x[self.physical_index][RECORDED]
 
     def _observe(self, k: int, t: float, x: np.ndarray) -> None:
         if k > 0:
