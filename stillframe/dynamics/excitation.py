@@ -96,7 +96,7 @@ class FloorLoad:
             w = 2.0 * np.pi * np.asarray(e.frequencies_hz)
             phases = np.asarray(e.phases or [0.0] * len(w))
             return np.sin(np.multiply.outer(times, w) + phases) @ np.asarray(e.amplitudes)
-        return np.array([self.force(t) for t in times])
+        return np.vectorize(self.force, otypes=[float])(times)
 
 
 def floor_load(excitation: Excitation, duration: float) -> FloorLoad | None:

@@ -71,6 +71,8 @@ class Plant:
         self.n_dof = n
         picks = [*model.floor_index, model.phi_index]
         self.physical_index = np.array([*picks, *(n + i for i in picks)])
+        self._recorded_index = self.physical_index[RECORDED]
+        self._substep_times = np.arange(1, self.substeps + 1) * self.h   # after t_k
         self.linear = self._linear_period(scene)
         #: the nonlinear model's substeps on the compiled kernels where they handle its load
         self.compiled = (CompiledFrame(model) if isinstance(self.system, MechanicalSystem)
@@ -115,21 +117,21 @@ class Plant:
         """True [x1, x2, x3, φ, ẋ1, ẋ2, ẋ3, φ̇]."""
         return self.x[self.physical_index].copy()
 
-    def force(self, t: float) -> float:
-        return float(self.load(t)[self.excited_floor - 1]) if self.load else 0.0
-
     def sample(self) -> Sample:
         """Sensor readings and ground truth at the current time t_k."""
         t = self.t
+        loads = self.load(t) if self.load else None
         if self._acceleration_rows is not None:  # linear: E⁻¹[A B] rows, formed once
-            z = self._acceleration_input
-            z[: self.x.size] = self.x
-            z[self.x.size :] = self.system.inputs(t)
+            z, n = self._acceleration_input, self.x.size
+            z[:n] = self.x
+            z[n:] = self.system.control
+            if loads is not None:
+                z[n : n + 3] += loads
             accelerations = self._acceleration_rows @ z
         else:
             accelerations = self.system.derivative(t, self.x)[self.n_dof:][self.model.floor_index]
-        readings, force = self.sensors.read(accelerations, self.x[self.model.phi_index],
-                                            self.force(t))
+        force = float(loads[self.excited_floor - 1]) if loads is not None else 0.0
+        readings, force = self.sensors.read(accelerations, self.x[self.model.phi_index], force)
         applied = np.array([self.actuators.torque.value, self.actuators.force.value])
         return Sample(t, readings, force, truth=self.physical(), applied=applied)
 
@@ -164,7 +166,7 @@ class Plant:
 
     def _advance_linear(self, linear: LinearPeriod, t0: float) -> None:
         """``advance`` of a linear plant: the substeps as one product, recorded alike."""
-        recorded, x = linear.step(self.x, t0, self.system.control)
+        recorded, x = linear.step(self.x, self.k, self.system.control)
         if not np.all(np.isfinite(x)):
             first = int(np.argmax(~np.isfinite(recorded).all(axis=1)))
             raise non_finite(t0 + (first + 1) * self.h, self.h, self.method)
@@ -179,7 +181,7 @@ class Plant:
         if rows + s > len(self._fine):
             self._fine = np.vstack([self._fine, np.empty_like(self._fine)])
         fine = self._fine[rows : rows + s]
-        fine[:, 0] = t0 + np.arange(1, s + 1) * self.h
+        fine[:, 0] = t0 + self._substep_times
         fine[:, 1:] = recorded
         self._rows = rows + s
 
@@ -187,7 +189,7 @@ class Plant:
         """Eq. 5.215, once per period; the last recorded row follows."""
         if self.process_std.any():
             self.x[self.physical_index] += self.process_std * self.process_rng.standard_normal(8)
-            self._fine[self._rows - 1, 1:] = self.x[self.physical_index][RECORDED]
+            self._fine[self._rows - 1, 1:] = self.x[self._recorded_index]
 
     def _observe(self, k: int, t: float, x: np.ndarray) -> None:
         if k > 0:

@@ -33,7 +33,8 @@ from stillframe.design.discrete import first_order_hold
 from stillframe.dynamics.excitation import FloorLoad
 from stillframe.dynamics.systems import LinearSystem
 
-DISCRETIZATIONS: tuple[str, ...] = ("substeps", "zoh")
+#: periods whose excitation force is evaluated at once
+CHUNK = 64
 
 
 @dataclass(frozen=True)
@@ -87,16 +88,28 @@ class LinearPeriod:
         self.W = np.vstack([*rows, state])
         self.n, self.n_recorded = n, r
         self.z = np.zeros(self.W.shape[1])
+        self.period = h * substeps
+        self._forces = np.empty((0, len(offsets)))
+        self._first = 0     # the period of the first row of _forces
 
-    def step(self, x: np.ndarray, t0: float, control: np.ndarray) -> tuple[np.ndarray,
-                                                                             np.ndarray]:
+    def forces(self, k: int) -> np.ndarray:
+        """The force at the tap times of period k, t_k + offsets · h with t_k = k · period,
+        evaluated :data:`CHUNK` periods at a time (the same numbers as one at a time)."""
+        if not self._first <= k < self._first + len(self._forces):
+            assert self.load is not None
+            self._first = k - k % CHUNK
+            t0 = np.arange(self._first, self._first + CHUNK)[:, None] * self.period
+            self._forces = self.load.force_at(t0 + self.offsets * self.h)
+        return self._forces[k - self._first]
+
+    def step(self, x: np.ndarray, k: int, control: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The recorded values after each substep (substeps × recorded) and the end state,
-        from x at t0 with the inputs ``control`` = u_c held."""
+        from x at the start of period k with the inputs ``control`` = u_c held."""
         n, z = self.n, self.z
         z[:n] = x
         z[n : n + 4] = control
         if self.load is not None:
-            z[n + 4 :] = self.load.force_at(t0 + self.offsets * self.h)
+            z[n + 4 :] = self.forces(k)
         y = self.W @ z
         k = self.substeps * self.n_recorded
         return y[:k].reshape(self.substeps, self.n_recorded), y[k:]
