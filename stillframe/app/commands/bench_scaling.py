@@ -93,12 +93,14 @@ def one_process(sets: list[str]) -> dict[str, Any]:
             "one_process_us": 1e6 * loop / steps, "plant_us": 1e6 * alone / steps}
 
 
-def through_nodes(sets: list[str], out: Path, backend: str) -> float:
-    """µs per sample of sim_node's lock-step loop with the three node processes."""
+def through_nodes(sets: list[str], out: Path, backend: str) -> dict[str, Any]:
+    """µs per sample of sim_node's lock-step loop with the three node processes, and its
+    lock-step timeouts (a sample the simulator stopped waiting for)."""
     from stillframe.app.launcher import run_scene
 
     result = run_scene(SCENE, sets, out, "lockstep", backends=[backend]).evaluation
-    return 1e6 * result["wall_s"] / result["steps"]
+    return {"nodes_us": 1e6 * result["wall_s"] / result["steps"],
+            "lockstep_timeouts": result.get("lockstep_timeouts")}
 
 
 def run(args: argparse.Namespace) -> int:
@@ -115,7 +117,7 @@ def run(args: argparse.Namespace) -> int:
             row["plant_share"] = row["plant_us"] / row["one_process_us"]
             if not args.no_nodes:
                 print(f"[{i + 1}/{len(PLANTS)}] {label}: three nodes, lock-step", file=sys.stderr)
-                row["nodes_us"] = through_nodes(sets, Path(tmp) / str(i), args.backend)
+                row.update(through_nodes(sets, Path(tmp) / str(i), args.backend))
             rows.append(row)
     base = rows[0]
     for row in rows:
@@ -129,9 +131,11 @@ def run(args: argparse.Namespace) -> int:
     nodes = not args.no_nodes
     print(format_table(
         ["plant", "states", "one process [us]", "plant alone [us]", "plant share",
-         "x first row", *(["nodes [us]", "x first row", "nodes / one process"] if nodes else [])],
+         "x first row",
+         *(["nodes [us]", "x first row", "nodes / one process", "timeouts"] if nodes else [])],
         [[r["plant"], r["states"], f"{r['one_process_us']:.0f}", f"{r['plant_us']:.0f}",
           f"{100 * r['plant_share']:.0f} %", f"{r['one_process_over_first']:.2f}",
           *([f"{r['nodes_us']:.0f}", f"{r['nodes_over_first']:.2f}",
-             f"{r['nodes_over_one_process']:.2f}"] if nodes else [])] for r in rows]))
+             f"{r['nodes_over_one_process']:.2f}", r["lockstep_timeouts"]] if nodes else [])]
+         for r in rows]))
     return 0
