@@ -106,7 +106,7 @@ class Plant:
                 discretization == "substeps" and self.integrator.name != "midpoint"):
             return None
         recorded = self.physical_index[RECORDED]
-        return make_linear_period(self.system, self.load, discretization, self.h,
+        return make_linear_period(self.system, self.load, discretization, self.period,
                                   self.substeps, recorded)
 
     @property

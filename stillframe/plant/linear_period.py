@@ -68,9 +68,10 @@ class LinearPeriod:
     ``recorded`` are the indices of the state the plant records at every substep."""
 
     def __init__(self, system: LinearSystem, load: FloorLoad | None, recurrence: Recurrence,
-                 h: float, substeps: int, recorded: np.ndarray) -> None:
+                 period: float, substeps: int, recorded: np.ndarray) -> None:
         self.load = load
-        self.h = h
+        self.period = period
+        self.h = period / substeps
         self.substeps = substeps
         n, r = system.n, len(recorded)
         offsets = sorted({j + c for j in range(substeps) for c, _ in recurrence.taps})
@@ -88,7 +89,6 @@ class LinearPeriod:
         self.W = np.vstack([*rows, state])
         self.n, self.n_recorded = n, r
         self.z = np.zeros(self.W.shape[1])
-        self.period = h * substeps
         self._forces = np.empty((0, len(offsets)))
         self._first = 0     # the period of the first row of _forces
 
@@ -111,12 +111,13 @@ class LinearPeriod:
         if self.load is not None:
             z[n + 4 :] = self.forces(k)
         y = self.W @ z
-        k = self.substeps * self.n_recorded
-        return y[:k].reshape(self.substeps, self.n_recorded), y[k:]
+        rows = self.substeps * self.n_recorded
+        return y[:rows].reshape(self.substeps, self.n_recorded), y[rows:]
 
 
 def make_linear_period(system: LinearSystem, load: FloorLoad | None, discretization: str,
-                       h: float, substeps: int, recorded: np.ndarray) -> LinearPeriod:
+                       period: float, substeps: int, recorded: np.ndarray) -> LinearPeriod:
     """The period stepper of ``plant.discretization`` for ``system`` under ``load``."""
+    h = period / substeps
     recurrence = (zoh_recurrence if discretization == "zoh" else midpoint_recurrence)(system, h)
-    return LinearPeriod(system, load, recurrence, h, substeps, recorded)
+    return LinearPeriod(system, load, recurrence, period, substeps, recorded)
