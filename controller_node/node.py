@@ -28,6 +28,8 @@ import sys
 import time
 from typing import Any
 
+import numpy as np
+
 from stillframe.contract import messages, topics
 from stillframe.contract.codecs import COMMAND_TOPICS, CommandMessage, SampleGrid, physical_state
 from stillframe.contract.signals import Command, Estimate
@@ -77,6 +79,9 @@ class ControllerNode:
         self.last_command = Command(0.0)
         self.compute = Durations()
         self.rate = RateMeter()
+        #: composed with the estimator in one process: estimates come by :meth:`handed_over`,
+        #: not from the ``state_estimate`` topic
+        self.intra_process = False
         self.declare_run_time_parameters()
 
     def declare_run_time_parameters(self) -> None:
@@ -109,7 +114,8 @@ class ControllerNode:
 
     def subscribe_inputs(self) -> None:
         est, wrench = topics.STATE_ESTIMATE, topics.EXCITATION_WRENCH
-        self.node.create_subscription(est.type_name, est.name, self.on_estimate, est.qos)
+        if not self.intra_process:
+            self.node.create_subscription(est.type_name, est.name, self.on_estimate, est.qos)
         self.node.create_subscription(wrench.type_name, wrench.name, self.on_force,
                                       self.params.qos(wrench))
 
@@ -119,6 +125,10 @@ class ControllerNode:
     def on_estimate(self, msg: Any) -> None:
         self.matching.add_estimate(messages.stamp_ns(msg.header.stamp), physical_state(msg),
                                    time.monotonic_ns())
+
+    def handed_over(self, ns: int, physical: np.ndarray) -> None:
+        """An estimate from the estimator in the same process (the values it published)."""
+        self.matching.add_estimate(ns, physical, time.monotonic_ns())
 
     def process_ready(self) -> None:
         """Answer pending estimates in order; in lock-step each waits for its load cell."""

@@ -107,6 +107,9 @@ class EstimatorNode:
                        "skipped_before_initialisation": 0}
         self.compute = Durations()
         self.rate = RateMeter()
+        #: composed with the controller in one process: ``handover(stamp_ns, physical)`` gets
+        #: every estimate as published (intra-process, no serialisation)
+        self.handover: Callable[[int, np.ndarray], None] | None = None
         if isinstance(self.estimator, Filter):
             self.declare_run_time_parameters()
         else:
@@ -205,6 +208,8 @@ class EstimatorNode:
         state, cov = self.out.fill(estimate, ready.ns)
         self.state_pub.publish(state)
         self.cov_pub.publish(cov)
+        if self.handover is not None:
+            self.handover(ready.ns, estimate.physical)
         self.compute.add(time.perf_counter() - started)
         self.counts["estimates"] += 1
         self.rate.tick()
@@ -224,8 +229,10 @@ class EstimatorNode:
         self.diagnostics.publish(max(a.last_ns, 0), values, level)
 
     def peers_ready(self) -> bool:
-        """The controller reads the estimates and publishes the scene's command topic."""
-        return self.state_pub.get_subscription_count() > 0 and has_publisher(
+        """The controller reads the estimates (handed over when composed) and publishes the
+        scene's command topic."""
+        reads = self.handover is not None or self.state_pub.get_subscription_count() > 0
+        return reads and has_publisher(
             self.node, command_topic(self.params.scene).name)
 
     def run(self) -> None:
@@ -242,17 +249,22 @@ class EstimatorNode:
         self.publish_status()
 
 
+def build(node: api.Node) -> EstimatorNode:
+    """The estimator on ``node`` from its parameters (InputError naming a wrong one)."""
+    params = declare_loop_parameters(node)
+    partial = node.declare_parameter("partial_after_s", 0.5 * params.period,
+                                     read_only=True).value
+    if not partial > 0:
+        raise InputError(f"parameter 'partial_after_s': must be > 0, got {partial}")
+    return EstimatorNode(node, params, float(partial))
+
+
 @api.node_main
 def main() -> int:
     """Run the node (console script ``estimator_node``); bad parameters exit 2 with one line."""
     node = api.create_node("estimator_node", namespace=topics.DEFAULT_NAMESPACE)
     try:
-        params = declare_loop_parameters(node)
-        partial = node.declare_parameter("partial_after_s", 0.5 * params.period,
-                                         read_only=True).value
-        if not partial > 0:
-            raise InputError(f"parameter 'partial_after_s': must be > 0, got {partial}")
-        EstimatorNode(node, params, float(partial)).run()
+        build(node).run()
     finally:
         node.destroy_node()
     return 0

@@ -34,6 +34,8 @@ from stillframe.locations import REPO_ROOT
 from stillframe.middleware import api, discovery, names
 
 NODES: tuple[str, ...] = ("sim_node", "estimator_node", "controller_node")
+#: the process that hosts the estimator and the controller with ``--compose``
+CONTAINER = "container_node"
 #: the children whose middleware backend ``--backend NAME=BACKEND`` can choose
 BACKEND_TARGETS: tuple[str, ...] = (*NODES, "recorder", "monitor")
 MODES: tuple[str, ...] = ("lockstep", "realtime")
@@ -280,6 +282,8 @@ class LaunchOptions:
     backends: list[str] = field(default_factory=list)
     #: ``stillframe monitor`` arguments (ports) to run the monitor beside the nodes; None: none
     monitor_args: list[str] | None = None
+    #: estimator and controller in one process (``container_node``, intra-process handover)
+    compose: bool = False
 
 
 class Launcher:
@@ -327,10 +331,17 @@ class Launcher:
             children.append(("monitor", [sys.executable, "-m", "stillframe", "monitor",
                                          "--dashboard", "--use-sim-time", "--scene", str(scene),
                                          *sets, *o.monitor_args]))
+        nodes = nodes_for(load_scene(scene, o.overrides))
+        if o.compose and {"estimator_node", "controller_node"} <= set(nodes):
+            nodes = ["sim_node", CONTAINER]
         children += [(name, node_command(name, scene, o.overrides, o.mode,
                                          sim_params if name == "sim_node" else None))
-                     for name in reversed(nodes_for(load_scene(scene, o.overrides)))]
+                     for name in reversed(nodes)]
         return children
+
+    def backend(self, child: str) -> str:
+        """The middleware of a child (the container: the estimator's)."""
+        return self.backends["estimator_node" if child == CONTAINER else child]
 
     def run(self) -> LaunchResult:
         """Start everything, wait for sim_node's result, stop the rest. Raises NodeDiedError,
@@ -340,10 +351,10 @@ class Launcher:
         try:
             commands = self.commands()
             self.status.echo(f"discovery range {self.discovery}; backends " + ", ".join(
-                f"{name} {self.backends[name]}" for name, _ in commands))
-            mixed = len({self.backends[name] for name, _ in commands}) > 1
+                f"{name} {self.backend(name)}" for name, _ in commands))
+            mixed = len({self.backend(name) for name, _ in commands}) > 1
             for name, argv in commands:
-                child = self.processes.start(name, argv, {"STILLFRAME_RMW": self.backends[name]})
+                child = self.processes.start(name, argv, {"STILLFRAME_RMW": self.backend(name)})
                 if name in READY_LINES:
                     self._wait_for_line(child, READY_LINES[name])
                 elif mixed:
@@ -401,16 +412,18 @@ def run_scene(scene: Path, overrides: Sequence[str], out: Path, mode: str = "loc
               record: Path | None = None, lockstep_timeout_s: float | None = None,
               prepare: Callable[[Any], None] | None = None,
               record_topics: Sequence[str] = (), backends: Sequence[str] = (),
-              monitor_args: Sequence[str] | None = None) -> LaunchResult:
+              monitor_args: Sequence[str] | None = None, compose: bool = False) -> LaunchResult:
     """Launch ``scene`` through the three nodes to its end; sim_node's results go to ``out``
     (``result.json``, ``result.npz``); ``record`` records ``record_topics`` (default all) into
     a bag; ``backends`` are ``--backend`` values (:func:`parse_backends`); ``monitor_args``
     (e.g. ports) start ``stillframe monitor`` beside the nodes. ``prepare(node)`` may
-    subscribe the launcher's hidden node to more topics before the children start."""
+    subscribe the launcher's hidden node to more topics before the children start; ``compose``
+    runs the estimator and the controller in one process (``container_node``)."""
     out.mkdir(parents=True, exist_ok=True)
     launcher = Launcher(LaunchOptions(scene, list(overrides), mode, out / "result.json", record,
                                       lockstep_timeout_s, list(record_topics), list(backends),
-                                      None if monitor_args is None else list(monitor_args)))
+                                      None if monitor_args is None else list(monitor_args),
+                                      compose))
     if prepare is not None:
         prepare(launcher.node)
     return launcher.run()

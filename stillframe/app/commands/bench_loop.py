@@ -42,6 +42,8 @@ def register(benches: argparse._SubParsersAction) -> None:
     parser.add_argument("--backend", dest="backends", action="append", default=[],
                         choices=api.BACKENDS,
                         help="measure this backend (repeatable; default: every one installed)")
+    parser.add_argument("--compose", action="store_true",
+                        help="also lock-step with the estimator and controller in one process")
     add_json_argument(parser)
     parser.set_defaults(func=run)
 
@@ -87,20 +89,28 @@ def realtime(rate_hz: float, duration: float, out: Path, backend: str) -> dict[s
             "sim_overruns": e.get("overruns"), "steps": e["steps"]}
 
 
-def lockstep(out: Path, backend: str, one: dict[str, Any]) -> dict[str, Any]:
-    """The full LQG scene through the nodes on ``backend`` against ``one`` (one process)."""
+def lockstep(out: Path, backend: str, one: dict[str, Any], compose: bool) -> dict[str, Any]:
+    """The full LQG scene through the nodes on ``backend`` against ``one`` (one process);
+    with ``compose`` also with the estimator and controller composed in one process."""
     scene = load_scene(SCENE)
     started = time.perf_counter()
     nodes = run_scene(SCENE, [], out, "lockstep", backends=[backend]).evaluation
     launch_wall = time.perf_counter() - started
-    return {
+    composed = {}
+    if compose:
+        c = run_scene(SCENE, [], out / "composed", "lockstep", backends=[backend],
+                      compose=True).evaluation
+        composed = {"composed_steps_per_s": c["steps"] / c["wall_s"],
+                    "composed_over_one_process": one["loop_s"] / c["wall_s"],
+                    "composed_over_nodes": nodes["wall_s"] / c["wall_s"]}
+    return {**composed,
         "backend": backend, "scene": scene.name, "steps": nodes["steps"], "sim_s": scene.duration,
         "nodes_wall_s": nodes["wall_s"], "launch_wall_s": launch_wall,
         "nodes_steps_per_s": nodes["steps"] / nodes["wall_s"],
         "nodes_realtime_ratio": scene.duration / nodes["wall_s"],
-        "one_process_wall_s": one["wall_s"],
-        "one_process_steps_per_s": one["steps"] / one["wall_s"],
-        "nodes_over_one_process": one["wall_s"] / nodes["wall_s"],
+        "one_process_wall_s": one["loop_s"],
+        "one_process_steps_per_s": one["steps"] / one["loop_s"],
+        "nodes_over_one_process": one["loop_s"] / nodes["wall_s"],
         "lockstep_timeouts": nodes.get("lockstep_timeouts"),
         "reduction_pct": nodes["reduction_pct"],
     }
@@ -122,7 +132,8 @@ def run(args: argparse.Namespace) -> int:
                 rows.append(realtime(rate, args.duration, Path(tmp) / f"{backend}{rate:g}",
                                      backend))
             print(f"{backend}: lock-step, the full LQG scene", file=sys.stderr)
-            speeds.append(lockstep(Path(tmp) / f"{backend}-lockstep", backend, one))
+            speeds.append(lockstep(Path(tmp) / f"{backend}-lockstep", backend, one,
+                                   args.compose))
     if args.json:
         emit_json({"realtime": rows, "lockstep": speeds})
         return 0
@@ -138,6 +149,8 @@ def run(args: argparse.Namespace) -> int:
         [[s["backend"], s["steps"], f"{s['nodes_wall_s']:.2f}", f"{s['nodes_steps_per_s']:.0f}",
           f"{s['nodes_realtime_ratio']:.2f}", f"{s['nodes_over_one_process']:.2f}",
           s["lockstep_timeouts"]] for s in speeds]
-        + [["one process", one["steps"], f"{one['wall_s']:.2f}",
-            f"{one['steps'] / one['wall_s']:.0f}", "", "1.00", ""]]))
+        + [[f"{s['backend']} composed", s["steps"], "", f"{s['composed_steps_per_s']:.0f}", "",
+            f"{s['composed_over_one_process']:.2f}", ""] for s in speeds if args.compose]
+        + [["one process", one["steps"], f"{one['loop_s']:.2f}",
+            f"{one['steps'] / one['loop_s']:.0f}", "", "1.00", ""]]))
     return 0

@@ -63,6 +63,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                         help="with --monitor: dashboard port (default 8080; 0: any)")
     parser.add_argument("--out", type=Path, default=None, metavar="DIR",
                         help="keep sim_node's result.json and result.npz (histories) here")
+    parser.add_argument("--compose", action="store_true",
+                        help="estimator and controller in one process (container_node): "
+                             "estimates handed over in-process, still published")
     parser.set_defaults(func=run)
 
 
@@ -124,7 +127,7 @@ def run(args: argparse.Namespace) -> int:
                                record_topics=args.record_topics, backends=args.backends,
                                monitor_args=["--port", str(args.monitor_port),
                                              "--dashboard-port", str(args.dashboard_port)]
-                               if args.monitor else None)
+                               if args.monitor else None, compose=args.compose)
         except NodeDiedError as exc:
             return report_death("launch", exc)
         except KeyboardInterrupt:
