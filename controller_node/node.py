@@ -26,15 +26,23 @@ from __future__ import annotations
 
 import sys
 import time
-from typing import Any
 
-from stillframe.contract import messages, topics
-from stillframe.contract.codecs import COMMAND_TOPICS, CommandMessage, SampleGrid, physical_state
+import numpy as np
+
+from stillframe.contract import topics
+from stillframe.contract.codecs import (
+    COMMAND_TOPICS,
+    CommandMessage,
+    SampleGrid,
+    state_reader,
+    wrench_reader,
+)
 from stillframe.contract.signals import Command, Estimate
 from stillframe.control.factory import make_controller
 from stillframe.control.supervisor import RUNAWAY_FACTOR
 from stillframe.design.coordinates import design_map
 from stillframe.errors import InputError
+from stillframe.loop import fast_inputs
 from stillframe.loop.matching import ForceMatching
 from stillframe.loop.node_support import (
     ERROR,
@@ -109,16 +117,16 @@ class ControllerNode:
 
     def subscribe_inputs(self) -> None:
         est, wrench = topics.STATE_ESTIMATE, topics.EXCITATION_WRENCH
-        self.node.create_subscription(est.type_name, est.name, self.on_estimate, est.qos)
-        self.node.create_subscription(wrench.type_name, wrench.name, self.on_force,
-                                      self.params.qos(wrench))
+        fast_inputs.subscribe(self.node, est.type_name, est.name, est.qos, state_reader(),
+                              self.on_estimate)
+        fast_inputs.subscribe(self.node, wrench.type_name, wrench.name, self.params.qos(wrench),
+                              wrench_reader("floor1", "wrench.force.x"), self.on_force)
 
-    def on_force(self, msg: Any) -> None:
-        self.matching.add_force(messages.stamp_ns(msg.header.stamp), float(msg.wrench.force.x))
+    def on_force(self, ns: int, force: float) -> None:
+        self.matching.add_force(ns, force)
 
-    def on_estimate(self, msg: Any) -> None:
-        self.matching.add_estimate(messages.stamp_ns(msg.header.stamp), physical_state(msg),
-                                   time.monotonic_ns())
+    def on_estimate(self, ns: int, physical: np.ndarray) -> None:
+        self.matching.add_estimate(ns, physical, time.monotonic_ns())
 
     def process_ready(self) -> None:
         """Answer pending estimates in order; in lock-step each waits for its load cell."""
@@ -131,7 +139,7 @@ class ControllerNode:
             self.rate.tick()
 
     def send(self, command: Command) -> None:
-        self.pub.publish(self.out.fill(command, self.grid.ns(command.t)))
+        self.pub.publish(self.out.cdr(command, self.grid.ns(command.t)))
         self.last_command = command
 
     def check_watchdog(self) -> None:

@@ -40,13 +40,13 @@ from typing import Any
 
 import numpy as np
 
-from stillframe.contract import messages, topics
+from stillframe.contract import topics
 from stillframe.contract.codecs import (
     COMMAND_TOPICS,
     SAMPLE_TOPICS,
     SampleGrid,
     SensorMessages,
-    command_value,
+    command_reader,
 )
 from stillframe.contract.signals import Sample, actuator_of
 from stillframe.errors import InputError
@@ -100,6 +100,7 @@ class SimNode:
         self.gates = [CommandGate(limit, command_writer, functools.partial(self.writers, spec.name),
                                   active=i == self.active)
                       for i, (limit, spec) in enumerate(zip(limits, COMMAND_TOPICS, strict=True))]
+        self.readers = [command_reader(i) for i in range(len(COMMAND_TOPICS))]
         for i, spec in enumerate(COMMAND_TOPICS):
             node.create_subscription(spec.type_name, spec.name,
                                      functools.partial(self.on_command, i), spec.qos, raw=True)
@@ -122,13 +123,11 @@ class SimNode:
 
     def on_command(self, actuator: int, cdr: bytes, info: api.MessageInfo) -> None:
         """Take a command its topic's gate lets through (module docstring); count the others."""
-        spec = COMMAND_TOPICS[actuator]
-        msg = messages.decode_sample(cdr, spec.type_name)
-        if msg is None:
-            api.MALFORMED[spec.name] += 1
+        read = self.readers[actuator].read(cdr)
+        if read is None:
+            api.MALFORMED[COMMAND_TOPICS[actuator].name] += 1
             return
-        ns = messages.stamp_ns(msg.header.stamp)
-        value = command_value(actuator, msg)
+        ns, value = read
         if not self.gates[actuator].check(value, ns, info.publisher_gid, self.now_ns,
                                           self.command_ns[actuator]):
             self.counts["rejected_commands"] += 1
@@ -166,8 +165,7 @@ class SimNode:
         """/clock, then the samples serialized first and written in one burst (the readers
         wake once for all of them instead of competing with the serialization for the CPU)."""
         self.clock.publish(ns)
-        msgs = [*self.messages.fill(sample, ns), self.messages.fill_truth(sample, ns)]
-        cdrs = [messages.serialize(msg) for msg in msgs]
+        cdrs = self.messages.cdr(sample, ns)
         for pub, cdr in zip(self.publishers.values(), cdrs, strict=True):
             pub.publish(cdr)
         self.published_at = time.monotonic()
