@@ -56,6 +56,7 @@ from stillframe.loop.node_support import (
     declare_loop_parameters,
     wait_for_peers,
 )
+from stillframe.loop.realtime import Realtime, RealtimeOptions, declare_realtime, start_realtime
 from stillframe.loop.watchdog import EstimateWatchdog
 from stillframe.loop.wiring import design_model
 from stillframe.middleware import api
@@ -85,6 +86,7 @@ class ControllerNode:
         self.last_command = Command(0.0)
         self.compute = Durations()
         self.rate = RateMeter()
+        self.rt = Realtime(RealtimeOptions())   # main() enters the practices the node asks for
         self.declare_run_time_parameters()
 
     def declare_run_time_parameters(self) -> None:
@@ -189,6 +191,7 @@ class ControllerNode:
             left = self.matching.wait_ns_left(time.monotonic_ns())
             self.node.spin_once(0.05 if left is None else min(left * 1e-9, 0.05))
             self.process_ready()
+            self.rt.idle()
             self.check_watchdog()
             if self.diagnostics.due():
                 self.publish_status()
@@ -200,7 +203,11 @@ def main() -> int:
     """Run the node (console script ``controller_node``); bad parameters exit 2 with one line."""
     node = api.create_node("controller_node", namespace=topics.DEFAULT_NAMESPACE)
     try:
-        ControllerNode(node, declare_loop_parameters(node)).run()
+        params = declare_loop_parameters(node)
+        rt = declare_realtime(node)
+        controller = ControllerNode(node, params)
+        controller.rt = start_realtime(node, rt)
+        controller.run()
     finally:
         node.destroy_node()
     return 0

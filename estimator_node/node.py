@@ -77,6 +77,7 @@ from stillframe.loop.node_support import (
     has_publisher,
     wait_for_peers,
 )
+from stillframe.loop.realtime import Realtime, RealtimeOptions, declare_realtime, start_realtime
 from stillframe.loop.wiring import command_topic, design_model, estimator_inputs
 from stillframe.middleware import api
 from stillframe.middleware.params import Parameter, SetParametersResult, finite_floats
@@ -107,6 +108,7 @@ class EstimatorNode:
                        "skipped_before_initialisation": 0}
         self.compute = Durations()
         self.rate = RateMeter()
+        self.rt = Realtime(RealtimeOptions())   # main() enters the practices the node asks for
         if isinstance(self.estimator, Filter):
             self.declare_run_time_parameters()
         else:
@@ -235,6 +237,7 @@ class EstimatorNode:
         while api.ok():
             self.node.spin_once(self.next_wait())
             self.process_ready()
+            self.rt.idle()
             if self.diagnostics.due():
                 self.publish_status()
         self.publish_status()
@@ -250,7 +253,10 @@ def main() -> int:
                                          read_only=True).value
         if not partial > 0:
             raise InputError(f"parameter 'partial_after_s': must be > 0, got {partial}")
-        EstimatorNode(node, params, float(partial)).run()
+        rt = declare_realtime(node)
+        estimator = EstimatorNode(node, params, float(partial))
+        estimator.rt = start_realtime(node, rt)
+        estimator.run()
     finally:
         node.destroy_node()
     return 0

@@ -62,7 +62,8 @@ from stillframe.loop.node_support import (
     has_publisher,
     wait_for_peers,
 )
-from stillframe.loop.pacing import Pacer
+from stillframe.loop.pacing import Pacer, wait_until
+from stillframe.loop.realtime import Realtime, RealtimeOptions, declare_realtime, start_realtime
 from stillframe.loop.watchdog import command_expired
 from stillframe.loop.wiring import command_topic, estimator_inputs
 from stillframe.middleware import api
@@ -113,6 +114,7 @@ class SimNode:
                            round(params.lockstep_timeout_s * 1e9))
         self.counts = {"rejected_commands": 0, "safe_state_samples": 0}
         self.k = 0
+        self.rt = Realtime(RealtimeOptions())   # main() enters the practices the node asks for
         self.pacer.start(time.monotonic_ns())   # again when the first sample is due
         node.add_on_set_parameters_callback(check_settable)   # nothing changes while it runs
 
@@ -190,8 +192,8 @@ class SimNode:
             self.command_timeout_periods * self.pacer.period_ns)
 
     def sleep_until(self, when_ns: int) -> None:
-        while api.ok() and (remaining := (when_ns - time.monotonic_ns()) * 1e-9) > 0:
-            self.node.spin_once(remaining)
+        wait_until(when_ns, time.monotonic_ns, self.node.spin_once, self.rt.spin_margin_ns,
+                   api.ok)
 
     def status(self) -> tuple[dict[str, Any], int]:
         lat = self.latency.summary()
@@ -244,6 +246,7 @@ class SimNode:
             control[self.active] = 0.0      # the safe state: no actuation
             self.counts["safe_state_samples"] += 1
         plant.advance(control)
+        self.rt.idle()
         if self.diagnostics.due():
             self.publish_status()
         return np.concatenate([[sample.t], sample.truth, control, [sample.force]])
@@ -314,7 +317,9 @@ def main() -> int:
         if not (isinstance(timeout, int) and timeout >= 1):
             raise InputError(f"parameter 'command_timeout_periods': must be an integer >= 1, "
                              f"got {timeout!r}")
+        rt = declare_realtime(node)
         sim = SimNode(node, params, float(discovery), list(await_recorder), str(writer), timeout)
+        sim.rt = start_realtime(node, rt)
         history = sim.run()
         if history is not None and result:
             write_result(history, Path(result))
