@@ -5,8 +5,8 @@ The node parameter ``rt`` names the practices to apply (``all``, or a comma list
 - ``mlock``: ``mlockall(MCL_CURRENT | MCL_FUTURE)``, no page faults in the loop;
 - ``gc``: the objects made while setting up frozen (``gc.freeze``) and the collector off inside the
   loop; the node collects the young generations itself between periods (:meth:`Realtime.idle`);
-- ``fifo``: ``SCHED_FIFO`` at ``rt_priority`` for every thread of the process (the DDS receive
-  threads too), and a timer slack of 1 ns;
+- ``fifo``: ``SCHED_FIFO`` at ``rt_priority`` for the main thread and the DDS receive threads
+  (not inherited by child processes), and a timer slack of 1 ns;
 - ``affinity``: every thread pinned to the CPUs of ``rt_cpus`` (e.g. ``[1]``);
 - ``spin``: sim_node sleeps until ``spin_margin_us`` before a due time and polls from there
   (:func:`stillframe.loop.pacing.wait_until`).
@@ -29,6 +29,8 @@ from stillframe.errors import InputError
 PRACTICES = ("mlock", "gc", "fifo", "affinity", "spin")
 MCL_CURRENT, MCL_FUTURE = 1, 2
 PR_SET_TIMERSLACK = 29
+#: name prefixes of the DDS receive threads (Cyclone's ``recv``/``recvUC``/``recvMC``, Fast DDS's)
+RECEIVE_THREADS = ("recv", "dds.udp", "dds.shm")
 #: ``rt_cpus`` default: the CPUs the process was started with
 NO_PINNING = -1
 #: young objects the collector may leave before :meth:`Realtime.idle` collects generation 0
@@ -91,6 +93,23 @@ def _threads() -> list[int]:
     return [int(t) for t in os.listdir("/proc/self/task")]
 
 
+def _loop_threads() -> list[int]:
+    """The main thread and the DDS receive threads: the ones a sample passes through. Cyclone's
+    housekeeping threads (``gc``, ``tev``, ``dq.*``) stay SCHED_OTHER: at SCHED_FIFO they kept
+    the CPU from the loop when the nodes shared one (docs/realtime.md)."""
+    main = os.getpid()
+    found = []
+    for tid in _threads():
+        try:
+            with open(f"/proc/self/task/{tid}/comm") as comm:
+                name = comm.read().strip()
+        except OSError:       # ended meanwhile
+            continue
+        if tid == main or name.startswith(RECEIVE_THREADS):
+            found.append(tid)
+    return found
+
+
 def _errno_text(errno: int) -> str:
     return f"{os.strerror(errno)} (errno {errno})"
 
@@ -150,7 +169,7 @@ class Realtime:
 
     def _fifo(self) -> None:
         param = os.sched_param(self.options.priority)
-        threads = _threads()
+        threads = _loop_threads()
         try:
             for tid in threads:   # children started later do not inherit it
                 os.sched_setscheduler(tid, os.SCHED_FIFO | os.SCHED_RESET_ON_FORK, param)
@@ -165,7 +184,7 @@ class Realtime:
         """Back to SCHED_OTHER and the collector on (for a process that goes on with other
         work; the nodes stay real-time to their end)."""
         if any(text.startswith("SCHED_FIFO") for text in self.applied):
-            for tid in _threads():
+            for tid in _loop_threads():
                 with contextlib.suppress(OSError):   # a thread that ended meanwhile
                     os.sched_setscheduler(tid, os.SCHED_OTHER, os.sched_param(0))
         if self.gc_off:

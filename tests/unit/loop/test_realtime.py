@@ -49,23 +49,32 @@ def run_child(code: str) -> dict:
 
 
 ENTER = """
-import json, os, threading, time
+import ctypes, json, os, threading, time
 from stillframe.loop.realtime import Realtime, RealtimeOptions
-worker = threading.Thread(target=time.sleep, args=(5,), daemon=True)
-worker.start()
+
+def named(name):   # a thread with an OS name, as Cyclone names its threads
+    ctypes.CDLL(None).prctl(15, name.encode())
+    time.sleep(5)
+
+for name in ("recvUC", "tev"):
+    threading.Thread(target=named, args=(name,), daemon=True).start()
+time.sleep(0.2)
 {before}
 rt = Realtime(RealtimeOptions(frozenset({practices}), 42, ({cpu},)))
 rt.enter()
-tids = [int(t) for t in os.listdir("/proc/self/task")]
+threads = {{}}
+for t in os.listdir("/proc/self/task"):
+    name = open(f"/proc/self/task/{{t}}/comm").read().strip()
+    name = "main" if int(t) == os.getpid() else name
+    policy = os.sched_getscheduler(int(t)) & ~os.SCHED_RESET_ON_FORK
+    threads[name] = [policy, os.sched_getparam(int(t)).sched_priority,
+                     sorted(os.sched_getaffinity(int(t)))]
 child = os.fork()
 if child == 0:
     os._exit(0 if os.sched_getscheduler(0) == os.SCHED_OTHER else 1)
 _, status = os.waitpid(child, 0)
-print(json.dumps({{"applied": rt.applied, "refused": rt.refused,
-    "policies": [os.sched_getscheduler(t) & ~os.SCHED_RESET_ON_FORK for t in tids],
-    "priorities": [os.sched_getparam(t).sched_priority for t in tids],
-    "cpus": [sorted(os.sched_getaffinity(t)) for t in tids],
-    "child_other": status == 0, "fifo": os.SCHED_FIFO}}))
+print(json.dumps({{"applied": rt.applied, "refused": rt.refused, "threads": threads,
+    "child_other": status == 0, "fifo": os.SCHED_FIFO, "other": os.SCHED_OTHER}}))
 """
 
 
@@ -75,9 +84,11 @@ def test_fifo_affinity_and_mlock_reach_every_thread_and_not_children() -> None:
     out = run_child(ENTER.format(before="", practices='{"fifo", "affinity", "mlock"}', cpu=cpu))
     assert out["refused"] == []
     assert "memory locked" in out["applied"]
-    assert len(out["policies"]) >= 2                       # the main thread and the worker
-    assert set(out["policies"]) == {out["fifo"]} and set(out["priorities"]) == {42}
-    assert all(c == [cpu] for c in out["cpus"])
+    fifo, other = out["fifo"], out["other"]
+    threads = out["threads"]
+    assert threads["main"][:2] == [fifo, 42] and threads["recvUC"][:2] == [fifo, 42]
+    assert threads["tev"][:2] == [other, 0]               # housekeeping stays SCHED_OTHER
+    assert all(t[2] == [cpu] for t in threads.values())     # affinity: every thread
     assert out["child_other"]                               # SCHED_RESET_ON_FORK
     with open("/proc/self/status") as status:               # this process is untouched
         assert "VmLck:\t       0 kB" in status.read()
@@ -92,7 +103,7 @@ def test_an_unprivileged_process_is_told_what_was_refused_and_why() -> None:
     assert any(r.startswith("SCHED_FIFO refused: Operation not permitted") for r in out["refused"])
     assert any(r.startswith("mlockall refused:") for r in out["refused"])
     assert out["applied"] == ["gc frozen and off in the loop"]
-    assert out["fifo"] not in out["policies"]
+    assert all(t[0] == out["other"] for t in out["threads"].values())
 
 
 def test_collector_is_off_in_the_loop_and_idle_collects_the_young_generation() -> None:
