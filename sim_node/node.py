@@ -110,6 +110,7 @@ class SimNode:
         self.now_ns = 0
         self.published_at = 0.0
         self.latency = Durations()
+        self.commands_in_time = 0   # commands for the current sample taken before its deadline
         self.pacer = Pacer(self.grid.ns(self.plant.period), params.lockstep,
                            round(params.lockstep_timeout_s * 1e9))
         self.counts = {"rejected_commands": 0, "safe_state_samples": 0}
@@ -136,6 +137,7 @@ class SimNode:
             return
         if actuator == self.active and ns == self.now_ns and self.command_ns[actuator] != ns:
             self.latency.add(time.monotonic() - self.published_at)
+            self.commands_in_time += 1
         self.command[actuator], self.command_ns[actuator] = value, ns
 
     def peers_ready(self) -> bool:
@@ -281,6 +283,7 @@ class SimNode:
             "mode": p.mode, "steps": n, "wall_s": time.perf_counter() - wall,
             "malformed_samples": sum(api.MALFORMED.values()),
             **self.pacer.counts, **self.counts, "latency_ms": self.latency.summary(),
+            "commands_in_time": self.commands_in_time,
             "command_gates": {spec.name: gate.report()
                               for gate, spec in zip(self.gates, COMMAND_TOPICS, strict=True)},
             "max_lateness_ms": 1e-6 * self.pacer.max_lateness_ns,

@@ -5,8 +5,8 @@ The node parameter ``rt`` names the practices to apply (``all``, or a comma list
 - ``mlock``: ``mlockall(MCL_CURRENT | MCL_FUTURE)``, no page faults in the loop;
 - ``gc``: the objects made while setting up frozen (``gc.freeze``) and the collector off inside the
   loop; the node collects the young generations itself between periods (:meth:`Realtime.idle`);
-- ``fifo``: ``SCHED_FIFO`` at ``rt_priority`` for the main thread and the DDS receive threads
-  (not inherited by child processes), and a timer slack of 1 ns;
+- ``fifo``: ``SCHED_FIFO`` at ``rt_priority`` for the main thread and the DDS receive and
+  delivery threads (not inherited by child processes), and a timer slack of 1 ns;
 - ``affinity``: every thread pinned to the CPUs of ``rt_cpus`` (e.g. ``[1]``);
 - ``spin``: sim_node sleeps until ``spin_margin_us`` before a due time and polls from there
   (:func:`stillframe.loop.pacing.wait_until`).
@@ -29,8 +29,10 @@ from stillframe.errors import InputError
 PRACTICES = ("mlock", "gc", "fifo", "affinity", "spin")
 MCL_CURRENT, MCL_FUTURE = 1, 2
 PR_SET_TIMERSLACK = 29
-#: name prefixes of the DDS receive threads (Cyclone's ``recv``/``recvUC``/``recvMC``, Fast DDS's)
-RECEIVE_THREADS = ("recv", "dds.udp", "dds.shm")
+#: name prefixes of the threads a sample passes through: Cyclone's receive threads (``recv``,
+#: ``recvUC``, ``recvMC``) and delivery queues (``dq.user``, ``dq.builtins``), Fast DDS's receive
+#: threads
+RECEIVE_THREADS = ("recv", "dq.", "dds.udp", "dds.shm")
 #: ``rt_cpus`` default: the CPUs the process was started with
 NO_PINNING = -1
 #: young objects the collector may leave before :meth:`Realtime.idle` collects generation 0
@@ -94,9 +96,9 @@ def _threads() -> list[int]:
 
 
 def _loop_threads() -> list[int]:
-    """The main thread and the DDS receive threads: the ones a sample passes through. Cyclone's
-    housekeeping threads (``gc``, ``tev``, ``dq.*``) stay SCHED_OTHER: at SCHED_FIFO they kept
-    the CPU from the loop when the nodes shared one (docs/realtime.md)."""
+    """The main thread and the DDS threads a sample passes through (:data:`RECEIVE_THREADS`).
+    Cyclone's housekeeping threads (``gc``, ``tev``) stay SCHED_OTHER: with every thread at
+    SCHED_FIFO and the three nodes pinned to one CPU, the loop stopped (docs/realtime.md)."""
     main = os.getpid()
     found = []
     for tid in _threads():
