@@ -207,8 +207,8 @@ class CommandMessage:
         self.actuator = actuator
         self.msg = messages.new("geometry_msgs/msg/WrenchStamped")
         self.msg.header.frame_id = "pendulum" if actuator == 0 else "floor3"
-        field = "wrench.torque.z" if actuator == 0 else "wrench.force.x"
-        self._cdr = FixedWriter(self.msg, (*STAMP, field))
+        self.field = "wrench.torque.z" if actuator == 0 else "wrench.force.x"
+        self._cdr = FixedWriter(self.msg, (*STAMP, self.field))
 
     def fill(self, command: Command, ns: int) -> Any:
         set_stamp(self.msg, ns)
@@ -305,5 +305,8 @@ def state_reader() -> TopicReader:
 
 def command_reader(actuator: int) -> TopicReader:
     """(stamp ns, command value) of a command topic (:func:`command_value`)."""
-    return wrench_reader("pendulum" if actuator == 0 else "floor3",
-                         "wrench.torque.z" if actuator == 0 else "wrench.force.x")
+    def from_msg(msg: Any) -> tuple[Any, ...]:
+        return messages.stamp_ns(msg.header.stamp), command_value(actuator, msg)
+
+    out = CommandMessage(actuator)
+    return TopicReader(out.msg, (*STAMP, out.field), _stamped, from_msg)

@@ -35,7 +35,8 @@ def run(args: argparse.Namespace) -> int:
     from stillframe.config.scene import load_scene
     from stillframe.middleware import api
 
-    scene = load_scene(SCENE, ["sensors.rate_hz=1000", "integrator.dt=0.001"])
+    scene = load_scene(SCENE, ["sensors.rate_hz=1000", "integrator.dt=0.001",
+                               "controller.start=1", "evaluation.window=1"])
     backends = args.backends or [b for b in api.BACKENDS if b == "dds" or api.has_rclpy()]
     for backend in backends:
         api.check_backend(backend, f"bench hops --backend {backend}")
