@@ -1,4 +1,5 @@
-"""What each hop of one real-time sample costs, measured piece by piece in one process.
+"""What each hop of one real-time sample costs, measured piece by piece in one process
+(``stillframe bench hops``).
 
 The sample path through the three nodes (docs/realtime.md): sim_node takes the plant's sample and
 serializes and writes its seven messages; the estimator reads five of them, steps its filter and
