@@ -157,7 +157,8 @@ class FixedReader:
         self._start = start
 
     def unpack(self, data: bytes | bytearray | memoryview) -> tuple[Any, ...] | None:
-        if not self.size <= len(data) <= self.size + 3 or data[:4] != b"\0\x01\0\0":
+        # little-endian CDR (the options bytes after it may carry the padding, as Fast DDS sets)
+        if not self.size <= len(data) <= self.size + 3 or data[:2] != b"\0\x01":
             return None
         for start, end, fixed in self._fixed:
             if data[start:end] != fixed:

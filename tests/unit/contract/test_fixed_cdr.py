@@ -177,3 +177,7 @@ def test_other_layouts_are_decoded_by_rosbags_and_garbage_is_none() -> None:
     good = bytes(SensorMessages(SENSORS).cdr(samples(1)[0], 0)[3])
     assert reader.read(good[:-12]) is None
     assert reader.read(b"\x00\x01\x00\x00" + b"\xff" * 40) is None
+    big_endian = b"\x00\x00" + good[2:]
+    assert reader._fixed.unpack(big_endian) is None
+    with_options = good[:2] + b"\x00\x03" + good[4:]     # padding count in the options
+    assert reader.read(with_options) == reader.read(good)
