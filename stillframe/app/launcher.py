@@ -284,6 +284,9 @@ class LaunchOptions:
     monitor_args: list[str] | None = None
     #: estimator and controller in one process (``container_node``, intra-process handover)
     compose: bool = False
+    #: the loop nodes' real-time practices and CPUs (stillframe.loop.realtime; "": none)
+    rt: str = ""
+    rt_cpus: list[int] = field(default_factory=list)
 
 
 class Launcher:
@@ -334,8 +337,11 @@ class Launcher:
         nodes = nodes_for(load_scene(scene, o.overrides))
         if o.compose and {"estimator_node", "controller_node"} <= set(nodes):
             nodes = ["sim_node", CONTAINER]
-        children += [(name, node_command(name, scene, o.overrides, o.mode,
-                                         sim_params if name == "sim_node" else None))
+        # the container takes no real-time parameters (it composes two nodes' loops)
+        rt = {"rt": o.rt, **({"rt_cpus": o.rt_cpus} if o.rt_cpus else {})} if o.rt else {}
+        children += [(name, node_command(name, scene, o.overrides, o.mode, {
+                         **(rt if name != CONTAINER else {}),
+                         **(sim_params if name == "sim_node" else {})}))
                      for name in reversed(nodes)]
         return children
 
@@ -412,18 +418,21 @@ def run_scene(scene: Path, overrides: Sequence[str], out: Path, mode: str = "loc
               record: Path | None = None, lockstep_timeout_s: float | None = None,
               prepare: Callable[[Any], None] | None = None,
               record_topics: Sequence[str] = (), backends: Sequence[str] = (),
-              monitor_args: Sequence[str] | None = None, compose: bool = False) -> LaunchResult:
+              monitor_args: Sequence[str] | None = None, compose: bool = False,
+              rt: str = "", rt_cpus: Sequence[int] = ()) -> LaunchResult:
     """Launch ``scene`` through the three nodes to its end; sim_node's results go to ``out``
     (``result.json``, ``result.npz``); ``record`` records ``record_topics`` (default all) into
     a bag; ``backends`` are ``--backend`` values (:func:`parse_backends`); ``monitor_args``
-    (e.g. ports) start ``stillframe monitor`` beside the nodes. ``prepare(node)`` may
-    subscribe the launcher's hidden node to more topics before the children start; ``compose``
-    runs the estimator and the controller in one process (``container_node``)."""
+    (e.g. ports) start ``stillframe monitor`` beside the nodes; ``compose`` runs the estimator
+    and the controller in one process (``container_node``); ``rt`` and ``rt_cpus`` are the
+    loop nodes' real-time practices and CPUs (:mod:`stillframe.loop.realtime`).
+    ``prepare(node)`` may subscribe the launcher's hidden node to more topics before the
+    children start."""
     out.mkdir(parents=True, exist_ok=True)
     launcher = Launcher(LaunchOptions(scene, list(overrides), mode, out / "result.json", record,
                                       lockstep_timeout_s, list(record_topics), list(backends),
                                       None if monitor_args is None else list(monitor_args),
-                                      compose))
+                                      compose, rt, list(rt_cpus)))
     if prepare is not None:
         prepare(launcher.node)
     return launcher.run()
