@@ -108,4 +108,6 @@ def test_stray_command_writer_is_ignored_and_reported(ros_domain: int, tmp_path:
     ignored = gate["ignored_writers"]
     assert ignored == "/frame/stray_controller" or (len(ignored) == 32
                                                     and ignored.startswith("010f")), ignored
-    assert 0 < gate["rejected_second_writer"] <= sent and sent > 100
+    # the stray answers the /clock samples it gets (best effort, as many as its rclpy executor
+    # keeps up with): how many depends on the machine, that it wrote and was refused does not
+    assert 0 < gate["rejected_second_writer"] <= sent
