@@ -280,6 +280,9 @@ class LaunchOptions:
     backends: list[str] = field(default_factory=list)
     #: ``stillframe monitor`` arguments (ports) to run the monitor beside the nodes; None: none
     monitor_args: list[str] | None = None
+    #: a command prefix per node that runs it on another host (``ip netns exec``,
+    #: :mod:`stillframe.app.netns_lab`); a node not named runs here
+    hosts: dict[str, list[str]] = field(default_factory=dict)
 
 
 class Launcher:
@@ -327,8 +330,9 @@ class Launcher:
             children.append(("monitor", [sys.executable, "-m", "stillframe", "monitor",
                                          "--dashboard", "--use-sim-time", "--scene", str(scene),
                                          *sets, *o.monitor_args]))
-        children += [(name, node_command(name, scene, o.overrides, o.mode,
-                                         sim_params if name == "sim_node" else None))
+        children += [(name, [*o.hosts.get(name, []),
+                             *node_command(name, scene, o.overrides, o.mode,
+                                           sim_params if name == "sim_node" else None)])
                      for name in reversed(nodes_for(load_scene(scene, o.overrides)))]
         return children
 
@@ -401,16 +405,19 @@ def run_scene(scene: Path, overrides: Sequence[str], out: Path, mode: str = "loc
               record: Path | None = None, lockstep_timeout_s: float | None = None,
               prepare: Callable[[Any], None] | None = None,
               record_topics: Sequence[str] = (), backends: Sequence[str] = (),
-              monitor_args: Sequence[str] | None = None) -> LaunchResult:
+              monitor_args: Sequence[str] | None = None,
+              hosts: dict[str, list[str]] | None = None) -> LaunchResult:
     """Launch ``scene`` through the three nodes to its end; sim_node's results go to ``out``
     (``result.json``, ``result.npz``); ``record`` records ``record_topics`` (default all) into
     a bag; ``backends`` are ``--backend`` values (:func:`parse_backends`); ``monitor_args``
     (e.g. ports) start ``stillframe monitor`` beside the nodes. ``prepare(node)`` may
-    subscribe the launcher's hidden node to more topics before the children start."""
+    subscribe the launcher's hidden node to more topics before the children start; ``hosts``
+    runs nodes on other hosts (:attr:`LaunchOptions.hosts`)."""
     out.mkdir(parents=True, exist_ok=True)
     launcher = Launcher(LaunchOptions(scene, list(overrides), mode, out / "result.json", record,
                                       lockstep_timeout_s, list(record_topics), list(backends),
-                                      None if monitor_args is None else list(monitor_args)))
+                                      None if monitor_args is None else list(monitor_args),
+                                      dict(hosts or {})))
     if prepare is not None:
         prepare(launcher.node)
     return launcher.run()

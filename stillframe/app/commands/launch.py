@@ -23,6 +23,7 @@ from stillframe.app.commands.common import (
     scene_from_args,
 )
 from stillframe.app.launcher import MODES
+from stillframe.app.net_faults import FAULTS
 from stillframe.config.scene import Scene
 from stillframe.errors import InputError
 from stillframe.text_table import format_table
@@ -63,7 +64,25 @@ def register(sub: argparse._SubParsersAction) -> None:
                         help="with --monitor: dashboard port (default 8080; 0: any)")
     parser.add_argument("--out", type=Path, default=None, metavar="DIR",
                         help="keep sim_node's result.json and result.npz (histories) here")
+    add_netns_arguments(parser)
+    add_fault_argument(parser)
     parser.set_defaults(func=run)
+
+
+def add_netns_arguments(parser: argparse.ArgumentParser, switch: bool = True) -> None:
+    """``--netns`` (with ``switch``) and ``--netns-prefix`` (shared with ``bench faults``)."""
+    if switch:
+        parser.add_argument("--netns", action="store_true",
+                            help="run each node in its own network namespace, joined by a "
+                                 "bridge (three hosts on one; needs root; docs/reliability.md)")
+    parser.add_argument("--netns-prefix", default=None, metavar="P",
+                        help="name prefix of the network namespaces (default sf<pid>)")
+
+
+def add_fault_argument(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--fault", default=None, metavar="NAME",
+                        help="with --netns: a network fault on every host's incoming link: "
+                             + ", ".join(f"'{f.name}'" for f in FAULTS).replace("%", "%%"))
 
 
 def evaluation_table(evaluation: dict[str, Any], scene: Scene) -> str:
@@ -113,18 +132,20 @@ def report_death(command: str, exc: Exception) -> int:
 
 def run(args: argparse.Namespace) -> int:
     from stillframe.app.launcher import NodeDiedError, run_scene
+    from stillframe.app.net_faults import hosts_if
 
     scene = scene_from_args(args)
     if args.record_topics and args.record is None:
         raise InputError("--record-topic needs --record DIR")
     with tempfile.TemporaryDirectory(prefix="stillframe-launch-") as tmp:
         try:
-            result = run_scene(Path(args.scene), args.overrides, args.out or Path(tmp),
-                               args.mode, args.record, args.lockstep_timeout,
-                               record_topics=args.record_topics, backends=args.backends,
-                               monitor_args=["--port", str(args.monitor_port),
-                                             "--dashboard-port", str(args.dashboard_port)]
-                               if args.monitor else None)
+            with hosts_if(args.netns, args.netns_prefix, args.fault) as hosts:
+                result = run_scene(Path(args.scene), args.overrides, args.out or Path(tmp),
+                                   args.mode, args.record, args.lockstep_timeout,
+                                   record_topics=args.record_topics, backends=args.backends,
+                                   monitor_args=["--port", str(args.monitor_port),
+                                                 "--dashboard-port", str(args.dashboard_port)]
+                                   if args.monitor else None, hosts=hosts)
         except NodeDiedError as exc:
             return report_death("launch", exc)
         except KeyboardInterrupt:
