@@ -317,8 +317,9 @@ class Launcher:
         if o.record_dir is not None and o.mode == "lockstep":
             sim_params["await_recorder"] = [
                 names.resolve_topic(t) for t in o.record_topics] or ["*"]
-        if o.lockstep_timeout_s is not None:
-            sim_params["lockstep_timeout_s"] = float(o.lockstep_timeout_s)
+        # every loop node: the estimator's and controller's lock-step waits are parts of it
+        shared = ({} if o.lockstep_timeout_s is None
+                  else {"lockstep_timeout_s": float(o.lockstep_timeout_s)})
         scene = o.scene.resolve()
         children = []
         if o.record_dir is not None:
@@ -332,7 +333,8 @@ class Launcher:
                                          *sets, *o.monitor_args]))
         children += [(name, [*o.hosts.get(name, []),
                              *node_command(name, scene, o.overrides, o.mode,
-                                           sim_params if name == "sim_node" else None)])
+                                           {**shared, **sim_params} if name == "sim_node"
+                                           else shared)])
                      for name in reversed(nodes_for(load_scene(scene, o.overrides)))]
         return children
 
