@@ -35,7 +35,9 @@ def add_launch_arguments(parser: argparse.ArgumentParser) -> None:
                         help="lockstep: deterministic, as fast as the nodes go (default); "
                              "realtime: paced by the wall clock")
     parser.add_argument("--lockstep-timeout", type=float, default=None, metavar="S",
-                        help="sim_node's wait for a command before it holds the previous one")
+                        help="sim_node's wait for a command before it holds the previous one "
+                             "(given to every loop node: the estimator waits half, the "
+                             "controller a quarter)")
     parser.add_argument("--backend", dest="backends", action="append", default=[],
                         metavar="[NODE=]BACKEND",
                         help="middleware of every node (dds or rclpy; default: STILLFRAME_RMW, "
