@@ -26,15 +26,23 @@ from __future__ import annotations
 
 import sys
 import time
-from typing import Any
 
-from stillframe.contract import messages, topics
-from stillframe.contract.codecs import COMMAND_TOPICS, CommandMessage, SampleGrid, physical_state
+import numpy as np
+
+from stillframe.contract import topics
+from stillframe.contract.codecs import (
+    COMMAND_TOPICS,
+    CommandMessage,
+    SampleGrid,
+    state_reader,
+    wrench_reader,
+)
 from stillframe.contract.signals import Command, Estimate
 from stillframe.control.factory import make_controller
 from stillframe.control.supervisor import RUNAWAY_FACTOR
 from stillframe.design.coordinates import design_map
 from stillframe.errors import InputError
+from stillframe.loop import fast_inputs
 from stillframe.loop.matching import ForceMatching
 from stillframe.loop.node_support import (
     ERROR,
@@ -48,6 +56,7 @@ from stillframe.loop.node_support import (
     declare_loop_parameters,
     wait_for_peers,
 )
+from stillframe.loop.realtime import Realtime, RealtimeOptions, declare_realtime, start_realtime
 from stillframe.loop.watchdog import EstimateWatchdog
 from stillframe.loop.wiring import design_model
 from stillframe.middleware import api
@@ -77,6 +86,10 @@ class ControllerNode:
         self.last_command = Command(0.0)
         self.compute = Durations()
         self.rate = RateMeter()
+        #: composed with the estimator in one process: estimates come by :meth:`handed_over`,
+        #: not from the ``state_estimate`` topic
+        self.intra_process = False
+        self.rt = Realtime(RealtimeOptions())   # main() enters the practices the node asks for
         self.declare_run_time_parameters()
 
     def declare_run_time_parameters(self) -> None:
@@ -109,16 +122,21 @@ class ControllerNode:
 
     def subscribe_inputs(self) -> None:
         est, wrench = topics.STATE_ESTIMATE, topics.EXCITATION_WRENCH
-        self.node.create_subscription(est.type_name, est.name, self.on_estimate, est.qos)
-        self.node.create_subscription(wrench.type_name, wrench.name, self.on_force,
-                                      self.params.qos(wrench))
+        if not self.intra_process:
+            fast_inputs.subscribe(self.node, est.type_name, est.name, est.qos, state_reader(),
+                                  self.on_estimate)
+        fast_inputs.subscribe(self.node, wrench.type_name, wrench.name, self.params.qos(wrench),
+                              wrench_reader("floor1", "wrench.force.x"), self.on_force)
 
-    def on_force(self, msg: Any) -> None:
-        self.matching.add_force(messages.stamp_ns(msg.header.stamp), float(msg.wrench.force.x))
+    def on_force(self, ns: int, force: float) -> None:
+        self.matching.add_force(ns, force)
 
-    def on_estimate(self, msg: Any) -> None:
-        self.matching.add_estimate(messages.stamp_ns(msg.header.stamp), physical_state(msg),
-                                   time.monotonic_ns())
+    def on_estimate(self, ns: int, physical: np.ndarray) -> None:
+        self.matching.add_estimate(ns, physical, time.monotonic_ns())
+
+    def handed_over(self, ns: int, physical: np.ndarray) -> None:
+        """An estimate from the estimator in the same process (the values it published)."""
+        self.matching.add_estimate(ns, physical, time.monotonic_ns())
 
     def process_ready(self) -> None:
         """Answer pending estimates in order; in lock-step each waits for its load cell."""
@@ -131,7 +149,7 @@ class ControllerNode:
             self.rate.tick()
 
     def send(self, command: Command) -> None:
-        self.pub.publish(self.out.fill(command, self.grid.ns(command.t)))
+        self.pub.publish(self.out.cdr(command, self.grid.ns(command.t)))
         self.last_command = command
 
     def check_watchdog(self) -> None:
@@ -181,6 +199,7 @@ class ControllerNode:
             left = self.matching.wait_ns_left(time.monotonic_ns())
             self.node.spin_once(0.05 if left is None else min(left * 1e-9, 0.05))
             self.process_ready()
+            self.rt.idle()
             self.check_watchdog()
             if self.diagnostics.due():
                 self.publish_status()
@@ -192,7 +211,11 @@ def main() -> int:
     """Run the node (console script ``controller_node``); bad parameters exit 2 with one line."""
     node = api.create_node("controller_node", namespace=topics.DEFAULT_NAMESPACE)
     try:
-        ControllerNode(node, declare_loop_parameters(node)).run()
+        params = declare_loop_parameters(node)
+        rt = declare_realtime(node)
+        controller = ControllerNode(node, params)
+        controller.rt = start_realtime(node, rt)
+        controller.run()
     finally:
         node.destroy_node()
     return 0

@@ -43,27 +43,27 @@ import functools
 import sys
 import time
 from collections.abc import Callable
-from typing import Any
 
 import numpy as np
 
-from stillframe.contract import messages, topics
+from stillframe.contract import topics
 from stillframe.contract.codecs import (
     COMMAND_TOPICS,
-    ENCODER_CHANNEL,
     SENSOR_TOPICS,
     EstimateMessages,
     SampleGrid,
-    applied_torque,
-    command_value,
-    physical_state,
-    sensor_reading,
+    TopicReader,
+    command_reader,
+    sensor_reader,
+    state_reader,
+    wrench_reader,
 )
 from stillframe.contract.signals import actuator_of
 from stillframe.errors import InputError
 from stillframe.estimation.base import Filter
 from stillframe.estimation.factory import make_estimator
 from stillframe.estimation.kalman import LinearFilter
+from stillframe.loop import fast_inputs
 from stillframe.loop.assembly import Ready, SampleAssembly
 from stillframe.loop.node_support import (
     OK,
@@ -77,6 +77,7 @@ from stillframe.loop.node_support import (
     has_publisher,
     wait_for_peers,
 )
+from stillframe.loop.realtime import Realtime, RealtimeOptions, declare_realtime, start_realtime
 from stillframe.loop.wiring import command_topic, design_model, estimator_inputs
 from stillframe.middleware import api
 from stillframe.middleware.params import Parameter, SetParametersResult, finite_floats
@@ -101,12 +102,16 @@ class EstimatorNode:
         self.out = EstimateMessages()
         self.diagnostics = Diagnostics(node, params.diagnostics_period_s)
         for i, spec in enumerate(COMMAND_TOPICS):
-            node.create_subscription(spec.type_name, spec.name,
-                                     functools.partial(self.on_command, i), spec.qos)
+            fast_inputs.subscribe(node, spec.type_name, spec.name, spec.qos, command_reader(i),
+                                  functools.partial(self.on_command, i))
         self.counts = {"estimates": 0, "initialised_from_measurements": 0,
                        "skipped_before_initialisation": 0}
         self.compute = Durations()
         self.rate = RateMeter()
+        #: composed with the controller in one process: ``handover(stamp_ns, physical)`` gets
+        #: every estimate as published (intra-process, no serialisation)
+        self.handover: Callable[[int, np.ndarray], None] | None = None
+        self.rt = Realtime(RealtimeOptions())   # main() enters the practices the node asks for
         if isinstance(self.estimator, Filter):
             self.declare_run_time_parameters()
         else:
@@ -153,32 +158,30 @@ class EstimatorNode:
     # -- inputs --------------------------------------------------------------------------
     def subscribe_inputs(self) -> None:
         """The scene's estimator inputs (:func:`stillframe.loop.wiring.estimator_inputs`)."""
-        handlers: dict[str, Callable[[Any], None]] = {
-            topics.FLOOR3_LOAD_CELL.name: self.on_applied_force,
-            topics.STATE_TRUTH.name: self.on_truth,
-            **{spec.name: functools.partial(self.on_sensor, channel)
+        sensors = self.params.scene.sensors
+        handlers: dict[str, tuple[TopicReader, Callable[..., None]]] = {
+            topics.FLOOR3_LOAD_CELL.name: (wrench_reader("floor3", "wrench.force.x"),
+                                           self.on_applied_force),
+            topics.STATE_TRUTH.name: (state_reader(), self.on_truth),
+            **{spec.name: (sensor_reader(channel, sensors),
+                           functools.partial(self.on_sensor, channel))
                for channel, spec in enumerate(SENSOR_TOPICS)},
         }
         for spec in self.inputs:
-            self.node.create_subscription(spec.type_name, spec.name, handlers[spec.name],
-                                          self.params.qos(spec))
+            fast_inputs.subscribe(self.node, spec.type_name, spec.name, self.params.qos(spec),
+                                  *handlers[spec.name])
 
-    def on_sensor(self, channel: int, msg: Any) -> None:
-        torque = applied_torque(msg) if channel == ENCODER_CHANNEL else float("nan")
-        self.assembly.reading(channel, messages.stamp_ns(msg.header.stamp),
-                              sensor_reading(channel, msg), time.monotonic_ns(), torque)
+    def on_sensor(self, channel: int, ns: int, value: float, torque: float) -> None:
+        self.assembly.reading(channel, ns, value, time.monotonic_ns(), torque)
 
-    def on_applied_force(self, msg: Any) -> None:
-        self.assembly.applied_force(messages.stamp_ns(msg.header.stamp),
-                                    float(msg.wrench.force.x), time.monotonic_ns())
+    def on_applied_force(self, ns: int, force: float) -> None:
+        self.assembly.applied_force(ns, force, time.monotonic_ns())
 
-    def on_truth(self, msg: Any) -> None:
-        self.assembly.truth(messages.stamp_ns(msg.header.stamp), physical_state(msg),
-                            time.monotonic_ns())
+    def on_truth(self, ns: int, physical: np.ndarray) -> None:
+        self.assembly.truth(ns, physical, time.monotonic_ns())
 
-    def on_command(self, actuator: int, msg: Any) -> None:
-        self.assembly.command_received(actuator, messages.stamp_ns(msg.header.stamp),
-                                       command_value(actuator, msg))
+    def on_command(self, actuator: int, ns: int, value: float) -> None:
+        self.assembly.command_received(actuator, ns, value)
 
     # -- stepping ------------------------------------------------------------------------
     def process_ready(self) -> None:
@@ -202,9 +205,11 @@ class EstimatorNode:
         self.assembly.used(ready.ns)
         if estimate is None:
             return
-        state, cov = self.out.fill(estimate, ready.ns)
+        state, cov = self.out.cdr(estimate, ready.ns)
         self.state_pub.publish(state)
         self.cov_pub.publish(cov)
+        if self.handover is not None:
+            self.handover(ready.ns, estimate.physical)
         self.compute.add(time.perf_counter() - started)
         self.counts["estimates"] += 1
         self.rate.tick()
@@ -224,8 +229,10 @@ class EstimatorNode:
         self.diagnostics.publish(max(a.last_ns, 0), values, level)
 
     def peers_ready(self) -> bool:
-        """The controller reads the estimates and publishes the scene's command topic."""
-        return self.state_pub.get_subscription_count() > 0 and has_publisher(
+        """The controller reads the estimates (handed over when composed) and publishes the
+        scene's command topic."""
+        reads = self.handover is not None or self.state_pub.get_subscription_count() > 0
+        return reads and has_publisher(
             self.node, command_topic(self.params.scene).name)
 
     def run(self) -> None:
@@ -237,9 +244,20 @@ class EstimatorNode:
         while api.ok():
             self.node.spin_once(self.next_wait())
             self.process_ready()
+            self.rt.idle()
             if self.diagnostics.due():
                 self.publish_status()
         self.publish_status()
+
+
+def build(node: api.Node) -> EstimatorNode:
+    """The estimator on ``node`` from its parameters (InputError naming a wrong one)."""
+    params = declare_loop_parameters(node)
+    partial = node.declare_parameter("partial_after_s", 0.5 * params.period,
+                                     read_only=True).value
+    if not partial > 0:
+        raise InputError(f"parameter 'partial_after_s': must be > 0, got {partial}")
+    return EstimatorNode(node, params, float(partial))
 
 
 @api.node_main
@@ -247,12 +265,9 @@ def main() -> int:
     """Run the node (console script ``estimator_node``); bad parameters exit 2 with one line."""
     node = api.create_node("estimator_node", namespace=topics.DEFAULT_NAMESPACE)
     try:
-        params = declare_loop_parameters(node)
-        partial = node.declare_parameter("partial_after_s", 0.5 * params.period,
-                                         read_only=True).value
-        if not partial > 0:
-            raise InputError(f"parameter 'partial_after_s': must be > 0, got {partial}")
-        EstimatorNode(node, params, float(partial)).run()
+        estimator = build(node)
+        estimator.rt = start_realtime(node, declare_realtime(node))
+        estimator.run()
     finally:
         node.destroy_node()
     return 0

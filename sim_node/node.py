@@ -40,13 +40,13 @@ from typing import Any
 
 import numpy as np
 
-from stillframe.contract import messages, topics
+from stillframe.contract import topics
 from stillframe.contract.codecs import (
     COMMAND_TOPICS,
     SAMPLE_TOPICS,
     SampleGrid,
     SensorMessages,
-    command_value,
+    command_reader,
 )
 from stillframe.contract.signals import Sample, actuator_of
 from stillframe.errors import InputError
@@ -62,7 +62,8 @@ from stillframe.loop.node_support import (
     has_publisher,
     wait_for_peers,
 )
-from stillframe.loop.pacing import Pacer
+from stillframe.loop.pacing import Pacer, wait_until
+from stillframe.loop.realtime import Realtime, RealtimeOptions, declare_realtime, start_realtime
 from stillframe.loop.watchdog import command_expired
 from stillframe.loop.wiring import command_topic, estimator_inputs
 from stillframe.middleware import api
@@ -100,6 +101,7 @@ class SimNode:
         self.gates = [CommandGate(limit, command_writer, functools.partial(self.writers, spec.name),
                                   active=i == self.active)
                       for i, (limit, spec) in enumerate(zip(limits, COMMAND_TOPICS, strict=True))]
+        self.readers = [command_reader(i) for i in range(len(COMMAND_TOPICS))]
         for i, spec in enumerate(COMMAND_TOPICS):
             node.create_subscription(spec.type_name, spec.name,
                                      functools.partial(self.on_command, i), spec.qos, raw=True)
@@ -108,10 +110,12 @@ class SimNode:
         self.now_ns = 0
         self.published_at = 0.0
         self.latency = Durations()
+        self.commands_in_time = 0   # commands for the current sample taken before its deadline
         self.pacer = Pacer(self.grid.ns(self.plant.period), params.lockstep,
                            round(params.lockstep_timeout_s * 1e9))
         self.counts = {"rejected_commands": 0, "safe_state_samples": 0}
         self.k = 0
+        self.rt = Realtime(RealtimeOptions())   # main() enters the practices the node asks for
         self.pacer.start(time.monotonic_ns())   # again when the first sample is due
         node.add_on_set_parameters_callback(check_settable)   # nothing changes while it runs
 
@@ -122,19 +126,18 @@ class SimNode:
 
     def on_command(self, actuator: int, cdr: bytes, info: api.MessageInfo) -> None:
         """Take a command its topic's gate lets through (module docstring); count the others."""
-        spec = COMMAND_TOPICS[actuator]
-        msg = messages.decode_sample(cdr, spec.type_name)
-        if msg is None:
-            api.MALFORMED[spec.name] += 1
+        read = self.readers[actuator].read(cdr)
+        if read is None:
+            api.MALFORMED[COMMAND_TOPICS[actuator].name] += 1
             return
-        ns = messages.stamp_ns(msg.header.stamp)
-        value = command_value(actuator, msg)
+        ns, value = read
         if not self.gates[actuator].check(value, ns, info.publisher_gid, self.now_ns,
                                           self.command_ns[actuator]):
             self.counts["rejected_commands"] += 1
             return
         if actuator == self.active and ns == self.now_ns and self.command_ns[actuator] != ns:
             self.latency.add(time.monotonic() - self.published_at)
+            self.commands_in_time += 1
         self.command[actuator], self.command_ns[actuator] = value, ns
 
     def peers_ready(self) -> bool:
@@ -166,8 +169,7 @@ class SimNode:
         """/clock, then the samples serialized first and written in one burst (the readers
         wake once for all of them instead of competing with the serialization for the CPU)."""
         self.clock.publish(ns)
-        msgs = [*self.messages.fill(sample, ns), self.messages.fill_truth(sample, ns)]
-        cdrs = [messages.serialize(msg) for msg in msgs]
+        cdrs = self.messages.cdr(sample, ns)
         for pub, cdr in zip(self.publishers.values(), cdrs, strict=True):
             pub.publish(cdr)
         self.published_at = time.monotonic()
@@ -192,8 +194,8 @@ class SimNode:
             self.command_timeout_periods * self.pacer.period_ns)
 
     def sleep_until(self, when_ns: int) -> None:
-        while api.ok() and (remaining := (when_ns - time.monotonic_ns()) * 1e-9) > 0:
-            self.node.spin_once(remaining)
+        wait_until(when_ns, time.monotonic_ns, self.node.spin_once, self.rt.spin_margin_ns,
+                   api.ok)
 
     def status(self) -> tuple[dict[str, Any], int]:
         lat = self.latency.summary()
@@ -246,6 +248,7 @@ class SimNode:
             control[self.active] = 0.0      # the safe state: no actuation
             self.counts["safe_state_samples"] += 1
         plant.advance(control)
+        self.rt.idle()
         if self.diagnostics.due():
             self.publish_status()
         return np.concatenate([[sample.t], sample.truth, control, [sample.force]])
@@ -280,6 +283,7 @@ class SimNode:
             "mode": p.mode, "steps": n, "wall_s": time.perf_counter() - wall,
             "malformed_samples": sum(api.MALFORMED.values()),
             **self.pacer.counts, **self.counts, "latency_ms": self.latency.summary(),
+            "commands_in_time": self.commands_in_time,
             "command_gates": {spec.name: gate.report()
                               for gate, spec in zip(self.gates, COMMAND_TOPICS, strict=True)},
             "max_lateness_ms": 1e-6 * self.pacer.max_lateness_ns,
@@ -316,7 +320,9 @@ def main() -> int:
         if not (isinstance(timeout, int) and timeout >= 1):
             raise InputError(f"parameter 'command_timeout_periods': must be an integer >= 1, "
                              f"got {timeout!r}")
+        rt = declare_realtime(node)
         sim = SimNode(node, params, float(discovery), list(await_recorder), str(writer), timeout)
+        sim.rt = start_realtime(node, rt)
         history = sim.run()
         if history is not None and result:
             write_result(history, Path(result))

@@ -34,6 +34,8 @@ from stillframe.locations import REPO_ROOT
 from stillframe.middleware import api, discovery, names
 
 NODES: tuple[str, ...] = ("sim_node", "estimator_node", "controller_node")
+#: the process that hosts the estimator and the controller with ``--compose``
+CONTAINER = "container_node"
 #: the children whose middleware backend ``--backend NAME=BACKEND`` can choose
 BACKEND_TARGETS: tuple[str, ...] = (*NODES, "recorder", "monitor")
 MODES: tuple[str, ...] = ("lockstep", "realtime")
@@ -280,8 +282,14 @@ class LaunchOptions:
     backends: list[str] = field(default_factory=list)
     #: ``stillframe monitor`` arguments (ports) to run the monitor beside the nodes; None: none
     monitor_args: list[str] | None = None
+    #: estimator and controller in one process (``container_node``, intra-process handover)
+    compose: bool = False
+    #: the loop nodes' real-time practices and CPUs (stillframe.loop.realtime; "": none)
+    rt: str = ""
+    rt_cpus: list[int] = field(default_factory=list)
     #: a command prefix per node that runs it on another host (``ip netns exec``,
-    #: :mod:`stillframe.app.netns_lab`); a node not named runs here
+    #: :mod:`stillframe.app.netns_lab`; the container on the estimator's); a node not named
+    #: runs here
     hosts: dict[str, list[str]] = field(default_factory=dict)
 
 
@@ -331,12 +339,21 @@ class Launcher:
             children.append(("monitor", [sys.executable, "-m", "stillframe", "monitor",
                                          "--dashboard", "--use-sim-time", "--scene", str(scene),
                                          *sets, *o.monitor_args]))
-        children += [(name, [*o.hosts.get(name, []),
-                             *node_command(name, scene, o.overrides, o.mode,
-                                           {**shared, **sim_params} if name == "sim_node"
-                                           else shared)])
-                     for name in reversed(nodes_for(load_scene(scene, o.overrides)))]
+        nodes = nodes_for(load_scene(scene, o.overrides))
+        if o.compose and {"estimator_node", "controller_node"} <= set(nodes):
+            nodes = ["sim_node", CONTAINER]
+        # the container takes no real-time parameters (it composes two nodes' loops)
+        rt = {"rt": o.rt, **({"rt_cpus": o.rt_cpus} if o.rt_cpus else {})} if o.rt else {}
+        children += [(name, [*o.hosts.get("estimator_node" if name == CONTAINER else name, []),
+                             *node_command(name, scene, o.overrides, o.mode, {
+                                 **shared, **(rt if name != CONTAINER else {}),
+                                 **(sim_params if name == "sim_node" else {})})])
+                     for name in reversed(nodes)]
         return children
+
+    def backend(self, child: str) -> str:
+        """The middleware of a child (the container: the estimator's)."""
+        return self.backends["estimator_node" if child == CONTAINER else child]
 
     def run(self) -> LaunchResult:
         """Start everything, wait for sim_node's result, stop the rest. Raises NodeDiedError,
@@ -346,10 +363,10 @@ class Launcher:
         try:
             commands = self.commands()
             self.status.echo(f"discovery range {self.discovery}; backends " + ", ".join(
-                f"{name} {self.backends[name]}" for name, _ in commands))
-            mixed = len({self.backends[name] for name, _ in commands}) > 1
+                f"{name} {self.backend(name)}" for name, _ in commands))
+            mixed = len({self.backend(name) for name, _ in commands}) > 1
             for name, argv in commands:
-                child = self.processes.start(name, argv, {"STILLFRAME_RMW": self.backends[name]})
+                child = self.processes.start(name, argv, {"STILLFRAME_RMW": self.backend(name)})
                 if name in READY_LINES:
                     self._wait_for_line(child, READY_LINES[name])
                 elif mixed:
@@ -407,19 +424,23 @@ def run_scene(scene: Path, overrides: Sequence[str], out: Path, mode: str = "loc
               record: Path | None = None, lockstep_timeout_s: float | None = None,
               prepare: Callable[[Any], None] | None = None,
               record_topics: Sequence[str] = (), backends: Sequence[str] = (),
-              monitor_args: Sequence[str] | None = None,
+              monitor_args: Sequence[str] | None = None, compose: bool = False,
+              rt: str = "", rt_cpus: Sequence[int] = (),
               hosts: dict[str, list[str]] | None = None) -> LaunchResult:
     """Launch ``scene`` through the three nodes to its end; sim_node's results go to ``out``
     (``result.json``, ``result.npz``); ``record`` records ``record_topics`` (default all) into
     a bag; ``backends`` are ``--backend`` values (:func:`parse_backends`); ``monitor_args``
-    (e.g. ports) start ``stillframe monitor`` beside the nodes. ``prepare(node)`` may
-    subscribe the launcher's hidden node to more topics before the children start; ``hosts``
-    runs nodes on other hosts (:attr:`LaunchOptions.hosts`)."""
+    (e.g. ports) start ``stillframe monitor`` beside the nodes; ``compose`` runs the estimator
+    and the controller in one process (``container_node``); ``rt`` and ``rt_cpus`` are the
+    loop nodes' real-time practices and CPUs (:mod:`stillframe.loop.realtime`); ``hosts``
+    runs nodes on other hosts (:attr:`LaunchOptions.hosts`).
+    ``prepare(node)`` may subscribe the launcher's hidden node to more topics before the
+    children start."""
     out.mkdir(parents=True, exist_ok=True)
     launcher = Launcher(LaunchOptions(scene, list(overrides), mode, out / "result.json", record,
                                       lockstep_timeout_s, list(record_topics), list(backends),
                                       None if monitor_args is None else list(monitor_args),
-                                      dict(hosts or {})))
+                                      compose, rt, list(rt_cpus), dict(hosts or {})))
     if prepare is not None:
         prepare(launcher.node)
     return launcher.run()

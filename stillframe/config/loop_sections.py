@@ -37,6 +37,10 @@ class Plant(Section):
         "scene: the nonlinear model of the model section; file: the linear second-order "
         "model (identified structure + linearised pendulum) of plant.file"))
     file: str = key("thesis_mkr", doc="identified model: a bundled name or a path")
+    discretization: Literal["substeps", "zoh"] = key("substeps", doc=(
+        "model file only: substeps of the scene's integrator at integrator.dt, or zoh: each "
+        "substep exact for the held command and a force linear between substeps (matrix "
+        "exponential)"))
     process_noise_std: Floats8 = key((0.0,) * 8, non_negative, doc=(
         "std of the increments added to the physical state once per sample (eq. 5.215)"))
     seed: int = key(0, doc="process-noise random seed")

@@ -2,9 +2,11 @@
 (docs/architecture.md "Topic contract", :mod:`stillframe.contract.topics`).
 
 Each writer keeps one message instance per topic and refills it every sample (no per-step
-construction). Stamps are integer nanoseconds; :class:`SampleGrid` turns them back into the
-exact float sample times ``k · period`` the one-process loop uses, so that the nodes compute
-bit-for-bit what :func:`stillframe.loop.closed_loop.run_closed_loop` computes.
+construction); its ``cdr`` method writes the same bytes straight into preallocated buffers
+(:mod:`~.fixed_cdr`), the nodes' hot path, and the ``*_reader`` functions read them back.
+Stamps are integer nanoseconds; :class:`SampleGrid` turns them back into the exact float
+sample times ``k · period`` the one-process loop uses, so that the nodes compute bit-for-bit
+what :func:`stillframe.loop.closed_loop.run_closed_loop` computes.
 """
 
 from __future__ import annotations
@@ -15,9 +17,12 @@ import numpy as np
 
 from stillframe.config.loop_sections import Sensors
 from stillframe.contract import messages, topics
+from stillframe.contract.fixed_cdr import FixedReader, FixedWriter
 from stillframe.contract.signals import Command, Estimate, Sample
 
 STATE_NAMES = ["x1", "x2", "x3", "phi"]
+#: the header stamp's fields, first in every stamped message
+STAMP = ("header.stamp.sec", "header.stamp.nanosec")
 PENDULUM_JOINT = "pendulum"
 #: The sensor topics in the order of their readings [a1, a2, a3, φ, load cell]
 #: (``Sample.present``): a topic's index is its channel.
@@ -79,11 +84,19 @@ class SensorMessages:
             self.imus.append(imu)
         self.encoder = _joint_state([PENDULUM_JOINT])
         self.encoder.header.frame_id = "pendulum"
+        self.encoder.position, self.encoder.effort = np.zeros(1), np.zeros(1)
         self.load_cell = messages.new("geometry_msgs/msg/WrenchStamped")
         self.load_cell.header.frame_id = "floor1"
         self.actuator_load_cell = messages.new("geometry_msgs/msg/WrenchStamped")
         self.actuator_load_cell.header.frame_id = "floor3"
         self.truth = _joint_state(list(STATE_NAMES))
+        self.truth.position, self.truth.velocity = np.zeros(4), np.zeros(4)
+        self._imu_cdr = [FixedWriter(imu, (*STAMP, "linear_acceleration.x"))
+                         for imu in self.imus]
+        self._encoder_cdr = FixedWriter(self.encoder, (*STAMP, "position", "effort"))
+        self._wrench_cdr = [FixedWriter(m, (*STAMP, "wrench.force.x"))
+                            for m in (self.load_cell, self.actuator_load_cell)]
+        self._truth_cdr = FixedWriter(self.truth, (*STAMP, "position", "velocity"))
 
     def fill(self, sample: Sample, ns: int) -> list[Any]:
         """[imu1, imu2, imu3, encoder, load cell, floor-3 load cell] for ``sample``, stamped
@@ -104,6 +117,19 @@ class SensorMessages:
     def fill_truth(self, sample: Sample, ns: int) -> Any:
         fill_joint_state(self.truth, ns, sample.truth)
         return self.truth
+
+    def cdr(self, sample: Sample, ns: int) -> list[bytearray]:
+        """The CDR of :meth:`fill` and then :meth:`fill_truth` (the same bytes), written into
+        preallocated buffers that the next call rewrites."""
+        sec, nanosec = divmod(ns, 1_000_000_000)
+        m = sample.measurements
+        applied = (0.0, 0.0) if sample.applied is None else sample.applied
+        out = [w.pack(sec, nanosec, float(a)) for w, a in zip(self._imu_cdr, m[:3], strict=True)]
+        out.append(self._encoder_cdr.pack(sec, nanosec, float(m[3]), float(applied[0])))
+        out.append(self._wrench_cdr[0].pack(sec, nanosec, float(sample.force)))
+        out.append(self._wrench_cdr[1].pack(sec, nanosec, float(applied[1])))
+        out.append(self._truth_cdr.pack(sec, nanosec, *sample.truth[:8].tolist()))
+        return out
 
 
 def sensor_reading(channel: int, msg: Any) -> float:
@@ -154,12 +180,24 @@ class EstimateMessages:
                              stride=stride) for label, stride in (("rows", 64), ("cols", 8))]
         self.covariance = messages.new("std_msgs/msg/Float64MultiArray")
         self.covariance.layout.dim = dims
+        self.state.position, self.state.velocity = np.zeros(4), np.zeros(4)
+        self.covariance.data = np.zeros(64)
+        self._state_cdr = FixedWriter(self.state, (*STAMP, "position", "velocity"))
+        self._cov_cdr = FixedWriter(self.covariance, ("data",))
 
     def fill(self, estimate: Estimate, ns: int) -> tuple[Any, Any]:
         fill_joint_state(self.state, ns, estimate.physical)
         cov = np.zeros((8, 8)) if estimate.covariance is None else estimate.covariance
         self.covariance.data = np.ascontiguousarray(cov, dtype=np.float64).ravel()
         return self.state, self.covariance
+
+    def cdr(self, estimate: Estimate, ns: int) -> tuple[bytearray, bytearray]:
+        """The CDR of :meth:`fill`, in preallocated buffers that the next call rewrites."""
+        sec, nanosec = divmod(ns, 1_000_000_000)
+        state = self._state_cdr.pack(sec, nanosec, *estimate.physical[:8].tolist())
+        cov = (np.zeros(64) if estimate.covariance is None
+               else np.asarray(estimate.covariance, dtype=np.float64).ravel())
+        return state, self._cov_cdr.pack(*cov.tolist())
 
 
 class CommandMessage:
@@ -169,6 +207,8 @@ class CommandMessage:
         self.actuator = actuator
         self.msg = messages.new("geometry_msgs/msg/WrenchStamped")
         self.msg.header.frame_id = "pendulum" if actuator == 0 else "floor3"
+        self.field = "wrench.torque.z" if actuator == 0 else "wrench.force.x"
+        self._cdr = FixedWriter(self.msg, (*STAMP, self.field))
 
     def fill(self, command: Command, ns: int) -> Any:
         set_stamp(self.msg, ns)
@@ -178,7 +218,95 @@ class CommandMessage:
             self.msg.wrench.force.x = command.force
         return self.msg
 
+    def cdr(self, command: Command, ns: int) -> bytearray:
+        """The CDR of :meth:`fill`, in a preallocated buffer that the next call rewrites."""
+        value = command.torque if self.actuator == 0 else command.force
+        return self._cdr.pack(*divmod(ns, 1_000_000_000), float(value))
+
 
 def command_value(actuator: int, msg: Any) -> float:
     """The commanded torque (actuator 0) or floor-3 force (1) in a WrenchStamped."""
     return float(msg.wrench.torque.z if actuator == 0 else msg.wrench.force.x)
+
+
+class TopicReader:
+    """The values a node takes from one contract topic's CDR: read straight from the bytes when
+    they have the layout the stack's own writers give (:class:`~.fixed_cdr.FixedReader`), else
+    decoded with ``rosbags``; both give the same tuple. None for bytes that are no valid message
+    of the type (the caller counts them as malformed)."""
+
+    def __init__(self, template: Any, paths: tuple[str, ...],
+                 from_values: Any, from_msg: Any) -> None:
+        self.type_name = template.__msgtype__
+        self._fixed = FixedReader(template, paths)
+        self._from_values = from_values
+        self._from_msg = from_msg
+
+    def read(self, data: bytes | memoryview) -> tuple[Any, ...] | None:
+        values = self._fixed.unpack(data)
+        if values is not None:
+            return self._from_values(values)
+        msg = messages.decode_sample(data, self.type_name)
+        return None if msg is None else self._from_msg(msg)
+
+
+def _stamped(v: tuple[Any, ...]) -> tuple[Any, ...]:
+    """(ns, values...) of (sec, nanosec, values...)."""
+    return (v[0] * 1_000_000_000 + v[1], *v[2:])
+
+
+def sensor_reader(channel: int, sensors: Sensors) -> TopicReader:
+    """(stamp ns, reading, applied torque or NaN) of sensor channel ``channel``
+    (:func:`sensor_reading`, :func:`applied_torque`)."""
+    out = SensorMessages(sensors)
+    template = [*out.imus, out.encoder, out.load_cell][channel]
+    field = {3: ("position", "effort"), 4: ("wrench.force.x",)}.get(
+        channel, ("linear_acceleration.x",))
+    nan = float("nan")
+
+    def from_msg(msg: Any) -> tuple[Any, ...]:
+        torque = applied_torque(msg) if channel == ENCODER_CHANNEL else nan
+        return messages.stamp_ns(msg.header.stamp), sensor_reading(channel, msg), torque
+
+    def from_values(v: tuple[Any, ...]) -> tuple[Any, ...]:
+        return _stamped(v) if channel == ENCODER_CHANNEL else (*_stamped(v), nan)
+
+    return TopicReader(template, (*STAMP, *field), from_values, from_msg)
+
+
+def wrench_reader(frame_id: str, field: str) -> TopicReader:
+    """(stamp ns, ``field``) of a WrenchStamped (load cells, commands)."""
+    template = messages.new("geometry_msgs/msg/WrenchStamped")
+    template.header.frame_id = frame_id
+    parts = field.split(".")
+
+    def from_msg(msg: Any) -> tuple[Any, ...]:
+        value = msg
+        for part in parts:
+            value = getattr(value, part)
+        return messages.stamp_ns(msg.header.stamp), float(value)
+
+    return TopicReader(template, (*STAMP, field), _stamped, from_msg)
+
+
+def state_reader() -> TopicReader:
+    """(stamp ns, [x1, x2, x3, φ, ẋ1, ẋ2, ẋ3, φ̇]) of ``state_estimate`` or ``state_truth``
+    (:func:`physical_state`)."""
+    template = EstimateMessages().state
+
+    def from_values(v: tuple[Any, ...]) -> tuple[Any, ...]:
+        return v[0] * 1_000_000_000 + v[1], np.array(v[2:])
+
+    def from_msg(msg: Any) -> tuple[Any, ...]:
+        return messages.stamp_ns(msg.header.stamp), physical_state(msg)
+
+    return TopicReader(template, (*STAMP, "position", "velocity"), from_values, from_msg)
+
+
+def command_reader(actuator: int) -> TopicReader:
+    """(stamp ns, command value) of a command topic (:func:`command_value`)."""
+    def from_msg(msg: Any) -> tuple[Any, ...]:
+        return messages.stamp_ns(msg.header.stamp), command_value(actuator, msg)
+
+    out = CommandMessage(actuator)
+    return TopicReader(out.msg, (*STAMP, out.field), _stamped, from_msg)

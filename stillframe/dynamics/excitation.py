@@ -88,6 +88,16 @@ class FloorLoad:
         f[self.excitation.floor - 1] = self.force(t)
         return f
 
+    def force_at(self, times: np.ndarray) -> np.ndarray:
+        """The force at each of ``times`` (harmonics vectorised; the same values as
+        ``force`` to round-off)."""
+        e = self.excitation
+        if e.type == "harmonics":
+            w = 2.0 * np.pi * np.asarray(e.frequencies_hz)
+            phases = np.asarray(e.phases or [0.0] * len(w))
+            return np.sin(np.multiply.outer(times, w) + phases) @ np.asarray(e.amplitudes)
+        return np.vectorize(self.force, otypes=[float])(times)
+
 
 def floor_load(excitation: Excitation, duration: float) -> FloorLoad | None:
     """The scene's floor load, or None for ``type: none``."""

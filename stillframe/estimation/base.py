@@ -46,6 +46,7 @@ class Filter(ABC):
         self.t: float | None = None
         self.force = 0.0
         self.counters = Counters()
+        self._covariance: tuple[np.ndarray | None, np.ndarray | None] = (None, None)
 
     def noise_covariances(self, process_std: Sequence[float],
                           measurement_std: Sequence[float]) -> tuple[np.ndarray, np.ndarray]:
@@ -67,11 +68,13 @@ class Filter(ABC):
         if self.t is not None and not sample.t > self.t:
             c.stale += 1
             return None
-        present = np.asarray(sample.present[:4], dtype=bool).copy()
-        c.missing += int(np.count_nonzero(~sample.present))
+        arrived = np.asarray(sample.present, dtype=bool)
         finite = np.isfinite(sample.measurements)
-        c.non_finite += int(np.count_nonzero(present & ~finite))
-        present &= finite
+        present = arrived[:4] & finite
+        if not arrived.all():
+            c.missing += int(np.count_nonzero(~arrived))
+        if not finite.all():
+            c.non_finite += int(np.count_nonzero(arrived[:4] & ~finite))
         force = self.force
         if sample.present[4]:
             if np.isfinite(sample.force):
@@ -88,7 +91,11 @@ class Filter(ABC):
         return self.estimate()
 
     def estimate(self) -> Estimate:
-        return Estimate(self.t, self.x.copy(), self.S @ self.x, self.S @ self.P @ self.S.T)
+        if self.P is not self._covariance[0]:  # a stationary filter keeps P: computed once
+            covariance = self.S @ self.P @ self.S.T
+            covariance.flags.writeable = False
+            self._covariance = (self.P, covariance)
+        return Estimate(self.t, self.x.copy(), self.S @ self.x, self._covariance[1])
 
     @abstractmethod
     def predict(self, dt: float, force0: float, force1: float, control: np.ndarray) -> None:

@@ -78,6 +78,8 @@ class LinearFilter(Filter):
                    control: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Measured minus feedthrough, and the C and R rows of the channels present."""
         u = full_inputs(control, force, self.excited_floor)
+        if present.all():
+            return y - self.D @ u, self.C, self.R
         return (y - self.D @ u)[present], self.C[present], self.R[np.ix_(present, present)]
 
 
@@ -97,6 +99,7 @@ class SteadyStateKalman(LinearFilter):
                                 what="stationary Kalman filter (dual Riccati equation)")
         self.Q, self.R = Q, R
         self.gain = self.gain_for(np.ones(4, dtype=bool))
+        self.posterior = self.prior - self.gain @ self.C @ self.prior  # all channels present
 
     def set_noise(self, process_std: list[float], measurement_std: list[float]) -> None:
         self.design(*self.noise_covariances(process_std, measurement_std))
@@ -112,7 +115,11 @@ class SteadyStateKalman(LinearFilter):
     def update(self, y: np.ndarray, present: np.ndarray, force: float,
                control: np.ndarray) -> None:
         z, C, _ = self.innovation(y, present, force, control)
-        K = self.gain if present.all() else self.gain_for(present)
+        if present.all():
+            self.x = self.x + self.gain @ (z - C @ self.x)
+            self.P = self.posterior
+            return
+        K = self.gain_for(present)
         self.x = self.x + K @ (z - C @ self.x)
         self.P = self.prior - K @ C @ self.prior
 

@@ -11,6 +11,8 @@ the node, any integer in a test).
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 
 class Pacer:
     """Due times, deadlines and what was missed, for one run."""
@@ -46,3 +48,12 @@ class Pacer:
     def missed(self) -> None:
         """The command for the current sample did not come by its deadline."""
         self.counts["lockstep_timeouts" if self.lockstep else "deadline_misses"] += 1
+
+
+def wait_until(due_ns: int, now_ns: Callable[[], int], wait: Callable[[float], None],
+               spin_margin_ns: int = 0, running: Callable[[], bool] = lambda: True) -> None:
+    """Block in ``wait(seconds)`` (which handles messages meanwhile) until ``spin_margin_ns``
+    before ``due_ns``, then poll with ``wait(0)`` until it: a sleep wakes up tens of µs late
+    (timer slack, the scheduler), a poll does not (docs/realtime.md)."""
+    while running() and (left := due_ns - now_ns()) > 0:
+        wait(max(left - spin_margin_ns, 0) * 1e-9)

@@ -13,6 +13,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from stillframe.contract import messages
+from stillframe.contract.fixed_cdr import FixedWriter
 
 
 @dataclass(frozen=True, order=True)
@@ -69,9 +70,9 @@ class ClockPublisher:
 
     def __init__(self, node: Any) -> None:
         self._pub = node.create_publisher(self.TYPE, self.TOPIC, "clock")
-        self._cls = messages.msg_class(self.TYPE)
+        self._cdr = FixedWriter(messages.new(self.TYPE), ("clock.sec", "clock.nanosec"))
 
     def publish(self, t: Time | int) -> None:
         """Publish sim time ``t`` (a Time or integer nanoseconds)."""
         ns = t.nanoseconds if isinstance(t, Time) else int(t)
-        self._pub.publish(self._cls(clock=messages.time_msg(ns)))
+        self._pub.publish(self._cdr.pack(*divmod(ns, 1_000_000_000)))

@@ -21,12 +21,13 @@ from cyclonedds._clayer import ddspy_take, ddspy_write, ddspy_write_ts  # isort:
 ANY_SAMPLES = SampleState.Any | ViewState.Any | InstanceState.Any
 
 
-def pad4(cdr: bytes) -> bytes:
-    """CDR padded to a multiple of 4 bytes, as Cyclone expects of a serialized sample."""
-    return cdr + b"\0" * (-len(cdr) % 4)
+def pad4(cdr: bytes | bytearray) -> bytes | bytearray:
+    """CDR padded to a multiple of 4 bytes, as Cyclone expects of a serialized sample (the same
+    object, not a copy, when it is)."""
+    return cdr + b"\0" * (-len(cdr) % 4) if len(cdr) % 4 else cdr
 
 
-def write_raw(writer: DataWriter, cdr: bytes, timestamp_ns: int | None = None) -> None:
+def write_raw(writer: DataWriter, cdr: bytes | bytearray, timestamp_ns: int | None = None) -> None:
     """Write one serialized sample (CDR with encapsulation header), stamped ``timestamp_ns``
     (source time) if given."""
     data = pad4(cdr)

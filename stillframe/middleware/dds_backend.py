@@ -298,8 +298,12 @@ class DdsPublisher:
         messages.prepare(ros_type)
 
     def publish(self, msg: Any) -> None:
-        """Publish a ``rosbags`` message of this publisher's type, or its CDR bytes."""
-        if isinstance(msg, bytes | bytearray | memoryview):
+        """Publish a ``rosbags`` message of this publisher's type, or its CDR bytes (written as
+        they are: a preallocated ``bytearray`` is not copied)."""
+        if isinstance(msg, bytes | bytearray):
+            write_raw(self._writer, msg)
+            return
+        if isinstance(msg, memoryview):
             write_raw(self._writer, bytes(msg))
             return
         if getattr(msg, "__msgtype__", None) != self.msg_type:

@@ -51,6 +51,8 @@ class FoxgloveBridge(TopicFollower):
         self.server = server
         self.context = context
         self.channels: dict[str, foxglove.Channel] = {}
+        #: samples handed to the SDK per topic (what it then sends depends on the subscribers)
+        self.forwarded: dict[str, int] = {}
         super().__init__(node, topics)
         if node.get_parameter("use_sim_time").value:
             node.create_subscription("rosgraph_msgs/msg/Clock", "/clock", self._on_clock, "clock")
@@ -59,9 +61,11 @@ class FoxgloveBridge(TopicFollower):
         channel = foxglove.Channel(topic, schema=ros2msg_schema(msgtype),
                                    message_encoding=MESSAGE_ENCODING, context=self.context)
         self.channels[topic] = channel
+        self.forwarded[topic] = 0
 
         def forward(data: bytes, info: MessageInfo) -> None:
             channel.log(data, log_time=info.received_timestamp)
+            self.forwarded[topic] += 1
 
         return forward
 

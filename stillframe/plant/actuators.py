@@ -28,9 +28,9 @@ class Actuator:
         target = command
         if self.rate_limit is not None:
             step = self.rate_limit * self.period
-            target = float(np.clip(target, self.value - step, self.value + step))
+            target = min(max(target, self.value - step), self.value + step)
         if self.limit is not None:
-            target = float(np.clip(target, -self.limit, self.limit))
+            target = min(max(target, -self.limit), self.limit)
         if target != command:
             self.limited += 1
         self.value = target

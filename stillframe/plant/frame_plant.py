@@ -17,13 +17,18 @@ from stillframe.config.scene import Scene
 from stillframe.contract.signals import Sample
 from stillframe.design.identified import frame_for
 from stillframe.dynamics.excitation import floor_load
-from stillframe.dynamics.integrators import check_finite, integrate, make_integrator
+from stillframe.dynamics.integrators import check_finite, integrate, make_integrator, non_finite
+from stillframe.dynamics.kernels import CompiledFrame, compiles
 from stillframe.dynamics.simulation import initial_state
 from stillframe.dynamics.systems import LinearSystem, MechanicalSystem
 from stillframe.errors import InputError, IntegrationError
 from stillframe.plant.actuators import Actuators
+from stillframe.plant.linear_period import LinearPeriod, make_linear_period
 from stillframe.plant.ph_plant import PHPlant
 from stillframe.plant.sensors import Sensors
+
+#: the truth kept at every substep, in the physical state: floor displacements and velocities
+RECORDED = np.array([0, 1, 2, 4, 5, 6])
 
 
 def sample_period(scene: Scene) -> tuple[float, int]:
@@ -66,6 +71,20 @@ class Plant:
         self.n_dof = n
         picks = [*model.floor_index, model.phi_index]
         self.physical_index = np.array([*picks, *(n + i for i in picks)])
+        self._recorded_index = self.physical_index[RECORDED]
+        self._substep_times = np.arange(1, self.substeps + 1) * self.h   # after t_k
+        self.linear = self._linear_period(scene)
+        #: the nonlinear model's substeps on the compiled kernels where they handle its load
+        self.compiled = (CompiledFrame(model) if isinstance(self.system, MechanicalSystem)
+                         and compiles(load, self.integrator.name) else None)
+        self._acceleration_rows = None
+        if isinstance(self.system, LinearSystem):
+            rows = [n + i for i in model.floor_index]
+            E, A, B = self.system.E, self.system.A, self.system.B
+            self._acceleration_rows = np.linalg.solve(E, np.hstack([A, B]))[rows]
+            self._acceleration_input = np.zeros(self._acceleration_rows.shape[1])
+        #: how a substep is taken: the integrator's name, or zoh
+        self.method = "zoh" if scene.plant.discretization == "zoh" else self.integrator.name
         self.process_std = np.asarray(scene.plant.process_noise_std, dtype=float)
         self.process_rng = np.random.default_rng(scene.plant.seed)
         self.sensors = Sensors(scene.sensors, np.random.default_rng(scene.sensors.seed))
@@ -76,6 +95,20 @@ class Plant:
         self._rows = 0
         self._record(0.0, self.x)
 
+    def _linear_period(self, scene: Scene) -> LinearPeriod | None:
+        """The period as one matrix product (:mod:`stillframe.plant.linear_period`) for a
+        linear plant stepped by the midpoint rule or exactly; None: the integrator's steps."""
+        discretization = scene.plant.discretization
+        if discretization == "zoh" and not isinstance(self.system, LinearSystem):
+            raise InputError("plant.discretization: zoh needs the linear plant "
+                             "(plant.model: file)")
+        if not isinstance(self.system, LinearSystem) or (
+                discretization == "substeps" and self.integrator.name != "midpoint"):
+            return None
+        recorded = self.physical_index[RECORDED]
+        return make_linear_period(self.system, self.load, discretization, self.period,
+                                  self.substeps, recorded)
+
     @property
     def t(self) -> float:
         return self.k * self.period
@@ -84,15 +117,21 @@ class Plant:
         """True [x1, x2, x3, φ, ẋ1, ẋ2, ẋ3, φ̇]."""
         return self.x[self.physical_index].copy()
 
-    def force(self, t: float) -> float:
-        return float(self.load(t)[self.excited_floor - 1]) if self.load else 0.0
-
     def sample(self) -> Sample:
         """Sensor readings and ground truth at the current time t_k."""
         t = self.t
-        accelerations = self.system.derivative(t, self.x)[self.n_dof:][self.model.floor_index]
-        readings, force = self.sensors.read(accelerations, self.x[self.model.phi_index],
-                                            self.force(t))
+        loads = self.load(t) if self.load else None
+        if self._acceleration_rows is not None:  # linear: E⁻¹[A B] rows, formed once
+            z, n = self._acceleration_input, self.x.size
+            z[:n] = self.x
+            z[n:] = self.system.control
+            if loads is not None:
+                z[n : n + 3] += loads
+            accelerations = self._acceleration_rows @ z
+        else:
+            accelerations = self.system.derivative(t, self.x)[self.n_dof:][self.model.floor_index]
+        force = float(loads[self.excited_floor - 1]) if loads is not None else 0.0
+        readings, force = self.sensors.read(accelerations, self.x[self.model.phi_index], force)
         applied = np.array([self.actuators.torque.value, self.actuators.force.value])
         return Sample(t, readings, force, truth=self.physical(), applied=applied)
 
@@ -101,9 +140,18 @@ class Plant:
         applied = self.actuators.apply(command)
         self.system.control = np.array([0.0, 0.0, applied[1], applied[0]])
         t0 = self.t
+        if self.linear is not None:
+            self._advance_linear(self.linear, t0)
+            return applied
         try:
-            self.x = integrate(self.system, self.x, self.h, self.substeps, self.integrator, t0,
-                               observer=self._observe)
+            if self.compiled is not None:
+                states = self.compiled.run(self.integrator.name, self.x, self.h, self.substeps,
+                                           self.load, control=self.system.control, t0=t0)
+                self._record_period(t0, states[1:, self.physical_index[RECORDED]])
+                self.x = states[-1].copy()
+            else:
+                self.x = integrate(self.system, self.x, self.h, self.substeps, self.integrator,
+                                   t0, observer=self._observe)
         except (ValueError, OverflowError) as exc:  # math.sin(inf) and the like
             if isinstance(exc, IntegrationError):
                 raise
@@ -111,12 +159,37 @@ class Plant:
                 f"integrator.dt: the state left the finite range at t ≈ {t0:.6g} s (the command "
                 f"{applied} drove it away; limit the actuators or reduce integrator.dt)"
             ) from None
-        if self.process_std.any():
-            self.x[self.physical_index] += self.process_std * self.process_rng.standard_normal(8)
-            self._fine[self._rows - 1, 1:] = self.x[self.physical_index][[0, 1, 2, 4, 5, 6]]
+        self._add_process_noise()
         check_finite(self.x, t0 + self.period, self.h, self.integrator.name)
         self.k += 1
         return applied
+
+    def _advance_linear(self, linear: LinearPeriod, t0: float) -> None:
+        """``advance`` of a linear plant: the substeps as one product, recorded alike."""
+        recorded, x = linear.step(self.x, self.k, self.system.control)
+        if not np.all(np.isfinite(x)):
+            first = int(np.argmax(~np.isfinite(recorded).all(axis=1)))
+            raise non_finite(t0 + (first + 1) * self.h, self.h, self.method)
+        self._record_period(t0, recorded)
+        self.x = x
+        self._add_process_noise()
+        self.k += 1
+
+    def _record_period(self, t0: float, recorded: np.ndarray) -> None:
+        """The truth after each substep of the period from t0 (rows of ``recorded``)."""
+        s, rows = self.substeps, self._rows
+        if rows + s > len(self._fine):
+            self._fine = np.vstack([self._fine, np.empty_like(self._fine)])
+        fine = self._fine[rows : rows + s]
+        fine[:, 0] = t0 + self._substep_times
+        fine[:, 1:] = recorded
+        self._rows = rows + s
+
+    def _add_process_noise(self) -> None:
+        """Eq. 5.215, once per period; the last recorded row follows."""
+        if self.process_std.any():
+            self.x[self.physical_index] += self.process_std * self.process_rng.standard_normal(8)
+            self._fine[self._rows - 1, 1:] = self.x[self._recorded_index]
 
     def _observe(self, k: int, t: float, x: np.ndarray) -> None:
         if k > 0:

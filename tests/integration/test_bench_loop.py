@@ -8,8 +8,9 @@ import math
 import numpy as np
 import pytest
 
-from stillframe.app.commands.bench_loop import realtime_overrides
+from stillframe.app.commands.bench_loop import goal_rows, realtime_overrides, stamp_ns
 from stillframe.config.scene import load_scene
+from stillframe.contract import messages
 from stillframe.locations import REPO_ROOT
 from stillframe.loop.latency import LatencyLog
 from tests.support.middleware import run_stillframe
@@ -63,3 +64,36 @@ def test_bench_loop_rejects_a_short_duration() -> None:
     done = run_stillframe("bench", "loop", "--duration", "0.5")
     assert done.returncode == 2
     assert done.stderr.strip() == "stillframe bench: error: bench loop: --duration must be >= 1 s"
+
+
+def test_goals_are_judged_per_backend_and_rate() -> None:
+    """The goals of issue 10 against figures made up to sit on both sides of each bound."""
+    rows = [{"backend": "dds", "rate_hz": 1000.0, "within_period_pct": 99.95, "p99_us": 480.0,
+             "max_us": 2500.0},
+            {"backend": "dds", "rate_hz": 100.0, "within_period_pct": 100.0, "p99_us": 501.0,
+             "max_us": 900.0}]
+    speeds = [{"backend": "dds", "nodes_steps_per_s": 2500.0, "one_process_steps_per_s": 1982.0},
+              {"backend": "rclpy", "nodes_steps_per_s": 790.0, "one_process_steps_per_s": 1982.0}]
+    goals = {(g["figure"], g["backend"]): g["met"] for g in goal_rows(rows, speeds)}
+    assert goals == {
+        ("answered within the period [%], 1000 Hz", "dds"): True,
+        ("latency p99 [us], 1000 Hz", "dds"): True,
+        ("latency max [us], 1000 Hz", "dds"): False,
+        ("latency p99 [us], 100 Hz", "dds"): False,
+        ("lock-step through the nodes [steps/s]", "dds"): True,
+        ("lock-step through the nodes [steps/s]", "rclpy"): False,
+        ("one process [steps/s]", "-"): False,     # once: it involves no backend
+    }
+
+
+def test_observer_reads_the_stamp_from_the_cdr() -> None:
+    msg = messages.new("geometry_msgs/msg/WrenchStamped")
+    msg.header.stamp.sec, msg.header.stamp.nanosec = 12, 345
+    assert stamp_ns(messages.serialize(msg)) == 12_000_000_345
+
+
+def test_bench_loop_rejects_a_bad_rate_and_rt_practice() -> None:
+    done = run_stillframe("bench", "loop", "--rate", "0", "--backend", "dds")
+    assert done.returncode == 2 and "--rate must be 1..10000 Hz" in done.stderr
+    done = run_stillframe("bench", "loop", "--rt", "turbo", "--backend", "dds")
+    assert done.returncode == 2 and "unknown practice(s) turbo" in done.stderr

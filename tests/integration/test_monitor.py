@@ -108,9 +108,6 @@ def ros_domain_module() -> Iterator[int]:
         yield isolate_domain(patch)
 
 
-@pytest.mark.xfail(reason="known bug, issue 16: in the full suite the client sometimes gets no "
-                          "data on a channel it subscribed to (0 of 384, root cause not found); "
-                          "it passes when the module runs alone", strict=False)
 def test_a_foxglove_client_decodes_what_the_recorder_recorded(monitored_run: dict) -> None:
     """The IMU channel carries the ros2msg schema; decoded with it alone, every message the
     client got equals the bag's message of the same stamp, and none is missing in between."""
@@ -123,7 +120,8 @@ def test_a_foxglove_client_decodes_what_the_recorder_recorded(monitored_run: dic
                 for m in read_bag(monitored_run["bag"], messages.TYPESTORE, topics=[IMU],
                                   decode=True)}
     got = seen.messages.get(IMU, [])
-    assert len(got) >= 50, f"{len(got)} of {len(recorded)} messages reached the client"
+    forwarded = [line for line in monitored_run["lines"] if "Forwarded" in line]
+    assert len(got) >= 50, f"{len(got)} of {len(recorded)} messages reached the client; {forwarded}"
     stamps = [messages.stamp_ns(m.header.stamp) for m in got]
     assert set(stamps) <= set(recorded)
     for msg, stamp in zip(got, stamps, strict=True):
@@ -201,8 +199,9 @@ def plotted_ends(driver: Any) -> list[float]:
                            "(apt-get install -y chromium chromium-driver)")
 def test_dashboard_in_headless_chromium(tmp_path: Path, ros_domain_module: int) -> None:
     """The dashboard during a real-time launch at 1 kHz: every chart has data, the first trace
-    colour is on the page, two screenshots 1.5 s apart differ in the plotted data, exactly the
-    non-zero error counters are red (saturation is forced), and the browser logs no error."""
+    colour is on the page, two screenshots at least 1 s apart differ in the plotted data,
+    exactly the non-zero error counters are red (saturation is forced), and the browser logs no
+    error."""
     overrides = [*realtime_overrides(1000.0, 12.0), "controller.limit=0.5",
                  "controller.start=1.5", "evaluation.window=1"]
     launch = Launch.start("--mode", "realtime", *(a for o in overrides for a in ("--set", o)))
@@ -215,7 +214,13 @@ def test_dashboard_in_headless_chromium(tmp_path: Path, ros_domain_module: int) 
             assert time.monotonic() < deadline, plotted_ends(driver)
             time.sleep(0.2)
         first, first_ends = driver.get_screenshot_as_png(), plotted_ends(driver)
-        time.sleep(1.5)
+        time.sleep(1.0)
+        deadline = time.monotonic() + 30
+        # a second apart at least, and until every chart has plotted newer data (on a loaded
+        # machine the loop, and so the data, can advance slower than the wall clock)
+        while not all(b > a for a, b in zip(first_ends, plotted_ends(driver), strict=True)):
+            assert time.monotonic() < deadline, (first_ends, plotted_ends(driver))
+            time.sleep(0.2)
         second, second_ends = driver.get_screenshot_as_png(), plotted_ends(driver)
         cells = driver.execute_script(
             "return [...document.querySelectorAll('td[data-key]')].map("

@@ -13,6 +13,8 @@ BENCHES: tuple[str, ...] = (
     "stillframe.app.commands.bench_identify",
     "stillframe.app.commands.bench_identify_hammer",
     "stillframe.app.commands.bench_loop",
+    "stillframe.app.commands.bench_scaling",
+    "stillframe.app.commands.bench_hops",
     "stillframe.app.commands.bench_monitor",
     "stillframe.app.commands.bench_fidelity",
     "stillframe.app.commands.bench_speed",

@@ -7,19 +7,26 @@
    simulated to wall time, against the same scene in one process (``closed-loop``) in this run.
 
 Both run once per middleware backend (``dds``: Cyclone; ``rclpy``: real rclpy on Fast DDS), all
-three nodes on it, so the backends are compared in the same run.
+three nodes on it, so the backends are compared in the same run. ``--rt`` runs the nodes with the
+real-time practices of docs/realtime.md. The figures are printed beside the goals of issue 10,
+with the machine's load average during each real-time run (the machine may be shared).
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
+import os
+import struct
 import sys
 import tempfile
 import time
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
 from stillframe.app.commands.common import add_json_argument, emit_json
+from stillframe.app.commands.launch import add_realtime_arguments, realtime_arguments
 from stillframe.app.launcher import run_scene
 from stillframe.config.scene import load_scene
 from stillframe.contract.topics import DEFAULT_NAMESPACE, FLOOR_IMU, FORCE_CMD, TORQUE_CMD
@@ -27,6 +34,7 @@ from stillframe.errors import InputError
 from stillframe.locations import SCENES_DIR
 from stillframe.loop.closed_loop import run_closed_loop
 from stillframe.loop.latency import LatencyLog
+from stillframe.loop.realtime import Realtime, RealtimeOptions, parse_practices
 from stillframe.middleware import api
 from stillframe.text_table import format_table
 
@@ -39,9 +47,16 @@ def register(benches: argparse._SubParsersAction) -> None:
                                 description=__doc__.split("\n\n", 1)[1])
     parser.add_argument("--duration", type=float, default=10.0, metavar="S",
                         help="seconds of each real-time run (default 10)")
+    parser.add_argument("--rate", dest="rates", action="append", type=float, default=[],
+                        metavar="HZ", help="real-time rate (repeatable; default 100 and 1000)")
+    parser.add_argument("--no-lockstep", dest="lockstep", action="store_false",
+                        help="skip the lock-step runs")
     parser.add_argument("--backend", dest="backends", action="append", default=[],
                         choices=api.BACKENDS,
                         help="measure this backend (repeatable; default: every one installed)")
+    parser.add_argument("--compose", action="store_true",
+                        help="also lock-step with the estimator and controller in one process")
+    add_realtime_arguments(parser)
     add_json_argument(parser)
     parser.set_defaults(func=run)
 
@@ -55,52 +70,139 @@ def realtime_overrides(rate_hz: float, duration: float) -> list[str]:
             f"evaluation.window={duration / 2:g}"]
 
 
-def stamp_ns(msg: Any) -> int:
-    return msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+_STAMP = struct.Struct("<iI")   # header.stamp, first in every stamped message's CDR
+
+
+def stamp_ns(cdr: bytes) -> int:
+    """The header stamp of a stamped message's CDR, in ns."""
+    sec, nanosec = _STAMP.unpack_from(cdr, 4)
+    return sec * 1_000_000_000 + nanosec
 
 
 def observe(log: LatencyLog) -> Any:
     """A ``prepare`` hook for :func:`stillframe.app.launcher.run_scene`: the launcher's node logs
-    floor-1 samples and both command topics, on the wall clock."""
+    floor-1 samples and both command topics, on the wall clock, reading only the stamps from the
+    raw bytes (the observer must keep up with 1 kHz on a loaded machine)."""
 
     def prepare(node: Any) -> None:
         def topic(spec: Any) -> str:
             return f"{DEFAULT_NAMESPACE}/{spec.name}"
 
         node.create_subscription(FLOOR_IMU[0].type_name, topic(FLOOR_IMU[0]),
-                                 lambda m: log.on_sample(stamp_ns(m), time.time_ns()),
-                                 FLOOR_IMU[0].qos)
+                                 lambda cdr, _: log.on_sample(stamp_ns(cdr), time.time_ns()),
+                                 FLOOR_IMU[0].qos, raw=True)
         for spec in (TORQUE_CMD, FORCE_CMD):
             node.create_subscription(spec.type_name, topic(spec),
-                                     lambda m: log.on_command(stamp_ns(m), time.time_ns()),
-                                     spec.qos)
+                                     lambda cdr, _: log.on_command(stamp_ns(cdr), time.time_ns()),
+                                     spec.qos, raw=True)
 
     return prepare
 
 
-def realtime(rate_hz: float, duration: float, out: Path, backend: str) -> dict[str, Any]:
+@contextlib.contextmanager
+def observer_backend(backend: str) -> Iterator[None]:
+    """The launcher's node (the observer) on the backend it measures, not the default one: an
+    rclpy observer of a Cyclone loop pays rclpy's executor per message and falls behind at
+    1 kHz, which it would count as the loop's latency."""
+    before = os.environ.get(api.BACKEND_ENV)
+    os.environ[api.BACKEND_ENV] = backend
+    try:
+        yield
+    finally:
+        if before is None:
+            del os.environ[api.BACKEND_ENV]
+        else:
+            os.environ[api.BACKEND_ENV] = before
+
+
+@contextlib.contextmanager
+def observer_realtime(practices: str) -> Iterator[None]:
+    """With ``fifo`` among the nodes' practices, the observer (this process) runs SCHED_FIFO too,
+    one priority below the nodes, for the run: else the nodes starve it on a loaded machine and
+    it measures its own delay. SCHED_OTHER again afterwards."""
+    if "fifo" not in parse_practices(practices):
+        yield
+        return
+    rt = Realtime(RealtimeOptions(frozenset({"fifo"}), RealtimeOptions().priority - 1))
+    rt.enter()
+    for text in rt.refused:
+        print(f"bench loop: observer: {text}", file=sys.stderr)
+    try:
+        yield
+    finally:
+        rt.leave()
+
+
+def realtime(rate_hz: float, duration: float, out: Path, backend: str,
+             rt: tuple[str, list[int]] = ("", [])) -> dict[str, Any]:
     log = LatencyLog(round(1e9 / rate_hz))
-    result = run_scene(SCENE, realtime_overrides(rate_hz, duration), out, "realtime",
-                       prepare=observe(log), backends=[backend])
+    with observer_backend(backend), observer_realtime(rt[0]):
+        result = run_scene(SCENE, realtime_overrides(rate_hz, duration), out, "realtime",
+                           prepare=observe(log), backends=[backend], rt=rt[0], rt_cpus=rt[1])
     e = result.evaluation
-    return {"backend": backend, "rate_hz": rate_hz, **log.summary(),
-            "sim_overruns": e.get("overruns"), "steps": e["steps"]}
+    summary = log.summary()
+    seen = summary["answered"] + summary["unanswered"]
+    within = summary["answered"] - summary["deadline_misses"]
+    return {"backend": backend, "rate_hz": rate_hz, "rt": rt[0], "rt_cpus": rt[1], **summary,
+            "within_period_pct": 100.0 * within / seen if seen else float("nan"),
+            "sim_overruns": e.get("overruns"), "sim_deadline_misses": e.get("deadline_misses"),
+            "steps": e["steps"], "load_1min": os.getloadavg()[0]}
 
 
-def lockstep(out: Path, backend: str, one: dict[str, Any]) -> dict[str, Any]:
-    """The full LQG scene through the nodes on ``backend`` against ``one`` (one process)."""
+#: the goals of issue 10: (figure, key, rate or None, test, goal text)
+GOALS: tuple[tuple[str, str, float | None, Any, str], ...] = (
+    ("answered within the period [%]", "within_period_pct", 1000.0, lambda v: v >= 99.9,
+     ">= 99.9"),
+    ("latency p99 [us]", "p99_us", 1000.0, lambda v: v <= 500.0, "<= 500"),
+    ("latency max [us]", "max_us", 1000.0, lambda v: v <= 2000.0, "<= 2000"),
+    ("latency p99 [us]", "p99_us", 100.0, lambda v: v <= 500.0, "<= 500"),
+    ("lock-step through the nodes [steps/s]", "nodes_steps_per_s", None,
+     lambda v: v >= 2500.0, ">= 2500"),
+    ("one process [steps/s]", "one_process_steps_per_s", None, lambda v: v >= 20000.0,
+     ">= 20000"),
+    ("composed / one process", "composed_over_one_process", None, lambda v: v >= 0.7,
+     ">= 0.7"),
+)
+
+
+def goal_rows(rows: list[dict[str, Any]], speeds: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """Each measured figure with its goal of issue 10 and whether it is met."""
+    out = []
+    for figure, key, rate, test, goal in GOALS:
+        runs = [r for r in (speeds if rate is None else
+                            [r for r in rows if r["rate_hz"] == rate]) if key in r]
+        if key.startswith("one_process"):
+            runs = runs[:1]     # measured once, without DDS
+        for r in runs:
+            label = f"{figure}, {r['rate_hz']:g} Hz" if rate is not None else figure
+            backend = "-" if key.startswith("one_process") else r["backend"]
+            out.append({"figure": label, "backend": backend, "value": r[key],
+                        "goal": goal, "met": bool(test(r[key]))})
+    return out
+
+
+def lockstep(out: Path, backend: str, one: dict[str, Any], compose: bool) -> dict[str, Any]:
+    """The full LQG scene through the nodes on ``backend`` against ``one`` (one process);
+    with ``compose`` also with the estimator and controller composed in one process."""
     scene = load_scene(SCENE)
     started = time.perf_counter()
     nodes = run_scene(SCENE, [], out, "lockstep", backends=[backend]).evaluation
     launch_wall = time.perf_counter() - started
-    return {
+    composed = {}
+    if compose:
+        c = run_scene(SCENE, [], out / "composed", "lockstep", backends=[backend],
+                      compose=True).evaluation
+        composed = {"composed_steps_per_s": c["steps"] / c["wall_s"],
+                    "composed_over_one_process": one["loop_s"] / c["wall_s"],
+                    "composed_over_nodes": nodes["wall_s"] / c["wall_s"]}
+    return {**composed,
         "backend": backend, "scene": scene.name, "steps": nodes["steps"], "sim_s": scene.duration,
         "nodes_wall_s": nodes["wall_s"], "launch_wall_s": launch_wall,
         "nodes_steps_per_s": nodes["steps"] / nodes["wall_s"],
         "nodes_realtime_ratio": scene.duration / nodes["wall_s"],
-        "one_process_wall_s": one["wall_s"],
-        "one_process_steps_per_s": one["steps"] / one["wall_s"],
-        "nodes_over_one_process": one["wall_s"] / nodes["wall_s"],
+        "one_process_wall_s": one["loop_s"],
+        "one_process_steps_per_s": one["steps"] / one["loop_s"],
+        "nodes_over_one_process": one["loop_s"] / nodes["wall_s"],
         "lockstep_timeouts": nodes.get("lockstep_timeouts"),
         "reduction_pct": nodes["reduction_pct"],
     }
@@ -112,32 +214,49 @@ def run(args: argparse.Namespace) -> int:
     backends = args.backends or [b for b in api.BACKENDS if b == "dds" or api.has_rclpy()]
     for backend in backends:
         api.check_backend(backend, f"bench loop --backend {backend}")
-    one = run_closed_loop(load_scene(SCENE)).evaluation
+    rt = realtime_arguments(args)
+    rates = args.rates or list(RATES_HZ)
+    if not all(1.0 <= r <= 10_000.0 for r in rates):
+        raise InputError(f"bench loop: --rate must be 1..10000 Hz, got {rates}")
+    one = run_closed_loop(load_scene(SCENE)).evaluation if args.lockstep else {}
     rows, speeds = [], []
     with tempfile.TemporaryDirectory(prefix="stillframe-bench-loop-") as tmp:
         for backend in backends:
-            for rate in RATES_HZ:
-                print(f"{backend}: real time at {rate:g} Hz for {args.duration:g} s",
-                      file=sys.stderr)
+            for rate in rates:
+                print(f"{backend}: real time at {rate:g} Hz for {args.duration:g} s"
+                      + (f" (--rt {rt[0]})" if rt[0] else ""), file=sys.stderr)
                 rows.append(realtime(rate, args.duration, Path(tmp) / f"{backend}{rate:g}",
-                                     backend))
-            print(f"{backend}: lock-step, the full LQG scene", file=sys.stderr)
-            speeds.append(lockstep(Path(tmp) / f"{backend}-lockstep", backend, one))
+                                     backend, rt))
+            if args.lockstep:
+                print(f"{backend}: lock-step, the full LQG scene", file=sys.stderr)
+                speeds.append(lockstep(Path(tmp) / f"{backend}-lockstep", backend, one,
+                                       args.compose))
+    goals = goal_rows(rows, speeds)
     if args.json:
-        emit_json({"realtime": rows, "lockstep": speeds})
+        emit_json({"realtime": rows, "lockstep": speeds, "goals": goals,
+                   "cpus": os.cpu_count()})
         return 0
     print(format_table(
-        ["backend", "rate [Hz]", "samples", "answered", "p50 [us]", "p99 [us]", "max [us]",
-         "deadline misses", "unanswered", "sim overruns"],
-        [[r["backend"], f"{r['rate_hz']:g}", r["samples"], r["answered"], f"{r['p50_us']:.0f}",
+        ["backend", "rate [Hz]", "samples", "answered", "within period [%]", "p50 [us]",
+         "p99 [us]", "max [us]", "deadline misses", "unanswered", "sim overruns", "load"],
+        [[r["backend"], f"{r['rate_hz']:g}", r["samples"], r["answered"],
+          f"{r['within_period_pct']:.2f}", f"{r['p50_us']:.0f}",
           f"{r['p99_us']:.0f}", f"{r['max_us']:.0f}", r["deadline_misses"], r["unanswered"],
-          r["sim_overruns"] if r["sim_overruns"] is not None else "-"] for r in rows]))
+          r["sim_overruns"] if r["sim_overruns"] is not None else "-",
+          f"{r['load_1min']:.2f}"] for r in rows]))
+    print(format_table(["figure", "backend", "measured", "goal", "met"],
+                       [[g["figure"], g["backend"], f"{g['value']:.4g}", g["goal"],
+                         "yes" if g["met"] else "NO"] for g in goals]))
+    if not speeds:
+        return 0
     print(format_table(
         ["lock-step", "steps", "wall [s]", "steps/s", "x real time", "/ one process",
          "timeouts"],
         [[s["backend"], s["steps"], f"{s['nodes_wall_s']:.2f}", f"{s['nodes_steps_per_s']:.0f}",
           f"{s['nodes_realtime_ratio']:.2f}", f"{s['nodes_over_one_process']:.2f}",
           s["lockstep_timeouts"]] for s in speeds]
-        + [["one process", one["steps"], f"{one['wall_s']:.2f}",
-            f"{one['steps'] / one['wall_s']:.0f}", "", "1.00", ""]]))
+        + [[f"{s['backend']} composed", s["steps"], "", f"{s['composed_steps_per_s']:.0f}", "",
+            f"{s['composed_over_one_process']:.2f}", ""] for s in speeds if args.compose]
+        + [["one process", one["steps"], f"{one['loop_s']:.2f}",
+            f"{one['steps'] / one['loop_s']:.0f}", "", "1.00", ""]]))
     return 0

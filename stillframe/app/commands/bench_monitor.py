@@ -1,11 +1,14 @@
-"""``stillframe bench monitor``: the lock-step loop with and without a monitor attached.
+"""``stillframe bench monitor``: the loop's ``bench loop`` figures with and without a monitor.
 
-The full LQG scene through the three nodes, alternately without and with ``stillframe monitor
---dashboard`` beside them, a Foxglove client subscribed to every topic and the dashboard's data
-polled twice a second (what an open browser tab does); the client counts the messages without
-decoding them (a viewer's decoding happens in its own process). Figures: sim_node's loop wall time
-(without process start-up), steps per second, and the ratio with / without, best of
-``--repeats`` runs each.
+The LQG scene through the three nodes, without and with ``stillframe monitor --dashboard`` beside
+them, a Foxglove client subscribed to every topic (counting the messages: a viewer decodes in its
+own process) and the dashboard's data polled twice a second (what an open browser tab does).
+Two figures of ``bench loop``: the full scene in lock-step (steps per second of sim_node's loop,
+without process start-up), and real time at ``--rate`` (samples answered within the period and
+the command latency p99, seen by an observer in this process). Each repeat runs both kinds in
+both orders (without first, then with first, alternately) so that drift of the machine's load
+cancels; the figures are the medians over the repeats, and the monitor's cost is the ratio
+of the medians, against a bound of 10 %.
 """
 
 from __future__ import annotations
@@ -17,14 +20,16 @@ import socket
 import sys
 import tempfile
 import threading
-import time
 import urllib.request
 from pathlib import Path
 from typing import Any
 
-from stillframe.app.commands.bench_loop import SCENE
+import numpy as np
+
+from stillframe.app.commands.bench_loop import SCENE, observe, realtime_overrides
 from stillframe.app.commands.common import add_json_argument, emit_json
 from stillframe.errors import InputError
+from stillframe.loop.latency import LatencyLog
 from stillframe.monitor.foxglove_client import Capture, capture
 from stillframe.text_table import format_table
 
@@ -32,10 +37,15 @@ POLL_PERIOD_S = 0.5
 
 
 def register(benches: argparse._SubParsersAction) -> None:
-    parser = benches.add_parser("monitor", help="lock-step loop speed with and without a monitor",
+    parser = benches.add_parser("monitor",
+                                help="the loop's figures with and without a monitor attached",
                                 description=__doc__.split("\n\n", 1)[1])
-    parser.add_argument("--repeats", type=int, default=2, metavar="N",
-                        help="runs of each kind, alternating (default 2)")
+    parser.add_argument("--repeats", type=int, default=3, metavar="N",
+                        help="runs of each kind, in alternating order (default 3)")
+    parser.add_argument("--rate", type=float, default=1000.0, metavar="HZ",
+                        help="sample rate of the real-time runs (default 1000)")
+    parser.add_argument("--duration", type=float, default=10.0, metavar="S",
+                        help="seconds of each real-time run (default 10)")
     add_json_argument(parser)
     parser.set_defaults(func=run)
 
@@ -85,46 +95,99 @@ class Watchers:
         self._thread.join(30)
 
 
-def one_run(out: Path, monitored: bool) -> dict[str, Any]:
+#: the monitor may cost the loop at most this fraction of a figure
+BOUND = 0.10
+
+
+def one_run(out: Path, mode: str, monitored: bool, rate_hz: float, duration: float
+            ) -> dict[str, Any]:
+    """One launch of the LQG scene: lock-step (the full scene) or real time at ``rate_hz`` for
+    ``duration`` s; with ``monitored``, a monitor and its watchers beside the nodes."""
     from stillframe.app.launcher import run_scene
 
-    if not monitored:
-        evaluation = run_scene(SCENE, [], out, "lockstep").evaluation
-        return {"wall_s": evaluation["wall_s"], "steps": evaluation["steps"]}
-    ws_port, http_port = free_port(), free_port()
-    watchers = Watchers(ws_port, http_port)
+    overrides = [] if mode == "lockstep" else realtime_overrides(rate_hz, duration)
+    log = LatencyLog(round(1e9 / rate_hz))
+    prepare = observe(log) if mode == "realtime" else None
+    watchers, monitor_args = None, None
+    if monitored:
+        ws_port, http_port = free_port(), free_port()
+        watchers = Watchers(ws_port, http_port)
+        monitor_args = ["--port", str(ws_port), "--dashboard-port", str(http_port)]
     try:
-        evaluation = run_scene(SCENE, [], out, "lockstep", monitor_args=[
-            "--port", str(ws_port), "--dashboard-port", str(http_port)]).evaluation
+        evaluation = run_scene(SCENE, overrides, out, mode, prepare=prepare,
+                               monitor_args=monitor_args).evaluation
     finally:
-        watchers.stop()
-    return {"wall_s": evaluation["wall_s"], "steps": evaluation["steps"],
-            "client_messages": sum(len(m) for m in watchers.seen.messages.values()),
-            "client_topics": len(watchers.seen.messages), "dashboard_polls": watchers.polls}
+        if watchers is not None:
+            watchers.stop()
+    figures: dict[str, Any] = {"steps": evaluation["steps"]}
+    if mode == "lockstep":
+        figures["steps_per_s"] = evaluation["steps"] / evaluation["wall_s"]
+    else:
+        latency = log.summary()
+        figures["within_period_pct"] = 100.0 * (
+            latency["answered"] - latency["deadline_misses"]) / max(latency["samples"], 1)
+        figures["p99_us"] = latency["p99_us"]
+    if watchers is not None:
+        figures["client_messages"] = sum(len(m) for m in watchers.seen.messages.values())
+        figures["client_topics"] = len(watchers.seen.messages)
+        figures["dashboard_polls"] = watchers.polls
+    return figures
+
+
+#: (mode, figure, label, True if larger is better)
+FIGURES: tuple[tuple[str, str, str, bool], ...] = (
+    ("lockstep", "steps_per_s", "lock-step steps/s", True),
+    ("realtime", "within_period_pct", "real time: answered within the period [%]", True),
+    ("realtime", "p99_us", "real time: latency p99 [us]", False),
+)
+
+
+def compare(runs: dict[str, dict[str, list[dict[str, Any]]]]) -> list[dict[str, Any]]:
+    """Per figure: the medians without and with the monitor, their ratio, and whether the
+    monitor costs at most :data:`BOUND` of it."""
+    rows = []
+    for mode, key, label, larger_is_better in FIGURES:
+        without = float(np.median([r[key] for r in runs[mode]["without"]]))
+        with_ = float(np.median([r[key] for r in runs[mode]["with"]]))
+        ratio = with_ / without
+        cost = 1.0 - ratio if larger_is_better else ratio - 1.0
+        rows.append({"figure": label, "mode": mode, "key": key, "without": without,
+                     "with": with_, "with_over_without": ratio, "monitor_cost": cost,
+                     "within_bound": bool(cost <= BOUND)})
+    return rows
 
 
 def run(args: argparse.Namespace) -> int:
     if args.repeats < 1:
         raise InputError(f"bench monitor: --repeats must be >= 1, got {args.repeats}")
-    runs: dict[str, list[dict[str, Any]]] = {"without": [], "with": []}
+    if not args.rate > 0:
+        raise InputError(f"bench monitor: --rate must be > 0 Hz, got {args.rate:g}")
+    if not args.duration >= 1.0:
+        raise InputError(f"bench monitor: --duration must be >= 1 s, got {args.duration:g}")
+    runs: dict[str, dict[str, list[dict[str, Any]]]] = {
+        mode: {"without": [], "with": []} for mode in ("lockstep", "realtime")}
+    total = 4 * args.repeats
     with tempfile.TemporaryDirectory(prefix="stillframe-bench-monitor-") as tmp:
         for i in range(args.repeats):
-            for kind in runs:
-                print(f"run {i + 1}/{args.repeats}: lock-step LQG {kind} a monitor",
-                      file=sys.stderr)
-                started = time.perf_counter()
-                runs[kind].append(one_run(Path(tmp) / f"{kind}{i}", kind == "with"))
-                print(f"  {runs[kind][-1]['wall_s']:.2f} s loop, "
-                      f"{time.perf_counter() - started:.1f} s in all", file=sys.stderr)
-    best = {kind: min(rs, key=lambda r: r["wall_s"]) for kind, rs in runs.items()}
-    ratio = best["without"]["wall_s"] / best["with"]["wall_s"]
+            order = ("without", "with") if i % 2 == 0 else ("with", "without")
+            for mode in runs:
+                for kind in order:
+                    done = sum(len(r) for m in runs.values() for r in m.values())
+                    print(f"[{done + 1}/{total}] {mode} {kind} a monitor", file=sys.stderr)
+                    runs[mode][kind].append(one_run(
+                        Path(tmp) / f"{mode}-{kind}{i}", mode, kind == "with", args.rate,
+                        args.duration))
+    rows = compare(runs)
     if args.json:
-        emit_json({"runs": runs, "best": best, "speed_with_over_without": ratio})
+        emit_json({"rate_hz": args.rate, "duration_s": args.duration, "repeats": args.repeats,
+                   "bound": BOUND, "runs": runs, "figures": rows})
         return 0
     print(format_table(
-        ["", "loop wall [s]", "steps", "steps/s", "client msgs", "topics", "dashboard polls"],
-        [[kind, f"{b['wall_s']:.2f}", b["steps"], f"{b['steps'] / b['wall_s']:.0f}",
-          b.get("client_messages", "-"), b.get("client_topics", "-"),
-          b.get("dashboard_polls", "-")] for kind, b in best.items()]))
-    print(f"speed with a monitor / without: {ratio:.3f} (best of {args.repeats} each)")
+        ["figure", "without", "with", "with / without", "monitor's cost", "goal"],
+        [[r["figure"], f"{r['without']:.1f}", f"{r['with']:.1f}",
+          f"{r['with_over_without']:.3f}", f"{100 * r['monitor_cost']:+.1f} %",
+          f"<= {100 * BOUND:.0f} %: {'met' if r['within_bound'] else 'NOT met'}"]
+         for r in rows]))
+    print(f"medians of {args.repeats} runs each; real time at {args.rate:g} Hz for "
+          f"{args.duration:g} s")
     return 0

@@ -66,6 +66,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                         help="with --monitor: dashboard port (default 8080; 0: any)")
     parser.add_argument("--out", type=Path, default=None, metavar="DIR",
                         help="keep sim_node's result.json and result.npz (histories) here")
+    parser.add_argument("--compose", action="store_true",
+                        help="estimator and controller in one process (container_node): "
+                             "estimates handed over in-process, still published")
+    add_realtime_arguments(parser)
     add_netns_arguments(parser)
     add_fault_argument(parser)
     parser.set_defaults(func=run)
@@ -124,6 +128,31 @@ def print_evaluation(evaluation: dict[str, Any], scene: Scene) -> None:
           f"{evaluation['wall_s']:.2f} s wall" + (f"; {', '.join(extras)}" if extras else ""))
 
 
+def add_realtime_arguments(parser: argparse.ArgumentParser) -> None:
+    """``--rt [PRACTICES]`` and ``--rt-cpus`` (shared with ``bench loop``)."""
+    parser.add_argument("--rt", nargs="?", const="all", default="", metavar="PRACTICES",
+                        help="real-time mode for the loop nodes: 'all' (the default with --rt) "
+                             "or a comma list of mlock, gc, fifo, affinity, spin "
+                             "(docs/realtime.md)")
+    parser.add_argument("--rt-cpus", default="", metavar="CPUS",
+                        help="with --rt affinity: pin the loop nodes to these CPUs (e.g. 1)")
+
+
+def realtime_arguments(args: argparse.Namespace) -> tuple[str, list[int]]:
+    """The checked ``--rt`` practices and ``--rt-cpus`` CPUs."""
+    from stillframe.loop.realtime import parse_cpus, parse_practices
+
+    practices = parse_practices(args.rt)
+    try:
+        cpus = [int(c) for c in args.rt_cpus.split(",") if c.strip()]
+    except ValueError:
+        raise InputError(f"--rt-cpus {args.rt_cpus!r}: expected CPU numbers, e.g. 1 or 0,1") \
+            from None
+    if cpus and not practices:
+        raise InputError("--rt-cpus needs --rt")
+    return ",".join(sorted(practices)), list(parse_cpus(cpus)) if cpus else []
+
+
 def report_death(command: str, exc: Exception) -> int:
     """One line naming the dead node, then the last lines it printed."""
     print(f"stillframe {command}: error: {exc}", file=sys.stderr)
@@ -137,6 +166,7 @@ def run(args: argparse.Namespace) -> int:
     from stillframe.app.net_faults import hosts_if
 
     scene = scene_from_args(args)
+    rt, rt_cpus = realtime_arguments(args)
     if args.record_topics and args.record is None:
         raise InputError("--record-topic needs --record DIR")
     with tempfile.TemporaryDirectory(prefix="stillframe-launch-") as tmp:
@@ -147,7 +177,8 @@ def run(args: argparse.Namespace) -> int:
                                    record_topics=args.record_topics, backends=args.backends,
                                    monitor_args=["--port", str(args.monitor_port),
                                                  "--dashboard-port", str(args.dashboard_port)]
-                                   if args.monitor else None, hosts=hosts)
+                                   if args.monitor else None, compose=args.compose, rt=rt,
+                                   rt_cpus=rt_cpus, hosts=hosts)
         except NodeDiedError as exc:
             return report_death("launch", exc)
         except KeyboardInterrupt:

@@ -89,7 +89,8 @@ def run(args: argparse.Namespace) -> int:
         node.get_logger().info(f"{READY_LINE}: {where}")
         spin(node)
         server.stop()
-        node.get_logger().info(f"Forwarded {len(bridge.channels)} topics")
+        counts = ", ".join(f"{topic} {n}" for topic, n in sorted(bridge.forwarded.items()))
+        node.get_logger().info(f"Forwarded {len(bridge.channels)} topics: {counts}")
     finally:
         node.destroy_node()
     return 0

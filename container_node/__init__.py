@@ -1,0 +1,1 @@
+"""The estimator and the controller composed in one process (``stillframe launch --compose``)."""

@@ -1,0 +1,216 @@
+"""Opt-in real-time practice for the loop nodes, as ros2_control applies it (docs/realtime.md).
+
+The node parameter ``rt`` names the practices to apply (``all``, or a comma list; empty: none):
+
+- ``mlock``: ``mlockall(MCL_CURRENT | MCL_FUTURE)``, no page faults in the loop;
+- ``gc``: the objects made while setting up frozen (``gc.freeze``) and the collector off inside the
+  loop; the node collects the young generations itself between periods (:meth:`Realtime.idle`);
+- ``fifo``: ``SCHED_FIFO`` at ``rt_priority`` for the main thread and the DDS receive and
+  delivery threads (not inherited by child processes), and a timer slack of 1 ns;
+- ``affinity``: every thread pinned to the CPUs of ``rt_cpus`` (e.g. ``[1]``);
+- ``spin``: sim_node sleeps until ``spin_margin_us`` before a due time and polls from there
+  (:func:`stillframe.loop.pacing.wait_until`).
+
+A practice the OS refuses (no root, no ``CAP_SYS_NICE``, no ``RLIMIT_MEMLOCK``) is skipped with one
+warning naming it and why; the node runs on without it.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import ctypes
+import gc
+import os
+from dataclasses import dataclass, field
+from typing import Any
+
+from stillframe.errors import InputError
+
+PRACTICES = ("mlock", "gc", "fifo", "affinity", "spin")
+MCL_CURRENT, MCL_FUTURE = 1, 2
+PR_SET_TIMERSLACK = 29
+#: name prefixes of the threads a sample passes through: Cyclone's receive threads (``recv``,
+#: ``recvUC``, ``recvMC``) and delivery queues (``dq.user``, ``dq.builtins``), Fast DDS's receive
+#: threads
+RECEIVE_THREADS = ("recv", "dq.", "dds.udp", "dds.shm")
+#: ``rt_cpus`` default: the CPUs the process was started with
+NO_PINNING = -1
+#: young objects the collector may leave before :meth:`Realtime.idle` collects generation 0
+GC_YOUNG = 700
+#: generation-0 collections before :meth:`Realtime.idle` collects generation 1
+GC_OLDER = 10
+
+
+@dataclass
+class RealtimeOptions:
+    """What ``rt``, ``rt_priority``, ``rt_cpus`` and ``spin_margin_us`` ask for."""
+
+    practices: frozenset[str] = frozenset()
+    priority: int = 80
+    cpus: tuple[int, ...] = ()
+    spin_margin_us: float = 200.0
+
+
+def parse_practices(text: str) -> frozenset[str]:
+    """``all``, a comma list of :data:`PRACTICES`, or empty; InputError otherwise."""
+    words = {w.strip() for w in text.split(",") if w.strip()}
+    if words == {"all"}:
+        return frozenset(PRACTICES)
+    unknown = words - set(PRACTICES)
+    if unknown:
+        raise InputError(f"parameter 'rt': unknown practice(s) {', '.join(sorted(unknown))} "
+                         f"(expected 'all' or a comma list of {', '.join(PRACTICES)})")
+    return frozenset(words)
+
+
+def parse_cpus(values: list[int]) -> tuple[int, ...]:
+    """The CPUs of ``rt_cpus`` (``[-1]``: no pinning); InputError for CPUs this process may not
+    use."""
+    if list(values) == [NO_PINNING]:
+        return ()
+    available = os.sched_getaffinity(0)
+    if not values or any(not isinstance(c, int) or c not in available for c in values):
+        raise InputError(f"parameter 'rt_cpus': expected CPUs of {sorted(available)} "
+                         f"(or [-1]: no pinning), got {values!r}")
+    return tuple(values)
+
+
+def declare_realtime(node: Any) -> RealtimeOptions:
+    """Declare the real-time parameters (read-only) and return what they ask for."""
+    practices = parse_practices(str(node.declare_parameter("rt", "", read_only=True).value))
+    priority = node.declare_parameter("rt_priority", 80, read_only=True).value
+    lo, hi = os.sched_get_priority_min(os.SCHED_FIFO), os.sched_get_priority_max(os.SCHED_FIFO)
+    if not (isinstance(priority, int) and lo <= priority <= hi):
+        raise InputError(f"parameter 'rt_priority': expected an integer {lo}..{hi}, "
+                         f"got {priority!r}")
+    cpus = parse_cpus(list(node.declare_parameter("rt_cpus", [NO_PINNING], read_only=True).value))
+    margin = node.declare_parameter("spin_margin_us", 200.0, read_only=True).value
+    if not (isinstance(margin, float) and 0 <= margin <= 10_000):
+        raise InputError(f"parameter 'spin_margin_us': expected 0..10000, got {margin!r}")
+    return RealtimeOptions(practices, priority, cpus, margin)
+
+
+def _threads() -> list[int]:
+    """The thread ids of this process (scheduling and affinity are per thread on Linux)."""
+    return [int(t) for t in os.listdir("/proc/self/task")]
+
+
+def _loop_threads() -> list[int]:
+    """The main thread and the DDS threads a sample passes through (:data:`RECEIVE_THREADS`).
+    Cyclone's housekeeping threads (``gc``, ``tev``) stay SCHED_OTHER: with every thread at
+    SCHED_FIFO and the three nodes pinned to one CPU, the loop stopped (docs/realtime.md)."""
+    main = os.getpid()
+    found = []
+    for tid in _threads():
+        try:
+            with open(f"/proc/self/task/{tid}/comm") as comm:
+                name = comm.read().strip()
+        except OSError:       # ended meanwhile
+            continue
+        if tid == main or name.startswith(RECEIVE_THREADS):
+            found.append(tid)
+    return found
+
+
+def _errno_text(errno: int) -> str:
+    return f"{os.strerror(errno)} (errno {errno})"
+
+
+@dataclass
+class Realtime:
+    """The practices in effect in this process, and the collector's work between periods."""
+
+    options: RealtimeOptions
+    applied: list[str] = field(default_factory=list)
+    refused: list[str] = field(default_factory=list)
+    gc_off: bool = False
+    young_collections: int = 0
+
+    @property
+    def spin_margin_ns(self) -> int:
+        """How long before a due time sim_node stops sleeping and polls (0: no polling)."""
+        return round(self.options.spin_margin_us * 1e3) if "spin" in self.options.practices else 0
+
+    def enter(self) -> None:
+        """Apply every practice asked for (call once, after the node's entities exist, so the
+        DDS threads are there to be scheduled)."""
+        asked = self.options.practices
+        if "mlock" in asked:
+            self._mlock()
+        if "fifo" in asked:
+            self._fifo()
+        if "affinity" in asked and self.options.cpus:
+            self._try("affinity", lambda: [os.sched_setaffinity(tid, self.options.cpus)
+                                           for tid in _threads()],
+                      f"CPUs {','.join(map(str, self.options.cpus))}")
+        if "gc" in asked:
+            gc.collect()
+            gc.freeze()
+            gc.disable()
+            self.gc_off = True
+            self.applied.append("gc frozen and off in the loop")
+        if "spin" in asked:
+            self.applied.append(f"sleep/spin timing ({self.options.spin_margin_us:g} us)")
+
+    def _try(self, name: str, call: Any, done: str) -> bool:
+        try:
+            call()
+        except OSError as exc:
+            self.refused.append(f"{name} refused: {_errno_text(exc.errno or 0)}")
+            return False
+        self.applied.append(done)
+        return True
+
+    def _mlock(self) -> None:
+        libc = ctypes.CDLL(None, use_errno=True)
+        if libc.mlockall(MCL_CURRENT | MCL_FUTURE) == 0:
+            self.applied.append("memory locked")
+        else:
+            self.refused.append(f"mlockall refused: {_errno_text(ctypes.get_errno())} "
+                                "(needs CAP_IPC_LOCK or a larger RLIMIT_MEMLOCK)")
+
+    def _fifo(self) -> None:
+        param = os.sched_param(self.options.priority)
+        threads = _loop_threads()
+        try:
+            for tid in threads:   # children started later do not inherit it
+                os.sched_setscheduler(tid, os.SCHED_FIFO | os.SCHED_RESET_ON_FORK, param)
+        except OSError as exc:
+            self.refused.append(f"SCHED_FIFO refused: {_errno_text(exc.errno or 0)} (needs root "
+                                "or CAP_SYS_NICE and an rtprio limit)")
+            return
+        ctypes.CDLL(None, use_errno=True).prctl(PR_SET_TIMERSLACK, 1, 0, 0, 0)
+        self.applied.append(f"SCHED_FIFO {self.options.priority} on {len(threads)} threads")
+
+    def leave(self) -> None:
+        """Back to SCHED_OTHER and the collector on (for a process that goes on with other
+        work; the nodes stay real-time to their end)."""
+        if any(text.startswith("SCHED_FIFO") for text in self.applied):
+            for tid in _loop_threads():
+                with contextlib.suppress(OSError):   # a thread that ended meanwhile
+                    os.sched_setscheduler(tid, os.SCHED_OTHER, os.sched_param(0))
+        if self.gc_off:
+            gc.enable()
+            self.gc_off = False
+
+    def report(self, logger: Any) -> None:
+        """One info line of what is in effect, one warning per refused practice."""
+        if self.applied:
+            logger.info(f"real-time: {'; '.join(self.applied)}")
+        for text in self.refused:
+            logger.warning(f"real-time: {text}; going on without it")
+
+    def idle(self) -> None:
+        """Between periods, with the collector off: collect the young generation when it has
+        grown, the middle one every :data:`GC_OLDER` times (never the frozen setup objects)."""
+        if self.gc_off and gc.get_count()[0] > GC_YOUNG:
+            self.young_collections += 1
+            gc.collect(1 if self.young_collections % GC_OLDER == 0 else 0)
+
+
+def start_realtime(node: Any, options: RealtimeOptions) -> Realtime:
+    """Enter the practices of ``options`` and log what took effect."""
+    rt = Realtime(options)
+    rt.enter()
+    rt.report(node.get_logger())
+    return rt

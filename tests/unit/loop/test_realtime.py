@@ -1,0 +1,149 @@
+"""The real-time practices (stillframe.loop.realtime) and the sleep/spin pacing: what the OS
+reports after each practice, the refusal messages of an unprivileged process, the collector's
+work between periods, and the waits of ``wait_until`` on a scripted clock."""
+
+from __future__ import annotations
+
+import gc
+import json
+import os
+import subprocess
+import sys
+
+import pytest
+
+from stillframe.errors import InputError
+from stillframe.locations import REPO_ROOT
+from stillframe.loop.pacing import wait_until
+from stillframe.loop.realtime import (
+    GC_YOUNG,
+    PRACTICES,
+    Realtime,
+    RealtimeOptions,
+    parse_cpus,
+    parse_practices,
+)
+
+ROOT = os.geteuid() == 0
+
+
+def test_practices_and_cpus_are_parsed_and_bad_ones_refused() -> None:
+    assert parse_practices("all") == frozenset(PRACTICES)
+    assert parse_practices(" gc, fifo ") == {"gc", "fifo"}
+    assert parse_practices("") == frozenset()
+    with pytest.raises(InputError, match=r"unknown practice.*turbo"):
+        parse_practices("gc,turbo")
+    assert parse_cpus([-1]) == ()
+    cpu = min(os.sched_getaffinity(0))
+    assert parse_cpus([cpu]) == (cpu,)
+    with pytest.raises(InputError, match="rt_cpus"):
+        parse_cpus([10_000])
+
+
+def run_child(code: str) -> dict:
+    """Run ``code`` in a fresh interpreter; it prints one JSON line."""
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          cwd=REPO_ROOT, timeout=60)
+    assert done.returncode == 0, done.stderr
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+ENTER = """
+import ctypes, json, os, threading, time
+from stillframe.loop.realtime import Realtime, RealtimeOptions
+
+def named(name):   # a thread with an OS name, as Cyclone names its threads
+    ctypes.CDLL(None).prctl(15, name.encode())
+    time.sleep(5)
+
+for name in ("recvUC", "tev"):
+    threading.Thread(target=named, args=(name,), daemon=True).start()
+time.sleep(0.2)
+{before}
+rt = Realtime(RealtimeOptions(frozenset({practices}), 42, ({cpu},)))
+rt.enter()
+threads = {{}}
+for t in os.listdir("/proc/self/task"):
+    name = open(f"/proc/self/task/{{t}}/comm").read().strip()
+    name = "main" if int(t) == os.getpid() else name
+    policy = os.sched_getscheduler(int(t)) & ~os.SCHED_RESET_ON_FORK
+    threads[name] = [policy, os.sched_getparam(int(t)).sched_priority,
+                     sorted(os.sched_getaffinity(int(t)))]
+child = os.fork()
+if child == 0:
+    os._exit(0 if os.sched_getscheduler(0) == os.SCHED_OTHER else 1)
+_, status = os.waitpid(child, 0)
+print(json.dumps({{"applied": rt.applied, "refused": rt.refused, "threads": threads,
+    "child_other": status == 0, "fifo": os.SCHED_FIFO, "other": os.SCHED_OTHER}}))
+"""
+
+
+@pytest.mark.skipif(not ROOT, reason="SCHED_FIFO and mlockall need root here")
+def test_fifo_affinity_and_mlock_reach_every_thread_and_not_children() -> None:
+    cpu = max(os.sched_getaffinity(0))
+    out = run_child(ENTER.format(before="", practices='{"fifo", "affinity", "mlock"}', cpu=cpu))
+    assert out["refused"] == []
+    assert "memory locked" in out["applied"]
+    fifo, other = out["fifo"], out["other"]
+    threads = out["threads"]
+    assert threads["main"][:2] == [fifo, 42] and threads["recvUC"][:2] == [fifo, 42]
+    assert threads["tev"][:2] == [other, 0]               # housekeeping stays SCHED_OTHER
+    assert all(t[2] == [cpu] for t in threads.values())     # affinity: every thread
+    assert out["child_other"]                               # SCHED_RESET_ON_FORK
+    with open("/proc/self/status") as status:               # this process is untouched
+        assert "VmLck:\t       0 kB" in status.read()
+
+
+@pytest.mark.skipif(not ROOT, reason="needs root to become an unprivileged user")
+def test_an_unprivileged_process_is_told_what_was_refused_and_why() -> None:
+    cpu = max(os.sched_getaffinity(0))
+    before = ("import resource; resource.setrlimit(resource.RLIMIT_RTPRIO, (0, 0)); "
+              "resource.setrlimit(resource.RLIMIT_MEMLOCK, (65536, 65536)); os.setuid(65534)")
+    out = run_child(ENTER.format(before=before, practices='{"fifo", "mlock", "gc"}', cpu=cpu))
+    assert any(r.startswith("SCHED_FIFO refused: Operation not permitted") for r in out["refused"])
+    assert any(r.startswith("mlockall refused:") for r in out["refused"])
+    assert out["applied"] == ["gc frozen and off in the loop"]
+    assert all(t[0] == out["other"] for t in out["threads"].values())
+
+
+def test_collector_is_off_in_the_loop_and_idle_collects_the_young_generation() -> None:
+    rt = Realtime(RealtimeOptions(frozenset({"gc"})))
+    rt.enter()
+    try:
+        assert not gc.isenabled()
+        rt.idle()
+        assert rt.young_collections == 0                    # nothing young yet
+        garbage = []
+        for _ in range(2 * GC_YOUNG):                       # reference cycles: only gc frees them
+            cycle: list = []
+            cycle.append(cycle)
+            garbage.append(cycle)
+        del garbage, cycle
+        assert gc.get_count()[0] > GC_YOUNG
+        rt.idle()
+        assert rt.young_collections == 1 and gc.get_count()[0] < GC_YOUNG
+    finally:
+        rt.leave()
+        gc.unfreeze()
+    assert gc.isenabled()
+
+
+def test_wait_until_sleeps_to_the_margin_then_polls() -> None:
+    """A scripted clock: each wait(s) advances it by s plus 30 ns of call overhead."""
+    clock = [0]
+    waits: list[float] = []
+
+    def wait(seconds: float) -> None:
+        waits.append(seconds)
+        clock[0] += round(seconds * 1e9) + 30
+
+    wait_until(1000, lambda: clock[0], wait, spin_margin_ns=200)
+    assert waits[0] == pytest.approx(800e-9)                # sleep to 200 ns before due
+    assert all(w == 0.0 for w in waits[1:])                 # then poll
+    assert 1000 <= clock[0] < 1000 + 30
+    clock[0], waits[:] = 0, []
+    wait_until(1000, lambda: clock[0], wait)                # no margin: sleep all the way
+    assert waits[0] == pytest.approx(1000e-9) and len(waits) == 1
+    waits[:] = []
+    wait_until(500, lambda: clock[0], wait, 200)            # already past due: no wait
+    assert waits == []
