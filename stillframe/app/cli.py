@@ -32,6 +32,7 @@ COMMANDS: tuple[str, ...] = (
     "stillframe.app.commands.experiment",
     "stillframe.app.commands.ph",
     "stillframe.app.commands.montecarlo",
+    "stillframe.app.commands.netns",
 )
 
 

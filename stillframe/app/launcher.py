@@ -287,6 +287,10 @@ class LaunchOptions:
     #: the loop nodes' real-time practices and CPUs (stillframe.loop.realtime; "": none)
     rt: str = ""
     rt_cpus: list[int] = field(default_factory=list)
+    #: a command prefix per node that runs it on another host (``ip netns exec``,
+    #: :mod:`stillframe.app.netns_lab`; the container on the estimator's); a node not named
+    #: runs here
+    hosts: dict[str, list[str]] = field(default_factory=dict)
 
 
 class Launcher:
@@ -321,8 +325,9 @@ class Launcher:
         if o.record_dir is not None and o.mode == "lockstep":
             sim_params["await_recorder"] = [
                 names.resolve_topic(t) for t in o.record_topics] or ["*"]
-        if o.lockstep_timeout_s is not None:
-            sim_params["lockstep_timeout_s"] = float(o.lockstep_timeout_s)
+        # every loop node: the estimator's and controller's lock-step waits are parts of it
+        shared = ({} if o.lockstep_timeout_s is None
+                  else {"lockstep_timeout_s": float(o.lockstep_timeout_s)})
         scene = o.scene.resolve()
         children = []
         if o.record_dir is not None:
@@ -339,9 +344,10 @@ class Launcher:
             nodes = ["sim_node", CONTAINER]
         # the container takes no real-time parameters (it composes two nodes' loops)
         rt = {"rt": o.rt, **({"rt_cpus": o.rt_cpus} if o.rt_cpus else {})} if o.rt else {}
-        children += [(name, node_command(name, scene, o.overrides, o.mode, {
-                         **(rt if name != CONTAINER else {}),
-                         **(sim_params if name == "sim_node" else {})}))
+        children += [(name, [*o.hosts.get("estimator_node" if name == CONTAINER else name, []),
+                             *node_command(name, scene, o.overrides, o.mode, {
+                                 **shared, **(rt if name != CONTAINER else {}),
+                                 **(sim_params if name == "sim_node" else {})})])
                      for name in reversed(nodes)]
         return children
 
@@ -419,20 +425,22 @@ def run_scene(scene: Path, overrides: Sequence[str], out: Path, mode: str = "loc
               prepare: Callable[[Any], None] | None = None,
               record_topics: Sequence[str] = (), backends: Sequence[str] = (),
               monitor_args: Sequence[str] | None = None, compose: bool = False,
-              rt: str = "", rt_cpus: Sequence[int] = ()) -> LaunchResult:
+              rt: str = "", rt_cpus: Sequence[int] = (),
+              hosts: dict[str, list[str]] | None = None) -> LaunchResult:
     """Launch ``scene`` through the three nodes to its end; sim_node's results go to ``out``
     (``result.json``, ``result.npz``); ``record`` records ``record_topics`` (default all) into
     a bag; ``backends`` are ``--backend`` values (:func:`parse_backends`); ``monitor_args``
     (e.g. ports) start ``stillframe monitor`` beside the nodes; ``compose`` runs the estimator
     and the controller in one process (``container_node``); ``rt`` and ``rt_cpus`` are the
-    loop nodes' real-time practices and CPUs (:mod:`stillframe.loop.realtime`).
+    loop nodes' real-time practices and CPUs (:mod:`stillframe.loop.realtime`); ``hosts``
+    runs nodes on other hosts (:attr:`LaunchOptions.hosts`).
     ``prepare(node)`` may subscribe the launcher's hidden node to more topics before the
     children start."""
     out.mkdir(parents=True, exist_ok=True)
     launcher = Launcher(LaunchOptions(scene, list(overrides), mode, out / "result.json", record,
                                       lockstep_timeout_s, list(record_topics), list(backends),
                                       None if monitor_args is None else list(monitor_args),
-                                      compose, rt, list(rt_cpus)))
+                                      compose, rt, list(rt_cpus), dict(hosts or {})))
     if prepare is not None:
         prepare(launcher.node)
     return launcher.run()

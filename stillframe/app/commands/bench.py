@@ -19,6 +19,7 @@ BENCHES: tuple[str, ...] = (
     "stillframe.app.commands.bench_fidelity",
     "stillframe.app.commands.bench_speed",
     "stillframe.app.commands.bench_montecarlo",
+    "stillframe.app.commands.bench_faults",
 )
 
 

@@ -23,6 +23,7 @@ from stillframe.app.commands.common import (
     scene_from_args,
 )
 from stillframe.app.launcher import MODES
+from stillframe.app.net_faults import FAULTS
 from stillframe.config.scene import Scene
 from stillframe.errors import InputError
 from stillframe.text_table import format_table
@@ -34,7 +35,9 @@ def add_launch_arguments(parser: argparse.ArgumentParser) -> None:
                         help="lockstep: deterministic, as fast as the nodes go (default); "
                              "realtime: paced by the wall clock")
     parser.add_argument("--lockstep-timeout", type=float, default=None, metavar="S",
-                        help="sim_node's wait for a command before it holds the previous one")
+                        help="sim_node's wait for a command before it holds the previous one "
+                             "(given to every loop node: the estimator waits half, the "
+                             "controller a quarter)")
     parser.add_argument("--backend", dest="backends", action="append", default=[],
                         metavar="[NODE=]BACKEND",
                         help="middleware of every node (dds or rclpy; default: STILLFRAME_RMW, "
@@ -67,7 +70,25 @@ def register(sub: argparse._SubParsersAction) -> None:
                         help="estimator and controller in one process (container_node): "
                              "estimates handed over in-process, still published")
     add_realtime_arguments(parser)
+    add_netns_arguments(parser)
+    add_fault_argument(parser)
     parser.set_defaults(func=run)
+
+
+def add_netns_arguments(parser: argparse.ArgumentParser, switch: bool = True) -> None:
+    """``--netns`` (with ``switch``) and ``--netns-prefix`` (shared with ``bench faults``)."""
+    if switch:
+        parser.add_argument("--netns", action="store_true",
+                            help="run each node in its own network namespace, joined by a "
+                                 "bridge (three hosts on one; needs root; docs/reliability.md)")
+    parser.add_argument("--netns-prefix", default=None, metavar="P",
+                        help="name prefix of the network namespaces (default sf<pid>)")
+
+
+def add_fault_argument(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--fault", default=None, metavar="NAME",
+                        help="with --netns: a network fault on every host's incoming link: "
+                             + ", ".join(f"'{f.name}'" for f in FAULTS).replace("%", "%%"))
 
 
 def evaluation_table(evaluation: dict[str, Any], scene: Scene) -> str:
@@ -142,6 +163,7 @@ def report_death(command: str, exc: Exception) -> int:
 
 def run(args: argparse.Namespace) -> int:
     from stillframe.app.launcher import NodeDiedError, run_scene
+    from stillframe.app.net_faults import hosts_if
 
     scene = scene_from_args(args)
     rt, rt_cpus = realtime_arguments(args)
@@ -149,13 +171,14 @@ def run(args: argparse.Namespace) -> int:
         raise InputError("--record-topic needs --record DIR")
     with tempfile.TemporaryDirectory(prefix="stillframe-launch-") as tmp:
         try:
-            result = run_scene(Path(args.scene), args.overrides, args.out or Path(tmp),
-                               args.mode, args.record, args.lockstep_timeout,
-                               record_topics=args.record_topics, backends=args.backends,
-                               monitor_args=["--port", str(args.monitor_port),
-                                             "--dashboard-port", str(args.dashboard_port)]
-                               if args.monitor else None, compose=args.compose, rt=rt,
-                               rt_cpus=rt_cpus)
+            with hosts_if(args.netns, args.netns_prefix, args.fault) as hosts:
+                result = run_scene(Path(args.scene), args.overrides, args.out or Path(tmp),
+                                   args.mode, args.record, args.lockstep_timeout,
+                                   record_topics=args.record_topics, backends=args.backends,
+                                   monitor_args=["--port", str(args.monitor_port),
+                                                 "--dashboard-port", str(args.dashboard_port)]
+                                   if args.monitor else None, compose=args.compose, rt=rt,
+                                   rt_cpus=rt_cpus, hosts=hosts)
         except NodeDiedError as exc:
             return report_death("launch", exc)
         except KeyboardInterrupt:
