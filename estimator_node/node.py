@@ -33,8 +33,12 @@ a crash) starts a Kalman filter's mean from that sample's measurements
 state,
 at the first sample that carries all four measurements (earlier ones are skipped and counted).
 
-Messages older than the last stamp used are rejected and counted (``stale_messages``); NaN or
-Inf readings are dropped by the filter and counted (``non_finite``).
+Messages older than the last stamp used are rejected and counted (``stale_messages``), so are
+negative stamps and stamps more than a second after it (``future_stamps``), unless every input of
+such a stamp arrives: then the loop's time jumped (a simulator restarted at t = 0, counted in
+``time_jumps``) and the estimator starts again as above (:mod:`stillframe.loop.assembly`). NaN or
+Inf readings are dropped by the filter and counted (``non_finite``). With no input for
+``2 · lockstep_timeout_s`` (simulator gone) ``/diagnostics`` says ERROR; the node idles.
 """
 
 from __future__ import annotations
@@ -66,6 +70,7 @@ from stillframe.estimation.factory import make_estimator
 from stillframe.estimation.kalman import LinearFilter
 from stillframe.loop.assembly import Ready, SampleAssembly
 from stillframe.loop.node_support import (
+    ERROR,
     OK,
     WARN,
     Diagnostics,
@@ -107,6 +112,7 @@ class EstimatorNode:
                        "skipped_before_initialisation": 0}
         self.compute = Durations()
         self.rate = RateMeter()
+        self.input_at = time.monotonic()     # when the last sample input arrived
         if isinstance(self.estimator, Filter):
             self.declare_run_time_parameters()
         else:
@@ -164,6 +170,7 @@ class EstimatorNode:
                                           self.params.qos(spec))
 
     def on_sensor(self, channel: int, msg: Any) -> None:
+        self.input_at = time.monotonic()
         torque = applied_torque(msg) if channel == ENCODER_CHANNEL else float("nan")
         self.assembly.reading(channel, messages.stamp_ns(msg.header.stamp),
                               sensor_reading(channel, msg), time.monotonic_ns(), torque)
@@ -183,6 +190,13 @@ class EstimatorNode:
     # -- stepping ------------------------------------------------------------------------
     def process_ready(self) -> None:
         """Use every pending stamp that is ready, oldest first."""
+        if self.assembly.take_jump():        # a new run of the loop: a new filter
+            counters = self.estimator.counters
+            self.estimator = make_estimator(self.params.scene, design_model(self.params.scene))
+            self.estimator.counters = counters
+            if isinstance(self.estimator, Filter):
+                self.estimator.set_noise(self.noise["process_noise_std"],
+                                         self.noise["measurement_noise_std"])
         while (ready := self.assembly.pop_ready(time.monotonic_ns())) is not None:
             self.use(ready)
 
@@ -220,8 +234,14 @@ class EstimatorNode:
                   "non_finite": c.non_finite, "missing": c.missing,
                   "rejected": c.rejected + a.counts["stale_messages"],
                   **{f"compute_ms_{k}": v for k, v in self.compute.summary().items()}}
+        idle_s = time.monotonic() - self.input_at
+        values["input_age_s"] = idle_s
         level = WARN if values["rejected"] or a.counts["partial_updates"] else OK
-        self.diagnostics.publish(max(a.last_ns, 0), values, level)
+        message = ""
+        if idle_s > 2 * self.params.lockstep_timeout_s:
+            level, message = ERROR, (f"stale input: no sample for {idle_s:.3g} s "
+                                     "(simulator stale or gone)")
+        self.diagnostics.publish(max(a.last_ns, 0), values, level, message)
 
     def peers_ready(self) -> bool:
         """The controller reads the estimates and publishes the scene's command topic."""

@@ -17,6 +17,7 @@ BENCHES: tuple[str, ...] = (
     "stillframe.app.commands.bench_fidelity",
     "stillframe.app.commands.bench_speed",
     "stillframe.app.commands.bench_montecarlo",
+    "stillframe.app.commands.bench_soak",
 )
 
 
