@@ -36,7 +36,7 @@ from stillframe.locations import REPO_ROOT
 from stillframe.loop.closed_loop import run_closed_loop
 from stillframe.middleware.api import create_node, spin_until
 from tests.support.middleware import child_env, finish
-from tests.support.nodes import params_file, start_node, stop, wait_for_log
+from tests.support.nodes import Statuses, params_file, start_node, stop, wait_for_log
 from tests.support.scenes import thesis_scene
 
 RATE_HZ = 32.0
@@ -152,23 +152,6 @@ def _cpu_s(pid: int) -> float:
     """User + system CPU time of process ``pid`` so far [s] (/proc/PID/stat)."""
     fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
-
-
-class Statuses:
-    """The newest ``/diagnostics`` status of each node (level, message, values)."""
-
-    def __init__(self, node: object) -> None:
-        self.latest: dict[str, tuple[int, str, dict[str, str]]] = {}
-        node.create_subscription(topics.DIAGNOSTICS.type_name, "/diagnostics", self.on_status,
-                                 "default")
-
-    def on_status(self, msg: object) -> None:
-        for s in msg.status:
-            self.latest[s.name] = (s.level, s.message, {kv.key: kv.value for kv in s.values})
-
-    def stale(self, name: str) -> bool:
-        level, message, _ = self.latest.get(f"/frame/{name}", (0, "", {}))
-        return level == 2 and "stale input" in message
 
 
 @pytest.mark.slow
