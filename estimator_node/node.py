@@ -232,7 +232,8 @@ class EstimatorNode:
         values = {"mode": self.params.mode, "rate_hz": self.rate.read(), **self.counts,
                   **a.counts, "updates": c.updates, "stale": c.stale,
                   "non_finite": c.non_finite, "missing": c.missing,
-                  "rejected": c.rejected + a.counts["stale_messages"],
+                  "rejected": c.rejected + a.counts["stale_messages"]
+                  + a.counts["negative_stamps"] + a.counts["future_stamps"],
                   **{f"compute_ms_{k}": v for k, v in self.compute.summary().items()}}
         idle_s = time.monotonic() - self.input_at
         values["input_age_s"] = idle_s
