@@ -24,7 +24,8 @@ timing out, and it needs no ``/clock``.
 When the loop's time goes back (a restarted simulator: an estimate stamped before the last one,
 with a load-cell reading of that stamp; :mod:`stillframe.loop.matching`) the watchdog is disarmed
 until the next estimate, and counted (``time_jumps``). With no load-cell reading for
-``2 · lockstep_timeout_s`` (simulator gone) ``/diagnostics`` says ERROR; the node idles.
+``5 · lockstep_timeout_s`` (at least 1 s) after one came (simulator gone) ``/diagnostics`` says
+ERROR; the node idles.
 """
 
 from __future__ import annotations
@@ -80,7 +81,7 @@ class ControllerNode:
         self.matching = ForceMatching(round(params.lockstep_timeout_s / 4 * 1e9), params.lockstep)
         self.watchdog = EstimateWatchdog(self.controller, self.grid)
         self.last_command = Command(0.0)
-        self.input_at = time.monotonic()     # when the last load-cell reading arrived
+        self.input_at: float | None = None   # when the last load-cell reading arrived
         self.compute = Durations()
         self.rate = RateMeter()
         self.declare_run_time_parameters()
@@ -175,12 +176,12 @@ class ControllerNode:
             (c.runaway, f"control law output non-finite or beyond {RUNAWAY_FACTOR:g}x the "
                         f"limit {c.runaway} times"),
         ) if flag]
-        idle_s = time.monotonic() - self.input_at
+        idle_s = 0.0 if self.input_at is None else time.monotonic() - self.input_at
         values["input_age_s"] = idle_s
-        if idle_s > 2 * self.params.lockstep_timeout_s:
+        if idle_s > self.params.stale_input_s:
             problems.append(f"stale input: no load-cell reading for {idle_s:.3g} s "
                             "(simulator stale or gone)")
-        level = ERROR if cmd.watchdog or idle_s > 2 * self.params.lockstep_timeout_s else (
+        level = ERROR if cmd.watchdog or idle_s > self.params.stale_input_s else (
             WARN if problems else OK)
         self.diagnostics.publish(max(self.matching.last_ns, 0), values, level, "; ".join(problems))
 

@@ -33,12 +33,14 @@ a crash) starts a Kalman filter's mean from that sample's measurements
 state,
 at the first sample that carries all four measurements (earlier ones are skipped and counted).
 
-Messages older than the last stamp used are rejected and counted (``stale_messages``), so are
-negative stamps and stamps more than a second after it (``future_stamps``), unless every input of
-such a stamp arrives: then the loop's time jumped (a simulator restarted at t = 0, counted in
-``time_jumps``) and the estimator starts again as above (:mod:`stillframe.loop.assembly`). NaN or
-Inf readings are dropped by the filter and counted (``non_finite``). With no input for
-``2 · lockstep_timeout_s`` (simulator gone) ``/diagnostics`` says ERROR; the node idles.
+Negative stamps are rejected and counted (``negative_stamps``). Messages not newer than the last
+stamp used (``stale_messages``) or more than a second after it (``future_stamps``) are counted
+and held apart; if every input of such a stamp arrives, the loop's time jumped (a simulator
+restarted at t = 0, counted in ``time_jumps``) and the estimator starts again as above
+(:mod:`stillframe.loop.assembly`). NaN or Inf readings are dropped by the filter and counted
+(``non_finite``). With no input for
+``5 · lockstep_timeout_s`` (at least 1 s) after one came (simulator gone) ``/diagnostics`` says
+ERROR; the node idles.
 """
 
 from __future__ import annotations
@@ -112,7 +114,7 @@ class EstimatorNode:
                        "skipped_before_initialisation": 0}
         self.compute = Durations()
         self.rate = RateMeter()
-        self.input_at = time.monotonic()     # when the last sample input arrived
+        self.input_at: float | None = None   # when the last sample input arrived
         if isinstance(self.estimator, Filter):
             self.declare_run_time_parameters()
         else:
@@ -235,11 +237,11 @@ class EstimatorNode:
                   "rejected": c.rejected + a.counts["stale_messages"]
                   + a.counts["negative_stamps"] + a.counts["future_stamps"],
                   **{f"compute_ms_{k}": v for k, v in self.compute.summary().items()}}
-        idle_s = time.monotonic() - self.input_at
+        idle_s = 0.0 if self.input_at is None else time.monotonic() - self.input_at
         values["input_age_s"] = idle_s
         level = WARN if values["rejected"] or a.counts["partial_updates"] else OK
         message = ""
-        if idle_s > 2 * self.params.lockstep_timeout_s:
+        if idle_s > self.params.stale_input_s:
             level, message = ERROR, (f"stale input: no sample for {idle_s:.3g} s "
                                      "(simulator stale or gone)")
         self.diagnostics.publish(max(a.last_ns, 0), values, level, message)
