@@ -9,6 +9,7 @@ and, for the simulator, net of that.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -44,12 +45,12 @@ class RssLog:
     def add(self, name: str, sim_s: float, rss: int) -> None:
         self.samples.setdefault(name, []).append((sim_s, rss))
 
-    def growth(self, name: str, warmup_s: float,
-               by_design: tuple[float, int] | None = None) -> dict[str, float]:
-        """RSS at the first sample at or after ``warmup_s`` of sim time, at the end, the peak,
-        and the growth from the first to the last [%]; ``by_design`` = (period [s], substeps)
-        also gives the growth net of :func:`history_bytes`."""
-        after = [(t, r) for t, r in self.samples.get(name, []) if t >= warmup_s]
+    def growth(self, name: str, warmup_s: float, by_design: tuple[float, int] | None = None,
+               until_s: float = math.inf) -> dict[str, float]:
+        """RSS at the first sample at or after ``warmup_s`` of sim time, at the last before
+        ``until_s``, the peak, and the growth from the first to the last [%]; ``by_design`` =
+        (period [s], substeps) also gives the growth net of :func:`history_bytes`."""
+        after = [(t, r) for t, r in self.samples.get(name, []) if warmup_s <= t < until_s]
         if len(after) < 2:
             return {}
         (t0, r0), (t1, r1) = after[0], after[-1]

@@ -25,6 +25,7 @@ def test_growth_from_the_first_sample_after_warmup_to_the_last() -> None:
     assert (g["warm_mib"], g["end_mib"], g["peak_mib"]) == (200.0, 202.0, 204.0)
     assert g["growth_pct"] == pytest.approx(1.0) and g["samples"] == 3
     assert log.growth("node", warmup_s=60.0) == {}        # one sample after warm-up: no figure
+    assert log.growth("node", 10.0, until_s=100.0)["growth_pct"] == pytest.approx(2.0)
 
 
 def test_simulator_growth_net_of_its_histories() -> None:
