@@ -6,7 +6,8 @@ Reported per process: RSS after warm-up, at the end (the last second of sim time
 simulator then evaluates the run and writes its results), and the growth between (must stay
 below 5 %; the simulator's net of the histories it keeps by design,
 :mod:`stillframe.bench.soak`), and the loop's counters at the end (lock-step timeouts,
-safe-state samples, rejected commands, malformed samples; the nodes' last ``/diagnostics``). Progress (sim time, RSS) goes to stderr.
+safe-state samples, rejected commands, malformed samples; the nodes' last ``/diagnostics``).
+Progress (sim time, RSS) goes to stderr.
 """
 
 from __future__ import annotations
