@@ -38,9 +38,8 @@ stamp used (``stale_messages``) or more than a second after it (``future_stamps`
 and held apart; if every input of such a stamp arrives, the loop's time jumped (a simulator
 restarted at t = 0, counted in ``time_jumps``) and the estimator starts again as above
 (:mod:`stillframe.loop.assembly`). NaN or Inf readings are dropped by the filter and counted
-(``non_finite``). With no input for
-``5 · lockstep_timeout_s`` (at least 1 s) after one came (simulator gone) ``/diagnostics`` says
-ERROR; the node idles.
+(``non_finite``). With no input for ``5 · lockstep_timeout_s`` (at least 1 s) after one came
+(simulator gone) ``/diagnostics`` says ERROR; the node idles.
 """
 
 from __future__ import annotations

@@ -59,7 +59,8 @@ class ForceMatching:
         if ns < 0 or (newest >= 0 and ns > newest + JUMP_NS):
             self.counts["rejected_force_stamps"] += 1
             return
-        self.force = value
+        if ns >= self.sample_ns:        # the newest reading; an older or stray one is not
+            self.force = value
         self.forces[ns] = value
         self.sample_ns = max(self.sample_ns, ns)
         if len(self.forces) > self.kept:

@@ -89,3 +89,6 @@ def test_matching_rejects_far_future_and_negative_load_cell_stamps() -> None:
     m.add_force(-1, 1e3)
     assert m.counts["rejected_force_stamps"] == 2 and m.sample_ns == 0 and m.force == 1.0
     assert m.pop_ready(0).force == 1.0
+    m.add_force(PERIOD_NS, 2.0)
+    m.add_force(0, 1e3)                                  # a stray stamp 0: not the newest
+    assert m.force == 2.0
