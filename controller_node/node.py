@@ -20,6 +20,12 @@ sample carries, or ``/clock`` with ``use_sim_time`` if newer), the node publishe
 supervisor's zero command stamped with that time, once per sample time, and counts it. Sample
 time rather than wall time: in lock-step the simulator then applies the zero command instead of
 timing out, and it needs no ``/clock``.
+
+When the loop's time goes back (a restarted simulator: an estimate stamped before the last one,
+with a load-cell reading of that stamp; :mod:`stillframe.loop.matching`) the watchdog is disarmed
+until the next estimate, and counted (``time_jumps``). With no load-cell reading for
+``5 · lockstep_timeout_s`` (at least 1 s) after one came (simulator gone) ``/diagnostics`` says
+ERROR; the node idles.
 """
 
 from __future__ import annotations
@@ -84,6 +90,7 @@ class ControllerNode:
         self.matching = ForceMatching(round(params.lockstep_timeout_s / 4 * 1e9), params.lockstep)
         self.watchdog = EstimateWatchdog(self.controller, self.grid)
         self.last_command = Command(0.0)
+        self.input_at: float | None = None   # when the last load-cell reading arrived
         self.compute = Durations()
         self.rate = RateMeter()
         #: composed with the estimator in one process: estimates come by :meth:`handed_over`,
@@ -129,6 +136,7 @@ class ControllerNode:
                               wrench_reader("floor1", "wrench.force.x"), self.on_force)
 
     def on_force(self, ns: int, force: float) -> None:
+        self.input_at = time.monotonic()
         self.matching.add_force(ns, force)
 
     def on_estimate(self, ns: int, physical: np.ndarray) -> None:
@@ -140,6 +148,9 @@ class ControllerNode:
 
     def process_ready(self) -> None:
         """Answer pending estimates in order; in lock-step each waits for its load cell."""
+        if self.matching.take_jump():        # a new run of the loop: disarm the watchdog
+            self.controller.latest = None
+            self.watchdog = EstimateWatchdog(self.controller, self.grid)
         while (m := self.matching.pop_ready(time.monotonic_ns())) is not None:
             started = time.perf_counter()
             t = self.grid.seconds(m.ns)
@@ -183,7 +194,13 @@ class ControllerNode:
             (c.runaway, f"control law output non-finite or beyond {RUNAWAY_FACTOR:g}x the "
                         f"limit {c.runaway} times"),
         ) if flag]
-        level = ERROR if cmd.watchdog else WARN if problems else OK
+        idle_s = 0.0 if self.input_at is None else time.monotonic() - self.input_at
+        values["input_age_s"] = idle_s
+        if idle_s > self.params.stale_input_s:
+            problems.append(f"stale input: no load-cell reading for {idle_s:.3g} s "
+                            "(simulator stale or gone)")
+        level = ERROR if cmd.watchdog or idle_s > self.params.stale_input_s else (
+            WARN if problems else OK)
         self.diagnostics.publish(max(self.matching.last_ns, 0), values, level, "; ".join(problems))
 
     def peers_ready(self) -> bool:

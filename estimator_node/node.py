@@ -33,8 +33,13 @@ a crash) starts a Kalman filter's mean from that sample's measurements
 state,
 at the first sample that carries all four measurements (earlier ones are skipped and counted).
 
-Messages older than the last stamp used are rejected and counted (``stale_messages``); NaN or
-Inf readings are dropped by the filter and counted (``non_finite``).
+Negative stamps are rejected and counted (``negative_stamps``). Messages not newer than the last
+stamp used (``stale_messages``) or more than a second after it (``future_stamps``) are counted
+and held apart; if every input of such a stamp arrives, the loop's time jumped (a simulator
+restarted at t = 0, counted in ``time_jumps``) and the estimator starts again as above
+(:mod:`stillframe.loop.assembly`). NaN or Inf readings are dropped by the filter and counted
+(``non_finite``). With no input for ``5 · lockstep_timeout_s`` (at least 1 s) after one came
+(simulator gone) ``/diagnostics`` says ERROR; the node idles.
 """
 
 from __future__ import annotations
@@ -66,6 +71,7 @@ from stillframe.estimation.kalman import LinearFilter
 from stillframe.loop import fast_inputs
 from stillframe.loop.assembly import Ready, SampleAssembly
 from stillframe.loop.node_support import (
+    ERROR,
     OK,
     WARN,
     Diagnostics,
@@ -112,6 +118,7 @@ class EstimatorNode:
         #: every estimate as published (intra-process, no serialisation)
         self.handover: Callable[[int, np.ndarray], None] | None = None
         self.rt = Realtime(RealtimeOptions())   # main() enters the practices the node asks for
+        self.input_at: float | None = None   # when the last sample input arrived
         if isinstance(self.estimator, Filter):
             self.declare_run_time_parameters()
         else:
@@ -172,6 +179,7 @@ class EstimatorNode:
                                   *handlers[spec.name])
 
     def on_sensor(self, channel: int, ns: int, value: float, torque: float) -> None:
+        self.input_at = time.monotonic()
         self.assembly.reading(channel, ns, value, time.monotonic_ns(), torque)
 
     def on_applied_force(self, ns: int, force: float) -> None:
@@ -186,6 +194,13 @@ class EstimatorNode:
     # -- stepping ------------------------------------------------------------------------
     def process_ready(self) -> None:
         """Use every pending stamp that is ready, oldest first."""
+        if self.assembly.take_jump():        # a new run of the loop: a new filter
+            counters = self.estimator.counters
+            self.estimator = make_estimator(self.params.scene, design_model(self.params.scene))
+            self.estimator.counters = counters
+            if isinstance(self.estimator, Filter):
+                self.estimator.set_noise(self.noise["process_noise_std"],
+                                         self.noise["measurement_noise_std"])
         while (ready := self.assembly.pop_ready(time.monotonic_ns())) is not None:
             self.use(ready)
 
@@ -223,10 +238,17 @@ class EstimatorNode:
         values = {"mode": self.params.mode, "rate_hz": self.rate.read(), **self.counts,
                   **a.counts, "updates": c.updates, "stale": c.stale,
                   "non_finite": c.non_finite, "missing": c.missing,
-                  "rejected": c.rejected + a.counts["stale_messages"],
+                  "rejected": c.rejected + a.counts["stale_messages"]
+                  + a.counts["negative_stamps"] + a.counts["future_stamps"],
                   **{f"compute_ms_{k}": v for k, v in self.compute.summary().items()}}
+        idle_s = 0.0 if self.input_at is None else time.monotonic() - self.input_at
+        values["input_age_s"] = idle_s
         level = WARN if values["rejected"] or a.counts["partial_updates"] else OK
-        self.diagnostics.publish(max(a.last_ns, 0), values, level)
+        message = ""
+        if idle_s > self.params.stale_input_s:
+            level, message = ERROR, (f"stale input: no sample for {idle_s:.3g} s "
+                                     "(simulator stale or gone)")
+        self.diagnostics.publish(max(a.last_ns, 0), values, level, message)
 
     def peers_ready(self) -> bool:
         """The controller reads the estimates (handed over when composed) and publishes the

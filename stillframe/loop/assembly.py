@@ -4,8 +4,15 @@ nanoseconds in the node, any integer in a test).
 
 A stamp is used, oldest first, when it is complete (every input arrived, and in lock-step the
 command answering the previous stamp too), when a newer stamp has arrived, or ``wait_ns`` after
-its first message; anything but complete is a partial update and counted. Messages stamped at or
-before the last stamp used are rejected and counted (``stale_messages``).
+its first message; anything but complete is a partial update and counted. Negative stamps are
+rejected and counted (``negative_stamps``).
+
+A stamp at or before the last stamp used (``stale_messages``), or more than :data:`JUMP_NS`
+after it (``future_stamps``), is counted and not taken at its word: it is held apart (at most
+:data:`HELD_STAMPS` such stamps) until every input of that stamp has arrived. A stray writer's
+far-future or zero stamp on one topic never gets there and is dropped; a simulator restarted at
+t = 0 (or resumed after a long loss) does, and the assembly starts again at that stamp as if new
+(``time_jumps``; :meth:`SampleAssembly.take_jump` tells the caller to start its filter again).
 """
 
 from __future__ import annotations
@@ -17,6 +24,11 @@ import numpy as np
 from stillframe.contract import topics
 from stillframe.contract.codecs import ENCODER_CHANNEL, SENSOR_TOPICS, SampleGrid
 from stillframe.contract.signals import Sample
+
+#: How far [ns] a stamp may lie from the last stamp used before it needs every input to agree.
+JUMP_NS = 1_000_000_000
+#: Far-off stamps held at most (the oldest is dropped first).
+HELD_STAMPS = 8
 
 
 class Pending:
@@ -58,18 +70,40 @@ class SampleAssembly:
         self.wait_ns = wait_ns
         self.lockstep = lockstep
         self.pending: dict[int, Pending] = {}
+        self.held: dict[int, Pending] = {}      # far-off stamps, until one is complete
+        self.jumped = False
         self.last_ns = -1               # the last stamp used
         self.command = np.zeros(2)      # the newest command received, [torque, force]
         self.command_ns = [-1, -1]
         self.counts = {"stale_messages": 0, "partial_updates": 0, "rejected_commands": 0,
-                       "command_waits_timed_out": 0, "applied_reported": 0}
+                       "command_waits_timed_out": 0, "applied_reported": 0,
+                       "negative_stamps": 0, "future_stamps": 0, "time_jumps": 0}
 
     # -- inputs --------------------------------------------------------------------------
     def _slot(self, ns: int, now_ns: int) -> Pending | None:
-        if ns <= self.last_ns:
-            self.counts["stale_messages"] += 1
+        if ns < 0:
+            self.counts["negative_stamps"] += 1
             return None
+        far_ahead = self.last_ns >= 0 and ns > self.last_ns + JUMP_NS
+        if far_ahead or ns <= self.last_ns:
+            self.counts["future_stamps" if far_ahead else "stale_messages"] += 1
+            if ns not in self.held and len(self.held) >= HELD_STAMPS:
+                del self.held[next(iter(self.held))]
+            return self.held.setdefault(ns, Pending(ns, now_ns))
         return self.pending.setdefault(ns, Pending(ns, now_ns))
+
+    def _filled(self, p: Pending) -> None:
+        """A held stamp that is now complete: the loop's time jumped there; start again."""
+        if self.held.get(p.ns) is p and self.complete(p):
+            self.pending, self.held = {p.ns: p}, {}
+            self.last_ns, self.command, self.command_ns = -1, np.zeros(2), [-1, -1]
+            self.counts["time_jumps"] += 1
+            self.jumped = True
+
+    def take_jump(self) -> bool:
+        """Whether the loop's time jumped since the last call (the filter must start again)."""
+        jumped, self.jumped = self.jumped, False
+        return jumped
 
     def reading(self, channel: int, ns: int, value: float, now_ns: int,
                 applied_torque: float = np.nan) -> None:
@@ -80,16 +114,19 @@ class SampleAssembly:
             p.present[channel] = True
             if channel == ENCODER_CHANNEL:
                 p.applied[0] = applied_torque
+            self._filled(p)
 
     def applied_force(self, ns: int, value: float, now_ns: int) -> None:
         """The floor-3 force applied over the period before stamp ``ns``."""
         if (p := self._slot(ns, now_ns)) is not None:
             p.applied[1] = value
+            self._filled(p)
 
     def truth(self, ns: int, physical: np.ndarray, now_ns: int) -> None:
         """The simulator's true physical state at stamp ``ns``."""
         if (p := self._slot(ns, now_ns)) is not None:
             p.truth = physical
+            self._filled(p)
 
     def command_received(self, actuator: int, ns: int, value: float) -> bool:
         """A command stamped ``ns``; rejected and counted when non-finite or older than the

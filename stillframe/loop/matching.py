@@ -5,6 +5,13 @@ docs/nodes.md, lock-step protocol, step 4). No clock is read here: the caller pa
 In lock-step an estimate waits for the load-cell reading of its stamp, at most ``wait_ns`` after
 it arrived (then it takes the newest reading, counted in ``force_waits_timed_out``); in real time
 it takes the reading of its stamp if there is one, else the newest at once.
+
+A load-cell stamp that is negative or more than :data:`~stillframe.loop.assembly.JUMP_NS` after
+the newest stamp seen is rejected and counted (``rejected_force_stamps``). An estimate stamped
+at or before the last one is stale, unless a load-cell reading of its stamp has arrived since
+the last estimate answered:
+then the loop's time went back (a restarted simulator), and the matching starts again there
+(``time_jumps``; :meth:`ForceMatching.take_jump` tells the caller).
 """
 
 from __future__ import annotations
@@ -12,6 +19,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+
+from stillframe.loop.assembly import JUMP_NS
 
 #: Load-cell readings kept for matching estimates by stamp.
 FORCES_KEPT = 256
@@ -38,14 +47,20 @@ class ForceMatching:
         self.sample_ns = -1         # the newest load-cell stamp: the newest sample time seen
         self.pending: list[tuple[int, np.ndarray, int]] = []   # (ns, physical, arrival ns)
         self.last_ns = -1           # the newest estimate accepted
+        self.jumped = False
         self.counts = {"stale_estimates": 0, "rejected_estimates": 0,
-                       "force_waits_timed_out": 0}
+                       "force_waits_timed_out": 0, "rejected_force_stamps": 0, "time_jumps": 0}
 
     def add_force(self, ns: int, value: float) -> None:
         """The load cell read ``value`` at stamp ``ns`` (a non-finite reading is ignored)."""
         if not np.isfinite(value):
             return
-        self.force = value
+        newest = max(self.sample_ns, self.last_ns)
+        if ns < 0 or (newest >= 0 and ns > newest + JUMP_NS):
+            self.counts["rejected_force_stamps"] += 1
+            return
+        if ns >= self.sample_ns:        # the newest reading; an older or stray one is not
+            self.force = value
         self.forces[ns] = value
         self.sample_ns = max(self.sample_ns, ns)
         if len(self.forces) > self.kept:
@@ -54,6 +69,12 @@ class ForceMatching:
     def add_estimate(self, ns: int, physical: np.ndarray, now_ns: int) -> None:
         """An estimate stamped ``ns`` arrived; one not newer than the last, or non-finite, is
         rejected and counted."""
+        first = self.pending[0][0] if self.pending else self.last_ns + 1
+        if ns < first and ns in self.forces:     # the loop started again at ns
+            self.pending, self.last_ns, self.jumped = [], -1, True
+            self.forces = {k: v for k, v in self.forces.items() if ns <= k <= ns + JUMP_NS}
+            self.sample_ns = max(self.forces)
+            self.counts["time_jumps"] += 1
         if ns <= self.last_ns:
             self.counts["stale_estimates"] += 1
         elif not np.all(np.isfinite(physical)):
@@ -61,6 +82,11 @@ class ForceMatching:
         else:
             self.pending.append((ns, physical, now_ns))
             self.last_ns = ns
+
+    def take_jump(self) -> bool:
+        """Whether the loop's time went back since the last call."""
+        jumped, self.jumped = self.jumped, False
+        return jumped
 
     @property
     def waiting(self) -> bool:

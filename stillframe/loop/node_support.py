@@ -48,6 +48,13 @@ class LoopParameters:
     def lockstep(self) -> bool:
         return self.mode == "lockstep"
 
+    @property
+    def stale_input_s(self) -> float:
+        """Wall seconds without input after which the estimator and controller report the
+        simulator stale or gone: 5 lock-step timeouts (a lock-step sim may wait one per
+        sample), at least 1 s."""
+        return max(1.0, 5 * self.lockstep_timeout_s)
+
     def qos(self, spec: topics.TopicSpec) -> QoSProfile | str:
         """The contract's QoS, except that sensor topics are RELIABLE and TRANSIENT_LOCAL in
         lock-step.

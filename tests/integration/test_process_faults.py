@@ -11,10 +11,15 @@ sample periods from a bag recorded by ``stillframe record``:
 
 The loop is frozen (SIGSTOP on the sim) while the estimator restarts, so that the run cannot end
 before it is back however fast the machine is.
+
+4. the sim is killed: the estimator and controller idle and report stale input; a new sim (at
+   t = 0 again) is taken as a restart and the loop resumes at once.
 """
 
 from __future__ import annotations
 
+import json
+import os
 import signal
 import subprocess
 import sys
@@ -28,9 +33,11 @@ from stillframe.contract import messages, topics
 from stillframe.contract.codecs import applied_torque, physical_state
 from stillframe.contract.messages import TYPESTORE
 from stillframe.locations import REPO_ROOT
+from stillframe.loop.closed_loop import run_closed_loop
 from stillframe.middleware.api import create_node, spin_until
 from tests.support.middleware import child_env, finish
-from tests.support.nodes import params_file, start_node, stop, wait_for_log
+from tests.support.nodes import Statuses, params_file, start_node, stop, wait_for_log
+from tests.support.scenes import thesis_scene
 
 RATE_HZ = 32.0
 PERIOD_NS = round(1e9 / RATE_HZ)
@@ -139,3 +146,62 @@ def test_kill_and_restart_estimator_then_kill_controller(ros_domain: int, tmp_pa
     # ... then zero (applied over [t + 3 periods, t + 4 periods), reported at t + 4 periods)
     after = [v for ns, v in effort.items() if ns >= last_command + 4 * PERIOD_NS]
     assert len(after) >= 5 and all(v == 0.0 for v in after)
+
+
+def _cpu_s(pid: int) -> float:
+    """User + system CPU time of process ``pid`` so far [s] (/proc/PID/stat)."""
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+@pytest.mark.slow
+def test_sim_killed_loop_idles_reports_stale_input_and_resumes_with_a_new_sim(
+        ros_domain: int, tmp_path: Path) -> None:
+    """The sim is SIGKILLed mid-run: the estimator and controller idle (CPU over 1 s of wall time
+    below half a core, a generous bound for a node that blocks in its wait set), say ERROR
+    'stale input' in /diagnostics; a new sim starting at t = 0 is taken as a restart of the loop
+    (``time_jumps``), and its whole run equals the one-process loop to the last bit: the
+    estimator started again from the scene, control resumed at the new run's sample 0."""
+    (tmp_path / "a").mkdir()
+    (tmp_path / "b").mkdir()
+    first = params_file(tmp_path / "a", "thesis_lqg", OVERRIDES, lockstep_timeout_s=0.2,
+                        diagnostics_period_s=0.05)
+    short = ["duration=4", "controller.start=1", "evaluation.window=1"]
+    result = tmp_path / "b" / "result.json"
+    second = params_file(tmp_path / "b", "thesis_lqg", short, lockstep_timeout_s=0.2,
+                         diagnostics_period_s=0.05, result_file=str(result))
+    estimator = start_node("estimator_node", first)
+    controller = start_node("controller_node", first)
+    sim = start_node("sim_node", first)
+    watch = Watch()
+    statuses = Statuses(watch.node)
+    peers = (estimator, controller)
+    try:
+        watch.until(lambda: watch.clock_ns >= 3e9)
+        sim.kill()                                                 # SIGKILL the sim
+        sim.wait()
+        watch.until(lambda: all(statuses.stale(n) for n in ("estimator_node", "controller_node")),
+                    timeout=30)
+        before = [_cpu_s(p.pid) for p in peers]
+        spin_until(watch.node, lambda: False, 1.0)
+        used = [_cpu_s(p.pid) - b for p, b in zip(peers, before, strict=True)]
+        print(f"sim killed: CPU over 1 s estimator {used[0]:.3f} s, controller {used[1]:.3f} s")
+        assert max(used) < 0.5
+        sim = start_node("sim_node", second)                       # a new sim, t = 0 again
+        _out, err = finish(sim, timeout=120)
+        assert sim.returncode == 0, err[-2000:]
+        spin_until(watch.node, lambda: False, 0.5)
+    finally:
+        watch.node.destroy_node()
+        for proc in (sim, *peers):
+            if proc.poll() is None:
+                stop(proc)
+    estimator_values = statuses.latest["/frame/estimator_node"][2]
+    controller_values = statuses.latest["/frame/controller_node"][2]
+    assert estimator_values["time_jumps"] == "1" and controller_values["time_jumps"] == "1"
+    with np.load(result.with_suffix(".npz")) as data:
+        hist = dict(data)
+    reference = run_closed_loop(thesis_scene("thesis_lqg", short))
+    np.testing.assert_array_equal(hist["truth"], reference.truth)
+    np.testing.assert_array_equal(hist["command"], reference.command)
+    assert json.loads(result.read_text())["lockstep_timeouts"] == 0

@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 import yaml
 
+from stillframe.contract import topics
 from stillframe.locations import REPO_ROOT
 from tests.support.middleware import child_env, finish, start_python
 
@@ -97,3 +98,20 @@ def run_loop_beside(tmp_path: Path, writer_code: str, scene: str, overrides: lis
         out, err = finish(writer, timeout=20)
     assert writer.returncode == 0, err[-2000:]
     return result, hist, int(out.split()[-1])
+
+
+class Statuses:
+    """The newest ``/diagnostics`` status of each node (level, message, values)."""
+
+    def __init__(self, node: object) -> None:
+        self.latest: dict[str, tuple[int, str, dict[str, str]]] = {}
+        node.create_subscription(topics.DIAGNOSTICS.type_name, "/diagnostics", self.on_status,
+                                 "default")
+
+    def on_status(self, msg: object) -> None:
+        for s in msg.status:
+            self.latest[s.name] = (s.level, s.message, {kv.key: kv.value for kv in s.values})
+
+    def stale(self, name: str) -> bool:
+        level, message, _ = self.latest.get(f"/frame/{name}", (0, "", {}))
+        return level == 2 and "stale input" in message

@@ -20,6 +20,7 @@ BENCHES: tuple[str, ...] = (
     "stillframe.app.commands.bench_speed",
     "stillframe.app.commands.bench_montecarlo",
     "stillframe.app.commands.bench_faults",
+    "stillframe.app.commands.bench_soak",
 )
 
 
