@@ -128,20 +128,25 @@ def _flood_run(tmp_path: Path, topic_set: str, flood_s: float, duration: float) 
                          command_writer="controller_node", diagnostics_period_s=0.2,
                          lockstep_timeout_s=2.0)
     peers = [start_node(name, params) for name in ("estimator_node", "controller_node")]
+
+    def start_writers() -> list:
+        return [subprocess.Popen([sys.executable, str(WRITER), backend, "5000", f"{flood_s:g}",
+                                  topic_set], env=child_env(), cwd=REPO_ROOT,
+                                 stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                for backend in ("rclpy", "dds")]
+
+    # the writers start before the sim and flood from the moment the loop reaches 1 s, so that
+    # a run shorter than a writer's start-up is flooded too
+    writers = start_writers()
     sim = start_node("sim_node", params)
     watch = create_node("hostile_probe", argv=["test"])
     clock = [0]
     watch.create_subscription(topics.CLOCK.type_name, "/clock",
                               lambda m: clock.__setitem__(0, messages.stamp_ns(m.clock)), "clock")
     statuses = Statuses(watch)
-    writers: list = []
     try:
-        assert spin_until(watch, lambda: clock[0] >= 1e9, 60)
-        writers = [subprocess.Popen([sys.executable, str(WRITER), backend, "5000", f"{flood_s:g}",
-                                     topic_set], env=child_env(), cwd=REPO_ROOT,
-                                    stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-                   for backend in ("rclpy", "dds")]
         assert all(w.stdout.readline().strip() == "ready" for w in writers)
+        spin_until(watch, lambda: False, 0.01)
         during = clock[0]
         assert spin_until(watch, lambda: all(w.poll() is not None for w in writers), 120)
         flooded = clock[0] - during
