@@ -287,8 +287,9 @@ def main() -> int:
     """Run the node (console script ``estimator_node``); bad parameters exit 2 with one line."""
     node = api.create_node("estimator_node", namespace=topics.DEFAULT_NAMESPACE)
     try:
+        rt = declare_realtime(node)     # before build(): the node refuses changes once built
         estimator = build(node)
-        estimator.rt = start_realtime(node, declare_realtime(node))
+        estimator.rt = start_realtime(node, rt)
         estimator.run()
     finally:
         node.destroy_node()
