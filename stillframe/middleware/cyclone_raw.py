@@ -41,3 +41,17 @@ def write_raw(writer: DataWriter, cdr: bytes | bytearray, timestamp_ns: int | No
 def take_raw(reader: DataReader, limit: int) -> list[tuple[bytes, Any]]:
     """Take up to ``limit`` samples as (serialized bytes, SampleInfo) pairs."""
     return ddspy_take(reader._ref, ANY_SAMPLES, limit)
+
+
+def matched_count(entity: DataWriter | DataReader) -> int:
+    """How many readers a writer (writers a reader) is matched with: ``dds_get_matched_*`` with
+    no buffer returns the count. cyclonedds' ``get_matched_subscriptions()`` asks for the count,
+    then fills a list of that size; when an endpoint matches in between (a monitor joining) the
+    second call reports more than the list holds and it raises IndexError."""
+    if isinstance(entity, DataWriter):
+        count = entity._get_matched_subscriptions(entity._ref, None, 0)
+    else:
+        count = entity._get_matched_publications(entity._ref, None, 0)
+    if count < 0:
+        raise DDSException(count, f"Occurred when counting the matched endpoints of {entity!r}")
+    return int(count)

@@ -44,7 +44,7 @@ from stillframe.contract import messages
 from stillframe.errors import InputError
 from stillframe.middleware import dds_types, discovery, interface, names, params
 from stillframe.middleware.clock import Clock
-from stillframe.middleware.cyclone_raw import ANY_SAMPLES, take_raw, write_raw
+from stillframe.middleware.cyclone_raw import ANY_SAMPLES, matched_count, take_raw, write_raw
 from stillframe.middleware.logger import Logger
 from stillframe.middleware.qos import (
     CLOCK,
@@ -314,7 +314,7 @@ class DdsPublisher:
         write_raw(self._writer, messages.serialize(msg))
 
     def get_subscription_count(self) -> int:
-        return len(self._writer.get_matched_subscriptions())
+        return matched_count(self._writer)
 
     def wait_for_all_acked(self, timeout_sec: float) -> bool:
         """Block until every reliable reader acknowledged everything (True) or the timeout."""
@@ -346,7 +346,7 @@ class DdsSubscription:
         self._clock = node.get_clock()
 
     def get_publisher_count(self) -> int:
-        return len(self._reader.get_matched_publications())
+        return matched_count(self._reader)
 
     def writer_gid(self, handle: int) -> bytes:
         """The GUID of the matched writer with instance handle ``handle`` (empty if gone)."""

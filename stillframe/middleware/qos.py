@@ -108,3 +108,10 @@ def recorder_request(offers: Sequence[QoSProfile]) -> QoSProfile:
         reliability=Reliability.RELIABLE if reliable else Reliability.BEST_EFFORT,
         durability=Durability.TRANSIENT_LOCAL if transient else Durability.VOLATILE,
     )
+
+
+def viewer_request(offers: Sequence[QoSProfile]) -> QoSProfile:
+    """A live viewer's subscription QoS: :func:`recorder_request` but BEST_EFFORT always. A
+    reliable reader makes each publisher track it (heartbeats, acknowledgements, repairs) on the
+    loop's own path; a viewer would rather miss a sample than cost the loop time."""
+    return replace(recorder_request(offers), reliability=Reliability.BEST_EFFORT)

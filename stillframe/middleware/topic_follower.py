@@ -38,6 +38,10 @@ class TopicFollower:
     def on_new_topic(self, topic: str, msgtype: str, offers: list[QoSProfile]) -> RawCallback:
         raise NotImplementedError
 
+    def request(self, offers: list[QoSProfile]) -> QoSProfile:
+        """The subscription QoS for a topic with these publishers' ``offers``."""
+        return recorder_request(offers)
+
     def discover(self) -> None:
         """Subscribe to every wanted topic that has a publisher and is not followed yet."""
         for topic, types in self.node.get_topic_names_and_types():
@@ -52,7 +56,7 @@ class TopicFollower:
             offers = [info.qos_profile for info in publishers]
             callback = self.on_new_topic(topic, msgtype, offers)
             self._subscriptions[topic] = self.node.create_subscription(
-                msgtype, topic, callback, recorder_request(offers), raw=True)
+                msgtype, topic, callback, self.request(offers), raw=True)
             self.node.get_logger().info(f"Subscribed to topic '{topic}'")
 
     def _usable(self, topic: str, types: list[str], publishers: list[Any]) -> bool:

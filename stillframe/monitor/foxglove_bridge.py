@@ -19,7 +19,7 @@ import foxglove
 
 from stillframe.contract import messages
 from stillframe.middleware.api import MessageInfo
-from stillframe.middleware.qos import QoSProfile
+from stillframe.middleware.qos import QoSProfile, viewer_request
 from stillframe.middleware.topic_follower import RawCallback, TopicFollower
 
 SCHEMA_ENCODING = "ros2msg"
@@ -56,6 +56,9 @@ class FoxgloveBridge(TopicFollower):
         super().__init__(node, topics)
         if node.get_parameter("use_sim_time").value:
             node.create_subscription("rosgraph_msgs/msg/Clock", "/clock", self._on_clock, "clock")
+
+    def request(self, offers: list[QoSProfile]) -> QoSProfile:
+        return viewer_request(offers)
 
     def on_new_topic(self, topic: str, msgtype: str, offers: list[QoSProfile]) -> RawCallback:
         channel = foxglove.Channel(topic, schema=ros2msg_schema(msgtype),

@@ -114,3 +114,21 @@ def test_raw_subscription_gets_cdr_and_timestamps(ros_domain: int) -> None:
         assert got[1][0] == data
     finally:
         node.destroy_node()
+
+
+def test_matched_counts_follow_endpoints_as_they_join(ros_domain: int) -> None:
+    """The dds backend's matched counts (``cyclone_raw.matched_count``) equal the length of
+    cyclonedds' own matched lists as readers join one by one (that list can raise IndexError
+    when one joins between its two C calls; the count cannot)."""
+    node = create_node("matched_counts")
+    try:
+        pub = node.create_publisher("std_msgs/msg/String", "/matched", "default")
+        subs = []
+        for joined in range(1, 4):
+            subs.append(node.create_subscription("std_msgs/msg/String", "/matched",
+                                                 lambda _m: None, "default"))
+            assert spin_until(node, lambda j=joined: pub.get_subscription_count() == j, 10)
+            assert pub.get_subscription_count() == len(pub._writer.get_matched_subscriptions())
+        assert all(s.get_publisher_count() == 1 for s in subs)
+    finally:
+        node.destroy_node()

@@ -40,6 +40,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     parser.add_argument("--nice", type=int, default=10, metavar="N",
                         help="lower the monitor's CPU priority by N (default 10), so that under "
                              "load the loop's nodes come first")
+    parser.add_argument("--idle", action="store_true",
+                        help="run at SCHED_IDLE: only on CPU time the loop leaves unused (the "
+                             "monitor then gives up data, never loop time, on a busy machine)")
     parser.add_argument("--use-sim-time", action="store_true",
                         help="follow /clock: stamps and the Foxglove time cursor in sim time")
     parser.set_defaults(func=run)
@@ -64,6 +67,8 @@ def run(args: argparse.Namespace) -> int:
     if not 0 <= args.nice <= 19:
         raise InputError(f"--nice {args.nice}: expected 0..19")
     os.nice(args.nice)
+    if args.idle:   # before any thread starts: the middleware's and the SDK's threads inherit it
+        os.sched_setscheduler(0, os.SCHED_IDLE, os.sched_param(0))
     limits = Limits()
     if args.scene is not None:
         scene = load_scene(args.scene, args.overrides)
