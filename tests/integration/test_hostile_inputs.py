@@ -131,7 +131,7 @@ def _flood_run(tmp_path: Path, topic_set: str, flood_s: float, duration: float) 
 
     def start_writers() -> list:
         return [subprocess.Popen([sys.executable, str(WRITER), backend, "5000", f"{flood_s:g}",
-                                  topic_set], env=child_env(), cwd=REPO_ROOT,
+                                  topic_set, "1"], env=child_env(), cwd=REPO_ROOT,
                                  stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
                 for backend in ("rclpy", "dds")]
 
@@ -243,7 +243,8 @@ def test_garbage_cdr_on_the_wire_is_dropped_and_counted(ros_domain: int) -> None
         env=child_env(), cwd=REPO_ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
         text=True) for backend in ("rclpy", "dds")}
     assert all(r.stdout.readline().strip() == "ready" for r in readers.values())
-    writer = subprocess.Popen([sys.executable, str(WRITER), "rclpy", "2000", "2", "own"],
+    writer = subprocess.Popen([sys.executable, str(WRITER), "rclpy", "2000", "2", "own", "0",
+                               str(len(readers))],
                               env=child_env(), cwd=REPO_ROOT, stdout=subprocess.PIPE,
                               stderr=subprocess.PIPE, text=True)
     out, err = finish(writer, timeout=60)

@@ -1,13 +1,14 @@
-"""A hostile writer (issue 11, item 5), run as ``python tests/support/hostile_writer.py BACKEND RATE
-SECONDS TOPICS``. TOPICS ``own``: the LQG loop's own sensor topics (``floor1/imu``,
-``pendulum/joint_states``, ``excitation/wrench``); ``unused``: topics it does not read
-(``floor3/force_cmd``, a command topic it does not drive, ``floor3/load_cell``, ``unused/imu``).
-Once the loop's readers have matched and ``/clock`` has reached 1 s: ``RATE`` messages/s in all,
-stamped 0, -5 s and +2e9 s, with an empty ``frame_id`` and every 5000th a 1 MB one, JointState
-arrays of mismatched lengths, and about every 100th sample garbage or truncated CDR (empty, a bare
-header, 48 random bytes, half a message) under the topic's type name. ``BACKEND``: ``rclpy`` (a
-real rclpy peer on Fast DDS) or ``dds`` (a Cyclone DDS writer of ours). Prints ``ready``, writes
-for ``SECONDS`` (or until SIGTERM), then prints ``sent GOOD GARBAGE_SENT GARBAGE_REFUSED RATE``.
+"""A hostile writer (issue 11, item 5), run as ``python tests/support/hostile_writer.py BACKEND
+RATE SECONDS TOPICS [AFTER_CLOCK_S [READERS]]``. TOPICS ``own``: the LQG loop's own sensor
+topics (``floor1/imu``, ``pendulum/joint_states``, ``excitation/wrench``); ``unused``: topics it
+does not read (``floor3/force_cmd``, a command topic it does not drive, ``floor3/load_cell``,
+``unused/imu``). Once the loop's readers have matched (and ``/clock`` has reached
+AFTER_CLOCK_S): ``RATE`` messages/s in all, stamped 0, -5 s and +2e9 s, with an empty
+``frame_id`` and every 5000th a 1 MB one, JointState arrays of mismatched lengths, and about
+every 100th sample garbage or truncated CDR (empty, a bare header, 48 random bytes, half a
+message) under the topic's type name. ``BACKEND``: ``rclpy`` (a real rclpy peer on Fast DDS) or
+``dds`` (a Cyclone DDS writer of ours). Prints ``ready``, writes for ``SECONDS`` (or until
+SIGTERM), then prints ``sent GOOD GARBAGE_SENT GARBAGE_REFUSED RATE``.
 """
 
 from __future__ import annotations
@@ -66,11 +67,14 @@ def main() -> None:
     clock = [0]
     node.create_subscription("rosgraph_msgs/msg/Clock", "/clock", lambda m: clock.__setitem__(
         0, m.clock.sec * 1_000_000_000 + m.clock.nanosec), "clock")
-    # the loop's readers matched (the flood reaches them) and the loop at 1 s (it runs meanwhile,
-    # however fast the machine)
+    # the loop's readers matched (the flood reaches them) and, with AFTER_CLOCK_S, the loop that
+    # far (it runs meanwhile, however fast the machine)
+    after_ns = round(float(sys.argv[5]) * 1e9) if len(sys.argv) > 5 else 0
+    readers = int(sys.argv[6]) if len(sys.argv) > 6 else 1
     deadline = time.monotonic() + 60
-    while (time.monotonic() < deadline and not stop and (clock[0] < 1_000_000_000 or not all(
-            pub.get_subscription_count() > 0 for t, pub in pubs.items() if t not in UNREAD))):
+    while (time.monotonic() < deadline and not stop and (clock[0] < after_ns or not all(
+            pub.get_subscription_count() >= readers
+            for t, pub in pubs.items() if t not in UNREAD))):
         node.spin_once(0.001)
     print("ready", flush=True)
     t0 = time.monotonic()
