@@ -44,7 +44,7 @@ from stillframe.studies.vary import (
 
 WHATS: tuple[str, ...] = ("closed-loop", "simulate", "identify")
 NOISE_SEEDS: tuple[str, ...] = ("plant.seed", "sensors.seed", "excitation.seed")
-TIMING: tuple[str, ...] = ("wall_s", "steps_per_s", "cpu_s")
+TIMING: tuple[str, ...] = ("wall_s", "loop_s", "loop_cpu_s", "steps_per_s", "cpu_s")
 """Figures that measure the machine, not the run (left out of comparisons)."""
 
 
