@@ -134,11 +134,15 @@ def observer_realtime(practices: str) -> Iterator[None]:
 
 
 def realtime(rate_hz: float, duration: float, out: Path, backend: str,
-             rt: tuple[str, list[int]] = ("", [])) -> dict[str, Any]:
+             rt: tuple[str, list[int]] = ("", []),
+             monitor_args: list[str] | None = None) -> dict[str, Any]:
+    """The LQG scene in real time at ``rate_hz`` through the nodes on ``backend``: latency and
+    deadline figures seen by an observer here; ``monitor_args`` start a monitor beside them."""
     log = LatencyLog(round(1e9 / rate_hz))
     with observer_backend(backend), observer_realtime(rt[0]):
         result = run_scene(SCENE, realtime_overrides(rate_hz, duration), out, "realtime",
-                           prepare=observe(log), backends=[backend], rt=rt[0], rt_cpus=rt[1])
+                           prepare=observe(log), backends=[backend], rt=rt[0], rt_cpus=rt[1],
+                           monitor_args=monitor_args)
     e = result.evaluation
     summary = log.summary()
     seen = summary["answered"] + summary["unanswered"]

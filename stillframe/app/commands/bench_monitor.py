@@ -26,15 +26,9 @@ from typing import Any
 
 import numpy as np
 
-from stillframe.app.commands.bench_loop import (
-    SCENE,
-    observe,
-    observer_backend,
-    realtime_overrides,
-)
+from stillframe.app.commands.bench_loop import SCENE, observer_backend, realtime
 from stillframe.app.commands.common import add_json_argument, emit_json
 from stillframe.errors import InputError
-from stillframe.loop.latency import LatencyLog
 from stillframe.middleware import api
 from stillframe.monitor.foxglove_client import Capture, capture
 from stillframe.text_table import format_table
@@ -113,13 +107,10 @@ BOUND = 0.10
 def one_run(out: Path, mode: str, monitored: bool, rate_hz: float, duration: float,
             backend: str, idle: bool = False) -> dict[str, Any]:
     """One launch of the LQG scene on ``backend``: lock-step (the full scene) or real time at
-    ``rate_hz`` for ``duration`` s; with ``monitored``, a monitor and its watchers beside the
-    nodes."""
+    ``rate_hz`` for ``duration`` s (``bench loop``'s real-time run); with ``monitored``, a
+    monitor and its watchers beside the nodes."""
     from stillframe.app.launcher import run_scene
 
-    overrides = [] if mode == "lockstep" else realtime_overrides(rate_hz, duration)
-    log = LatencyLog(round(1e9 / rate_hz))
-    prepare = observe(log) if mode == "realtime" else None
     watchers, monitor_args = None, None
     if monitored:
         ws_port, http_port = free_port(), free_port()
@@ -127,20 +118,17 @@ def one_run(out: Path, mode: str, monitored: bool, rate_hz: float, duration: flo
         monitor_args = ["--port", str(ws_port), "--dashboard-port", str(http_port),
                         *(["--idle"] if idle else [])]
     try:
-        with observer_backend(backend):
-            evaluation = run_scene(SCENE, overrides, out, mode, prepare=prepare,
-                                   backends=[backend], monitor_args=monitor_args).evaluation
+        if mode == "realtime":
+            figures = realtime(rate_hz, duration, out, backend, monitor_args=monitor_args)
+        else:
+            with observer_backend(backend):
+                evaluation = run_scene(SCENE, [], out, mode, backends=[backend],
+                                       monitor_args=monitor_args).evaluation
+            figures = {"steps": evaluation["steps"],
+                       "steps_per_s": evaluation["steps"] / evaluation["wall_s"]}
     finally:
         if watchers is not None:
             watchers.stop()
-    figures: dict[str, Any] = {"steps": evaluation["steps"]}
-    if mode == "lockstep":
-        figures["steps_per_s"] = evaluation["steps"] / evaluation["wall_s"]
-    else:
-        latency = log.summary()
-        figures["within_period_pct"] = 100.0 * (
-            latency["answered"] - latency["deadline_misses"]) / max(latency["samples"], 1)
-        figures["p99_us"] = latency["p99_us"]
     if watchers is not None:
         figures["client_messages"] = sum(len(m) for m in watchers.seen.messages.values())
         figures["client_topics"] = len(watchers.seen.messages)
