@@ -239,6 +239,9 @@ class RclpyNode:
             ros_message_class(name), topic, on_data, rclpy_qos(as_profile(qos)), raw=True
         )
 
+    def destroy_subscription(self, sub: Any) -> None:
+        self._node.destroy_subscription(sub)
+
     def create_timer(
         self, period_s: float, callback: Callable[[], None], clock: Clock | None = None
     ) -> Any:

@@ -5,11 +5,19 @@ Shared by the bag recorder and the Foxglove bridge, like ``ros2 bag record`` and
 topics that appear later are picked up too; a topic is taken with its first type if that type is
 a Jazzy standard type and no publisher announces a different type hash; the subscription QoS is
 adapted to the publishers' offers (:func:`stillframe.bags.qos.recorder_request`).
+
+The recorder takes every topic as soon as it is found. A follower made with ``on_demand``
+(the Foxglove bridge) only announces it (:meth:`TopicFollower.on_new_topic`) and subscribes
+while something wants it (:meth:`TopicFollower.want`, callable from any thread, applied on the
+next discovery pass), as ``foxglove_bridge`` subscribes only to the channels a client
+subscribed to: a topic nobody watches costs the publishers and this process nothing.
 """
 
 from __future__ import annotations
 
+import threading
 import time
+from collections import Counter
 from collections.abc import Callable, Sequence
 from typing import Any
 
@@ -29,10 +37,15 @@ class TopicFollower:
     """Subscribes ``node`` to ``topics`` (all ROS topics if empty) as they are discovered;
     :meth:`on_new_topic` says where each topic's samples go."""
 
-    def __init__(self, node: Any, topics: Sequence[str] = ()) -> None:
+    def __init__(self, node: Any, topics: Sequence[str] = (), on_demand: bool = False) -> None:
         self.node = node
         self.topics = set(topics)
+        self.on_demand = on_demand
+        #: topic -> (type, publishers' offers, callback) of every topic taken
+        self._found: dict[str, tuple[str, list[QoSProfile], RawCallback]] = {}
         self._subscriptions: dict[str, Any] = {}
+        self._wanted: Counter[str] = Counter()
+        self._wanted_lock = threading.Lock()
         self.node.create_timer(DISCOVERY_PERIOD_S, self.discover, clock=SYSTEM_CLOCK)
 
     def on_new_topic(self, topic: str, msgtype: str, offers: list[QoSProfile]) -> RawCallback:
@@ -42,10 +55,17 @@ class TopicFollower:
         """The subscription QoS for a topic with these publishers' ``offers``."""
         return recorder_request(offers)
 
+    def want(self, topic: str, wanted: bool) -> None:
+        """One more (``wanted``) or one fewer watcher of ``topic`` (``on_demand`` followers
+        subscribe while it has any); thread-safe, takes effect on the next discovery pass."""
+        with self._wanted_lock:
+            self._wanted[topic] += 1 if wanted else -1
+
     def discover(self) -> None:
-        """Subscribe to every wanted topic that has a publisher and is not followed yet."""
+        """Take every wanted topic that has a publisher and is not taken yet; then subscribe to
+        the topics taken and watched, and unsubscribe from those no longer watched."""
         for topic, types in self.node.get_topic_names_and_types():
-            if topic in self._subscriptions or (self.topics and topic not in self.topics):
+            if topic in self._found or (self.topics and topic not in self.topics):
                 continue
             publishers = self.node.get_publishers_info_by_topic(topic)
             if not publishers:
@@ -54,10 +74,18 @@ class TopicFollower:
             if not self._usable(topic, types, publishers):
                 continue
             offers = [info.qos_profile for info in publishers]
-            callback = self.on_new_topic(topic, msgtype, offers)
-            self._subscriptions[topic] = self.node.create_subscription(
-                msgtype, topic, callback, self.request(offers), raw=True)
-            self.node.get_logger().info(f"Subscribed to topic '{topic}'")
+            self._found[topic] = (msgtype, offers, self.on_new_topic(topic, msgtype, offers))
+        with self._wanted_lock:
+            watched = {topic for topic, n in self._wanted.items() if n > 0}
+        for topic, (msgtype, offers, callback) in self._found.items():
+            followed = topic in self._subscriptions
+            if not followed and (topic in watched or not self.on_demand):
+                self._subscriptions[topic] = self.node.create_subscription(
+                    msgtype, topic, callback, self.request(offers), raw=True)
+                self.node.get_logger().info(f"Subscribed to topic '{topic}'")
+            elif followed and self.on_demand and topic not in watched:
+                self.node.destroy_subscription(self._subscriptions.pop(topic))
+                self.node.get_logger().info(f"Unsubscribed from topic '{topic}' (not watched)")
 
     def _usable(self, topic: str, types: list[str], publishers: list[Any]) -> bool:
         """A topic is taken with its first type if that type is a Jazzy standard type and no
@@ -95,4 +123,4 @@ class TopicFollower:
 
     def missing(self) -> list[str]:
         """Requested topics never seen with a publisher."""
-        return sorted(self.topics - set(self._subscriptions))
+        return sorted(self.topics - set(self._found))

@@ -8,6 +8,11 @@ into MCAP bags) and message encoding ``cdr``; the CDR bytes pass through unconve
 time, each ``/clock`` sample is broadcast as the server time (capability ``time``), which
 drives Foxglove's and Lichtblick's time cursor. The SDK keeps a bounded queue per client and
 drops a slow client's oldest messages, so no client can hold the node back.
+
+Every topic is advertised as soon as it is found, but subscribed to only while a client
+subscribes to its channel (the server's ``on_subscribe``/``on_unsubscribe``, counted over the
+clients), like ``foxglove_bridge``: a topic no client watches costs neither its publisher nor
+the monitor anything.
 """
 
 from __future__ import annotations
@@ -35,27 +40,30 @@ def ros2msg_schema(msgtype: str) -> foxglove.Schema:
     return foxglove.Schema(name=msgtype, encoding=SCHEMA_ENCODING, data=text.encode())
 
 
-def start_server(host: str, port: int, context: foxglove.Context) -> foxglove.WebSocketServer:
-    """A Foxglove WebSocket server on ``host:port`` for ``context``'s channels."""
-    return foxglove.start_server(
-        name="stillframe monitor", host=host, port=port, context=context,
-        capabilities=[foxglove.Capability.Time], supported_encodings=[MESSAGE_ENCODING],
-        message_backlog_size=CLIENT_BACKLOG)
-
-
 class FoxgloveBridge(TopicFollower):
-    """Forwards ``topics`` (every topic if empty) of ``node`` to ``server``'s clients."""
+    """Serves ``topics`` (every topic if empty) of ``node`` to Foxglove clients on
+    ``host:port`` (``self.server``; raises RuntimeError if it cannot listen there)."""
 
-    def __init__(self, node: Any, server: foxglove.WebSocketServer, context: foxglove.Context,
-                 topics: Sequence[str] = ()) -> None:
-        self.server = server
-        self.context = context
+    def __init__(self, node: Any, host: str, port: int, topics: Sequence[str] = ()) -> None:
+        self.context = foxglove.Context()
         self.channels: dict[str, foxglove.Channel] = {}
         #: samples handed to the SDK per topic (what it then sends depends on the subscribers)
         self.forwarded: dict[str, int] = {}
-        super().__init__(node, topics)
+        super().__init__(node, topics, on_demand=True)
+        self.server = foxglove.start_server(
+            name="stillframe monitor", host=host, port=port, context=self.context,
+            server_listener=self, capabilities=[foxglove.Capability.Time],
+            supported_encodings=[MESSAGE_ENCODING], message_backlog_size=CLIENT_BACKLOG)
         if node.get_parameter("use_sim_time").value:
             node.create_subscription("rosgraph_msgs/msg/Clock", "/clock", self._on_clock, "clock")
+
+    def on_subscribe(self, client: Any, channel: Any) -> None:
+        """A client subscribed to a channel (the SDK's server thread)."""
+        self.want(channel.topic, True)
+
+    def on_unsubscribe(self, client: Any, channel: Any) -> None:
+        """A client unsubscribed from a channel or disconnected."""
+        self.want(channel.topic, False)
 
     def request(self, offers: list[QoSProfile]) -> QoSProfile:
         return viewer_request(offers)

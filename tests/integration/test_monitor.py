@@ -26,6 +26,7 @@ from stillframe.app.commands.bench_loop import realtime_overrides
 from stillframe.bags.storage import read_bag
 from stillframe.contract import messages
 from stillframe.locations import REPO_ROOT
+from stillframe.middleware import api
 from stillframe.monitor.dashboard import ERROR_KEYS
 from stillframe.monitor.foxglove_client import Capture, capture, churn, stall
 from tests.support.middleware import child_env, isolate_domain
@@ -240,6 +241,61 @@ def test_dashboard_in_headless_chromium(tmp_path: Path, ros_domain_module: int) 
     for key, value, red in cells:
         assert red == (key in ERROR_KEYS and value not in ("", "0", "False")), (key, value)
     assert any(key == "saturated" and red for key, _, red in cells), cells
+
+
+def monitor_readers(probe: Any, topic: str) -> int:
+    """Readers of ``topic`` that the DDS graph shows in the monitor's node."""
+    return sum(info.node_name == "stillframe_monitor"
+               for info in probe.get_subscriptions_info_by_topic(topic))
+
+
+def test_a_topic_is_subscribed_only_while_a_client_watches_it(ros_domain: int) -> None:
+    """Like foxglove_bridge: the monitor advertises a topic once it has a publisher, but has a
+    reader on it (as the DDS graph shows) only while a client is subscribed to its channel;
+    the reader goes when the client leaves. A topic nobody watches costs its publisher
+    nothing."""
+    source = api.create_node("imu_source")
+    publisher = source.create_publisher("sensor_msgs/msg/Imu", IMU, "sensor_data")
+    stop = threading.Event()
+
+    def publish() -> None:
+        while not stop.wait(0.01):
+            publisher.publish(messages.new("sensor_msgs/msg/Imu"))
+
+    threading.Thread(target=publish, daemon=True).start()
+    monitor = subprocess.Popen([sys.executable, "-m", "stillframe", "monitor", "--port", "0"],
+                               env=child_env(), cwd=REPO_ROOT, stdout=subprocess.DEVNULL,
+                               stderr=subprocess.PIPE, text=True)
+    try:
+        line = ""
+        while (found := READY.search(line.rstrip())) is None:
+            line = monitor.stderr.readline()
+            assert line, "the monitor ended before it was ready"
+        url = found[1]
+
+        async def watch(topics: list[str] | None, seconds: float) -> tuple[Capture, int]:
+            """Connect, subscribe to ``topics``, and count the monitor's readers at the end."""
+            seen, until = Capture(), asyncio.Event()
+            task = asyncio.create_task(capture(url, topics, until, seen, decode=False))
+            await asyncio.sleep(seconds)
+            readers = monitor_readers(source, IMU)
+            until.set()
+            await task
+            return seen, readers
+
+        looked, idle_readers = asyncio.run(watch([], 3.0))   # connected, subscribed to nothing
+        assert IMU in looked.channels
+        watched, readers = asyncio.run(watch([IMU], 3.0))
+        assert len(watched.messages.get(IMU, [])) >= 50
+        assert (idle_readers, readers) == (0, 1)
+        assert api.spin_until(source, lambda: monitor_readers(source, IMU) == 0, 10)
+    finally:
+        stop.set()
+        monitor.send_signal(signal.SIGINT)
+        _, err = monitor.communicate(timeout=30)
+        source.destroy_node()
+    assert monitor.returncode == 0, err[-2000:]
+    assert "Unsubscribed from topic '/frame/floor1/imu' (not watched)" in err
 
 
 @pytest.mark.parametrize(("args", "message"), [

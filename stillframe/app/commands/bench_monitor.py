@@ -1,8 +1,9 @@
 """``stillframe bench monitor``: the loop's ``bench loop`` figures with and without a monitor.
 
 The LQG scene through the three nodes, without and with ``stillframe monitor --dashboard`` beside
-them, a Foxglove client subscribed to every topic (counting the messages: a viewer decodes in its
-own process) and the dashboard's data polled twice a second (what an open browser tab does).
+them, watched from a process of their own: the dashboard's data polled twice a second (what an
+open browser tab does) and, unless ``--watch dashboard``, a Foxglove client subscribed to every
+topic (counting the messages: a viewer decodes in its own process).
 Two figures of ``bench loop``: the full scene in lock-step (steps per second of sim_node's loop,
 without process start-up), and real time at ``--rate`` (samples answered within the period and
 the command latency p99, seen by an observer in this process). Each repeat runs both kinds in
@@ -16,10 +17,10 @@ from __future__ import annotations
 import argparse
 import asyncio
 import contextlib
+import multiprocessing
 import socket
 import sys
 import tempfile
-import threading
 import urllib.request
 from pathlib import Path
 from typing import Any
@@ -46,6 +47,9 @@ def register(benches: argparse._SubParsersAction) -> None:
                         help="sample rate of the real-time runs (default 1000)")
     parser.add_argument("--duration", type=float, default=10.0, metavar="S",
                         help="seconds of each real-time run (default 10)")
+    parser.add_argument("--watch", choices=WATCH, default="every-topic",
+                        help="what watches the monitor besides the dashboard page: a Foxglove "
+                             "client on every topic (default), or nothing else ('dashboard')")
     parser.add_argument("--idle", action="store_true",
                         help="run the monitor at SCHED_IDLE (stillframe monitor --idle)")
     parser.add_argument("--backend", default="dds", choices=api.BACKENDS,
@@ -62,59 +66,78 @@ def free_port() -> int:
         return probe.getsockname()[1]
 
 
+#: what watches the monitor: --watch value -> Foxglove client's topics (None: every topic)
+WATCH: dict[str, list[str] | None] = {"dashboard": [], "every-topic": None}
+
+
 class Watchers:
-    """A Foxglove client of every topic and a dashboard poller, in a thread, until stopped."""
+    """A Foxglove client of ``topics`` (None: every topic) and a dashboard poller, in a process
+    of their own (as a viewer is: it must not take the observer's interpreter), until stopped."""
 
-    def __init__(self, ws_port: int, http_port: int) -> None:
-        self.seen = Capture()
-        self.polls = 0
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=asyncio.run, args=(self._main(ws_port, http_port),),
-                                        daemon=True)
-        self._thread.start()
+    def __init__(self, ws_port: int, http_port: int, topics: list[str] | None) -> None:
+        spawn = multiprocessing.get_context("spawn")
+        self._stop = spawn.Event()
+        self._results: multiprocessing.Queue = spawn.Queue()
+        self._process = spawn.Process(target=watch, daemon=True, args=(
+            ws_port, http_port, topics, self._stop, self._results))
+        self._process.start()
 
-    async def _main(self, ws_port: int, http_port: int) -> None:
-        until = asyncio.Event()
-        client = asyncio.create_task(self._client(f"ws://127.0.0.1:{ws_port}", until))
-        while not self._stop.is_set():
-            with contextlib.suppress(OSError):  # the monitor is not up yet
-                await asyncio.to_thread(self._poll, f"http://127.0.0.1:{http_port}/data")
-            await asyncio.sleep(POLL_PERIOD_S)
-        until.set()
-        await client
+    def stop(self) -> dict[str, int]:
+        """Stop watching: the client's messages and topics and the dashboard's polls."""
+        self._stop.set()
+        figures = self._results.get(timeout=60)
+        self._process.join(30)
+        return figures
 
-    async def _client(self, url: str, until: asyncio.Event) -> None:
+
+def watch(ws_port: int, http_port: int, topics: list[str] | None, stop: Any,
+          results: multiprocessing.Queue) -> None:
+    """The watchers' process (:class:`Watchers`)."""
+    seen, polls = Capture(), 0
+
+    async def client(until: asyncio.Event) -> None:
         while not until.is_set():
             try:
-                await capture(url, None, until, self.seen, decode=False)
+                await capture(f"ws://127.0.0.1:{ws_port}", topics, until, seen, decode=False)
             except OSError:
                 await asyncio.sleep(0.1)  # the monitor is not up yet
 
-    def _poll(self, url: str) -> None:
-        with urllib.request.urlopen(url, timeout=5) as response:
-            response.read()
-        self.polls += 1
+    def poll() -> None:
+        nonlocal polls
+        with urllib.request.urlopen(f"http://127.0.0.1:{http_port}/data", timeout=5) as answer:
+            answer.read()
+        polls += 1
 
-    def stop(self) -> None:
-        self._stop.set()
-        self._thread.join(30)
+    async def main() -> None:
+        until = asyncio.Event()
+        task = asyncio.create_task(client(until))
+        while not stop.is_set():
+            with contextlib.suppress(OSError):  # the monitor is not up yet
+                await asyncio.to_thread(poll)
+            await asyncio.sleep(POLL_PERIOD_S)
+        until.set()
+        await task
+
+    asyncio.run(main())
+    results.put({"client_messages": sum(len(m) for m in seen.messages.values()),
+                 "client_topics": len(seen.messages), "dashboard_polls": polls})
 
 
 #: the monitor may cost the loop at most this fraction of a figure
 BOUND = 0.10
 
 
-def one_run(out: Path, mode: str, monitored: bool, rate_hz: float, duration: float,
+def one_run(out: Path, mode: str, watched: str | None, rate_hz: float, duration: float,
             backend: str, idle: bool = False) -> dict[str, Any]:
     """One launch of the LQG scene on ``backend``: lock-step (the full scene) or real time at
-    ``rate_hz`` for ``duration`` s (``bench loop``'s real-time run); with ``monitored``, a
-    monitor and its watchers beside the nodes."""
+    ``rate_hz`` for ``duration`` s (``bench loop``'s real-time run); with ``watched`` (a
+    :data:`WATCH` key), a monitor and its watchers beside the nodes."""
     from stillframe.app.launcher import run_scene
 
     watchers, monitor_args = None, None
-    if monitored:
+    if watched is not None:
         ws_port, http_port = free_port(), free_port()
-        watchers = Watchers(ws_port, http_port)
+        watchers = Watchers(ws_port, http_port, WATCH[watched])
         monitor_args = ["--port", str(ws_port), "--dashboard-port", str(http_port),
                         *(["--idle"] if idle else [])]
     try:
@@ -128,11 +151,9 @@ def one_run(out: Path, mode: str, monitored: bool, rate_hz: float, duration: flo
                        "steps_per_s": evaluation["steps"] / evaluation["wall_s"]}
     finally:
         if watchers is not None:
-            watchers.stop()
+            figures_of_watchers = watchers.stop()
     if watchers is not None:
-        figures["client_messages"] = sum(len(m) for m in watchers.seen.messages.values())
-        figures["client_topics"] = len(watchers.seen.messages)
-        figures["dashboard_polls"] = watchers.polls
+        figures.update(figures_of_watchers)
     return figures
 
 
@@ -178,13 +199,14 @@ def run(args: argparse.Namespace) -> int:
                     done = sum(len(r) for m in runs.values() for r in m.values())
                     print(f"[{done + 1}/{total}] {mode} {kind} a monitor", file=sys.stderr)
                     runs[mode][kind].append(one_run(
-                        Path(tmp) / f"{mode}-{kind}{i}", mode, kind == "with", args.rate,
-                        args.duration, args.backend, args.idle))
+                        Path(tmp) / f"{mode}-{kind}{i}", mode,
+                        args.watch if kind == "with" else None, args.rate, args.duration,
+                        args.backend, args.idle))
     rows = compare(runs)
     if args.json:
-        emit_json({"backend": args.backend, "idle": args.idle, "rate_hz": args.rate,
-                   "duration_s": args.duration, "repeats": args.repeats, "bound": BOUND,
-                   "runs": runs, "figures": rows})
+        emit_json({"backend": args.backend, "watch": args.watch, "idle": args.idle,
+                   "rate_hz": args.rate, "duration_s": args.duration, "repeats": args.repeats,
+                   "bound": BOUND, "runs": runs, "figures": rows})
         return 0
     print(format_table(
         ["figure", "without", "with", "with / without", "monitor's cost", "goal"],
@@ -192,6 +214,6 @@ def run(args: argparse.Namespace) -> int:
           f"{r['with_over_without']:.3f}", f"{100 * r['monitor_cost']:+.1f} %",
           f"<= {100 * BOUND:.0f} %: {'met' if r['within_bound'] else 'NOT met'}"]
          for r in rows]))
-    print(f"medians of {args.repeats} runs each on {args.backend}; real time at {args.rate:g} Hz "
-          f"for {args.duration:g} s")
+    print(f"medians of {args.repeats} runs each on {args.backend}, watched by: {args.watch}; "
+          f"real time at {args.rate:g} Hz for {args.duration:g} s")
     return 0

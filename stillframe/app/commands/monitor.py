@@ -54,13 +54,11 @@ def _check_port(name: str, port: int) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    import foxglove
-
     from stillframe.config.scene import load_scene
     from stillframe.middleware.api import create_node, spin
     from stillframe.middleware.names import resolve_topic
     from stillframe.monitor.dashboard import Dashboard, Limits, serve
-    from stillframe.monitor.foxglove_bridge import FoxgloveBridge, start_server
+    from stillframe.monitor.foxglove_bridge import FoxgloveBridge
 
     _check_port("--port", args.port)
     _check_port("--dashboard-port", args.dashboard_port)
@@ -76,13 +74,13 @@ def run(args: argparse.Namespace) -> int:
                         scene.actuators.force_limit)
     sim = ["--ros-args", "-p", "use_sim_time:=true"] if args.use_sim_time else []
     node = create_node("stillframe_monitor", argv=[*sys.argv[:1], *sim])
-    context = foxglove.Context()
     try:
         try:
-            server = start_server(args.host, args.port, context)
+            bridge = FoxgloveBridge(node, args.host, args.port,
+                                    [resolve_topic(t) for t in args.topics])
         except RuntimeError as exc:
             raise InputError(f"--port {args.port}: cannot serve on {args.host}: {exc}") from None
-        bridge = FoxgloveBridge(node, server, context, [resolve_topic(t) for t in args.topics])
+        server = bridge.server
         where = f"foxglove ws://{args.host}:{server.port}"
         if args.dashboard:
             try:

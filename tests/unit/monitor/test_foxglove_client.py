@@ -9,7 +9,7 @@ import time
 
 import foxglove
 
-from stillframe.monitor.foxglove_bridge import ros2msg_schema, start_server
+from stillframe.monitor.foxglove_bridge import ros2msg_schema
 from stillframe.monitor.foxglove_client import Capture, capture
 
 CHANNELS = 300
@@ -21,7 +21,7 @@ def test_every_channel_advertised_while_connected_delivers() -> None:
     advertisement before recording it; the count is in the message); the client subscribes
     again, so every channel's messages arrive."""
     context = foxglove.Context()
-    server = start_server("127.0.0.1", 0, context)
+    server = foxglove.start_server(host="127.0.0.1", port=0, context=context)
     channels: list[foxglove.Channel] = []
     connected, created = threading.Event(), threading.Event()
 
