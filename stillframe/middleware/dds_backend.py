@@ -144,6 +144,10 @@ def user_data_field(qos: Qos, key: str) -> str:
     return ""
 
 
+def _never_called(*_: Any) -> None:
+    """The callback of a polled subscription (its samples are taken, never dispatched)."""
+
+
 def delete(entity: Any) -> None:
     """Delete a Cyclone entity now (and its children) instead of at garbage collection."""
     if entity is not None:
@@ -357,6 +361,13 @@ class DdsSubscription:
             self._writer_gids[handle] = endpoint.key.bytes
         return self._writer_gids[handle]
 
+    def take(self) -> list[tuple[bytes, interface.MessageInfo]]:
+        """The samples waiting (at most ``TAKE_BATCH``), raw with their info, oldest first."""
+        received = self._clock.now().nanoseconds
+        return [(bytes(data), interface.MessageInfo(
+                    info.source_timestamp, received, self.writer_gid(info.publication_handle)))
+                for data, info in take_raw(self._reader, TAKE_BATCH) if info.valid_data]
+
     def take_and_dispatch(self) -> int:
         """Hand every waiting sample to the callback; the number handed."""
         samples = take_raw(self._reader, TAKE_BATCH)
@@ -436,6 +447,7 @@ class DdsNode:
         self.context = Context.get()
         self._publishers: list[DdsPublisher] = []
         self._subscriptions: list[DdsSubscription] = []
+        self._polled: list[DdsSubscription] = []    # readers outside the wait set
         self._timers: list[DdsTimer] = []
         self._waitset = WaitSet(self.context.participant)
         sim_time = self.declare_parameter("use_sim_time", False, read_only=True).value
@@ -507,9 +519,23 @@ class DdsNode:
         delete(pub._writer)
         self.context.publish_graph()
 
+    def create_polled_subscription(
+        self, msg_type: str | type, topic: str, qos: QoSProfile | str | int,
+    ) -> DdsSubscription:
+        """A reader outside the node's wait set: nothing wakes for its samples."""
+        topic = self.resolve_topic_name(topic)
+        sub = DdsSubscription(self, messages.type_name(msg_type), topic, _never_called,
+                              as_profile(qos), raw=True)
+        self._polled.append(sub)
+        self.context.publish_graph()
+        return sub
+
     def destroy_subscription(self, sub: DdsSubscription) -> None:
-        self._waitset.detach(sub.condition)
-        self._subscriptions.remove(sub)
+        if sub in self._polled:
+            self._polled.remove(sub)
+        else:
+            self._waitset.detach(sub.condition)
+            self._subscriptions.remove(sub)
         delete(sub._reader)
         self.context.publish_graph()
 
@@ -521,7 +547,7 @@ class DdsNode:
         return timer
 
     def reader_gids(self) -> list[bytes]:
-        return [sub.gid for sub in self._subscriptions]
+        return [sub.gid for sub in (*self._subscriptions, *self._polled)]
 
     def writer_gids(self) -> list[bytes]:
         return [pub.gid for pub in self._publishers]
@@ -573,10 +599,11 @@ class DdsNode:
         if self not in self.context.nodes:
             return
         delete(self._waitset)
-        for entity in (*self._publishers, *self._subscriptions):
+        for entity in (*self._publishers, *self._subscriptions, *self._polled):
             delete(getattr(entity, "_writer", None) or entity._reader)
         self._publishers.clear()
         self._subscriptions.clear()
+        self._polled.clear()
         self._timers.clear()
         self.context.remove_node(self)
 

@@ -60,6 +60,19 @@ class Subscription(Protocol):
     topic_name: str
 
 
+class PolledSubscription(Protocol):
+    """A subscription that never calls back: its samples wait in the middleware (KEEP_LAST
+    ``depth`` of them) until :meth:`take`. The process does no work per sample, only per
+    take: what a viewer wants of a 1 kHz topic (Cyclone's advice for a time-based filter,
+    which it does not implement at the writer: a keep-last reader, polled)."""
+
+    topic_name: str
+
+    def take(self) -> list[tuple[bytes, MessageInfo]]:
+        """The samples waiting, oldest first (raw CDR with their info)."""
+        ...
+
+
 class Timer(Protocol):
     def cancel(self) -> None: ...
     def reset(self) -> None: ...
@@ -81,7 +94,10 @@ class Node(Protocol):
         self, msg_type: str | type, topic: str, callback: Callable[..., None],
         qos: QoSProfile | str | int, raw: bool = False,
     ) -> Subscription: ...
-    def destroy_subscription(self, sub: Subscription) -> None: ...
+    def create_polled_subscription(
+        self, msg_type: str | type, topic: str, qos: QoSProfile | str | int,
+    ) -> PolledSubscription: ...
+    def destroy_subscription(self, sub: Subscription | PolledSubscription) -> None: ...
     def create_timer(
         self, period_s: float, callback: Callable[[], None], clock: Clock | None = None
     ) -> Timer: ...

@@ -18,6 +18,7 @@ from typing import Any
 import rclpy
 from rcl_interfaces.msg import ParameterDescriptor
 from rcl_interfaces.msg import SetParametersResult as RclpySetParametersResult
+from rclpy.callback_groups import CallbackGroup
 from rclpy.clock import ClockType
 from rclpy.duration import Duration
 from rclpy.executors import SingleThreadedExecutor
@@ -144,6 +145,48 @@ class RclpyPublisher:
         return self._pub.wait_for_all_acked(Duration(nanoseconds=int(timeout_sec * 1e9)))
 
 
+class NeverExecuted(CallbackGroup):
+    """A callback group the executor never runs: its subscriptions stay out of the executor's
+    wait set, so their samples wake nothing (they are taken by polling)."""
+
+    def can_execute(self, entity: Any) -> bool:
+        return False
+
+    def beginning_execution(self, entity: Any) -> bool:
+        return False
+
+    def ending_execution(self, entity: Any) -> None:
+        """Nothing runs, so nothing ends."""
+
+
+NEVER_EXECUTED = NeverExecuted()
+
+
+def _never_called(*_: Any) -> None:
+    """The callback of a polled subscription (its samples are taken, never dispatched)."""
+
+
+class RclpyPolledSubscription:
+    """:class:`.interface.PolledSubscription` over an rclpy subscription in
+    :data:`NEVER_EXECUTED`; takes with rcl's ``take`` as the executor would."""
+
+    def __init__(self, subscription: Any, clock: Any) -> None:
+        self.subscription = subscription
+        self.topic_name = subscription.topic_name
+        self._clock = clock
+
+    def take(self) -> list[tuple[bytes, interface.MessageInfo]]:
+        taken = []
+        with self.subscription.handle:
+            while (got := self.subscription.handle.take_message(
+                    self.subscription.msg_type, True)) is not None:
+                data, info = got
+                now = self._clock.now().nanoseconds
+                gid = bytes(info.get("publisher_gid") or b"")   # absent in Jazzy's rclpy
+                taken.append((data, interface.MessageInfo(now, now, gid)))
+        return taken
+
+
 class RclpyNode:
     """:class:`.interface.Node` over an ``rclpy.node.Node``."""
 
@@ -239,8 +282,17 @@ class RclpyNode:
             ros_message_class(name), topic, on_data, rclpy_qos(as_profile(qos)), raw=True
         )
 
+    def create_polled_subscription(
+        self, msg_type: str | type, topic: str, qos: QoSProfile | str | int,
+    ) -> RclpyPolledSubscription:
+        name = messages.type_name(msg_type)
+        sub = self._node.create_subscription(
+            ros_message_class(name), topic, _never_called, rclpy_qos(as_profile(qos)),
+            callback_group=NEVER_EXECUTED, raw=True)
+        return RclpyPolledSubscription(sub, self._clock)
+
     def destroy_subscription(self, sub: Any) -> None:
-        self._node.destroy_subscription(sub)
+        self._node.destroy_subscription(getattr(sub, "subscription", sub))
 
     def create_timer(
         self, period_s: float, callback: Callable[[], None], clock: Clock | None = None

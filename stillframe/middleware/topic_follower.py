@@ -11,6 +11,11 @@ The recorder takes every topic as soon as it is found. A follower made with ``on
 while something wants it (:meth:`TopicFollower.want`, callable from any thread, applied on the
 next discovery pass), as ``foxglove_bridge`` subscribes only to the channels a client
 subscribed to: a topic nobody watches costs the publishers and this process nothing.
+
+A follower made with ``poll_period_s`` reads by polling (the middleware's polled
+subscriptions): nothing runs per sample; every ``poll_period_s`` it takes what waits in each
+reader (at most the request's KEEP_LAST depth) and hands it on. With depth 1 that is the newest
+sample per period, a live view decimated before any work is done on it.
 """
 
 from __future__ import annotations
@@ -37,16 +42,20 @@ class TopicFollower:
     """Subscribes ``node`` to ``topics`` (all ROS topics if empty) as they are discovered;
     :meth:`on_new_topic` says where each topic's samples go."""
 
-    def __init__(self, node: Any, topics: Sequence[str] = (), on_demand: bool = False) -> None:
+    def __init__(self, node: Any, topics: Sequence[str] = (), on_demand: bool = False,
+                 poll_period_s: float | None = None) -> None:
         self.node = node
         self.topics = set(topics)
         self.on_demand = on_demand
+        self.polled = poll_period_s is not None
         #: topic -> (type, publishers' offers, callback) of every topic taken
         self._found: dict[str, tuple[str, list[QoSProfile], RawCallback]] = {}
         self._subscriptions: dict[str, Any] = {}
         self._wanted: Counter[str] = Counter()
         self._wanted_lock = threading.Lock()
         self.node.create_timer(DISCOVERY_PERIOD_S, self.discover, clock=SYSTEM_CLOCK)
+        if poll_period_s is not None:
+            self.node.create_timer(poll_period_s, self.poll, clock=SYSTEM_CLOCK)
 
     def on_new_topic(self, topic: str, msgtype: str, offers: list[QoSProfile]) -> RawCallback:
         raise NotImplementedError
@@ -80,12 +89,21 @@ class TopicFollower:
         for topic, (msgtype, offers, callback) in self._found.items():
             followed = topic in self._subscriptions
             if not followed and (topic in watched or not self.on_demand):
-                self._subscriptions[topic] = self.node.create_subscription(
-                    msgtype, topic, callback, self.request(offers), raw=True)
+                qos = self.request(offers)
+                self._subscriptions[topic] = (
+                    self.node.create_polled_subscription(msgtype, topic, qos) if self.polled
+                    else self.node.create_subscription(msgtype, topic, callback, qos, raw=True))
                 self.node.get_logger().info(f"Subscribed to topic '{topic}'")
             elif followed and self.on_demand and topic not in watched:
                 self.node.destroy_subscription(self._subscriptions.pop(topic))
                 self.node.get_logger().info(f"Unsubscribed from topic '{topic}' (not watched)")
+
+    def poll(self) -> None:
+        """Hand on what waits in each polled subscription."""
+        for topic, sub in list(self._subscriptions.items()):
+            callback = self._found[topic][2]
+            for data, info in sub.take():
+                callback(data, info)
 
     def _usable(self, topic: str, types: list[str], publishers: list[Any]) -> bool:
         """A topic is taken with its first type if that type is a Jazzy standard type and no
@@ -111,7 +129,10 @@ class TopicFollower:
         the middleware has received, and those still arriving, until none came for
         :data:`DRAIN_QUIET_S` (samples in flight when the signal came are kept). The ``dds``
         backend's subscriptions can be asked for them directly; under rclpy, what rclpy
-        delivered before shutdown is all there is."""
+        delivered before shutdown is all there is. A polled follower hands on what waits."""
+        if self.polled:
+            self.poll()
+            return
         takers = [take for sub in self._subscriptions.values()
                   if (take := getattr(sub, "take_and_dispatch", None)) is not None]
         quiet_since = time.monotonic()

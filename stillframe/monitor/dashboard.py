@@ -4,10 +4,11 @@ One page (``stillframe/data/dashboard.html``) of Plotly charts: per floor the tr
 estimated displacement (``state_truth``, ``state_estimate``) with the measured acceleration
 (``floorN/imu``); the pendulum angle; the command with its limits; and each node's counters from
 ``/diagnostics``, red when an error counter is non-zero. The page polls ``/data`` twice a
-second. Decimation happens here, before decoding: a topic's sample is decoded and kept only
-if at least ``1 / rate_hz`` has passed (receive time, sim time with ``use_sim_time``) since the
-last one kept, and each series keeps its last ``points`` samples; so a 1 kHz topic costs a
-comparison per sample and the page always gets at most ``points`` points per series.
+second. Decimation happens here, before any work is done on a sample: the loop's topics are
+read by polled subscriptions (KEEP_LAST 1), and every ``1 / rate_hz`` s of wall time the newest
+sample of each is taken, decoded and kept; each series keeps its last ``points`` samples. So a
+1 kHz topic costs this process ``rate_hz`` takes a second, not a thousand wake-ups, and the page
+always gets at most ``points`` points per series.
 
 Plotly's JavaScript is served from the ``plotly`` Python package (``plotly.min.js``), so the
 page needs no internet.
@@ -38,14 +39,16 @@ from stillframe.contract.topics import (
     TORQUE_CMD,
     TopicSpec,
 )
-from stillframe.middleware.api import MessageInfo
+from stillframe.middleware.clock import SYSTEM_CLOCK
 from stillframe.middleware.qos import QoSProfile, Reliability
 
 #: counters that are errors when non-zero (the rest of STATUS_KEYS are progress figures)
 ERROR_KEYS: tuple[str, ...] = tuple(k for k in STATUS_KEYS
                                     if k not in ("sim_time_s", "step", "realtime_factor"))
-#: best effort with a short queue: the dashboard never back-pressures a publisher
-WATCH_QOS = QoSProfile(depth=10, reliability=Reliability.BEST_EFFORT)
+#: best effort, the newest sample only: the dashboard never back-pressures a publisher
+WATCH_QOS = QoSProfile(depth=1, reliability=Reliability.BEST_EFFORT)
+#: best effort with a short queue for ``/diagnostics`` (every node's status counts)
+DIAGNOSTICS_QOS = QoSProfile(depth=10, reliability=Reliability.BEST_EFFORT)
 
 
 def _joint_positions(msg: Any) -> list[float]:
@@ -64,22 +67,16 @@ SERIES: dict[str, tuple[TopicSpec, Callable[[Any], list[float]]]] = {
 }
 
 
-class DecimatedSeries:
-    """The last ``points`` samples kept at most every ``period_ns`` of receive time."""
+class Series:
+    """The last ``points`` samples kept, ``(stamp [s], values)``."""
 
-    def __init__(self, points: int, period_ns: int) -> None:
-        self.period_ns = period_ns
+    def __init__(self, points: int) -> None:
         self.samples: deque[tuple[float, list[float]]] = deque(maxlen=points)
-        self._last_ns: int | None = None
-        self.received = 0
+        self.kept = 0
 
-    def wants(self, received_ns: int) -> bool:
-        """Count a sample; True if it is to be decoded and kept."""
-        self.received += 1
-        if self._last_ns is not None and 0 <= received_ns - self._last_ns < self.period_ns:
-            return False
-        self._last_ns = received_ns
-        return True
+    def keep(self, sample: tuple[float, list[float]]) -> None:
+        self.samples.append(sample)
+        self.kept += 1
 
     def as_columns(self) -> dict[str, Any]:
         """``{"t": [...], "y": [[first value ...], [second value ...], ...]}``."""
@@ -87,7 +84,7 @@ class DecimatedSeries:
         width = len(samples[0][1]) if samples else 0
         return {"t": [t for t, _ in samples],
                 "y": [[v[i] for _, v in samples] for i in range(width)],
-                "received": self.received}
+                "kept": self.kept}
 
 
 @dataclass
@@ -107,28 +104,23 @@ class Dashboard:
                  points: int = 500) -> None:
         self.limits = limits
         self._lock = threading.Lock()
-        self.series = {name: DecimatedSeries(points, round(1e9 / rate_hz)) for name in SERIES}
+        self.series = {name: Series(points) for name in SERIES}
+        self._readers = {name: (node.create_polled_subscription(
+            spec.type_name, f"{namespace}/{spec.name}", WATCH_QOS), spec.type_name, values)
+            for name, (spec, values) in SERIES.items()}
         self.diagnostics: dict[str, dict[str, str]] = {}
-        for name, (spec, values) in SERIES.items():
-            node.create_subscription(spec.type_name, f"{namespace}/{spec.name}",
-                                     self._keeper(name, spec.type_name, values), WATCH_QOS,
-                                     raw=True)
         node.create_subscription(DIAGNOSTICS.type_name, DIAGNOSTICS.name, self._on_diagnostics,
-                                 WATCH_QOS)
+                                 DIAGNOSTICS_QOS)
+        node.create_timer(1.0 / rate_hz, self.poll, clock=SYSTEM_CLOCK)
 
-    def _keeper(self, name: str, msgtype: str,
-                values: Callable[[Any], list[float]]) -> Callable[[bytes, MessageInfo], None]:
-        series = self.series[name]
-
-        def keep(data: bytes, info: MessageInfo) -> None:
-            if not series.wants(info.received_timestamp):
-                return
-            msg = messages.deserialize(data, msgtype)
-            sample = (messages.stamp_ns(msg.header.stamp) * 1e-9, values(msg))
-            with self._lock:
-                series.samples.append(sample)
-
-        return keep
+    def poll(self) -> None:
+        """Keep the newest sample of each series' topic, if a new one came."""
+        for name, (reader, msgtype, values) in self._readers.items():
+            if taken := reader.take():
+                msg = messages.deserialize(taken[-1][0], msgtype)
+                with self._lock:
+                    self.series[name].keep((messages.stamp_ns(msg.header.stamp) * 1e-9,
+                                            values(msg)))
 
     def _on_diagnostics(self, msg: Any) -> None:
         with self._lock:

@@ -13,6 +13,13 @@ Every topic is advertised as soon as it is found, but subscribed to only while a
 subscribes to its channel (the server's ``on_subscribe``/``on_unsubscribe``, counted over the
 clients), like ``foxglove_bridge``: a topic no client watches costs neither its publisher nor
 the monitor anything.
+
+A live view is forwarded at most ``max_rate_hz`` samples per second per topic: the
+subscriptions are polled (KEEP_LAST 1, taken every ``1 / max_rate_hz`` s), so the monitor does
+no work for the samples in between, and a 1 kHz loop is not slowed by a Python process waking
+a thousand times a second per topic (docs/monitor.md has the figures). ``max_rate_hz = 0``
+forwards every sample (polled every :data:`EVERY_SAMPLE_POLL_S`, from a deep queue); a bag
+(``stillframe record``) has every sample too, for Foxglove to open after.
 """
 
 from __future__ import annotations
@@ -31,6 +38,8 @@ SCHEMA_ENCODING = "ros2msg"
 MESSAGE_ENCODING = "cdr"
 #: outgoing messages buffered per client before the oldest are dropped
 CLIENT_BACKLOG = 1024
+#: how often every waiting sample is taken when every sample is forwarded [s]
+EVERY_SAMPLE_POLL_S = 0.02
 
 
 def ros2msg_schema(msgtype: str) -> foxglove.Schema:
@@ -42,14 +51,18 @@ def ros2msg_schema(msgtype: str) -> foxglove.Schema:
 
 class FoxgloveBridge(TopicFollower):
     """Serves ``topics`` (every topic if empty) of ``node`` to Foxglove clients on
-    ``host:port`` (``self.server``; raises RuntimeError if it cannot listen there)."""
+    ``host:port`` (``self.server``; raises RuntimeError if it cannot listen there), at most
+    ``max_rate_hz`` samples per second and topic (0: every sample)."""
 
-    def __init__(self, node: Any, host: str, port: int, topics: Sequence[str] = ()) -> None:
+    def __init__(self, node: Any, host: str, port: int, topics: Sequence[str],
+                 max_rate_hz: float) -> None:
         self.context = foxglove.Context()
         self.channels: dict[str, foxglove.Channel] = {}
         #: samples handed to the SDK per topic (what it then sends depends on the subscribers)
         self.forwarded: dict[str, int] = {}
-        super().__init__(node, topics, on_demand=True)
+        self.every_sample = max_rate_hz == 0
+        super().__init__(node, topics, on_demand=True, poll_period_s=(
+            EVERY_SAMPLE_POLL_S if self.every_sample else 1.0 / max_rate_hz))
         self.server = foxglove.start_server(
             name="stillframe monitor", host=host, port=port, context=self.context,
             server_listener=self, capabilities=[foxglove.Capability.Time],
@@ -66,7 +79,8 @@ class FoxgloveBridge(TopicFollower):
         self.want(channel.topic, False)
 
     def request(self, offers: list[QoSProfile]) -> QoSProfile:
-        return viewer_request(offers)
+        request = viewer_request(offers)
+        return request if self.every_sample else request.with_depth(1)
 
     def on_new_topic(self, topic: str, msgtype: str, offers: list[QoSProfile]) -> RawCallback:
         channel = foxglove.Channel(topic, schema=ros2msg_schema(msgtype),

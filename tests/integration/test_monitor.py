@@ -83,7 +83,8 @@ def monitored_run(tmp_path_factory: pytest.TempPathFactory, ros_domain_module: i
     a client has subscribed)."""
     bag = tmp_path_factory.mktemp("monitor") / "bag"
     launch = Launch.start(*SHORT, "--mode", "realtime", "--json", "--record", str(bag),
-                          "--record-topic", IMU, "--record-topic", "/clock")
+                          "--record-topic", IMU, "--record-topic", "/clock",
+                          "--monitor-max-rate", "0")
     url = launch.urls[0]
 
     async def clients() -> tuple[Capture, int, int]:
@@ -111,7 +112,8 @@ def ros_domain_module() -> Iterator[int]:
 
 def test_a_foxglove_client_decodes_what_the_recorder_recorded(monitored_run: dict) -> None:
     """The IMU channel carries the ros2msg schema; decoded with it alone, every message the
-    client got equals the bag's message of the same stamp, and none is missing in between."""
+    client got equals the bag's message of the same stamp, and (every sample forwarded: launch
+    ``--monitor-max-rate 0``) none is missing in between."""
     seen: Capture = monitored_run["seen"]
     assert seen.subprotocol == "foxglove.sdk.v1"
     channel = seen.channels[IMU]
@@ -130,7 +132,8 @@ def test_a_foxglove_client_decodes_what_the_recorder_recorded(monitored_run: dic
         assert msg.linear_acceleration.x == mine.linear_acceleration.x
         assert list(msg.linear_acceleration_covariance) == list(
             mine.linear_acceleration_covariance)
-    # consecutive samples at 32 Hz: the slow client made the server drop nothing for this one
+    # every sample (--monitor-max-rate 0), consecutive at 32 Hz: the slow client made the
+    # server drop nothing for this one
     period = round(1e9 / 32)
     assert all(abs(b - a - period) <= 1 for a, b in itertools.pairwise(stamps))
 
@@ -249,53 +252,99 @@ def monitor_readers(probe: Any, topic: str) -> int:
                for info in probe.get_subscriptions_info_by_topic(topic))
 
 
-def test_a_topic_is_subscribed_only_while_a_client_watches_it(ros_domain: int) -> None:
-    """Like foxglove_bridge: the monitor advertises a topic once it has a publisher, but has a
-    reader on it (as the DDS graph shows) only while a client is subscribed to its channel;
-    the reader goes when the client leaves. A topic nobody watches costs its publisher
-    nothing."""
+PUBLISH_HZ = 200
+
+
+@pytest.fixture
+def imu_source(ros_domain: int) -> Iterator[Any]:
+    """A node publishing the IMU topic at :data:`PUBLISH_HZ`, stamps counting periods."""
     source = api.create_node("imu_source")
     publisher = source.create_publisher("sensor_msgs/msg/Imu", IMU, "sensor_data")
     stop = threading.Event()
 
     def publish() -> None:
-        while not stop.wait(0.01):
-            publisher.publish(messages.new("sensor_msgs/msg/Imu"))
+        msg = messages.new("sensor_msgs/msg/Imu")
+        for k in itertools.count():
+            if stop.wait(1 / PUBLISH_HZ):
+                return
+            msg.header.stamp = messages.time_msg(k * 10**9 // PUBLISH_HZ)
+            publisher.publish(msg)
 
-    threading.Thread(target=publish, daemon=True).start()
-    monitor = subprocess.Popen([sys.executable, "-m", "stillframe", "monitor", "--port", "0"],
-                               env=child_env(), cwd=REPO_ROOT, stdout=subprocess.DEVNULL,
-                               stderr=subprocess.PIPE, text=True)
-    try:
-        line = ""
-        while (found := READY.search(line.rstrip())) is None:
-            line = monitor.stderr.readline()
-            assert line, "the monitor ended before it was ready"
-        url = found[1]
+    thread = threading.Thread(target=publish, daemon=True)
+    thread.start()
+    yield source
+    stop.set()
+    thread.join()
+    source.destroy_node()
 
-        async def watch(topics: list[str] | None, seconds: float) -> tuple[Capture, int]:
-            """Connect, subscribe to ``topics``, and count the monitor's readers at the end."""
-            seen, until = Capture(), asyncio.Event()
-            task = asyncio.create_task(capture(url, topics, until, seen, decode=False))
-            await asyncio.sleep(seconds)
-            readers = monitor_readers(source, IMU)
-            until.set()
-            await task
-            return seen, readers
 
-        looked, idle_readers = asyncio.run(watch([], 3.0))   # connected, subscribed to nothing
-        assert IMU in looked.channels
-        watched, readers = asyncio.run(watch([IMU], 3.0))
-        assert len(watched.messages.get(IMU, [])) >= 50
-        assert (idle_readers, readers) == (0, 1)
-        assert api.spin_until(source, lambda: monitor_readers(source, IMU) == 0, 10)
-    finally:
-        stop.set()
-        monitor.send_signal(signal.SIGINT)
-        _, err = monitor.communicate(timeout=30)
-        source.destroy_node()
+def start_monitor(*args: str) -> tuple[subprocess.Popen, str]:
+    """``stillframe monitor ARGS`` on a free port; the process and its Foxglove URL."""
+    monitor = subprocess.Popen([sys.executable, "-m", "stillframe", "monitor", "--port", "0",
+                                *args], env=child_env(), cwd=REPO_ROOT,
+                               stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    line = ""
+    while (found := READY.search(line.rstrip())) is None:
+        line = monitor.stderr.readline()
+        assert line, "the monitor ended before it was ready"
+    return monitor, found[1]
+
+
+def stop_monitor(monitor: subprocess.Popen) -> str:
+    """SIGINT, then its stderr; it must exit 0."""
+    monitor.send_signal(signal.SIGINT)
+    _, err = monitor.communicate(timeout=30)
     assert monitor.returncode == 0, err[-2000:]
+    return err
+
+
+async def watch(url: str, topics: list[str] | None, seconds: float,
+                probe: Any) -> tuple[Capture, int]:
+    """Connect to ``url``, subscribe to ``topics`` for ``seconds``; what came, and the monitor's
+    readers of the IMU topic just before leaving."""
+    seen, until = Capture(), asyncio.Event()
+    task = asyncio.create_task(capture(url, topics, until, seen))
+    await asyncio.sleep(seconds)
+    readers = monitor_readers(probe, IMU)
+    until.set()
+    await task
+    return seen, readers
+
+
+def test_a_topic_is_subscribed_only_while_a_client_watches_it(imu_source: Any) -> None:
+    """Like foxglove_bridge: the monitor advertises a topic once it has a publisher, but has a
+    reader on it (as the DDS graph shows) only while a client is subscribed to its channel;
+    the reader goes when the client leaves. A topic nobody watches costs its publisher
+    nothing. Watched, the topic comes at most at ``--max-rate`` (default 50 Hz) from a
+    200 Hz publisher, the newest sample each time."""
+    monitor, url = start_monitor()
+    try:
+        looked, idle_readers = asyncio.run(watch(url, [], 3.0, imu_source))
+        assert IMU in looked.channels
+        watched, readers = asyncio.run(watch(url, [IMU], 3.0, imu_source))
+        assert (idle_readers, readers) == (0, 1)
+        assert api.spin_until(imu_source, lambda: monitor_readers(imu_source, IMU) == 0, 10)
+    finally:
+        err = stop_monitor(monitor)
     assert "Unsubscribed from topic '/frame/floor1/imu' (not watched)" in err
+    stamps = [messages.stamp_ns(m.header.stamp) for m in watched.messages[IMU]]
+    assert stamps == sorted(set(stamps))
+    # 50 Hz at most over the 3 s (+1 for the phase), of the 600 samples published
+    assert 10 <= len(stamps) <= 151, len(stamps)
+
+
+def test_every_sample_with_max_rate_zero(imu_source: Any) -> None:
+    """``--max-rate 0``: every sample of the 200 Hz publisher reaches the client, in order,
+    none missing between the first and the last."""
+    monitor, url = start_monitor("--max-rate", "0")
+    try:
+        watched, _ = asyncio.run(watch(url, [IMU], 3.0, imu_source))
+    finally:
+        stop_monitor(monitor)
+    periods = [messages.stamp_ns(m.header.stamp) * PUBLISH_HZ // 10**9
+               for m in watched.messages[IMU]]
+    assert len(periods) >= 300
+    assert periods == list(range(periods[0], periods[0] + len(periods)))
 
 
 @pytest.mark.parametrize(("args", "message"), [

@@ -64,6 +64,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                         help="with --monitor: Foxglove WebSocket port (default 8765; 0: any)")
     parser.add_argument("--dashboard-port", type=int, default=8080, metavar="P",
                         help="with --monitor: dashboard port (default 8080; 0: any)")
+    parser.add_argument("--monitor-max-rate", type=float, default=None, metavar="HZ",
+                        help="with --monitor: samples forwarded per second and topic at most "
+                             "(stillframe monitor --max-rate; 0: every sample)")
     parser.add_argument("--out", type=Path, default=None, metavar="DIR",
                         help="keep sim_node's result.json and result.npz (histories) here")
     parser.add_argument("--compose", action="store_true",
@@ -161,6 +164,12 @@ def report_death(command: str, exc: Exception) -> int:
     return 1
 
 
+def monitor_args(args: argparse.Namespace) -> list[str]:
+    """``stillframe monitor``'s arguments from launch's ``--monitor-*`` options."""
+    rate = [] if args.monitor_max_rate is None else ["--max-rate", f"{args.monitor_max_rate:g}"]
+    return ["--port", str(args.monitor_port), "--dashboard-port", str(args.dashboard_port), *rate]
+
+
 def run(args: argparse.Namespace) -> int:
     from stillframe.app.launcher import NodeDiedError, run_scene
     from stillframe.app.net_faults import hosts_if
@@ -175,10 +184,8 @@ def run(args: argparse.Namespace) -> int:
                 result = run_scene(Path(args.scene), args.overrides, args.out or Path(tmp),
                                    args.mode, args.record, args.lockstep_timeout,
                                    record_topics=args.record_topics, backends=args.backends,
-                                   monitor_args=["--port", str(args.monitor_port),
-                                                 "--dashboard-port", str(args.dashboard_port)]
-                                   if args.monitor else None, compose=args.compose, rt=rt,
-                                   rt_cpus=rt_cpus, hosts=hosts)
+                                   monitor_args=monitor_args(args) if args.monitor else None,
+                                   compose=args.compose, rt=rt, rt_cpus=rt_cpus, hosts=hosts)
         except NodeDiedError as exc:
             return report_death("launch", exc)
         except KeyboardInterrupt:

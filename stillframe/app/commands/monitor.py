@@ -9,6 +9,7 @@ Runs until Ctrl-C. See docs/monitor.md.
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import sys
 from pathlib import Path
@@ -16,6 +17,9 @@ from pathlib import Path
 from stillframe.errors import InputError
 
 READY_LINE = "Monitor ready"
+#: samples forwarded per second and topic at most, by default: a live plot shows no more, and
+#: the loop does not pay for the rest (docs/monitor.md)
+MAX_RATE_HZ = 50.0
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -28,6 +32,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                         help="address to bind (default 127.0.0.1: this machine only)")
     parser.add_argument("--port", type=int, default=8765,
                         help="Foxglove WebSocket port (default 8765; 0: any free port)")
+    parser.add_argument("--max-rate", type=float, default=MAX_RATE_HZ, metavar="HZ",
+                        help=f"forward at most HZ samples per second and topic (default "
+                             f"{MAX_RATE_HZ:g}; 0: every sample, which costs a 1 kHz loop more; "
+                             "docs/monitor.md)")
     parser.add_argument("--dashboard", action="store_true", help="also serve the dashboard")
     parser.add_argument("--dashboard-port", type=int, default=8080,
                         help="dashboard HTTP port (default 8080; 0: any free port)")
@@ -62,6 +70,9 @@ def run(args: argparse.Namespace) -> int:
 
     _check_port("--port", args.port)
     _check_port("--dashboard-port", args.dashboard_port)
+    if not (args.max_rate >= 0 and math.isfinite(args.max_rate)):
+        raise InputError(f"--max-rate {args.max_rate:g}: expected a rate >= 0 Hz (0: every "
+                         "sample)")
     if not 0 <= args.nice <= 19:
         raise InputError(f"--nice {args.nice}: expected 0..19")
     os.nice(args.nice)
@@ -77,7 +88,7 @@ def run(args: argparse.Namespace) -> int:
     try:
         try:
             bridge = FoxgloveBridge(node, args.host, args.port,
-                                    [resolve_topic(t) for t in args.topics])
+                                    [resolve_topic(t) for t in args.topics], args.max_rate)
         except RuntimeError as exc:
             raise InputError(f"--port {args.port}: cannot serve on {args.host}: {exc}") from None
         server = bridge.server
