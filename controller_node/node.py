@@ -130,8 +130,8 @@ class ControllerNode:
     def subscribe_inputs(self) -> None:
         est, wrench = topics.STATE_ESTIMATE, topics.EXCITATION_WRENCH
         if not self.intra_process:
-            fast_inputs.subscribe(self.node, est.type_name, est.name, est.qos, state_reader(),
-                                  self.on_estimate)
+            fast_inputs.subscribe(self.node, est.type_name, est.name, self.params.reader_qos(est),
+                                  state_reader(), self.on_estimate)
         fast_inputs.subscribe(self.node, wrench.type_name, wrench.name, self.params.qos(wrench),
                               wrench_reader("floor1", "wrench.force.x"), self.on_force)
 

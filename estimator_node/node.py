@@ -108,8 +108,8 @@ class EstimatorNode:
         self.out = EstimateMessages()
         self.diagnostics = Diagnostics(node, params.diagnostics_period_s)
         for i, spec in enumerate(COMMAND_TOPICS):
-            fast_inputs.subscribe(node, spec.type_name, spec.name, spec.qos, command_reader(i),
-                                  functools.partial(self.on_command, i))
+            fast_inputs.subscribe(node, spec.type_name, spec.name, params.reader_qos(spec),
+                                  command_reader(i), functools.partial(self.on_command, i))
         self.counts = {"estimates": 0, "initialised_from_measurements": 0,
                        "skipped_before_initialisation": 0}
         self.compute = Durations()

@@ -104,7 +104,8 @@ class SimNode:
         self.readers = [command_reader(i) for i in range(len(COMMAND_TOPICS))]
         for i, spec in enumerate(COMMAND_TOPICS):
             node.create_subscription(spec.type_name, spec.name,
-                                     functools.partial(self.on_command, i), spec.qos, raw=True)
+                                     functools.partial(self.on_command, i),
+                                     params.reader_qos(spec), raw=True)
         self.command = np.zeros(2)          # [torque, force] held
         self.command_ns = [-1, -1]
         self.now_ns = 0

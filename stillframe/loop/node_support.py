@@ -22,9 +22,17 @@ from stillframe.errors import InputError
 from stillframe.fidelity.auto_model import resolve_model
 from stillframe.middleware import api
 from stillframe.middleware.params import Parameter, SetParametersResult
-from stillframe.middleware.qos import PROFILES, Durability, QoSProfile, Reliability
+from stillframe.middleware.qos import (
+    PROFILES,
+    Durability,
+    QoSProfile,
+    Reliability,
+    as_profile,
+)
 
 MODES = ("lockstep", "realtime")
+#: the topics from the estimator to the simulator, read best effort in real time
+CONTROL_PATH = (topics.STATE_ESTIMATE, topics.TORQUE_CMD, topics.FORCE_CMD)
 #: After the peers are matched, spin this long so that the other side of every match (the
 #: remote writer's view) has caught up before the first sample (docs/nodes.md, start-up).
 SETTLE_S = 0.25
@@ -72,6 +80,21 @@ class LoopParameters:
             return replace(PROFILES["sensor_data"], reliability=Reliability.RELIABLE,
                            durability=Durability.TRANSIENT_LOCAL)
         return spec.qos
+
+    def reader_qos(self, spec: topics.TopicSpec) -> QoSProfile | str:
+        """What the loop's own readers ask for: :meth:`qos`, except that in real time the
+        control path (:data:`CONTROL_PATH`: estimates and commands) is read BEST_EFFORT.
+
+        The writers stay RELIABLE as the contract says (a recorder or a viewer still gets every
+        sample), but a real-time loop has no use for a sample that comes late: a reliable reader
+        delivers in order, so one lost packet holds back every later estimate or command until
+        the retransmission (after the writer's next heartbeat and the reader's NACK, tens of
+        ms), and the loop then acts on old data. Read best effort, a lost estimate or command is
+        one missed period: the simulator holds the last command (its command timeout brings the
+        safe state), the controller answers the next estimate (docs/reliability.md)."""
+        if not self.lockstep and spec in CONTROL_PATH:
+            return replace(as_profile(spec.qos), reliability=Reliability.BEST_EFFORT)
+        return self.qos(spec)
 
 
 def _overrides(value: Any) -> list[str]:

@@ -22,7 +22,7 @@ from stillframe.errors import InputError
 from stillframe.locations import REPO_ROOT
 from stillframe.middleware import api, discovery
 from stillframe.middleware.names import resolve_topic
-from stillframe.middleware.qos import PROFILES
+from stillframe.middleware.qos import PROFILES, Reliability
 from tests.support.middleware import child_env, run_stillframe, wait_for_line
 
 pytest.importorskip("rclpy", reason="real rclpy is installed by `make setup` ([ros] extra)")
@@ -289,6 +289,10 @@ def test_rclpy_graph_api_sees_the_dds_nodes_as_the_contract_says(
                     assert endpoint.qos_profile.durability == profile.durability, name
         for name, reader in readers_expected.items():
             assert reader in reader_names(name), name
+            # in real time the loop reads its inputs best effort (the control path too: a late
+            # estimate or command is worth nothing; docs/reliability.md)
+            assert {s.qos_profile.reliability for s in node.get_subscriptions_info_by_topic(name)
+                    if s.node_name == reader} == {Reliability.BEST_EFFORT}, name
     finally:
         node.destroy_node()
         for proc in procs:
