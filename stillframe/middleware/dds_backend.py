@@ -28,6 +28,7 @@ from cyclonedds.builtin import (
 )
 from cyclonedds.core import (
     DDSException,
+    DDSStatus,
     InstanceState,
     ReadCondition,
     SampleState,
@@ -179,6 +180,11 @@ class Context:
             self.participant, self.topic(DISCOVERY_TOPIC, DISCOVERY_TYPE), dds_qos(discovery_qos)
         )
         self._graph_readers: dict[str, tuple[BuiltinDataReader, ReadCondition]] = {}
+        #: per kind, the alive samples of the last read (read again only after a change) and
+        #: how many reads that was
+        self._graph_samples: dict[str, tuple[int, list[Any]]] = {}
+        #: per kind, (read count, owners) the endpoints were made from, and the endpoints
+        self._endpoints: dict[str, tuple[tuple[int, dict], list[interface.TopicEndpointInfo]]] = {}
         self._discovery_reader: DataReader | None = None
         self._participant_nodes: dict[bytes, list[Any]] = {}
 
@@ -229,7 +235,11 @@ class Context:
         del Context._instances[self.domain_id]
 
     # -- graph ----------------------------------------------------------------------------
-    def _alive(self, kind: str) -> list[Any]:
+    def _alive(self, kind: str) -> tuple[int, list[Any]]:
+        """How many reads so far, and the alive samples of a builtin topic. Read only when the
+        reader has data available (a new, changed or vanished entity; a read resets that
+        status): converting every endpoint's QoS in cyclonedds' Python is what a read costs,
+        and a follower asking for the graph ten times a second spent a whole core on it."""
         if kind not in self._graph_readers:
             builtin = {
                 "participant": BuiltinTopicDcpsParticipant,
@@ -239,7 +249,11 @@ class Context:
             reader = BuiltinDataReader(self.participant, builtin)
             self._graph_readers[kind] = (reader, ReadCondition(reader, _ALIVE))
         reader, alive = self._graph_readers[kind]
-        return reader.read(N=100_000, condition=alive)
+        if kind not in self._graph_samples or (
+                reader.get_status_changes() & DDSStatus.DataAvailable):
+            reads = self._graph_samples.get(kind, (0, []))[0] + 1
+            self._graph_samples[kind] = (reads, reader.read(N=100_000, condition=alive))
+        return self._graph_samples[kind]
 
     def node_names(self) -> dict[bytes, list[tuple[str, str, set[bytes]]]]:
         """Per alive participant GID: its nodes as (namespace, name, endpoint GIDs)."""
@@ -255,7 +269,7 @@ class Context:
                      {bytes(g.data) for g in (*n.reader_gid_seq, *n.writer_gid_seq)})
                     for n in info.node_entities_info_seq
                 ]
-        alive = {p.key.bytes for p in self._alive("participant")}
+        alive = {p.key.bytes for p in self._alive("participant")[1]}
         return {gid: nodes for gid, nodes in self._participant_nodes.items() if gid in alive}
 
     def endpoints(self, kind: str) -> list[interface.TopicEndpointInfo]:
@@ -266,8 +280,12 @@ class Context:
             for namespace, name, gids in nodes
             for gid in gids
         }
+        reads, samples = self._alive(kind)
+        made_from, made = self._endpoints.get(kind, ((0, {}), []))
+        if made_from == (reads, owners):
+            return made
         result = []
-        for ep in self._alive(kind):
+        for ep in samples:
             topic, rtype = dds_types.ros_topic(ep.topic_name), dds_types.ros_type(ep.type_name)
             if topic is None or rtype is None:
                 continue
@@ -278,6 +296,7 @@ class Context:
                 endpoint_gid=ep.key.bytes, qos_profile=ros_qos(ep.qos),
                 node_name=name, node_namespace=namespace,
             ))
+        self._endpoints[kind] = ((reads, owners), result)
         return result
 
 
