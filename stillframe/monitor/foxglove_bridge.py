@@ -5,9 +5,11 @@ Like ``foxglove_bridge``, on whichever backend the node runs: every discovered t
 with schema
 encoding ``ros2msg`` (the ``.msg`` definition with its dependencies, as ``rosbags`` writes it
 into MCAP bags) and message encoding ``cdr``; the CDR bytes pass through unconverted. With sim
-time, each ``/clock`` sample is broadcast as the server time (capability ``time``), which
-drives Foxglove's and Lichtblick's time cursor. The SDK keeps a bounded queue per client and
-drops a slow client's oldest messages, so no client can hold the node back.
+time, the newest ``/clock`` is broadcast as the server time at each poll (capability ``time``),
+which drives Foxglove's and Lichtblick's time cursor, and it is the log time of the messages
+forwarded in that poll. ``/clock`` is polled like the topics (a node with ``use_sim_time``
+would decode every one of a 1 kHz loop's ``/clock`` samples). The SDK keeps a bounded queue
+per client and drops a slow client's oldest messages, so no client can hold the node back.
 
 Every topic is advertised as soon as it is found, but subscribed to only while a client
 subscribes to its channel (the server's ``on_subscribe``/``on_unsubscribe``, counted over the
@@ -31,7 +33,7 @@ import foxglove
 
 from stillframe.contract import messages
 from stillframe.middleware.api import MessageInfo
-from stillframe.middleware.qos import QoSProfile, viewer_request
+from stillframe.middleware.qos import CLOCK, QoSProfile, viewer_request
 from stillframe.middleware.topic_follower import RawCallback, TopicFollower
 
 SCHEMA_ENCODING = "ros2msg"
@@ -55,7 +57,7 @@ class FoxgloveBridge(TopicFollower):
     ``max_rate_hz`` samples per second and topic (0: every sample)."""
 
     def __init__(self, node: Any, host: str, port: int, topics: Sequence[str],
-                 max_rate_hz: float) -> None:
+                 max_rate_hz: float, use_sim_time: bool) -> None:
         self.context = foxglove.Context()
         self.channels: dict[str, foxglove.Channel] = {}
         #: samples handed to the SDK per topic (what it then sends depends on the subscribers)
@@ -67,8 +69,10 @@ class FoxgloveBridge(TopicFollower):
             name="stillframe monitor", host=host, port=port, context=self.context,
             server_listener=self, capabilities=[foxglove.Capability.Time],
             supported_encodings=[MESSAGE_ENCODING], message_backlog_size=CLIENT_BACKLOG)
-        if node.get_parameter("use_sim_time").value:
-            node.create_subscription("rosgraph_msgs/msg/Clock", "/clock", self._on_clock, "clock")
+        #: the newest /clock [ns] (sim time only)
+        self.sim_time_ns: int | None = None
+        self._clock = node.create_polled_subscription(
+            "rosgraph_msgs/msg/Clock", "/clock", CLOCK.with_depth(1)) if use_sim_time else None
 
     def on_subscribe(self, client: Any, channel: Any) -> None:
         """A client subscribed to a channel (the SDK's server thread)."""
@@ -89,10 +93,16 @@ class FoxgloveBridge(TopicFollower):
         self.forwarded[topic] = 0
 
         def forward(data: bytes, info: MessageInfo) -> None:
-            channel.log(data, log_time=info.received_timestamp)
+            channel.log(data, log_time=info.received_timestamp if self.sim_time_ns is None
+                        else self.sim_time_ns)
             self.forwarded[topic] += 1
 
         return forward
 
-    def _on_clock(self, msg: Any) -> None:
-        self.server.broadcast_time(messages.stamp_ns(msg.clock))
+    def poll(self) -> None:
+        """Broadcast the newest /clock (with sim time), then forward what waits."""
+        if self._clock is not None and (taken := self._clock.take()):
+            clock = messages.deserialize(taken[-1][0], "rosgraph_msgs/msg/Clock").clock
+            self.sim_time_ns = messages.stamp_ns(clock)
+            self.server.broadcast_time(self.sim_time_ns)
+        super().poll()

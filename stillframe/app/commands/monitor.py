@@ -83,12 +83,12 @@ def run(args: argparse.Namespace) -> int:
         scene = load_scene(args.scene, args.overrides)
         limits = Limits(scene.controller.limit, scene.actuators.torque_limit,
                         scene.actuators.force_limit)
-    sim = ["--ros-args", "-p", "use_sim_time:=true"] if args.use_sim_time else []
-    node = create_node("stillframe_monitor", argv=[*sys.argv[:1], *sim])
+    node = create_node("stillframe_monitor", argv=sys.argv[:1])
     try:
         try:
             bridge = FoxgloveBridge(node, args.host, args.port,
-                                    [resolve_topic(t) for t in args.topics], args.max_rate)
+                                    [resolve_topic(t) for t in args.topics], args.max_rate,
+                                    args.use_sim_time)
         except RuntimeError as exc:
             raise InputError(f"--port {args.port}: cannot serve on {args.host}: {exc}") from None
         server = bridge.server
