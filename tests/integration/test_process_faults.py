@@ -91,7 +91,12 @@ def test_kill_and_restart_estimator_then_kill_controller(ros_domain: int, tmp_pa
         watch.until(lambda: watch.clock_ns >= 3e9)
         estimator.kill()                                           # 1. SIGKILL the estimator
         estimator.wait()
+        gone_at = watch.clock_ns
         watch.until(lambda: 2 in watch.levels)                     # the controller says ERROR
+        # the restarted estimator is handed the sim's last 5 samples of each sensor topic
+        # (TRANSIENT_LOCAL in lock-step): let the sim run on well past them, so that the bag
+        # shows the estimator's absence as a gap whatever the machine's speed
+        watch.until(lambda: watch.clock_ns >= gone_at + 10 * PERIOD_NS)
         sim.send_signal(signal.SIGSTOP)                            # freeze the loop
         estimator = start_node("estimator_node", params)           # 2. restart it
         procs.append(estimator)
