@@ -108,13 +108,14 @@ async def capture(url: str, topics: list[str] | None, until: asyncio.Event,
                 out.times.append(struct.unpack_from("<Q", frame, 1)[0])
 
 
-async def stall(url: str, topic: str, until: asyncio.Event) -> int:
-    """A slow client: once ``topic`` is advertised, subscribes to every channel advertised so
-    far, then stops reading until ``until``; the number of channels it subscribed to."""
+async def stall(url: str, topic: str, until: asyncio.Event, at_least: int = 1) -> int:
+    """A slow client: once ``topic`` and at least ``at_least`` channels are advertised,
+    subscribes to every channel advertised so far, then stops reading until ``until``; the
+    number of channels it subscribed to."""
     async with websockets.connect(url, subprotocols=SUBPROTOCOLS, max_size=None,
                                   max_queue=1) as ws:
         channels: dict[str, int] = {}
-        while topic not in channels:
+        while topic not in channels or len(channels) < at_least:
             frame = await ws.recv()
             if isinstance(frame, bytes):
                 continue  # time broadcasts may come before the advertisement

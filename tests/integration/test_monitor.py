@@ -91,7 +91,7 @@ def monitored_run(tmp_path_factory: pytest.TempPathFactory, ros_domain_module: i
         done = asyncio.Event()
         seen = Capture()
         tasks = [asyncio.create_task(capture(url, [IMU], done, seen)),
-                 asyncio.create_task(stall(url, IMU, done)),
+                 asyncio.create_task(stall(url, IMU, done, at_least=5)),
                  asyncio.create_task(churn(url, done))]
         await asyncio.to_thread(launch.proc.wait)
         done.set()
