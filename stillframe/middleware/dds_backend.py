@@ -145,10 +145,6 @@ def user_data_field(qos: Qos, key: str) -> str:
     return ""
 
 
-def _never_called(*_: Any) -> None:
-    """The callback of a polled subscription (its samples are taken, never dispatched)."""
-
-
 def delete(entity: Any) -> None:
     """Delete a Cyclone entity now (and its children) instead of at garbage collection."""
     if entity is not None:
@@ -380,28 +376,29 @@ class DdsSubscription:
             self._writer_gids[handle] = endpoint.key.bytes
         return self._writer_gids[handle]
 
+    def _taken(self) -> list[tuple[Any, Any]]:
+        """The samples with data waiting (at most ``TAKE_BATCH``), oldest first."""
+        return [(data, info) for data, info in take_raw(self._reader, TAKE_BATCH)
+                if info.valid_data]
+
+    def _info(self, info: Any) -> interface.MessageInfo:
+        """A raw sample's info, received now."""
+        return interface.MessageInfo(info.source_timestamp, self._clock.now().nanoseconds,
+                                     self.writer_gid(info.publication_handle))
+
     def take(self) -> list[tuple[bytes, interface.MessageInfo]]:
-        """The samples waiting (at most ``TAKE_BATCH``), raw with their info, oldest first."""
-        received = self._clock.now().nanoseconds
-        return [(bytes(data), interface.MessageInfo(
-                    info.source_timestamp, received, self.writer_gid(info.publication_handle)))
-                for data, info in take_raw(self._reader, TAKE_BATCH) if info.valid_data]
+        """The samples waiting, raw with their info, oldest first (polled subscriptions)."""
+        return [(bytes(data), self._info(info)) for data, info in self._taken()]
 
     def take_and_dispatch(self) -> int:
         """Hand every waiting sample to the callback; the number handed."""
-        samples = take_raw(self._reader, TAKE_BATCH)
-        count = 0
+        samples = self._taken()
         for data, info in samples:
-            if not info.valid_data:
-                continue
             if self.raw:
-                received = self._clock.now().nanoseconds
-                self.callback(bytes(data), interface.MessageInfo(
-                    info.source_timestamp, received, self.writer_gid(info.publication_handle)))
+                self.callback(bytes(data), self._info(info))
             else:
                 interface.deliver(self.callback, data, self.msg_type, self.topic_name)
-            count += 1
-        return count
+        return len(samples)
 
 
 class DdsTimer:
@@ -543,7 +540,7 @@ class DdsNode:
     ) -> DdsSubscription:
         """A reader outside the node's wait set: nothing wakes for its samples."""
         topic = self.resolve_topic_name(topic)
-        sub = DdsSubscription(self, messages.type_name(msg_type), topic, _never_called,
+        sub = DdsSubscription(self, messages.type_name(msg_type), topic, interface.never_called,
                               as_profile(qos), raw=True)
         self._polled.append(sub)
         self.context.publish_graph()

@@ -60,6 +60,10 @@ class Subscription(Protocol):
     topic_name: str
 
 
+def never_called(*_: Any) -> None:
+    """The callback of a polled subscription (its samples are taken, never dispatched)."""
+
+
 class PolledSubscription(Protocol):
     """A subscription that never calls back: its samples wait in the middleware (KEEP_LAST
     ``depth`` of them) until :meth:`take`. The process does no work per sample, only per

@@ -162,10 +162,6 @@ class NeverExecuted(CallbackGroup):
 NEVER_EXECUTED = NeverExecuted()
 
 
-def _never_called(*_: Any) -> None:
-    """The callback of a polled subscription (its samples are taken, never dispatched)."""
-
-
 class RclpyPolledSubscription:
     """:class:`.interface.PolledSubscription` over an rclpy subscription in
     :data:`NEVER_EXECUTED`; takes with rcl's ``take`` as the executor would."""
@@ -287,7 +283,7 @@ class RclpyNode:
     ) -> RclpyPolledSubscription:
         name = messages.type_name(msg_type)
         sub = self._node.create_subscription(
-            ros_message_class(name), topic, _never_called, rclpy_qos(as_profile(qos)),
+            ros_message_class(name), topic, interface.never_called, rclpy_qos(as_profile(qos)),
             callback_group=NEVER_EXECUTED, raw=True)
         return RclpyPolledSubscription(sub, self._clock)
 
