@@ -67,6 +67,7 @@ from stillframe.loop.watchdog import EstimateWatchdog
 from stillframe.loop.wiring import design_model
 from stillframe.middleware import api
 from stillframe.middleware.params import Parameter, SetParametersResult, finite_floats
+from stillframe.middleware.taps import TappedPublisher
 
 RUN_TIME_PARAMETERS = frozenset({"enabled", "command_limit"})
 
@@ -83,7 +84,7 @@ class ControllerNode:
         self.to_design = design_map(design)    # z = T · physical, built once
         self.grid = SampleGrid(params.period)
         spec = COMMAND_TOPICS[self.controller.actuator]
-        self.pub = node.create_publisher(spec.type_name, spec.name, spec.qos)
+        self.pub = TappedPublisher(node, spec.type_name, spec.name, spec.qos)
         self.out = CommandMessage(self.controller.actuator)
         self.diagnostics = Diagnostics(node, params.diagnostics_period_s)
         self.sim_time = bool(node.get_parameter("use_sim_time").value)

@@ -87,6 +87,7 @@ from stillframe.loop.realtime import Realtime, RealtimeOptions, declare_realtime
 from stillframe.loop.wiring import command_topic, design_model, estimator_inputs
 from stillframe.middleware import api
 from stillframe.middleware.params import Parameter, SetParametersResult, finite_floats
+from stillframe.middleware.taps import TappedPublisher
 
 
 class EstimatorNode:
@@ -103,8 +104,8 @@ class EstimatorNode:
         self.assembly = SampleAssembly(self.inputs, self.active, SampleGrid(params.period),
                                        round(wait_s * 1e9), params.lockstep)
         spec, cov = topics.STATE_ESTIMATE, topics.STATE_COVARIANCE
-        self.state_pub = node.create_publisher(spec.type_name, spec.name, spec.qos)
-        self.cov_pub = node.create_publisher(cov.type_name, cov.name, cov.qos)
+        self.state_pub = TappedPublisher(node, spec.type_name, spec.name, spec.qos)
+        self.cov_pub = TappedPublisher(node, cov.type_name, cov.name, cov.qos)
         self.out = EstimateMessages()
         self.diagnostics = Diagnostics(node, params.diagnostics_period_s)
         for i, spec in enumerate(COMMAND_TOPICS):

@@ -68,6 +68,7 @@ from stillframe.loop.watchdog import command_expired
 from stillframe.loop.wiring import command_topic, estimator_inputs
 from stillframe.middleware import api
 from stillframe.middleware.clock import ClockPublisher
+from stillframe.middleware.taps import TappedPublisher
 from stillframe.plant.command_gate import CommandGate
 from stillframe.plant.frame_plant import make_plant
 
@@ -93,7 +94,7 @@ class SimNode:
         self.active = actuator_of(scene)
         self.clock = ClockPublisher(node)
         # by topic, in the order of SensorMessages.fill and then the truth
-        self.publishers = {s.name: node.create_publisher(s.type_name, s.name, params.qos(s))
+        self.publishers = {s.name: TappedPublisher(node, s.type_name, s.name, params.qos(s))
                            for s in (*SAMPLE_TOPICS, topics.STATE_TRUTH)}
         self.messages = SensorMessages(scene.sensors)
         self.diagnostics = Diagnostics(node, params.diagnostics_period_s)

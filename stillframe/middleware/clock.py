@@ -14,6 +14,7 @@ from typing import Any
 
 from stillframe.contract import messages
 from stillframe.contract.fixed_cdr import FixedWriter
+from stillframe.middleware.taps import TappedPublisher
 
 
 @dataclass(frozen=True, order=True)
@@ -63,13 +64,13 @@ SYSTEM_CLOCK = Clock(sim=False)
 
 
 class ClockPublisher:
-    """Publishes ``/clock`` (QoS ``clock``) for the nodes that use sim time."""
+    """Publishes ``/clock`` (QoS ``clock``, with a monitor tap) for the nodes that use sim time."""
 
     TOPIC = "/clock"
     TYPE = "rosgraph_msgs/msg/Clock"
 
     def __init__(self, node: Any) -> None:
-        self._pub = node.create_publisher(self.TYPE, self.TOPIC, "clock")
+        self._pub = TappedPublisher(node, self.TYPE, self.TOPIC, "clock")
         self._cdr = FixedWriter(messages.new(self.TYPE), ("clock.sec", "clock.nanosec"))
 
     def publish(self, t: Time | int) -> None:

@@ -31,6 +31,12 @@ def validate_namespace(namespace: str) -> str:
     return namespace
 
 
+def is_hidden(name: str) -> bool:
+    """A name with a token starting with '_' is hidden (``ros2 topic list`` and ``ros2 bag record
+    -a`` leave it out unless asked)."""
+    return any(token.startswith("_") for token in name.split("/"))
+
+
 def resolve_topic(name: str, namespace: str = "/", node_name: str = "") -> str:
     """The fully qualified topic name of ``name`` seen from a node (relative, ``~`` or absolute)."""
     if name.startswith("~"):

@@ -12,6 +12,12 @@ while something wants it (:meth:`TopicFollower.want`, callable from any thread, 
 next discovery pass), as ``foxglove_bridge`` subscribes only to the channels a client
 subscribed to: a topic nobody watches costs the publishers and this process nothing.
 
+A follower made with ``read_taps`` (a live view) reads a topic's monitor tap
+(:mod:`stillframe.middleware.taps`: the samples thinned by the loop's writers, on a hidden twin
+topic) while the tap has a publisher, and the topic itself otherwise; it switches when the tap
+appears or goes. Hidden topics (a token starting with ``_``: the taps, ``/_action/``) are taken
+only when named, as ``ros2 bag record -a`` leaves them out.
+
 A follower made with ``poll_period_s`` reads by polling (the middleware's polled
 subscriptions): nothing runs per sample; every ``poll_period_s`` it takes what waits in each
 reader (at most the request's KEEP_LAST depth) and hands it on. With depth 1 that is the newest
@@ -27,8 +33,10 @@ from collections.abc import Callable, Sequence
 from typing import Any
 
 from stillframe.contract import messages
+from stillframe.middleware import names
 from stillframe.middleware.clock import SYSTEM_CLOCK
 from stillframe.middleware.qos import QoSProfile, recorder_request
+from stillframe.middleware.taps import tap_topic
 
 DISCOVERY_PERIOD_S = 0.1
 #: on shutdown, keep handing on what arrives until nothing came for this long [s]
@@ -43,14 +51,16 @@ class TopicFollower:
     :meth:`on_new_topic` says where each topic's samples go."""
 
     def __init__(self, node: Any, topics: Sequence[str] = (), on_demand: bool = False,
-                 poll_period_s: float | None = None) -> None:
+                 poll_period_s: float | None = None, read_taps: bool = False) -> None:
         self.node = node
         self.topics = set(topics)
         self.on_demand = on_demand
         self.polled = poll_period_s is not None
+        self.read_taps = read_taps
         #: topic -> (type, publishers' offers, callback) of every topic taken
         self._found: dict[str, tuple[str, list[QoSProfile], RawCallback]] = {}
-        self._subscriptions: dict[str, Any] = {}
+        #: topic -> (the topic read for it: itself or its tap, subscription)
+        self._subscriptions: dict[str, tuple[str, Any]] = {}
         self._wanted: Counter[str] = Counter()
         self._wanted_lock = threading.Lock()
         self.node.create_timer(DISCOVERY_PERIOD_S, self.discover, clock=SYSTEM_CLOCK)
@@ -72,9 +82,11 @@ class TopicFollower:
 
     def discover(self) -> None:
         """Take every wanted topic that has a publisher and is not taken yet; then subscribe to
-        the topics taken and watched, and unsubscribe from those no longer watched."""
+        the topics taken and watched (to their taps where read), and unsubscribe from those no
+        longer watched."""
         for topic, types in self.node.get_topic_names_and_types():
-            if topic in self._found or (self.topics and topic not in self.topics):
+            if topic in self._found or (topic not in self.topics if self.topics
+                                        else names.is_hidden(topic)):
                 continue
             publishers = self.node.get_publishers_info_by_topic(topic)
             if not publishers:
@@ -86,21 +98,32 @@ class TopicFollower:
             self._found[topic] = (msgtype, offers, self.on_new_topic(topic, msgtype, offers))
         with self._wanted_lock:
             watched = {topic for topic, n in self._wanted.items() if n > 0}
+        log = self.node.get_logger()
         for topic, (msgtype, offers, callback) in self._found.items():
-            followed = topic in self._subscriptions
-            if not followed and (topic in watched or not self.on_demand):
-                qos = self.request(offers)
-                self._subscriptions[topic] = (
-                    self.node.create_polled_subscription(msgtype, topic, qos) if self.polled
-                    else self.node.create_subscription(msgtype, topic, callback, qos, raw=True))
-                self.node.get_logger().info(f"Subscribed to topic '{topic}'")
-            elif followed and self.on_demand and topic not in watched:
-                self.node.destroy_subscription(self._subscriptions.pop(topic))
-                self.node.get_logger().info(f"Unsubscribed from topic '{topic}' (not watched)")
+            wanted = topic in watched or not self.on_demand
+            tap_offers = self._tap_offers(topic) if wanted else []
+            source = (tap_topic(topic) if tap_offers else topic) if wanted else None
+            if (current := self._subscriptions.get(topic)) and current[0] != source:
+                self.node.destroy_subscription(self._subscriptions.pop(topic)[1])
+                log.info(f"Unsubscribed from topic '{current[0]}'"
+                         + ("" if wanted else " (not watched)"))
+            if source is not None and topic not in self._subscriptions:
+                qos = self.request(tap_offers or offers)
+                self._subscriptions[topic] = (source, (
+                    self.node.create_polled_subscription(msgtype, source, qos) if self.polled
+                    else self.node.create_subscription(msgtype, source, callback, qos, raw=True)))
+                log.info(f"Subscribed to topic '{source}'")
+
+    def _tap_offers(self, topic: str) -> list[QoSProfile]:
+        """The offers of ``topic``'s tap if this follower reads taps and one is published."""
+        if not self.read_taps:
+            return []
+        return [info.qos_profile
+                for info in self.node.get_publishers_info_by_topic(tap_topic(topic))]
 
     def poll(self) -> None:
         """Hand on what waits in each polled subscription."""
-        for topic, sub in list(self._subscriptions.items()):
+        for topic, (_, sub) in list(self._subscriptions.items()):
             callback = self._found[topic][2]
             for data, info in sub.take():
                 callback(data, info)
@@ -133,7 +156,7 @@ class TopicFollower:
         if self.polled:
             self.poll()
             return
-        takers = [take for sub in self._subscriptions.values()
+        takers = [take for _, sub in self._subscriptions.values()
                   if (take := getattr(sub, "take_and_dispatch", None)) is not None]
         quiet_since = time.monotonic()
         while takers and time.monotonic() - quiet_since < DRAIN_QUIET_S:

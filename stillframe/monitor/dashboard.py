@@ -4,11 +4,12 @@ One page (``stillframe/data/dashboard.html``) of Plotly charts: per floor the tr
 estimated displacement (``state_truth``, ``state_estimate``) with the measured acceleration
 (``floorN/imu``); the pendulum angle; the command with its limits; and each node's counters from
 ``/diagnostics``, red when an error counter is non-zero. The page polls ``/data`` twice a
-second. Decimation happens here, before any work is done on a sample: the loop's topics are
-read by polled subscriptions (KEEP_LAST 1), and every ``1 / rate_hz`` s of wall time the newest
-sample of each is taken, decoded and kept; each series keeps its last ``points`` samples. So a
-1 kHz topic costs this process ``rate_hz`` takes a second, not a thousand wake-ups, and the page
-always gets at most ``points`` points per series.
+second. Decimation happens before any work is done on a sample: the loop's topics are read
+from their monitor taps (:mod:`stillframe.middleware.taps`, thinned by the loop's writers) when
+published, else from the topics, by polled subscriptions (KEEP_LAST 1), and every ``1 / rate_hz``
+s of wall time the newest sample of each is taken, decoded and kept; each series keeps its last
+``points`` samples. So a 1 kHz topic costs neither the loop nor this process a send or a
+wake-up per sample, and the page always gets at most ``points`` points per series.
 
 Plotly's JavaScript is served from the ``plotly`` Python package (``plotly.min.js``), so the
 page needs no internet.
@@ -39,8 +40,9 @@ from stillframe.contract.topics import (
     TORQUE_CMD,
     TopicSpec,
 )
-from stillframe.middleware.clock import SYSTEM_CLOCK
 from stillframe.middleware.qos import QoSProfile, Reliability
+from stillframe.middleware.taps import TAP_RATE_HZ
+from stillframe.middleware.topic_follower import RawCallback, TopicFollower
 
 #: counters that are errors when non-zero (the rest of STATUS_KEYS are progress figures)
 ERROR_KEYS: tuple[str, ...] = tuple(k for k in STATUS_KEYS
@@ -96,31 +98,39 @@ class Limits:
     force: float | None = None
 
 
-class Dashboard:
-    """Subscribes ``node`` to the loop's topics under ``namespace`` and keeps decimated series
-    and the latest ``/diagnostics`` values; :meth:`snapshot` is what ``/data`` serves."""
+class Dashboard(TopicFollower):
+    """Follows the loop's topics under ``namespace`` (their taps where published) and keeps
+    decimated series and the latest ``/diagnostics`` values; :meth:`snapshot` is what ``/data``
+    serves."""
 
     def __init__(self, node: Any, namespace: str, limits: Limits, rate_hz: float = 50.0,
                  points: int = 500) -> None:
         self.limits = limits
         self._lock = threading.Lock()
         self.series = {name: Series(points) for name in SERIES}
-        self._readers = {name: (node.create_polled_subscription(
-            spec.type_name, f"{namespace}/{spec.name}", WATCH_QOS), spec.type_name, values)
-            for name, (spec, values) in SERIES.items()}
+        #: topic -> (series name, the values of a message)
+        self._by_topic = {f"{namespace}/{spec.name}": (name, values)
+                          for name, (spec, values) in SERIES.items()}
         self.diagnostics: dict[str, dict[str, str]] = {}
+        super().__init__(node, list(self._by_topic), poll_period_s=1.0 / rate_hz,
+                         read_taps=rate_hz <= TAP_RATE_HZ)
         node.create_subscription(DIAGNOSTICS.type_name, DIAGNOSTICS.name, self._on_diagnostics,
                                  DIAGNOSTICS_QOS)
-        node.create_timer(1.0 / rate_hz, self.poll, clock=SYSTEM_CLOCK)
 
-    def poll(self) -> None:
-        """Keep the newest sample of each series' topic, if a new one came."""
-        for name, (reader, msgtype, values) in self._readers.items():
-            if taken := reader.take():
-                msg = messages.deserialize(taken[-1][0], msgtype)
-                with self._lock:
-                    self.series[name].keep((messages.stamp_ns(msg.header.stamp) * 1e-9,
-                                            values(msg)))
+    def request(self, offers: list[QoSProfile]) -> QoSProfile:
+        return WATCH_QOS
+
+    def on_new_topic(self, topic: str, msgtype: str, offers: list[QoSProfile]) -> RawCallback:
+        name, values = self._by_topic[topic]
+
+        def keep(data: bytes, _: Any) -> None:
+            """Keep the newest sample of the topic (one per poll: the reader keeps one)."""
+            msg = messages.deserialize(data, msgtype)
+            with self._lock:
+                self.series[name].keep((messages.stamp_ns(msg.header.stamp) * 1e-9,
+                                        values(msg)))
+
+        return keep
 
     def _on_diagnostics(self, msg: Any) -> None:
         with self._lock:

@@ -5,11 +5,12 @@ Like ``foxglove_bridge``, on whichever backend the node runs: every discovered t
 with schema
 encoding ``ros2msg`` (the ``.msg`` definition with its dependencies, as ``rosbags`` writes it
 into MCAP bags) and message encoding ``cdr``; the CDR bytes pass through unconverted. With sim
-time, the newest ``/clock`` is broadcast as the server time at each poll (capability ``time``),
-which drives Foxglove's and Lichtblick's time cursor, and it is the log time of the messages
-forwarded in that poll. ``/clock`` is polled like the topics (a node with ``use_sim_time``
-would decode every one of a 1 kHz loop's ``/clock`` samples). The SDK keeps a bounded queue
-per client and drops a slow client's oldest messages, so no client can hold the node back.
+time, the newest ``/clock`` is broadcast as the server time after each poll (capability
+``time``), which drives Foxglove's and Lichtblick's time cursor, and it is the log time of the
+messages forwarded in the next poll. ``/clock`` is followed like the topics, always watched (a
+node with ``use_sim_time`` would decode every one of a 1 kHz loop's ``/clock`` samples). The SDK
+keeps a bounded queue per client and drops a slow client's oldest messages, so no client can
+hold the node back.
 
 Every topic is advertised as soon as it is found, but subscribed to only while a client
 subscribes to its channel (the server's ``on_subscribe``/``on_unsubscribe``, counted over the
@@ -19,7 +20,10 @@ the monitor anything.
 A live view is forwarded at most ``max_rate_hz`` samples per second per topic: the
 subscriptions are polled (KEEP_LAST 1, taken every ``1 / max_rate_hz`` s), so the monitor does
 no work for the samples in between, and a 1 kHz loop is not slowed by a Python process waking
-a thousand times a second per topic (docs/monitor.md has the figures). ``max_rate_hz = 0``
+a thousand times a second per topic (docs/monitor.md has the figures). Up to
+:data:`~stillframe.middleware.taps.TAP_RATE_HZ` the loop's topics are read from their monitor
+taps, thinned by the loop's own writers, so the loop does not send the monitor every sample
+either. ``max_rate_hz = 0``
 forwards every sample (polled every :data:`EVERY_SAMPLE_POLL_S`, from a deep queue); a bag
 (``stillframe record``) has every sample too, for Foxglove to open after.
 """
@@ -33,7 +37,9 @@ import foxglove
 
 from stillframe.contract import messages
 from stillframe.middleware.api import MessageInfo
-from stillframe.middleware.qos import CLOCK, QoSProfile, viewer_request
+from stillframe.middleware.clock import ClockPublisher
+from stillframe.middleware.qos import QoSProfile, viewer_request
+from stillframe.middleware.taps import TAP_RATE_HZ
 from stillframe.middleware.topic_follower import RawCallback, TopicFollower
 
 SCHEMA_ENCODING = "ros2msg"
@@ -64,15 +70,20 @@ class FoxgloveBridge(TopicFollower):
         self.forwarded: dict[str, int] = {}
         self.every_sample = max_rate_hz == 0
         super().__init__(node, topics, on_demand=True, poll_period_s=(
-            EVERY_SAMPLE_POLL_S if self.every_sample else 1.0 / max_rate_hz))
+            EVERY_SAMPLE_POLL_S if self.every_sample else 1.0 / max_rate_hz),
+            read_taps=not self.every_sample and max_rate_hz <= TAP_RATE_HZ)
         self.server = foxglove.start_server(
             name="stillframe monitor", host=host, port=port, context=self.context,
             server_listener=self, capabilities=[foxglove.Capability.Time],
             supported_encodings=[MESSAGE_ENCODING], message_backlog_size=CLIENT_BACKLOG)
         #: the newest /clock [ns] (sim time only)
         self.sim_time_ns: int | None = None
-        self._clock = node.create_polled_subscription(
-            "rosgraph_msgs/msg/Clock", "/clock", CLOCK.with_depth(1)) if use_sim_time else None
+        self.use_sim_time = use_sim_time
+        self._newest_clock: bytes | None = None
+        if use_sim_time:
+            if self.topics:
+                self.topics.add(ClockPublisher.TOPIC)
+            self.want(ClockPublisher.TOPIC, True)
 
     def on_subscribe(self, client: Any, channel: Any) -> None:
         """A client subscribed to a channel (the SDK's server thread)."""
@@ -97,12 +108,20 @@ class FoxgloveBridge(TopicFollower):
                         else self.sim_time_ns)
             self.forwarded[topic] += 1
 
-        return forward
+        if topic != ClockPublisher.TOPIC or not self.use_sim_time:
+            return forward
+
+        def forward_clock(data: bytes, info: MessageInfo) -> None:
+            self._newest_clock = data
+            forward(data, info)
+
+        return forward_clock
 
     def poll(self) -> None:
-        """Broadcast the newest /clock (with sim time), then forward what waits."""
-        if self._clock is not None and (taken := self._clock.take()):
-            clock = messages.deserialize(taken[-1][0], "rosgraph_msgs/msg/Clock").clock
+        """Forward what waits, then broadcast the newest /clock (with sim time)."""
+        super().poll()
+        if self._newest_clock is not None:
+            clock = messages.deserialize(self._newest_clock, ClockPublisher.TYPE).clock
+            self._newest_clock = None
             self.sim_time_ns = messages.stamp_ns(clock)
             self.server.broadcast_time(self.sim_time_ns)
-        super().poll()

@@ -314,30 +314,32 @@ class DdsString(IdlStruct, typename="std_msgs::msg::dds_::String_"):
 
 def test_records_a_foreign_publisher_and_skips_a_different_type_hash(
         env: dict[str, str], ros_domain: int, tmp_path: Path) -> None:
-    """Two raw Cyclone DDS writers (not stillframe) named the ROS 2 way: the one announcing
+    """Raw Cyclone DDS writers (not stillframe) named the ROS 2 way: the one announcing
     Jazzy's type hash of std_msgs/msg/String is recorded message for message; the one announcing
-    another hash is not recorded (its bytes would not match the definition in the bag)."""
+    another hash is not recorded (its bytes would not match the definition in the bag); a hidden
+    topic (a monitor tap's name) is not recorded either, as ``ros2 bag record -a`` leaves it."""
     domain = Domain(ros_domain, cyclone_config())
     participant = DomainParticipant(ros_domain, qos=DdsQos(Policy.Userdata(data=b"enclave=/;")))
     recorder = Proc(env, "record", "-o", str(tmp_path / "B"), "--all")
     writers = {}
     try:
-        for name, digest in (("native", TS.hash_rihs01("std_msgs/msg/String")),
-                             ("foreign", "RIHS01_" + "ab" * 32)):
+        for name, digest in (("frame/native", TS.hash_rihs01("std_msgs/msg/String")),
+                             ("frame/foreign", "RIHS01_" + "ab" * 32),
+                             ("_monitor/frame/native", TS.hash_rihs01("std_msgs/msg/String"))):
             qos = DdsQos(Policy.Reliability.Reliable(10**9), Policy.History.KeepLast(10),
                       Policy.Userdata(data=f"typehash={digest};".encode()))
             writers[name] = DataWriter(
-                participant, Topic(participant, f"rt/frame/{name}", DdsString), qos)
+                participant, Topic(participant, f"rt/{name}", DdsString), qos)
         recorder.wait_for("Subscribed to topic '/frame/native'")
         recorder.wait_for("/frame/foreign: publishers announce type hash RIHS01_abab")
         deadline = time.monotonic() + 30
-        while not writers["native"].get_matched_subscriptions():
+        while not writers["frame/native"].get_matched_subscriptions():
             assert time.monotonic() < deadline, "the recorder never matched"
             time.sleep(0.05)
         for k in range(20):
-            writers["native"].write(DdsString(f"native {k}"))
-            writers["foreign"].write(DdsString(f"foreign {k}"))
-        writers["native"].wait_for_acks(10**10)
+            for name, writer in writers.items():
+                writer.write(DdsString(f"{name.rsplit('/', 1)[1]} {k}"))
+        writers["frame/native"].wait_for_acks(10**10)
         assert recorder.finish(signal.SIGINT) == 0, "\n".join(recorder.lines)
     finally:
         recorder.stop()
@@ -347,3 +349,4 @@ def test_records_a_foreign_publisher_and_skips_a_different_type_hash(
     assert [TS.deserialize_cdr(d, "std_msgs/msg/String").data for _, _, d in got] == [
         f"native {k}" for k in range(20)]
     assert set(topic_metadata(tmp_path / "B")) == {"/frame/native"}
+    assert not any("_monitor" in line for line in recorder.lines), recorder.lines

@@ -13,8 +13,9 @@ RATE_HZ = 50.0
 PUBLISHER = f"""
 from stillframe.contract import messages
 from stillframe.middleware.api import create_node, spin
+from stillframe.middleware.taps import TappedPublisher
 node = create_node("truth_pub", namespace="/frame")
-pub = node.create_publisher("sensor_msgs/msg/JointState", "state_truth", "default")
+pub = TappedPublisher(node, "sensor_msgs/msg/JointState", "state_truth", "default")
 cov = node.create_publisher("std_msgs/msg/Float64MultiArray", "state_estimate/covariance", 10)
 k = [0]
 def tick():
@@ -56,6 +57,11 @@ def test_list_echo_and_hz(publisher: object, tool_backend: str,
     assert lines == sorted(lines)
     plain = run_stillframe("topic", "list", "--spin-time", "2")
     assert "/frame/state_truth" in plain.stdout.splitlines()
+    # the monitor tap is hidden, as ros2 topic list hides names with a token starting with '_'
+    assert not any("_monitor" in line for line in lines + plain.stdout.splitlines())
+    hidden = run_stillframe("topic", "list", "--include-hidden-topics", "--spin-time", "2")
+    assert {"/frame/state_truth", "/_monitor/frame/state_truth"} <= set(
+        hidden.stdout.splitlines())
 
     echo = run_stillframe("topic", "echo", "/frame/state_truth", "--once", "--timeout", "20")
     assert echo.returncode == 0, echo.stderr

@@ -27,6 +27,8 @@ from stillframe.bags.storage import read_bag
 from stillframe.contract import messages
 from stillframe.locations import REPO_ROOT
 from stillframe.middleware import api
+from stillframe.middleware.names import is_hidden
+from stillframe.middleware.taps import TappedPublisher, tap_topic
 from stillframe.monitor.dashboard import ERROR_KEYS
 from stillframe.monitor.foxglove_client import Capture, capture, churn, stall
 from tests.support.middleware import child_env, isolate_domain
@@ -255,11 +257,21 @@ def monitor_readers(probe: Any, topic: str) -> int:
 PUBLISH_HZ = 200
 
 
-@pytest.fixture
-def imu_source(ros_domain: int) -> Iterator[Any]:
-    """A node publishing the IMU topic at :data:`PUBLISH_HZ`, stamps counting periods."""
+@dataclass
+class ImuSource:
+    node: Any
+    #: published with a monitor tap, as the loop's nodes publish
+    tapped: bool
+
+
+@pytest.fixture(params=[False, True], ids=["plain", "tapped"])
+def imu_source(request: pytest.FixtureRequest, ros_domain: int) -> Iterator[ImuSource]:
+    """A node publishing the IMU topic at :data:`PUBLISH_HZ`, stamps counting periods; with a
+    monitor tap as the loop's nodes publish it, or without (another publisher, a bag played)."""
     source = api.create_node("imu_source")
-    publisher = source.create_publisher("sensor_msgs/msg/Imu", IMU, "sensor_data")
+    publisher = (TappedPublisher(source, "sensor_msgs/msg/Imu", IMU, "sensor_data")
+                 if request.param else
+                 source.create_publisher("sensor_msgs/msg/Imu", IMU, "sensor_data"))
     stop = threading.Event()
 
     def publish() -> None:
@@ -272,7 +284,7 @@ def imu_source(ros_domain: int) -> Iterator[Any]:
 
     thread = threading.Thread(target=publish, daemon=True)
     thread.start()
-    yield source
+    yield ImuSource(source, request.param)
     stop.set()
     thread.join()
     source.destroy_node()
@@ -299,46 +311,50 @@ def stop_monitor(monitor: subprocess.Popen) -> str:
 
 
 async def watch(url: str, topics: list[str] | None, seconds: float,
-                probe: Any) -> tuple[Capture, int]:
+                probe: Any, read: str) -> tuple[Capture, int]:
     """Connect to ``url``, subscribe to ``topics`` for ``seconds``; what came, and the monitor's
-    readers of the IMU topic just before leaving."""
+    readers of ``read`` (the IMU topic or its tap) just before leaving."""
     seen, until = Capture(), asyncio.Event()
     task = asyncio.create_task(capture(url, topics, until, seen))
     await asyncio.sleep(seconds)
-    readers = monitor_readers(probe, IMU)
+    readers = monitor_readers(probe, read)
     until.set()
     await task
     return seen, readers
 
 
-def test_a_topic_is_subscribed_only_while_a_client_watches_it(imu_source: Any) -> None:
+def test_a_topic_is_subscribed_only_while_a_client_watches_it(imu_source: ImuSource) -> None:
     """Like foxglove_bridge: the monitor advertises a topic once it has a publisher, but has a
     reader on it (as the DDS graph shows) only while a client is subscribed to its channel;
     the reader goes when the client leaves. A topic nobody watches costs its publisher
     nothing. Watched, the topic comes at most at ``--max-rate`` (default 50 Hz) from a
-    200 Hz publisher, the newest sample each time."""
+    200 Hz publisher, the newest sample each time. A tapped topic is read from its tap (the
+    hidden twin is never advertised): the publisher sends the monitor none of its samples."""
+    probe, read = imu_source.node, tap_topic(IMU) if imu_source.tapped else IMU
     monitor, url = start_monitor()
     try:
-        looked, idle_readers = asyncio.run(watch(url, [], 3.0, imu_source))
-        assert IMU in looked.channels
-        watched, readers = asyncio.run(watch(url, [IMU], 3.0, imu_source))
+        looked, idle_readers = asyncio.run(watch(url, [], 3.0, probe, read))
+        assert IMU in looked.channels and not any(map(is_hidden, looked.channels))
+        watched, readers = asyncio.run(watch(url, [IMU], 3.0, probe, read))
         assert (idle_readers, readers) == (0, 1)
-        assert api.spin_until(imu_source, lambda: monitor_readers(imu_source, IMU) == 0, 10)
+        assert monitor_readers(probe, IMU if imu_source.tapped else tap_topic(IMU)) == 0
+        assert api.spin_until(probe, lambda: monitor_readers(probe, read) == 0, 10)
     finally:
         err = stop_monitor(monitor)
-    assert "Unsubscribed from topic '/frame/floor1/imu' (not watched)" in err
+    assert f"Unsubscribed from topic '{read}' (not watched)" in err
     stamps = [messages.stamp_ns(m.header.stamp) for m in watched.messages[IMU]]
     assert stamps == sorted(set(stamps))
     # 50 Hz at most over the 3 s (+1 for the phase), of the 600 samples published
     assert 10 <= len(stamps) <= 151, len(stamps)
 
 
-def test_every_sample_with_max_rate_zero(imu_source: Any) -> None:
+def test_every_sample_with_max_rate_zero(imu_source: ImuSource) -> None:
     """``--max-rate 0``: every sample of the 200 Hz publisher reaches the client, in order,
-    none missing between the first and the last."""
+    none missing between the first and the last: read from the topic, tapped or not (a tap
+    carries at most 50 a second)."""
     monitor, url = start_monitor("--max-rate", "0")
     try:
-        watched, _ = asyncio.run(watch(url, [IMU], 3.0, imu_source))
+        watched, _ = asyncio.run(watch(url, [IMU], 3.0, imu_source.node, IMU))
     finally:
         stop_monitor(monitor)
     periods = [messages.stamp_ns(m.header.stamp) * PUBLISH_HZ // 10**9

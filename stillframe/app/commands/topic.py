@@ -17,6 +17,9 @@ def register(sub: argparse._SubParsersAction) -> None:
 
     listing = verbs.add_parser("list", help="topics seen on the network")
     listing.add_argument("-t", "--show-types", action="store_true", help="also print types")
+    listing.add_argument("--include-hidden-topics", action="store_true",
+                         help="also list hidden topics (a token starting with '_': the monitor "
+                              "taps under /_monitor)")
     listing.add_argument("--spin-time", type=float, default=1.0, metavar="S",
                          help="how long to wait for discovery (default 1 s)")
     listing.set_defaults(func=run_list)
@@ -44,7 +47,7 @@ def add_wait_argument(parser: argparse.ArgumentParser) -> None:
 
 
 def run_list(args: argparse.Namespace) -> int:
-    from stillframe.middleware import api
+    from stillframe.middleware import api, names
     from stillframe.middleware.monitor import cli_node
 
     node = cli_node()
@@ -53,6 +56,8 @@ def run_list(args: argparse.Namespace) -> int:
         while api.ok() and time.monotonic() < deadline:
             node.spin_once(0.05)
         for topic, types in node.get_topic_names_and_types():
+            if names.is_hidden(topic) and not args.include_hidden_topics:
+                continue
             print(f"{topic} [{', '.join(types)}]" if args.show_types else topic)
     finally:
         node.destroy_node()
