@@ -13,6 +13,11 @@ with it:
   in by the next sample's due time is a deadline miss (previous command held), and a sample
   that starts more than a period late is an overrun.
 
+With ``actuators.delay_periods`` = d ≥ 1 the command stamped t_k is applied from t_k+d on
+(:class:`stillframe.plant.actuation_delay.ActuationDelay`): in real time the sim does not wait
+for it, and a command not in when its period starts is the deadline miss; the safe state below
+counts its periods from t_k+d.
+
 Commands pass a :class:`stillframe.plant.command_gate.CommandGate` per topic: only one writer (by
 its
 writer GID; the first seen, or the node named by the ``command_writer`` parameter) may command,
@@ -69,6 +74,7 @@ from stillframe.loop.wiring import command_topic, estimator_inputs
 from stillframe.middleware import api
 from stillframe.middleware.clock import ClockPublisher
 from stillframe.middleware.taps import TappedPublisher
+from stillframe.plant.actuation_delay import ActuationDelay
 from stillframe.plant.command_gate import CommandGate
 from stillframe.plant.frame_plant import make_plant
 
@@ -109,8 +115,10 @@ class SimNode:
                                      params.reader_qos(spec), raw=True)
         self.command = np.zeros(2)          # [torque, force] held
         self.command_ns = [-1, -1]
+        self.delay = ActuationDelay(scene.actuators.delay_periods)
         self.now_ns = 0
-        self.published_at = 0.0
+        #: sample stamp -> when it was published, for the samples a command may still answer
+        self.published_at: dict[int, float] = {}
         self.latency = Durations()
         self.commands_in_time = 0   # commands for the current sample taken before its deadline
         self.pacer = Pacer(self.grid.ns(self.plant.period), params.lockstep,
@@ -137,10 +145,15 @@ class SimNode:
                                           self.command_ns[actuator]):
             self.counts["rejected_commands"] += 1
             return
-        if actuator == self.active and ns == self.now_ns and self.command_ns[actuator] != ns:
-            self.latency.add(time.monotonic() - self.published_at)
-            self.commands_in_time += 1
+        if (actuator == self.active and ns in self.published_at
+                and self.command_ns[actuator] != ns):
+            self.latency.add(time.monotonic() - self.published_at[ns])
+            # in time: taken before the advance that applies it (d = 0: in its own period)
+            self.commands_in_time += ns >= self.now_ns - max(self.delay.periods - 1, 0) * (
+                self.pacer.period_ns)
         self.command[actuator], self.command_ns[actuator] = value, ns
+        if actuator == self.active:
+            self.delay.put(self.grid.index(ns), self.command)
 
     def peers_ready(self) -> bool:
         """The estimator reads every sensor (and the truth when it is the ``truth`` estimator),
@@ -174,7 +187,10 @@ class SimNode:
         cdrs = self.messages.cdr(sample, ns)
         for pub, cdr in zip(self.publishers.values(), cdrs, strict=True):
             pub.publish(cdr)
-        self.published_at = time.monotonic()
+        self.published_at[ns] = time.monotonic()
+        oldest = ns - self.delay.periods * self.pacer.period_ns
+        for old in [t for t in self.published_at if t < oldest]:
+            del self.published_at[old]
 
     def wait_command(self, deadline_ns: int) -> bool:
         """Spin until the command stamped now arrives (True) or the monotonic ``deadline_ns``."""
@@ -190,10 +206,12 @@ class SimNode:
 
     def command_timed_out(self) -> bool:
         """The newest command taken is ``command_timeout_periods`` periods older than the
-        current sample (or none came for as long): the controller is gone or stuck."""
+        sample whose command is due now (or none came for as long): the controller is gone or
+        stuck."""
+        period = self.pacer.period_ns
         return self.active is not None and command_expired(
-            self.now_ns, self.command_ns[self.active],
-            self.command_timeout_periods * self.pacer.period_ns)
+            self.now_ns - self.delay.periods * period, self.command_ns[self.active],
+            self.command_timeout_periods * period)
 
     def sleep_until(self, when_ns: int) -> None:
         wait_until(when_ns, time.monotonic_ns, self.node.spin_once, self.rt.spin_margin_ns,
@@ -241,11 +259,17 @@ class SimNode:
         sample = plant.sample()
         self.now_ns = self.grid.ns(sample.t)
         self.publish(sample, self.now_ns)
-        if not self.wait_command(pacer.deadline_ns(k, time.monotonic_ns())):
+        if (pacer.lockstep or not self.delay.periods) and not self.wait_command(
+                pacer.deadline_ns(k, time.monotonic_ns())):
             if not api.ok():
                 return None
             pacer.missed()
-        control = self.command.copy()
+        if self.delay.periods:
+            control, late = self.delay.due(k)
+            if late and not pacer.lockstep:
+                pacer.missed()
+        else:
+            control = self.command.copy()
         if self.command_timed_out():
             control[self.active] = 0.0      # the safe state: no actuation
             self.counts["safe_state_samples"] += 1

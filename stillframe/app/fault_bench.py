@@ -54,10 +54,11 @@ def identical(histories: dict[str, np.ndarray], reference: LoopHistory) -> bool:
 
 
 def lockstep_row(lab: Lab, fault: Fault, duration: float, out: Path,
-                 reference: LoopHistory, backends: Sequence[str]) -> dict[str, Any]:
+                 reference: LoopHistory, backends: Sequence[str],
+                 overrides: Sequence[str]) -> dict[str, Any]:
     with applied(lab, fault):
         started = time.perf_counter()
-        result = run_scene(SCENE, lockstep_overrides(duration), out, "lockstep",
+        result = run_scene(SCENE, [*lockstep_overrides(duration), *overrides], out, "lockstep",
                            lockstep_timeout_s=LOCKSTEP_TIMEOUT_S, backends=backends,
                            hosts=host_prefixes(lab))
         launch_wall = time.perf_counter() - started
@@ -71,7 +72,7 @@ def lockstep_row(lab: Lab, fault: Fault, duration: float, out: Path,
 
 
 def realtime_row(lab: Lab, fault: Fault, duration: float, out: Path,
-                 backends: Sequence[str]) -> dict[str, Any]:
+                 backends: Sequence[str], overrides: Sequence[str]) -> dict[str, Any]:
     period_ns = round(1e9 / RATE_HZ)
     log = EstimateLog(period_ns)
 
@@ -81,7 +82,8 @@ def realtime_row(lab: Lab, fault: Fault, duration: float, out: Path,
                                  STATE_ESTIMATE.qos)
 
     with applied(lab, fault):
-        result = run_scene(SCENE, realtime_overrides(RATE_HZ, duration), out, "realtime",
+        result = run_scene(SCENE, [*realtime_overrides(RATE_HZ, duration), *overrides], out,
+                           "realtime",
                            prepare=observe, backends=backends, hosts=host_prefixes(lab))
     with np.load(result.history_file) as data:
         truth = data["truth"]
@@ -94,10 +96,12 @@ def realtime_row(lab: Lab, fault: Fault, duration: float, out: Path,
 
 def run_bench(lab: Lab, faults: Sequence[Fault], duration: float, out: Path,
               modes: Sequence[str] = ("lockstep", "realtime"), backends: Sequence[str] = (),
-              progress: Callable[[str], None] | None = None) -> list[dict[str, Any]]:
-    """A row per fault (module docstring), each with the fault's netem equivalent."""
+              progress: Callable[[str], None] | None = None,
+              overrides: Sequence[str] = ()) -> list[dict[str, Any]]:
+    """A row per fault (module docstring), each with the fault's netem equivalent; the
+    scene's ``overrides`` (``--set``) apply to every run and to the one-process reference."""
     say = progress or (lambda text: print(text, file=sys.stderr, flush=True))
-    reference = (run_closed_loop(load_scene(SCENE, lockstep_overrides(duration)))
+    reference = (run_closed_loop(load_scene(SCENE, [*lockstep_overrides(duration), *overrides]))
                  if "lockstep" in modes else None)
     rows = []
     for i, fault in enumerate(faults):
@@ -105,10 +109,11 @@ def run_bench(lab: Lab, faults: Sequence[Fault], duration: float, out: Path,
         if reference is not None:
             say(f"[{i + 1}/{len(faults)}] {fault.name}: lock-step, {duration:g} s of the LQG")
             row["lockstep"] = lockstep_row(lab, fault, duration, out / f"{i}-lockstep",
-                                           reference, backends)
+                                           reference, backends, overrides)
         if "realtime" in modes:
             say(f"[{i + 1}/{len(faults)}] {fault.name}: real time at {RATE_HZ:g} Hz for "
                 f"{duration:g} s")
-            row["realtime"] = realtime_row(lab, fault, duration, out / f"{i}-realtime", backends)
+            row["realtime"] = realtime_row(lab, fault, duration, out / f"{i}-realtime", backends,
+                                           overrides)
         rows.append(row)
     return rows

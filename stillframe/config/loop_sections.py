@@ -61,8 +61,11 @@ class Sensors(Section):
 
 @dataclass(frozen=True, kw_only=True)
 class Actuators(Section):
-    """actuators: saturation and slew limits (null: none)."""
+    """actuators: saturation and slew limits (null: none), and a fixed actuation delay."""
 
+    delay_periods: int = key(0, non_negative, doc=(
+        "the command stamped t_k is applied from t_k+d on (a playout buffer: network delay and "
+        "jitter up to d periods cost nothing more; LQG predicts d periods ahead)"))
     torque_limit: float | None = _limit("pendulum torque saturation [N m]")
     torque_rate_limit: float | None = _limit("pendulum torque slew limit [N m/s]")
     force_limit: float | None = _limit("floor-3 force saturation [N]")

@@ -46,9 +46,12 @@ class SampleGrid:
     def ns(t: float) -> int:
         return round(t * 1e9)
 
+    def index(self, ns: int) -> int:
+        """The sample k nearest to stamp ``ns``."""
+        return round(ns * 1e-9 / self.period)
+
     def seconds(self, ns: int) -> float:
-        k = round(ns * 1e-9 / self.period)
-        t = k * self.period
+        t = self.index(ns) * self.period
         return t if abs(round(t * 1e9) - ns) <= 1000 else ns * 1e-9
 
 

@@ -7,6 +7,7 @@ from stillframe.contract.signals import ACTUATOR
 from stillframe.control.euk import EUKLaw
 from stillframe.control.lqg import LQGLaw, design_lqr
 from stillframe.control.passivity import PassivityLaw
+from stillframe.control.prediction import DelayPredictor
 from stillframe.control.supervisor import Controller
 from stillframe.dynamics.models import FrameModel
 from stillframe.errors import InputError
@@ -31,9 +32,13 @@ def make_controller(scene: Scene, design: FrameModel) -> Controller:
     c = scene.controller
     period = 1.0 / scene.sensors.rate_hz
     floor = scene.excitation.floor
+    delay = scene.actuators.delay_periods
+    predictor = None
     if c.type == "lqg":
         law = LQGLaw(design_lqr(design, period, c.state_weights, c.input_weight, TORQUE_INPUT,
                                 floor), c.feedforward)
+        if delay:
+            predictor = DelayPredictor(law.design.A, law.design.B, delay, period)
     elif c.type in ("euk_pendulum", "euk_floor"):
         variant = "pendulum" if c.type == "euk_pendulum" else "floor"
         law = EUKLaw(design, variant, floor, c.hold_stiffness, c.hold_damping, c.singular_margin)
@@ -46,4 +51,4 @@ def make_controller(scene: Scene, design: FrameModel) -> Controller:
     actuators = scene.actuators
     actuator_limit = (actuators.torque_limit, actuators.force_limit)[ACTUATOR[c.type]]
     return Controller(law, ACTUATOR[c.type], period, c.start, c.limit, c.watchdog_periods,
-                      actuator_limit)
+                      actuator_limit, predictor)

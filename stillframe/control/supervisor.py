@@ -18,6 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from stillframe.contract.signals import Command, Estimate
+from stillframe.control.prediction import DelayPredictor
 
 #: A law output beyond this multiple of the command's limit is flagged ``runaway``.
 RUNAWAY_FACTOR = 10.0
@@ -39,8 +40,10 @@ class Controller:
 
     def __init__(self, law: Law, actuator: int, period: float, start: float = 0.0,
                  limit: float | None = None, watchdog_periods: int = 3,
-                 actuator_limit: float | None = None) -> None:
+                 actuator_limit: float | None = None,
+                 predictor: DelayPredictor | None = None) -> None:
         self.law = law
+        self.predictor = predictor
         self.actuator = actuator
         self.period = period
         self.start = start
@@ -58,7 +61,14 @@ class Controller:
                 >= self.watchdog_periods * self.period - 1e-9 * self.period)
 
     def command(self, t: float, estimate: Estimate | None, force: float) -> Command:
-        """The command at time t from the newest estimate and the measured excitation force."""
+        """The command at time t from the newest estimate and the measured excitation force
+        (with a ``predictor``, from the state predicted to when the command takes effect)."""
+        out = self._command(t, estimate, force)
+        if self.predictor is not None:
+            self.predictor.sent(out.t, float(out.vector[self.actuator]))
+        return out
+
+    def _command(self, t: float, estimate: Estimate | None, force: float) -> Command:
         c = self.counters
         c.commands += 1
         if estimate is not None and (self.latest is None or estimate.t > self.latest.t):
@@ -72,7 +82,8 @@ class Controller:
         if t < self.start - tolerance or not self.enabled:
             return out
         out.enabled = True
-        value, out.singular = self.law(latest.z, force)
+        z = latest.z if self.predictor is None else self.predictor.ahead(latest.t, latest.z)
+        value, out.singular = self.law(z, force)
         if not np.isfinite(value):
             value, out.singular = 0.0, True
         bounds = [b for b in (self.limit, self.actuator_limit) if b]

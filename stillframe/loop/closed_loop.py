@@ -2,7 +2,9 @@
 
 Per sample period k, exactly what the three nodes do in the DDS lock-step protocol:
 ``Plant.sample`` (readings stamped t_k), ``estimator.step(sample, actuation applied since t_k−1)``,
-``controller.command(t_k, estimate, measured force)``, ``Plant.advance(command)``. The estimator
+``controller.command(t_k, estimate, measured force)``, ``Plant.advance(command)`` (with
+``actuators.delay_periods`` = d, the command answering sample k − d:
+:class:`~stillframe.plant.actuation_delay.ActuationDelay`). The estimator
 gets what the actuators applied after their saturation and slew limits (what the simulator reports
 in the encoder's ``effort`` and the floor-3 load cell), not the command, so that a saturated
 actuator cannot wind the estimate up. The same scene
@@ -30,6 +32,7 @@ from stillframe.contract.signals import Command
 from stillframe.control.factory import make_controller
 from stillframe.estimation.factory import make_estimator
 from stillframe.loop.wiring import design_model
+from stillframe.plant.actuation_delay import ActuationDelay
 from stillframe.plant.frame_plant import make_plant
 
 Progress = Callable[[float], None]
@@ -37,8 +40,9 @@ Progress = Callable[[float], None]
 
 @dataclass
 class LoopHistory:
-    """Per sample: times, true and estimated physical state (N×8), commanded [torque, force]
-    (N×2), the load-cell reading; at every integrator step: true floor motion."""
+    """Per sample: times, true and estimated physical state (N×8), the [torque, force]
+    commanded for the period (N×2; with an actuation delay, the command sent d periods
+    earlier), the load-cell reading; at every integrator step: true floor motion."""
 
     t: np.ndarray
     truth: np.ndarray
@@ -100,6 +104,7 @@ def run_closed_loop(scene: Scene, progress: Progress | None = None) -> LoopHisto
     n = round(scene.duration / plant.period)
     rows = np.full((n, 20), np.nan)
     control = np.zeros(2)
+    delay = ActuationDelay(scene.actuators.delay_periods)
     every = max(1, n // 100)
     looping, looping_cpu = time.perf_counter(), time.process_time()
     for k in range(n):
@@ -107,9 +112,11 @@ def run_closed_loop(scene: Scene, progress: Progress | None = None) -> LoopHisto
         estimate = estimator.step(sample, control) if estimator else None
         command = (controller.command(sample.t, estimate, sample.force) if controller
                    else Command(sample.t))
-        applied = plant.advance(command.vector)
+        delay.put(k, command.vector)
+        due = delay.due(k)[0]               # the command of this period (d = 0: this one)
+        applied = plant.advance(due)
         rows[k, 0], rows[k, 1:9], rows[k, 17:19], rows[k, 19] = (
-            sample.t, sample.truth, command.vector, sample.force)
+            sample.t, sample.truth, due, sample.force)
         control = applied
         if estimate is not None:
             rows[k, 9:17] = estimate.physical

@@ -40,6 +40,16 @@ def test_lqg_three_processes_equal_one_process(ros_domain: int, tmp_path: Path) 
     assert result["peak_command"] > 0.0
 
 
+def test_lqg_with_an_actuation_delay_three_processes_equal_one_process(
+        ros_domain: int, tmp_path: Path) -> None:
+    """``actuators.delay_periods=2`` at 100 Hz: the simulator applies each command two periods
+    after its sample, the controller predicts over them; still the same numbers, and still
+    controlled (without the prediction this loop diverges: docs/reliability.md)."""
+    result = _same_as_one_process(tmp_path, "thesis_lqg", [
+        *SHORT_LQG, "sensors.rate_hz=100", "integrator.dt=0.001", "actuators.delay_periods=2"])
+    assert min(result["reduction_pct"]["displacement"]) > 20.0
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("scene", ["thesis_euk_floor", "thesis_euk_ekf"])
 def test_euk_three_processes_equal_one_process(ros_domain: int, tmp_path: Path,

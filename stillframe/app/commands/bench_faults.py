@@ -37,6 +37,9 @@ def register(benches: argparse._SubParsersAction) -> None:
                         help="run only the lock-step or only the real-time runs")
     parser.add_argument("--backend", dest="backends", action="append", default=[],
                         metavar="[NODE=]BACKEND", help="as for launch (default dds)")
+    parser.add_argument("--set", dest="overrides", action="append", default=[],
+                        metavar="KEY=VALUE", help="scene override for every run, as for launch "
+                        "(e.g. actuators.delay_periods=3: a playout delay the LQG predicts over)")
     add_netns_arguments(parser, switch=False)
     add_json_argument(parser)
     parser.set_defaults(func=run)
@@ -67,19 +70,22 @@ def table(rows: list[dict[str, Any]]) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    from stillframe.app.fault_bench import run_bench
+    from stillframe.app.fault_bench import SCENE, run_bench
     from stillframe.app.netns_lab import joined, lab
+    from stillframe.config.scene import load_scene
 
     if not args.duration >= 2.0:
         raise InputError("bench faults: --duration must be >= 2 s")
+    load_scene(SCENE, args.overrides)       # a bad --set is one line before the lab is built
     faults = [fault_named(name) for name in args.faults] or list(FAULTS)
     check_tools()
     modes = [args.only] if args.only else list(MODES)
     with tempfile.TemporaryDirectory(prefix="stillframe-bench-faults-") as tmp, \
             lab(args.netns_prefix) as made, joined(made):
-        rows = run_bench(made, faults, args.duration, Path(tmp), modes, args.backends)
+        rows = run_bench(made, faults, args.duration, Path(tmp), modes, args.backends,
+                         overrides=args.overrides)
     if args.json:
-        emit_json({"duration_s": args.duration, "rows": rows})
+        emit_json({"duration_s": args.duration, "overrides": args.overrides, "rows": rows})
     else:
         print(table(rows))
     return 0

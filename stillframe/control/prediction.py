@@ -1,0 +1,52 @@
+"""State prediction over a fixed actuation delay (scene ``actuators.delay_periods``).
+
+With the command stamped t_k applied from t_k+d on (``stillframe.plant.actuation_delay``), the
+design model runs x_{j+1} = A x_j + B u_{j−d}. At sample k the commands u_{k−d} … u_{k−1} are
+already sent but not yet applied, so the state the new command will act on is
+
+    x̂_{k+d|k} = A^d x̂_k + Σ_{j=k−d}^{k−1} A^{k−1−j} B u_j,
+
+and u_k = −K x̂_{k+d|k} gives the delay-free loop's poles back on the design model (the
+predictor form of state feedback for input delay; Åström & Wittenmark, *Computer-Controlled
+Systems*, §7.6, "sampled-data systems with time delay"). A command that was not sent for some
+sample (no estimate came) is taken as held, as the actuators hold it.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+class DelayPredictor:
+    """x̂_{k+d|k} on the discrete design model (A, B) of period ``period`` for d = ``periods``,
+    from the commands sent (:meth:`sent`)."""
+
+    def __init__(self, A: np.ndarray, B: np.ndarray, periods: int, period: float) -> None:
+        self.A = A
+        self.B = B.reshape(-1)
+        self.periods = periods
+        self.period = period
+        self._sent: dict[int, float] = {}
+
+    def index(self, t: float) -> int:
+        return round(t / self.period)
+
+    def sent(self, t: float, value: float) -> None:
+        """The command sent for the sample at ``t``. Forgets those no prediction needs: the
+        next one starts at sample k + 1 − d, and needs the newest command before that too."""
+        k = self.index(t)
+        self._sent[k] = value
+        for j in sorted(j for j in self._sent if j < k + 1 - self.periods)[:-1]:
+            del self._sent[j]
+
+    def held(self, j: int) -> float:
+        """The command in effect for sample j: the newest sent at or before j (0 before any)."""
+        older = [i for i in self._sent if i <= j]
+        return self._sent[max(older)] if older else 0.0
+
+    def ahead(self, t: float, z: np.ndarray) -> np.ndarray:
+        """x̂_{k+d|k} from the estimate ``z`` of the sample at ``t``."""
+        k = self.index(t)
+        for j in range(k - self.periods, k):
+            z = self.A @ z + self.B * self.held(j)
+        return z

@@ -1,0 +1,75 @@
+"""Prediction over a fixed actuation delay (``actuators.delay_periods``), against closed forms:
+the predicted state equals the delayed design model run forward, and state feedback on the
+prediction gives the delay-free closed loop's poles (plus d at the origin), where the same
+feedback without prediction is unstable."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from stillframe.control.factory import TORQUE_INPUT
+from stillframe.control.lqg import design_lqr
+from stillframe.control.prediction import DelayPredictor
+from stillframe.design.identified import frame_for
+from tests.support.scenes import thesis_scene
+
+PERIOD = 1.0 / 100
+
+
+def _design():
+    scene = thesis_scene("thesis_lqg")
+    model = frame_for("file", "thesis_mkr", scene, "design.file")
+    c = scene.controller
+    return design_lqr(model, PERIOD, c.state_weights, c.input_weight, TORQUE_INPUT, 1)
+
+
+@pytest.mark.parametrize("d", [1, 2, 3])
+def test_the_prediction_is_the_delayed_model_run_forward(d: int) -> None:
+    """x_{j+1} = A x_j + B u_{j-d}, with every command sent: x̂_{k+d|k} = x_{k+d} exactly
+    (to rounding)."""
+    design = _design()
+    A, B = design.A, design.B[:, 0]
+    rng = np.random.default_rng(4)
+    u = rng.normal(size=40)
+    x = [rng.normal(size=A.shape[0])]
+    for j in range(39):
+        x.append(A @ x[-1] + B * (u[j - d] if j >= d else 0.0))
+    predictor = DelayPredictor(design.A, design.B, d, PERIOD)
+    for k in range(39 - d):
+        predicted = predictor.ahead(k * PERIOD, x[k])
+        np.testing.assert_allclose(predicted, x[k + d], rtol=1e-10,
+                                   atol=1e-12 * np.abs(x[k + d]).max())
+        predictor.sent(k * PERIOD, u[k])
+
+
+def closed_loop(design, d: int, predict: bool) -> np.ndarray:
+    """The map of [x_k, u_{k-d}, ..., u_{k-1}] one period on, with u_k = -K x̂_{k+d|k}
+    (``predict``) or u_k = -K x_k, built column by column through :class:`DelayPredictor`."""
+    n = design.A.shape[0]
+    columns = []
+    for e in np.eye(n + d):
+        x, pending = e[:n], e[n:]
+        predictor = DelayPredictor(design.A, design.B, d, PERIOD)
+        for j, value in enumerate(pending):       # sent for samples -d ... -1
+            predictor.sent((j - d) * PERIOD, value)
+        z = predictor.ahead(0.0, x) if predict else x
+        u = -float(design.gain[0] @ z)
+        columns.append(np.concatenate([design.A @ x + design.B[:, 0] * pending[0],
+                                       pending[1:], [u]]))
+    return np.array(columns).T
+
+
+@pytest.mark.parametrize("d", [1, 2, 3])
+def test_feedback_on_the_prediction_keeps_the_delay_free_poles(d: int) -> None:
+    design = _design()
+    A_cl = design.A - design.B @ design.gain
+    # det(zI - M) = z^d det(zI - A_cl): the delay-free poles, and d at the origin (the pending
+    # commands, flushed in d steps); compared as characteristic polynomials, which a cluster
+    # of eigenvalues at 0 does not make ill-conditioned as the eigenvalues themselves are
+    got = np.poly(closed_loop(design, d, predict=True))
+    np.testing.assert_allclose(got, np.concatenate([np.poly(A_cl), np.zeros(d)]), atol=1e-9)
+    delay_free = np.linalg.eigvals(A_cl)
+    assert max(abs(delay_free)) < 1
+    if d >= 2:   # without prediction, the same gain destabilises the delayed loop
+        assert max(abs(np.linalg.eigvals(closed_loop(design, d, predict=False)))) > 1
