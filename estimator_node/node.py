@@ -8,7 +8,8 @@ one stamp t_k from the floor IMUs, the encoder and the load cell (and ``state_tr
 the simulator reports it applied over the previous period (after saturation and slew limits):
 the encoder's ``effort`` (hinge torque) and ``floor3/load_cell`` (floor-3 force), so that a
 saturated actuator does not wind the estimate up; where a sample carries no such reading, the
-newest command received on ``pendulum/torque_cmd`` and ``floor3/force_cmd``. In lock-step a
+command in effect received on ``pendulum/torque_cmd`` and ``floor3/force_cmd`` (the one
+answering the previous stamp, or ``actuators.delay_periods`` stamps before that). In lock-step a
 stamp of a scene driving the floor-3 force waits for its ``floor3/load_cell`` reading too. The
 actuator the scene's controller does not drive is taken as zero (the sim refuses its commands),
 whatever arrives on its topics.
@@ -102,7 +103,8 @@ class EstimatorNode:
         self.active = actuator_of(scene)
         wait_s = params.lockstep_timeout_s / 2 if params.lockstep else partial_after_s
         self.assembly = SampleAssembly(self.inputs, self.active, SampleGrid(params.period),
-                                       round(wait_s * 1e9), params.lockstep)
+                                       round(wait_s * 1e9), params.lockstep,
+                                       scene.actuators.delay_periods)
         spec, cov = topics.STATE_ESTIMATE, topics.STATE_COVARIANCE
         self.state_pub = TappedPublisher(node, spec.type_name, spec.name, spec.qos)
         self.cov_pub = TappedPublisher(node, cov.type_name, cov.name, cov.qos)

@@ -19,8 +19,8 @@ READINGS = [0.1, -0.2, 0.3, 0.04, 1.5]   # a1, a2, a3, φ, load cell
 
 
 def _assembly(lockstep: bool = True, inputs: tuple = SENSOR_TOPICS,
-              active: int | None = 0) -> SampleAssembly:
-    return SampleAssembly(inputs, active, SampleGrid(PERIOD), WAIT_NS, lockstep)
+              active: int | None = 0, delay_periods: int = 0) -> SampleAssembly:
+    return SampleAssembly(inputs, active, SampleGrid(PERIOD), WAIT_NS, lockstep, delay_periods)
 
 
 def _feed(a: SampleAssembly, k: int, now_ns: int, channels: range | list = range(5),
@@ -138,13 +138,25 @@ def test_control_is_the_applied_torque_else_the_command(torque: float, expected:
     assert a.counts["applied_reported"] == int(np.isfinite(torque))
 
 
+@pytest.mark.parametrize(("delay", "expected"), [(0, 5.0), (1, 3.0), (2, 3.0), (3, 2.0)])
+def test_without_the_effort_the_command_in_effect_is_the_delayed_one(
+        delay: int, expected: float) -> None:
+    """With ``actuators.delay_periods`` = d the simulator applies over the period before stamp 6
+    the command answering stamp 5 − d; one that never came (4) is held from the one before."""
+    a = _assembly(lockstep=False, delay_periods=delay)
+    for k in (0, 1, 2, 3, 5):
+        a.command_received(0, k * PERIOD_NS, float(k))
+    _feed(a, 6, now_ns=0, torque=np.nan)
+    np.testing.assert_array_equal(a.pop_ready(0).control, [expected, 0.0])
+
+
 def test_bad_commands_are_rejected_and_counted() -> None:
     a = _assembly()
     assert a.command_received(0, 2 * PERIOD_NS, 0.1)
     assert not a.command_received(0, PERIOD_NS, 0.2)     # older than the one held
     assert not a.command_received(0, 3 * PERIOD_NS, np.inf)
     assert a.counts["rejected_commands"] == 2
-    np.testing.assert_array_equal(a.command, [0.1, 0.0])
+    assert a.in_effect(0, 3 * PERIOD_NS) == 0.1
 
 
 def test_the_scene_inputs_decide_completeness() -> None:
