@@ -27,7 +27,11 @@ counted by reason.
 
 When the newest command taken is ``command_timeout_periods`` (default 3) sample periods old, the
 sim applies zero actuation (the safe state) until a fresh command comes, and counts the samples
-(``safe_state_samples``).
+(``safe_state_samples``). In real time it also applies zero while more than
+``command_miss_limit`` (default 0.25; 0: never) of the last second's samples missed their
+command, until no more than half that does (:class:`stillframe.loop.watchdog.MissRateGuard`;
+``degraded_samples``, ``/diagnostics`` ERROR): a network that loses or delays that many commands
+makes the held ones drive the structure instead of damping it.
 
 At the end of the scene's duration it writes ``result_file`` (the evaluation of
 :func:`stillframe.loop.closed_loop.evaluate` on its own truth history plus the loop's counters) and
@@ -57,6 +61,7 @@ from stillframe.contract.signals import Sample, actuator_of
 from stillframe.errors import InputError
 from stillframe.loop.closed_loop import LoopHistory, evaluate
 from stillframe.loop.node_support import (
+    ERROR,
     OK,
     WARN,
     Diagnostics,
@@ -69,7 +74,7 @@ from stillframe.loop.node_support import (
 )
 from stillframe.loop.pacing import Pacer, wait_until
 from stillframe.loop.realtime import Realtime, RealtimeOptions, declare_realtime, start_realtime
-from stillframe.loop.watchdog import command_expired
+from stillframe.loop.watchdog import MissRateGuard, command_expired
 from stillframe.loop.wiring import command_topic, estimator_inputs
 from stillframe.middleware import api
 from stillframe.middleware.clock import ClockPublisher
@@ -88,7 +93,7 @@ class SimNode:
 
     def __init__(self, node: api.Node, params: LoopParameters, discovery_timeout_s: float,
                  await_recorder: list[str] | None = None, command_writer: str = "",
-                 command_timeout_periods: int = 3) -> None:
+                 command_timeout_periods: int = 3, command_miss_limit: float = 0.25) -> None:
         self.node = node
         self.command_timeout_periods = command_timeout_periods
         self.await_recorder = [t for t in (await_recorder or []) if t]
@@ -123,7 +128,8 @@ class SimNode:
         self.commands_in_time = 0   # commands for the current sample taken before its deadline
         self.pacer = Pacer(self.grid.ns(self.plant.period), params.lockstep,
                            round(params.lockstep_timeout_s * 1e9))
-        self.counts = {"rejected_commands": 0, "safe_state_samples": 0}
+        self.counts = {"rejected_commands": 0, "safe_state_samples": 0, "degraded_samples": 0}
+        self.guard = MissRateGuard(max(10, round(1.0 / self.plant.period)), command_miss_limit)
         self.k = 0
         self.rt = Realtime(RealtimeOptions())   # main() enters the practices the node asks for
         self.pacer.start(time.monotonic_ns())   # again when the first sample is due
@@ -204,6 +210,17 @@ class SimNode:
             self.node.spin_once(remaining)
         return True
 
+    def degraded(self, missed: bool) -> bool:
+        """Record whether this sample missed its command; True while the guard holds zero."""
+        was = self.guard.tripped
+        if self.guard.record(missed) != was:
+            log = self.node.get_logger()
+            if was:
+                log.info("control path recovered: commands applied again")
+            else:
+                log.error(self.degraded_message())
+        return self.guard.tripped
+
     def command_timed_out(self) -> bool:
         """The newest command taken is ``command_timeout_periods`` periods older than the
         sample whose command is due now (or none came for as long): the controller is gone or
@@ -233,7 +250,7 @@ class SimNode:
             prefix = spec.name.rsplit("/", 1)[-1]
             values.update({f"{prefix}_{key}": value for key, value in gate.report().items()})
         bad = sum(self.pacer.counts.values()) + sum(self.counts.values())
-        return values, WARN if bad else OK
+        return values, ERROR if self.guard.tripped else WARN if bad else OK
 
     def intruder_message(self) -> str:
         """Which second writers are being ignored, for the status message."""
@@ -242,9 +259,15 @@ class SimNode:
                          for gate, spec in zip(self.gates, COMMAND_TOPICS, strict=True)
                          if gate.intruders)
 
+    def degraded_message(self) -> str:
+        g = self.guard
+        return (f"control path degraded: {g.misses} of the last {g.window} commands missed "
+                "their deadline; applying zero actuation") if g.tripped else ""
+
     def publish_status(self) -> None:
         values, level = self.status()
-        self.diagnostics.publish(self.now_ns, values, level, self.intruder_message())
+        message = "; ".join(m for m in (self.degraded_message(), self.intruder_message()) if m)
+        self.diagnostics.publish(self.now_ns, values, level, message)
 
     def step(self, k: int) -> np.ndarray | None:
         """Sample k: publish, wait for its command, advance. The row [t, truth (8), command
@@ -259,20 +282,26 @@ class SimNode:
         sample = plant.sample()
         self.now_ns = self.grid.ns(sample.t)
         self.publish(sample, self.now_ns)
+        missed = False
         if (pacer.lockstep or not self.delay.periods) and not self.wait_command(
                 pacer.deadline_ns(k, time.monotonic_ns())):
             if not api.ok():
                 return None
             pacer.missed()
+            missed = True
         if self.delay.periods:
             control, late = self.delay.due(k)
             if late and not pacer.lockstep:
                 pacer.missed()
+                missed = True
         else:
             control = self.command.copy()
         if self.command_timed_out():
             control[self.active] = 0.0      # the safe state: no actuation
             self.counts["safe_state_samples"] += 1
+        elif not pacer.lockstep and self.active is not None and self.degraded(missed):
+            control[self.active] = 0.0
+            self.counts["degraded_samples"] += 1
         plant.advance(control)
         self.rt.idle()
         if self.diagnostics.due():
@@ -346,8 +375,13 @@ def main() -> int:
         if not (isinstance(timeout, int) and timeout >= 1):
             raise InputError(f"parameter 'command_timeout_periods': must be an integer >= 1, "
                              f"got {timeout!r}")
+        miss_limit = node.declare_parameter("command_miss_limit", 0.25, read_only=True).value
+        if not (isinstance(miss_limit, float) and 0.0 <= miss_limit < 1.0):
+            raise InputError(f"parameter 'command_miss_limit': must be a float in [0, 1), "
+                             f"got {miss_limit!r}")
         rt = declare_realtime(node)
-        sim = SimNode(node, params, float(discovery), list(await_recorder), str(writer), timeout)
+        sim = SimNode(node, params, float(discovery), list(await_recorder), str(writer), timeout,
+                      miss_limit)
         sim.rt = start_realtime(node, rt)
         history = sim.run()
         if history is not None and result:

@@ -7,6 +7,8 @@ agree on it."""
 
 from __future__ import annotations
 
+from collections import deque
+
 from stillframe.contract.codecs import SampleGrid
 from stillframe.control.supervisor import Controller
 
@@ -41,3 +43,29 @@ def command_expired(now_ns: int, command_ns: int, limit_ns: int) -> bool:
     time ``now_ns`` the newest command taken, stamped ``command_ns`` (-1: none yet, counted from
     0), is ``limit_ns`` or older."""
     return now_ns - max(command_ns, 0) >= limit_ns
+
+
+class MissRateGuard:
+    """The simulator's second safe state (sim_node, ``command_miss_limit``): a control path
+    that loses or delays so many commands that the held ones drive the structure rather than
+    damp it. Over the last ``window`` samples, once more than ``limit`` of them missed their
+    command, zero actuation until no more than ``limit / 2`` do (the hysteresis keeps it from
+    flickering at the limit); ``limit`` 0 turns the guard off."""
+
+    def __init__(self, window: int, limit: float) -> None:
+        self.window = window
+        self.limit = limit
+        self._missed: deque[bool] = deque(maxlen=window)
+        self.misses = 0
+        self.tripped = False
+
+    def record(self, missed: bool) -> bool:
+        """One sample more (``missed``: its command was not in time); True while tripped."""
+        if len(self._missed) == self.window:
+            self.misses -= self._missed[0]
+        self._missed.append(missed)
+        self.misses += missed
+        if self.limit > 0:
+            rate = self.misses / self.window
+            self.tripped = rate > self.limit if not self.tripped else rate > self.limit / 2
+        return self.tripped

@@ -20,7 +20,7 @@ from stillframe.loop.closed_loop import run_closed_loop
 from stillframe.loop.node_support import LoopParameters
 from stillframe.middleware.api import create_node
 from stillframe.plant.frame_plant import Plant
-from tests.support.middleware import child_env, finish
+from tests.support.middleware import child_env, finish, start_python, wait_for_line
 from tests.support.nodes import params_file, run_loop, start_node, stop, wait_for_log
 from tests.support.scenes import thesis_scene
 
@@ -79,6 +79,54 @@ def test_realtime_sim_counts_overruns_when_it_cannot_keep_up(ros_domain: int) ->
     assert result["overruns"] in (n - 1, n)
     assert result["max_lateness_ms"] >= 1e3 * 2 * (n - 1) * period
     assert result["deadline_misses"] == 0               # no controller: nothing to wait for
+
+
+#: answers /clock with a 1 N m command for the even samples only, as a lossy control path would
+HALF_THE_COMMANDS = """
+from stillframe.contract import messages
+from stillframe.middleware.api import create_node, spin
+node = create_node("lossy_controller", namespace="/frame")
+pub = node.create_publisher("geometry_msgs/msg/WrenchStamped", "pendulum/torque_cmd", "default")
+def answer(clock):
+    ns = messages.stamp_ns(clock.clock)
+    if ns // 31_250_000 % 2 == 0:
+        msg = messages.new("geometry_msgs/msg/WrenchStamped")
+        msg.header.stamp = messages.time_msg(ns)
+        msg.wrench.torque.z = 1.0
+        pub.publish(msg)
+node.create_subscription("rosgraph_msgs/msg/Clock", "/clock", answer, "clock")
+print("ready", flush=True)
+spin(node)
+"""
+
+
+def test_realtime_sim_holds_zero_while_half_the_commands_miss(ros_domain: int) -> None:
+    """A controller whose every other command is missing (``actuators.delay_periods=1``, so the
+    sim never waits for one): more than a quarter of the last second's samples (32) missed
+    theirs, so the sim's guard trips and applies zero, and with half of them missing for good it
+    never recovers. Forced by the commands left out, not by the machine: a slow machine only
+    misses more. Before the trip the held 1 N m is applied."""
+    scene = thesis_scene("thesis_lqg", ["duration=2", "controller.start=1",
+                                        "evaluation.window=1", "actuators.delay_periods=1"])
+    commander = start_python(HALF_THE_COMMANDS)
+    node = create_node("sim_node", namespace=topics.DEFAULT_NAMESPACE, argv=["test"])
+    try:
+        wait_for_line(commander, "ready")
+        sim = SimNode(node, LoopParameters(scene, "realtime", 1.0, 1.0), discovery_timeout_s=2.0)
+        history = sim.run()
+    finally:
+        node.destroy_node()
+        commander.terminate()
+        finish(commander)
+    result, torque = history.evaluation, history.command[:, 0]
+    n = len(torque)
+    assert result["deadline_misses"] >= n // 2 - 1
+    tripped = int(np.flatnonzero(torque == 1.0)[-1]) + 1     # zero from here to the end
+    assert np.all(torque[tripped:] == 0.0) and result["degraded_samples"] == n - tripped
+    # 8 misses in 32 samples do not trip it, the 9th does: at the latest after 2 x 9 samples
+    # (+1: the delay, +1: the first command) when every odd sample misses
+    assert tripped <= 2 * 9 + 2, torque
+    assert result["safe_state_samples"] == 0
 
 
 @pytest.mark.slow
