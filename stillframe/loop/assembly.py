@@ -29,8 +29,6 @@ from stillframe.contract.signals import Sample
 JUMP_NS = 1_000_000_000
 #: Far-off stamps held at most (the oldest is dropped first).
 HELD_STAMPS = 8
-#: Commands kept per actuator to find the one in effect (more than any actuation delay).
-COMMANDS_KEPT = 64
 
 
 class Pending:
@@ -64,7 +62,7 @@ class SampleAssembly:
     """
 
     def __init__(self, inputs: tuple[topics.TopicSpec, ...], active: int | None,
-                 grid: SampleGrid, wait_ns: int, lockstep: bool, delay_periods: int = 0) -> None:
+                 grid: SampleGrid, wait_ns: int, lockstep: bool) -> None:
         self.needs_truth = topics.STATE_TRUTH in inputs
         self.needs_force = topics.FLOOR3_LOAD_CELL in inputs
         self.active = active
@@ -76,10 +74,8 @@ class SampleAssembly:
         self.jumped = False
         self.last_ns = -1               # the last stamp used
         self.command_ns = [-1, -1]      # the newest command's stamp, per actuator
-        #: per actuator, the commands received by stamp (the newest few)
-        self.commands: list[dict[int, float]] = [{}, {}]
-        #: the command in effect over the period before stamp k answers k − 1 − d
-        self.answer_lag_ns = (1 + delay_periods) * round(grid.period * 1e9)
+        #: the newest actuation the simulator reported it applied, [torque, force]
+        self.last_applied = np.zeros(2)
         self.counts = {"stale_messages": 0, "partial_updates": 0, "rejected_commands": 0,
                        "command_waits_timed_out": 0, "applied_reported": 0,
                        "negative_stamps": 0, "future_stamps": 0, "time_jumps": 0}
@@ -102,7 +98,7 @@ class SampleAssembly:
         if self.held.get(p.ns) is p and self.complete(p):
             self.pending, self.held = {p.ns: p}, {}
             self.last_ns, self.command_ns = -1, [-1, -1]
-            self.commands = [{}, {}]
+            self.last_applied = np.zeros(2)
             self.counts["time_jumps"] += 1
             self.jumped = True
 
@@ -141,17 +137,7 @@ class SampleAssembly:
             self.counts["rejected_commands"] += 1
             return False
         self.command_ns[actuator] = ns
-        received = self.commands[actuator]
-        received[ns] = value
-        if len(received) > COMMANDS_KEPT:
-            del received[min(received)]
         return True
-
-    def in_effect(self, actuator: int, ns: int) -> float:
-        """The command the simulator applies over the period before stamp ``ns``: the one
-        answering stamp ns − (1 + d) periods, or the newest before it (held), 0 before any."""
-        answered = [t for t in self.commands[actuator] if t <= ns - self.answer_lag_ns]
-        return self.commands[actuator][max(answered)] if answered else 0.0
 
     # -- stepping ------------------------------------------------------------------------
     def complete(self, p: Pending) -> bool:
@@ -185,11 +171,13 @@ class SampleAssembly:
 
     def _control(self, p: Pending) -> np.ndarray:
         """The actuation in effect over the period before ``p``: what the simulator reports
-        it applied, else the command in effect (:meth:`in_effect`); zero for the actuator not
-        driven."""
+        it applied, else the newest it reported (held: where the report was lost, the command
+        the controller sent is not evidence, since the simulator may have held, zeroed or
+        delayed it); zero for the actuator not driven."""
         reported = np.isfinite(p.applied)
-        control = np.where(reported, p.applied, [self.in_effect(i, p.ns) for i in (0, 1)])
+        control = np.where(reported, p.applied, self.last_applied)
         control[[i for i in (0, 1) if i != self.active]] = 0.0
+        self.last_applied = control
         self.counts["applied_reported"] += bool(reported[self.active or 0])
         return control
 
