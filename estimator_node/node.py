@@ -7,10 +7,11 @@ one stamp t_k from the floor IMUs, the encoder and the load cell (and ``state_tr
 ``state_estimate`` and ``state_estimate/covariance`` stamped t_k. The actuation in effect is what
 the simulator reports it applied over the previous period (after saturation and slew limits):
 the encoder's ``effort`` (hinge torque) and ``floor3/load_cell`` (floor-3 force), so that a
-saturated actuator does not wind the estimate up; where a sample carries no such reading (lost
-on the way), the newest one reported (the command sent is no evidence of what was applied: the
-simulator may have held, zeroed or delayed it). The command topics tell lock-step when the
-previous stamp was answered. In lock-step a
+saturated actuator does not wind the estimate up. Where a sample's reading was lost on the way:
+the command in effect received on ``pendulum/torque_cmd`` and ``floor3/force_cmd`` (the one
+answering the previous stamp, ``actuators.delay_periods`` stamps before that) while the
+simulator's last report showed it applying the commands, else that report held
+(``SampleAssembly._control`` in :mod:`stillframe.loop.assembly`). In lock-step a
 stamp of a scene driving the floor-3 force waits for its ``floor3/load_cell`` reading too. The
 actuator the scene's controller does not drive is taken as zero (the sim refuses its commands),
 whatever arrives on its topics.
@@ -104,7 +105,8 @@ class EstimatorNode:
         self.active = actuator_of(scene)
         wait_s = params.lockstep_timeout_s / 2 if params.lockstep else partial_after_s
         self.assembly = SampleAssembly(self.inputs, self.active, SampleGrid(params.period),
-                                       round(wait_s * 1e9), params.lockstep)
+                                       round(wait_s * 1e9), params.lockstep,
+                                       scene.actuators.delay_periods)
         spec, cov = topics.STATE_ESTIMATE, topics.STATE_COVARIANCE
         self.state_pub = TappedPublisher(node, spec.type_name, spec.name, spec.qos)
         self.cov_pub = TappedPublisher(node, cov.type_name, cov.name, cov.qos)

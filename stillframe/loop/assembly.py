@@ -29,6 +29,8 @@ from stillframe.contract.signals import Sample
 JUMP_NS = 1_000_000_000
 #: Far-off stamps held at most (the oldest is dropped first).
 HELD_STAMPS = 8
+#: Commands kept per actuator to find the one in effect (more than any actuation delay).
+COMMANDS_KEPT = 64
 
 
 class Pending:
@@ -62,7 +64,7 @@ class SampleAssembly:
     """
 
     def __init__(self, inputs: tuple[topics.TopicSpec, ...], active: int | None,
-                 grid: SampleGrid, wait_ns: int, lockstep: bool) -> None:
+                 grid: SampleGrid, wait_ns: int, lockstep: bool, delay_periods: int = 0) -> None:
         self.needs_truth = topics.STATE_TRUTH in inputs
         self.needs_force = topics.FLOOR3_LOAD_CELL in inputs
         self.active = active
@@ -74,8 +76,14 @@ class SampleAssembly:
         self.jumped = False
         self.last_ns = -1               # the last stamp used
         self.command_ns = [-1, -1]      # the newest command's stamp, per actuator
-        #: the newest actuation the simulator reported it applied, [torque, force]
+        #: per actuator, the commands received by stamp (the newest few)
+        self.commands: list[dict[int, float]] = [{}, {}]
+        #: the command in effect over the period before stamp k answers k − 1 − d
+        self.answer_lag_ns = (1 + delay_periods) * round(grid.period * 1e9)
+        #: the newest actuation the simulator reported it applied, [torque, force], and
+        #: whether it was the command in effect then (the simulator applying the commands)
         self.last_applied = np.zeros(2)
+        self.applying = np.ones(2, dtype=bool)
         self.counts = {"stale_messages": 0, "partial_updates": 0, "rejected_commands": 0,
                        "command_waits_timed_out": 0, "applied_reported": 0,
                        "negative_stamps": 0, "future_stamps": 0, "time_jumps": 0}
@@ -98,7 +106,8 @@ class SampleAssembly:
         if self.held.get(p.ns) is p and self.complete(p):
             self.pending, self.held = {p.ns: p}, {}
             self.last_ns, self.command_ns = -1, [-1, -1]
-            self.last_applied = np.zeros(2)
+            self.commands = [{}, {}]
+            self.last_applied, self.applying = np.zeros(2), np.ones(2, dtype=bool)
             self.counts["time_jumps"] += 1
             self.jumped = True
 
@@ -137,7 +146,17 @@ class SampleAssembly:
             self.counts["rejected_commands"] += 1
             return False
         self.command_ns[actuator] = ns
+        received = self.commands[actuator]
+        received[ns] = value
+        if len(received) > COMMANDS_KEPT:
+            del received[min(received)]
         return True
+
+    def in_effect(self, actuator: int, ns: int) -> float:
+        """The command the simulator applies over the period before stamp ``ns``: the one
+        answering stamp ns − (1 + d) periods, or the newest before it (held), 0 before any."""
+        answered = [t for t in self.commands[actuator] if t <= ns - self.answer_lag_ns]
+        return self.commands[actuator][max(answered)] if answered else 0.0
 
     # -- stepping ------------------------------------------------------------------------
     def complete(self, p: Pending) -> bool:
@@ -170,12 +189,18 @@ class SampleAssembly:
                      self._control(p), complete)
 
     def _control(self, p: Pending) -> np.ndarray:
-        """The actuation in effect over the period before ``p``: what the simulator reports
-        it applied, else the newest it reported (held: where the report was lost, the command
-        the controller sent is not evidence, since the simulator may have held, zeroed or
-        delayed it); zero for the actuator not driven."""
+        """The actuation in effect over the period before ``p``: what the simulator reports it
+        applied. Where that report was lost: the command in effect (:meth:`in_effect`) while
+        the simulator's last report showed it applying the commands, else that report held
+        (it saturates, holds or zeroes them: a command is then no evidence, and taking it would
+        let the estimator and the controller feed each other). Zero for the actuator not
+        driven."""
         reported = np.isfinite(p.applied)
-        control = np.where(reported, p.applied, self.last_applied)
+        commanded = np.array([self.in_effect(i, p.ns) for i in (0, 1)])
+        self.applying = np.where(reported, np.isclose(p.applied, commanded, rtol=1e-9,
+                                                      atol=1e-12), self.applying)
+        control = np.where(reported, p.applied,
+                           np.where(self.applying, commanded, self.last_applied))
         control[[i for i in (0, 1) if i != self.active]] = 0.0
         self.last_applied = control
         self.counts["applied_reported"] += bool(reported[self.active or 0])

@@ -4,6 +4,7 @@ and what is counted (docs/nodes.md, lock-step protocol step 3 and real-time mode
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from stillframe.contract import topics
 from stillframe.contract.codecs import ENCODER_CHANNEL, SENSOR_TOPICS, SampleGrid
@@ -18,8 +19,8 @@ READINGS = [0.1, -0.2, 0.3, 0.04, 1.5]   # a1, a2, a3, φ, load cell
 
 
 def _assembly(lockstep: bool = True, inputs: tuple = SENSOR_TOPICS,
-              active: int | None = 0) -> SampleAssembly:
-    return SampleAssembly(inputs, active, SampleGrid(PERIOD), WAIT_NS, lockstep)
+              active: int | None = 0, delay_periods: int = 0) -> SampleAssembly:
+    return SampleAssembly(inputs, active, SampleGrid(PERIOD), WAIT_NS, lockstep, delay_periods)
 
 
 def _feed(a: SampleAssembly, k: int, now_ns: int, channels: range | list = range(5),
@@ -124,21 +125,37 @@ def test_realtime_does_not_wait_for_commands() -> None:
     assert a.pop_ready(1).complete
 
 
-def test_control_is_the_applied_torque_else_the_last_one_applied() -> None:
-    """The encoder's effort when it carries one; where it was lost, the newest one reported
-    (zero before any), not the command sent (which the simulator may have held, zeroed or
-    delayed); the floor-3 force (not driven) is zero whatever was commanded."""
+def test_control_is_the_applied_torque_else_the_command_in_effect() -> None:
+    """The encoder's effort when it carries one; where it was lost, the command answering the
+    previous stamp while the simulator's reports matched the commands, and the last report held
+    once one did not (the simulator saturated, held or zeroed the command); the floor-3 force
+    (not driven) is zero whatever was commanded."""
     a = _assembly(lockstep=False)
-    a.command_received(0, 0, -0.3)
     a.command_received(1, 0, 5.0)
+    # the simulator applied sample 0's command, zero for sample 3's, then sample 6's again
+    efforts = [np.nan, 0.1, np.nan, np.nan, 0.0, np.nan, np.nan, 0.7, np.nan]
     controls = []
-    for k, torque in enumerate([np.nan, 0.07, np.nan, np.nan, -0.02]):
-        _feed(a, k, now_ns=0, torque=torque)
+    for k, effort in enumerate(efforts):
+        _feed(a, k, now_ns=0, torque=effort)
         controls.append(a.pop_ready(0).control)
         a.used(k * PERIOD_NS)
-    np.testing.assert_array_equal(controls, [[0.0, 0.0], [0.07, 0.0], [0.07, 0.0], [0.07, 0.0],
-                                             [-0.02, 0.0]])
-    assert a.counts["applied_reported"] == 2
+        a.command_received(0, k * PERIOD_NS, 0.1 * (k + 1))
+    np.testing.assert_allclose(np.array(controls)[:, 0],
+                               [0.0, 0.1, 0.2, 0.3, 0.0, 0.0, 0.0, 0.7, 0.8], atol=1e-15)
+    assert not np.array(controls)[:, 1].any()
+    assert a.counts["applied_reported"] == 3
+
+
+@pytest.mark.parametrize(("delay", "expected"), [(0, 5.0), (1, 3.0), (2, 3.0), (3, 2.0)])
+def test_without_the_effort_the_command_in_effect_is_the_delayed_one(
+        delay: int, expected: float) -> None:
+    """With ``actuators.delay_periods`` = d the simulator applies over the period before stamp 6
+    the command answering stamp 5 − d; one that never came (4) is held from the one before."""
+    a = _assembly(lockstep=False, delay_periods=delay)
+    for k in (0, 1, 2, 3, 5):
+        a.command_received(0, k * PERIOD_NS, float(k))
+    _feed(a, 6, now_ns=0, torque=np.nan)
+    np.testing.assert_array_equal(a.pop_ready(0).control, [expected, 0.0])
 
 
 def test_bad_commands_are_rejected_and_counted() -> None:
@@ -147,7 +164,7 @@ def test_bad_commands_are_rejected_and_counted() -> None:
     assert not a.command_received(0, PERIOD_NS, 0.2)     # older than the one held
     assert not a.command_received(0, 3 * PERIOD_NS, np.inf)
     assert a.counts["rejected_commands"] == 2
-    assert a.command_ns == [2 * PERIOD_NS, -1]
+    assert a.in_effect(0, 3 * PERIOD_NS) == 0.1
 
 
 def test_the_scene_inputs_decide_completeness() -> None:
