@@ -191,14 +191,17 @@ class SampleAssembly:
     def _control(self, p: Pending) -> np.ndarray:
         """The actuation in effect over the period before ``p``: what the simulator reports it
         applied. Where that report was lost: the command in effect (:meth:`in_effect`) while
-        the simulator's last report showed it applying the commands, else that report held
+        the simulator's last report of a non-zero command showed it applying the commands, else
+        that report held
         (it saturates, holds or zeroes them: a command is then no evidence, and taking it would
         let the estimator and the controller feed each other). Zero for the actuator not
         driven."""
         reported = np.isfinite(p.applied)
         commanded = np.array([self.in_effect(i, p.ns) for i in (0, 1)])
-        self.applying = np.where(reported, np.isclose(p.applied, commanded, rtol=1e-9,
-                                                      atol=1e-12), self.applying)
+        # a zero command applied as zero tells nothing (the controller's watchdog sends zero)
+        telling = reported & (commanded != 0.0)
+        self.applying = np.where(telling, np.isclose(p.applied, commanded, rtol=1e-9,
+                                                     atol=1e-12), self.applying)
         control = np.where(reported, p.applied,
                            np.where(self.applying, commanded, self.last_applied))
         control[[i for i in (0, 1) if i != self.active]] = 0.0

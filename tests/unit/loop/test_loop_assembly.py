@@ -133,7 +133,9 @@ def test_control_is_the_applied_torque_else_the_command_in_effect() -> None:
     a = _assembly(lockstep=False)
     a.command_received(1, 0, 5.0)
     # the simulator applied sample 0's command, zero for sample 3's, then sample 6's again
-    efforts = [np.nan, 0.1, np.nan, np.nan, 0.0, np.nan, np.nan, 0.7, np.nan]
+    # (the zero applied for the zero command before sample 0 tells nothing)
+    efforts = [0.0, 0.1, np.nan, np.nan, 0.0, np.nan, np.nan, 0.7, np.nan]
+    a.command_received(0, -PERIOD_NS, 0.0)
     controls = []
     for k, effort in enumerate(efforts):
         _feed(a, k, now_ns=0, torque=effort)
@@ -143,7 +145,7 @@ def test_control_is_the_applied_torque_else_the_command_in_effect() -> None:
     np.testing.assert_allclose(np.array(controls)[:, 0],
                                [0.0, 0.1, 0.2, 0.3, 0.0, 0.0, 0.0, 0.7, 0.8], atol=1e-15)
     assert not np.array(controls)[:, 1].any()
-    assert a.counts["applied_reported"] == 3
+    assert a.counts["applied_reported"] == 4
 
 
 @pytest.mark.parametrize(("delay", "expected"), [(0, 5.0), (1, 3.0), (2, 3.0), (3, 2.0)])
