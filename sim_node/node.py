@@ -296,10 +296,11 @@ class SimNode:
                 missed = True
         else:
             control = self.command.copy()
+        degraded = not pacer.lockstep and self.active is not None and self.degraded(missed)
         if self.command_timed_out():
             control[self.active] = 0.0      # the safe state: no actuation
             self.counts["safe_state_samples"] += 1
-        elif not pacer.lockstep and self.active is not None and self.degraded(missed):
+        elif degraded:
             control[self.active] = 0.0
             self.counts["degraded_samples"] += 1
         plant.advance(control)
