@@ -78,6 +78,7 @@ from stillframe.loop.watchdog import MissRateGuard, command_expired
 from stillframe.loop.wiring import command_topic, estimator_inputs
 from stillframe.middleware import api
 from stillframe.middleware.clock import ClockPublisher
+from stillframe.middleware.names import is_hidden
 from stillframe.middleware.taps import TappedPublisher
 from stillframe.plant.actuation_delay import ActuationDelay
 from stillframe.plant.command_gate import CommandGate
@@ -176,8 +177,9 @@ class SimNode:
         recorder (``*``: every such topic), so that a launch's bag misses no sample."""
         if not self.await_recorder:
             return True
-        names = [t for t, _ in self.node.get_topic_names_and_types()]
-        wanted = names if self.await_recorder == ["*"] else self.await_recorder
+        # "*": every topic the recorder takes, i.e. not the hidden ones (the monitor taps)
+        wanted = ([t for t, _ in self.node.get_topic_names_and_types() if not is_hidden(t)]
+                  if self.await_recorder == ["*"] else self.await_recorder)
         loop_nodes = {(topics.DEFAULT_NAMESPACE, n) for n in LOOP_NODES}
         return all(
             any(s.node_name == RECORDER_NODE for s in self.node.get_subscriptions_info_by_topic(t))

@@ -76,9 +76,9 @@ def test_lockstep_under_10pct_loss_equals_one_process(ros_domain: int, tmp_path:
 
 
 @pytest.mark.long
-@pytest.mark.xfail(reason="not met reliably (docs/reliability.md): with the control path read "
-                          "best effort, 5 % loss keeps control, but the error was 0.061 and 0.61 "
-                          "of the floors' RMS in two runs (0.013 without a fault)",
+@pytest.mark.xfail(reason="not met reliably (docs/reliability.md): at 5 % loss without a "
+                          "playout delay the loop keeps control, but the estimate's error was "
+                          "0.32 - 1.47 of the floors' RMS over five runs (0.013 without a fault)",
                    strict=False)
 def test_realtime_100hz_under_5pct_loss_keeps_tracking(ros_domain: int) -> None:
     """Best-effort sensor topics at 100 Hz: lost samples are gone. The sim runs every step;
