@@ -111,9 +111,10 @@ def test_realtime_100hz_with_5ms_delays_keeps_control_through_a_playout_delay(
     a command answers its sample 9 – 21 ms (1 – 2 periods) after it; without an actuation delay
     every command misses and the loop diverges (docs/reliability.md). With
     ``actuators.delay_periods=3`` the sim applies each command 30 ms after its sample and the LQG
-    predicts over it: the loop keeps the one-process loop's control (the same reductions; to
-    the digit when no command missed, within 10 points when a loaded machine made some late)
-    and the estimate tracks the truth (under 10 % of the floors' RMS displacement)."""
+    predicts over it: the loop keeps the one-process loop's control (the same reductions within
+    10 points: a sensor message held past ``partial_after_s`` gives the estimator a partial
+    update, and a loaded machine may make a command late) and the estimate tracks the truth
+    (under 10 % of the floors' RMS displacement)."""
     require_netns("iptables")
     duration = 4.0
     delay = "actuators.delay_periods=3"
@@ -128,8 +129,6 @@ def test_realtime_100hz_with_5ms_delays_keeps_control_through_a_playout_delay(
     reference = run_closed_loop(load_scene(SCENE, [*realtime_overrides(100.0, duration), delay]))
     expected = reference.evaluation["reduction_pct"]["displacement"]
     assert realtime["reduction_pct"] == pytest.approx(expected, abs=10.0), realtime
-    if realtime["deadline_misses"] == 0:
-        assert realtime["reduction_pct"] == pytest.approx(expected, rel=1e-9)
     assert realtime["estimate"]["relative_floors"] < 0.10, realtime
 
 
