@@ -60,6 +60,7 @@ from stillframe.loop.node_support import (
     RateMeter,
     check_settable,
     declare_loop_parameters,
+    reaches_peer,
     wait_for_peers,
 )
 from stillframe.loop.realtime import Realtime, RealtimeOptions, declare_realtime, start_realtime
@@ -205,7 +206,7 @@ class ControllerNode:
         self.diagnostics.publish(max(self.matching.last_ns, 0), values, level, "; ".join(problems))
 
     def peers_ready(self) -> bool:
-        return self.pub.get_subscription_count() > 0
+        return reaches_peer(self.node, self.pub, self.pub.topic_name)
 
     def run(self) -> None:
         """Wait for the command's subscribers in lock-step, then control until shutdown."""

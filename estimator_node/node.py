@@ -84,6 +84,7 @@ from stillframe.loop.node_support import (
     check_settable,
     declare_loop_parameters,
     has_publisher,
+    reaches_peer,
     wait_for_peers,
 )
 from stillframe.loop.realtime import Realtime, RealtimeOptions, declare_realtime, start_realtime
@@ -258,7 +259,8 @@ class EstimatorNode:
     def peers_ready(self) -> bool:
         """The controller reads the estimates (handed over when composed) and publishes the
         scene's command topic."""
-        reads = self.handover is not None or self.state_pub.get_subscription_count() > 0
+        reads = self.handover is not None or reaches_peer(
+            self.node, self.state_pub, self.state_pub.topic_name)
         return reads and has_publisher(
             self.node, command_topic(self.params.scene).name)
 

@@ -63,13 +63,15 @@ from stillframe.loop.closed_loop import LoopHistory, evaluate
 from stillframe.loop.node_support import (
     ERROR,
     OK,
+    RECORDER_NODE,
     WARN,
     Diagnostics,
     Durations,
     LoopParameters,
     check_settable,
     declare_loop_parameters,
-    has_publisher,
+    hears_peer,
+    reaches_peer,
     wait_for_peers,
 )
 from stillframe.loop.pacing import Pacer, wait_until
@@ -85,8 +87,6 @@ from stillframe.plant.command_gate import CommandGate
 from stillframe.plant.frame_plant import make_plant
 
 LOOP_NODES = ("sim_node", "estimator_node", "controller_node")
-#: the node name of ``stillframe record``
-RECORDER_NODE = "stillframe_recorder"
 
 
 class SimNode:
@@ -115,10 +115,11 @@ class SimNode:
                                   active=i == self.active)
                       for i, (limit, spec) in enumerate(zip(limits, COMMAND_TOPICS, strict=True))]
         self.readers = [command_reader(i) for i in range(len(COMMAND_TOPICS))]
-        for i, spec in enumerate(COMMAND_TOPICS):
+        self.subscriptions = [
             node.create_subscription(spec.type_name, spec.name,
                                      functools.partial(self.on_command, i),
                                      params.reader_qos(spec), raw=True)
+            for i, spec in enumerate(COMMAND_TOPICS)]
         self.command = np.zeros(2)          # [torque, force] held
         self.command_ns = [-1, -1]
         self.delay = ActuationDelay(scene.actuators.delay_periods)
@@ -164,12 +165,13 @@ class SimNode:
 
     def peers_ready(self) -> bool:
         """The estimator reads every sensor (and the truth when it is the ``truth`` estimator),
-        and the controller publishes the scene's command topic."""
+        and the controller's command is heard (both matched, not only the recorder)."""
         scene = self.params.scene
         command = command_topic(scene)
-        return (all(self.publishers[spec.name].get_subscription_count() > 0
+        return (all(reaches_peer(self.node, self.publishers[spec.name], spec.name)
                     for spec in estimator_inputs(scene))
-                and (command is None or has_publisher(self.node, command.name))
+                and (command is None or hears_peer(
+                    self.node, self.subscriptions[self.active], command.name))
                 and self.recorder_ready())
 
     def recorder_ready(self) -> bool:

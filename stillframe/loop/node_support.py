@@ -36,6 +36,10 @@ CONTROL_PATH = (topics.STATE_ESTIMATE, topics.TORQUE_CMD, topics.FORCE_CMD)
 #: After the peers are matched, spin this long so that the other side of every match (the
 #: remote writer's view) has caught up before the first sample (docs/nodes.md, start-up).
 SETTLE_S = 0.25
+#: the node name of ``stillframe record`` (it subscribes every topic at once)
+RECORDER_NODE = "stillframe_recorder"
+#: names an endpoint's node has before its node is known: ours, and rclpy's graph cache
+UNNAMED_NODES = ("", "_NODE_NAME_UNKNOWN_")
 OK, WARN, ERROR = 0, 1, 2
 
 
@@ -224,3 +228,27 @@ def wait_for_peers(node: api.Node, ready: Callable[[], bool],
 def has_publisher(node: api.Node, topic: str) -> bool:
     """A publisher of ``topic`` is in the graph (the reader side of a match)."""
     return bool(node.get_publishers_info_by_topic(topic))
+
+
+
+def reaches_peer(node: api.Node, publisher: api.Publisher, topic: str) -> bool:
+    """``publisher`` has matched every subscription of ``topic`` the graph shows, and one of them
+    belongs to a named node other than the launch's recorder.
+
+    A matched count alone is not enough in lock-step: the recorder subscribes every topic at
+    once, it can match before the peer does, and the first sample sent then is lost to the peer
+    (a lock-step timeout)."""
+    return _matched_with_peer(node.get_subscriptions_info_by_topic(topic),
+                              publisher.get_subscription_count())
+
+
+def hears_peer(node: api.Node, subscription: api.Subscription, topic: str) -> bool:
+    """``subscription`` has matched every publisher of ``topic`` the graph shows, one of them a
+    named node's (the reader's side of :func:`reaches_peer`)."""
+    return _matched_with_peer(node.get_publishers_info_by_topic(topic),
+                              subscription.get_publisher_count())
+
+
+def _matched_with_peer(remote: list[api.TopicEndpointInfo], matched: int) -> bool:
+    return matched >= len(remote) and any(
+        ep.node_name not in (RECORDER_NODE, *UNNAMED_NODES) for ep in remote)

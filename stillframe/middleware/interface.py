@@ -59,6 +59,8 @@ class Publisher(Protocol):
 class Subscription(Protocol):
     topic_name: str
 
+    def get_publisher_count(self) -> int: ...
+
 
 def never_called(*_: Any) -> None:
     """The callback of a polled subscription (its samples are taken, never dispatched)."""

@@ -23,6 +23,7 @@ def run(args: argparse.Namespace) -> int:
     from stillframe.bags.storage import BagWriter
     from stillframe.contract import messages
     from stillframe.errors import InputError
+    from stillframe.loop.node_support import RECORDER_NODE
     from stillframe.middleware.api import create_node, spin
     from stillframe.middleware.names import resolve_topic
     from stillframe.recording.recorder import Recorder
@@ -31,7 +32,7 @@ def run(args: argparse.Namespace) -> int:
         raise InputError("give either --all or one or more TOPICs")
     topics = [resolve_topic(t) for t in args.topics]
     sim = ["--ros-args", "-p", "use_sim_time:=true"] if args.use_sim_time else []
-    node = create_node("stillframe_recorder", argv=[*sys.argv[:1], *sim])
+    node = create_node(RECORDER_NODE, argv=[*sys.argv[:1], *sim])
     try:
         with BagWriter(args.output, messages.TYPESTORE) as bag:
             recorder = Recorder(node, bag, topics)
