@@ -17,6 +17,26 @@ from __future__ import annotations
 import numpy as np
 
 
+class CommandLog:
+    """Commands by the sample index they answer. The one in effect at sample j is the newest
+    at or before j (the actuators hold the last command; 0 before any)."""
+
+    def __init__(self) -> None:
+        self._by_index: dict[int, float] = {}
+
+    def record(self, k: int, value: float) -> None:
+        self._by_index[k] = value
+
+    def in_effect(self, j: int) -> float:
+        older = [i for i in self._by_index if i <= j]
+        return self._by_index[max(older)] if older else 0.0
+
+    def forget_before(self, k: int) -> None:
+        """Drop what no sample from k on needs: the commands before k but the newest of them."""
+        for j in sorted(j for j in self._by_index if j < k)[:-1]:
+            del self._by_index[j]
+
+
 class DelayPredictor:
     """x̂_{k+d|k} on the discrete design model (A, B) of period ``period`` for d = ``periods``,
     from the commands sent (:meth:`sent`)."""
@@ -26,27 +46,21 @@ class DelayPredictor:
         self.B = B.reshape(-1)
         self.periods = periods
         self.period = period
-        self._sent: dict[int, float] = {}
+        self._sent = CommandLog()
 
     def index(self, t: float) -> int:
         return round(t / self.period)
 
     def sent(self, t: float, value: float) -> None:
-        """The command sent for the sample at ``t``. Forgets those no prediction needs: the
-        next one starts at sample k + 1 − d, and needs the newest command before that too."""
+        """The command sent for the sample at ``t`` (the next prediction starts at sample
+        k + 1 − d)."""
         k = self.index(t)
-        self._sent[k] = value
-        for j in sorted(j for j in self._sent if j < k + 1 - self.periods)[:-1]:
-            del self._sent[j]
-
-    def held(self, j: int) -> float:
-        """The command in effect for sample j: the newest sent at or before j (0 before any)."""
-        older = [i for i in self._sent if i <= j]
-        return self._sent[max(older)] if older else 0.0
+        self._sent.record(k, value)
+        self._sent.forget_before(k + 1 - self.periods)
 
     def ahead(self, t: float, z: np.ndarray) -> np.ndarray:
         """x̂_{k+d|k} from the estimate ``z`` of the sample at ``t``."""
         k = self.index(t)
         for j in range(k - self.periods, k):
-            z = self.A @ z + self.B * self.held(j)
+            z = self.A @ z + self.B * self._sent.in_effect(j)
         return z

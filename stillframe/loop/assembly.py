@@ -24,13 +24,12 @@ import numpy as np
 from stillframe.contract import topics
 from stillframe.contract.codecs import ENCODER_CHANNEL, SENSOR_TOPICS, SampleGrid
 from stillframe.contract.signals import Sample
+from stillframe.control.prediction import CommandLog
 
 #: How far [ns] a stamp may lie from the last stamp used before it needs every input to agree.
 JUMP_NS = 1_000_000_000
 #: Far-off stamps held at most (the oldest is dropped first).
 HELD_STAMPS = 8
-#: Commands kept per actuator to find the one in effect (more than any actuation delay).
-COMMANDS_KEPT = 64
 
 
 class Pending:
@@ -76,10 +75,10 @@ class SampleAssembly:
         self.jumped = False
         self.last_ns = -1               # the last stamp used
         self.command_ns = [-1, -1]      # the newest command's stamp, per actuator
-        #: per actuator, the commands received by stamp (the newest few)
-        self.commands: list[dict[int, float]] = [{}, {}]
-        #: the command in effect over the period before stamp k answers k − 1 − d
-        self.answer_lag_ns = (1 + delay_periods) * round(grid.period * 1e9)
+        #: per actuator, the commands received by the sample they answer
+        self.commands = [CommandLog(), CommandLog()]
+        #: the command in effect over the period before sample k answers k − 1 − d
+        self.answer_lag = 1 + delay_periods
         #: the newest actuation the simulator reported it applied, [torque, force], and
         #: whether it was the command in effect then (the simulator applying the commands)
         self.last_applied = np.zeros(2)
@@ -106,7 +105,7 @@ class SampleAssembly:
         if self.held.get(p.ns) is p and self.complete(p):
             self.pending, self.held = {p.ns: p}, {}
             self.last_ns, self.command_ns = -1, [-1, -1]
-            self.commands = [{}, {}]
+            self.commands = [CommandLog(), CommandLog()]
             self.last_applied, self.applying = np.zeros(2), np.ones(2, dtype=bool)
             self.counts["time_jumps"] += 1
             self.jumped = True
@@ -146,17 +145,13 @@ class SampleAssembly:
             self.counts["rejected_commands"] += 1
             return False
         self.command_ns[actuator] = ns
-        received = self.commands[actuator]
-        received[ns] = value
-        if len(received) > COMMANDS_KEPT:
-            del received[min(received)]
+        self.commands[actuator].record(self.grid.index(ns), value)
         return True
 
     def in_effect(self, actuator: int, ns: int) -> float:
         """The command the simulator applies over the period before stamp ``ns``: the one
         answering stamp ns − (1 + d) periods, or the newest before it (held), 0 before any."""
-        answered = [t for t in self.commands[actuator] if t <= ns - self.answer_lag_ns]
-        return self.commands[actuator][max(answered)] if answered else 0.0
+        return self.commands[actuator].in_effect(self.grid.index(ns) - self.answer_lag)
 
     # -- stepping ------------------------------------------------------------------------
     def complete(self, p: Pending) -> bool:
@@ -204,6 +199,8 @@ class SampleAssembly:
                                                      atol=1e-12), self.applying)
         control = np.where(reported, p.applied,
                            np.where(self.applying, commanded, self.last_applied))
+        for log in self.commands:     # stamps are used in order: no later one looks further back
+            log.forget_before(self.grid.index(p.ns) - self.answer_lag)
         control[[i for i in (0, 1) if i != self.active]] = 0.0
         self.last_applied = control
         self.counts["applied_reported"] += bool(reported[self.active or 0])
