@@ -95,6 +95,15 @@ def _threads() -> list[int]:
     return [int(t) for t in os.listdir("/proc/self/task")]
 
 
+def run_idle() -> None:
+    """Put every thread of this process at SCHED_IDLE, and so the threads they start later: a
+    policy is per thread on Linux, and imports start some (OpenBLAS's workers) before a
+    process can ask."""
+    for tid in _threads():
+        with contextlib.suppress(ProcessLookupError):     # ended meanwhile
+            os.sched_setscheduler(tid, os.SCHED_IDLE, os.sched_param(0))
+
+
 def _loop_threads() -> list[int]:
     """The main thread and the DDS threads a sample passes through (:data:`RECEIVE_THREADS`).
     Cyclone's housekeeping threads (``gc``, ``tev``) stay SCHED_OTHER: with every thread at

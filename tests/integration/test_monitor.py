@@ -7,6 +7,7 @@ import asyncio
 import io
 import itertools
 import json
+import os
 import re
 import signal
 import subprocess
@@ -86,7 +87,7 @@ def monitored_run(tmp_path_factory: pytest.TempPathFactory, ros_domain_module: i
     bag = tmp_path_factory.mktemp("monitor") / "bag"
     launch = Launch.start(*SHORT, "--mode", "realtime", "--json", "--record", str(bag),
                           "--record-topic", IMU, "--record-topic", "/clock",
-                          "--monitor-max-rate", "0")
+                          "--monitor-max-rate", "0", "--no-monitor-idle")
     url = launch.urls[0]
 
     async def clients() -> tuple[Capture, int, int]:
@@ -210,7 +211,8 @@ def test_dashboard_in_headless_chromium(tmp_path: Path, ros_domain_module: int) 
     error."""
     overrides = [*realtime_overrides(1000.0, 12.0), "controller.limit=0.5",
                  "controller.start=1.5", "evaluation.window=1"]
-    launch = Launch.start("--mode", "realtime", *(a for o in overrides for a in ("--set", o)))
+    launch = Launch.start("--mode", "realtime", "--no-monitor-idle",
+                          *(a for o in overrides for a in ("--set", o)))
     driver = browser(tmp_path / "profile")
     try:
         driver.get(launch.urls[1])
@@ -361,6 +363,18 @@ def test_every_sample_with_max_rate_zero(imu_source: ImuSource) -> None:
                for m in watched.messages[IMU]]
     assert len(periods) >= 300
     assert periods == list(range(periods[0], periods[0] + len(periods)))
+
+
+def test_idle_monitor_runs_at_sched_idle(ros_domain: int) -> None:
+    """``--idle`` (what ``launch --monitor`` passes unless ``--no-monitor-idle``): the process
+    is SCHED_IDLE once it is ready, so every thread it started inherited the policy."""
+    monitor, _ = start_monitor("--idle")
+    try:
+        threads = list((Path("/proc") / str(monitor.pid) / "task").iterdir())
+        policies = {os.sched_getscheduler(int(t.name)) for t in threads}
+    finally:
+        stop_monitor(monitor)
+    assert len(threads) > 1 and policies == {os.SCHED_IDLE}
 
 
 @pytest.mark.parametrize(("args", "message"), [

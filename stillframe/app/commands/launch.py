@@ -67,6 +67,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     parser.add_argument("--monitor-max-rate", type=float, default=None, metavar="HZ",
                         help="with --monitor: samples forwarded per second and topic at most "
                              "(stillframe monitor --max-rate; 0: every sample)")
+    parser.add_argument("--monitor-idle", action=argparse.BooleanOptionalAction, default=True,
+                        help="with --monitor: run it at SCHED_IDLE, on CPU time the nodes leave "
+                             "unused (stillframe monitor --idle; default on: a viewer beside the "
+                             "loop gives up samples, never loop time)")
     parser.add_argument("--out", type=Path, default=None, metavar="DIR",
                         help="keep sim_node's result.json and result.npz (histories) here")
     parser.add_argument("--compose", action="store_true",
@@ -167,7 +171,9 @@ def report_death(command: str, exc: Exception) -> int:
 def monitor_args(args: argparse.Namespace) -> list[str]:
     """``stillframe monitor``'s arguments from launch's ``--monitor-*`` options."""
     rate = [] if args.monitor_max_rate is None else ["--max-rate", f"{args.monitor_max_rate:g}"]
-    return ["--port", str(args.monitor_port), "--dashboard-port", str(args.dashboard_port), *rate]
+    idle = ["--idle"] if args.monitor_idle else []
+    return ["--port", str(args.monitor_port), "--dashboard-port", str(args.dashboard_port), *rate,
+            *idle]
 
 
 def run(args: argparse.Namespace) -> int:

@@ -63,6 +63,7 @@ def _check_port(name: str, port: int) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from stillframe.config.scene import load_scene
+    from stillframe.loop.realtime import run_idle
     from stillframe.middleware.api import create_node, spin
     from stillframe.middleware.names import resolve_topic
     from stillframe.monitor.dashboard import Dashboard, Limits, serve
@@ -76,8 +77,8 @@ def run(args: argparse.Namespace) -> int:
     if not 0 <= args.nice <= 19:
         raise InputError(f"--nice {args.nice}: expected 0..19")
     os.nice(args.nice)
-    if args.idle:   # before any thread starts: the middleware's and the SDK's threads inherit it
-        os.sched_setscheduler(0, os.SCHED_IDLE, os.sched_param(0))
+    if args.idle:   # before the middleware's and the SDK's threads start: they inherit it
+        run_idle()
     limits = Limits()
     if args.scene is not None:
         scene = load_scene(args.scene, args.overrides)
