@@ -23,8 +23,17 @@ class ActuationDelay:
         self.held = np.zeros(2)
 
     def put(self, k: int, command: np.ndarray) -> None:
-        """The command answering sample ``k`` (a later one for the same k replaces it)."""
+        """The command answering sample ``k`` (a later one for the same k replaces it). Those
+        answering samples before k − d are dropped: their periods began before sample k was
+        taken, so they can never be due (and with d = 0 a caller that applies the newest
+        command itself, as sim_node does, never calls :meth:`due`)."""
         self._waiting[k] = np.array(command, dtype=float)
+        for old in [j for j in self._waiting if j < k - self.periods]:
+            del self._waiting[old]
+
+    def __len__(self) -> int:
+        """Commands waiting for their period."""
+        return len(self._waiting)
 
     def due(self, k: int) -> tuple[np.ndarray, bool]:
         """The command to apply over period k: the one answering sample k − d, or the one held
