@@ -42,7 +42,8 @@ def publisher(ros_domain: int):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("tool_backend", ["dds", "rclpy"])
+# the tools on dds against a dds publisher is the long run; rclpy's reads it across vendors
+@pytest.mark.parametrize("tool_backend", [pytest.param("dds", marks=pytest.mark.long), "rclpy"])
 def test_list_echo_and_hz(publisher: object, tool_backend: str,
                           monkeypatch: pytest.MonkeyPatch) -> None:
     """The publisher is on the dds backend; the tools on either (rclpy: across vendors)."""

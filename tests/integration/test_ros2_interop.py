@@ -82,7 +82,8 @@ def bag_counts(path: Path) -> dict[str, int]:
 
 @pytest.mark.slow
 @pytest.mark.parametrize(("backends", "recorder"), [
-    (["--backend", "dds"], None),
+    # Cyclone alone is also test_launch_e2e's lock-step run, so here it is the long one
+    pytest.param(["--backend", "dds"], None, marks=pytest.mark.long),
     (["--backend", "rclpy"], None),
     (["--backend", "rclpy", "--backend", "sim_node=dds"], "rclpy"),
     (["--backend", "dds", "--backend", "sim_node=rclpy"], "dds"),
