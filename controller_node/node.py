@@ -206,7 +206,7 @@ class ControllerNode:
         self.diagnostics.publish(max(self.matching.last_ns, 0), values, level, "; ".join(problems))
 
     def peers_ready(self) -> bool:
-        return reaches_peer(self.node, self.pub, self.pub.topic_name)
+        return reaches_peer(self.node, self.pub)
 
     def run(self) -> None:
         """Wait for the command's subscribers in lock-step, then control until shutdown."""

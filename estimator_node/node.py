@@ -260,7 +260,7 @@ class EstimatorNode:
         """The controller reads the estimates (handed over when composed) and publishes the
         scene's command topic."""
         reads = self.handover is not None or reaches_peer(
-            self.node, self.state_pub, self.state_pub.topic_name)
+            self.node, self.state_pub)
         return reads and has_publisher(
             self.node, command_topic(self.params.scene).name)
 

@@ -168,10 +168,10 @@ class SimNode:
         and the controller's command is heard (both matched, not only the recorder)."""
         scene = self.params.scene
         command = command_topic(scene)
-        return (all(reaches_peer(self.node, self.publishers[spec.name], spec.name)
+        return (all(reaches_peer(self.node, self.publishers[spec.name])
                     for spec in estimator_inputs(scene))
                 and (command is None or hears_peer(
-                    self.node, self.subscriptions[self.active], command.name))
+                    self.node, self.subscriptions[self.active]))
                 and self.recorder_ready())
 
     def recorder_ready(self) -> bool:

@@ -230,22 +230,21 @@ def has_publisher(node: api.Node, topic: str) -> bool:
     return bool(node.get_publishers_info_by_topic(topic))
 
 
-
-def reaches_peer(node: api.Node, publisher: api.Publisher, topic: str) -> bool:
-    """``publisher`` has matched every subscription of ``topic`` the graph shows, and one of them
+def reaches_peer(node: api.Node, publisher: api.Publisher) -> bool:
+    """``publisher`` has matched every subscription of its topic the graph shows, and one of them
     belongs to a named node other than the launch's recorder.
 
     A matched count alone is not enough in lock-step: the recorder subscribes every topic at
     once, it can match before the peer does, and the first sample sent then is lost to the peer
     (a lock-step timeout)."""
-    return _matched_with_peer(node.get_subscriptions_info_by_topic(topic),
+    return _matched_with_peer(node.get_subscriptions_info_by_topic(publisher.topic_name),
                               publisher.get_subscription_count())
 
 
-def hears_peer(node: api.Node, subscription: api.Subscription, topic: str) -> bool:
-    """``subscription`` has matched every publisher of ``topic`` the graph shows, one of them a
+def hears_peer(node: api.Node, subscription: api.Subscription) -> bool:
+    """``subscription`` has matched every publisher of its topic the graph shows, one of them a
     named node's (the reader's side of :func:`reaches_peer`)."""
-    return _matched_with_peer(node.get_publishers_info_by_topic(topic),
+    return _matched_with_peer(node.get_publishers_info_by_topic(subscription.topic_name),
                               subscription.get_publisher_count())
 
 

@@ -30,13 +30,13 @@ def test_the_recorder_alone_is_not_a_peer(backend: str, ros_domain: int,
         assert api.spin_until(writer, lambda: pub.get_subscription_count() == 1 and any(
             ep.node_name == RECORDER_NODE
             for ep in writer.get_subscriptions_info_by_topic("/t/x")), 10)
-        assert not reaches_peer(writer, pub, "/t/x")
+        assert not reaches_peer(writer, pub)
         peer = api.create_node("estimator_node")
         nodes.append(peer)
         sub = peer.create_subscription(TYPE, "/t/x", lambda _: None, DEFAULT)
-        assert api.spin_until(writer, lambda: reaches_peer(writer, pub, "/t/x"), 10)
+        assert api.spin_until(writer, lambda: reaches_peer(writer, pub), 10)
         assert pub.get_subscription_count() == 2           # both matched when it says ready
-        assert api.spin_until(peer, lambda: hears_peer(peer, sub, "/t/x"), 10)
+        assert api.spin_until(peer, lambda: hears_peer(peer, sub), 10)
     finally:
         for node in nodes:
             node.destroy_node()
