@@ -1,12 +1,16 @@
-"""container_node: estimator_node and controller_node in one process, as a ROS 2 component
-container with intra-process communication (``stillframe launch --compose``, docs/nodes.md).
+"""container_node: the loop's nodes in one process, as a ROS 2 component container with
+intra-process communication (``stillframe launch --compose``, docs/nodes.md).
 
-Both nodes keep their names, parameters, ``/diagnostics`` and topics: the estimates are still
-published on ``state_estimate`` for the recorder and the monitor. The controller does not
-subscribe to them: the estimator hands each estimate's physical state to it in-process (the
-values it published, no serialisation), so a composed run gives the three-process numbers bit
-for bit. One loop spins both nodes, the estimator's with its wait and the controller's without
-waiting, so that neither node's messages wait for the other's timeout.
+- ``python -m container_node.node --ros-args ...``: estimator_node and controller_node;
+- ``python -m container_node.node all --ros-args ...``: sim_node too (``--compose all``).
+
+Every node keeps its name, parameters, ``/diagnostics`` and topics, and everything is still
+published for the recorder and the monitor. Between the nodes of the container the samples are
+handed over as they are written (:mod:`stillframe.middleware.intra_process`, the ``dds``
+backend): the same CDR bytes, read by the same readers, so a composed run gives the
+three-process numbers bit for bit. With the simulator composed, one sample is one chain of
+calls in one thread: the sim publishes, the estimator estimates, the controller commands, and
+the command is in when the sim looks for it; nothing waits on DDS unless a sample is missing.
 """
 
 from __future__ import annotations
@@ -15,50 +19,99 @@ import sys
 
 from controller_node.node import ControllerNode
 from estimator_node.node import EstimatorNode, build
+from sim_node import node as sim_node
 from stillframe.contract import topics
 from stillframe.loop.node_support import declare_loop_parameters, wait_for_peers
-from stillframe.middleware import api
+from stillframe.middleware import api, intra_process
 
 #: longest wait of one spin of the estimator's node [s]: the controller's messages (the load
 #: cell it matches) are taken at least this often
 SPIN_S = 0.001
 
 
-def run(estimator: EstimatorNode, controller: ControllerNode) -> None:
-    """Wait for the peers in lock-step, then estimate and control until shutdown."""
-    controller.intra_process = True
-    estimator.handover = controller.handed_over
-    if controller.params.lockstep:
-        wait_for_peers(controller.node, controller.peers_ready)
-        wait_for_peers(estimator.node, estimator.peers_ready)
-    controller.subscribe_inputs()
-    estimator.subscribe_inputs()
-    while api.ok():
-        estimator.node.spin_once(min(SPIN_S, estimator.next_wait()))
-        controller.node.spin_once(0.0)
-        estimator.process_ready()
-        controller.process_ready()
-        controller.check_watchdog()
-        for node in (estimator, controller):
+class Container:
+    """The estimator and the controller of one process, stepped together."""
+
+    def __init__(self, estimator: EstimatorNode, controller: ControllerNode) -> None:
+        self.estimator = estimator
+        self.controller = controller
+
+    def advance(self) -> int:
+        """Estimate and command whatever is ready (an estimate reaches the controller as it is
+        published); how many estimates and commands were made."""
+        return self.estimator.process_ready() + self.controller.process_ready()
+
+    def spin(self, timeout_sec: float) -> None:
+        """Take the nodes' messages, waiting on the estimator's for at most ``timeout_sec``."""
+        self.estimator.node.spin_once(min(timeout_sec, self.estimator.next_wait()))
+        self.controller.node.spin_once(0.0)
+
+    def housekeeping(self) -> None:
+        """The controller's watchdog and both nodes' ``/diagnostics`` when due."""
+        self.controller.check_watchdog()
+        for node in (self.estimator, self.controller):
             if node.diagnostics.due():
                 node.publish_status()
-    estimator.publish_status()
-    controller.publish_status()
+
+    def finish(self) -> None:
+        self.estimator.publish_status()
+        self.controller.publish_status()
+
+    def run(self) -> None:
+        """Wait for the simulator in lock-step, then estimate and control until shutdown."""
+        if self.controller.params.lockstep:
+            wait_for_peers(self.controller.node, self.controller.peers_ready)
+        self.controller.subscribe_inputs()
+        if self.controller.params.lockstep:
+            wait_for_peers(self.estimator.node, self.estimator.peers_ready)
+        self.estimator.subscribe_inputs()
+        while api.ok():
+            self.spin(SPIN_S)
+            self.advance()
+            self.housekeeping()
+        self.finish()
+
+
+def run_with_sim(sim: sim_node.SimNode, container: Container) -> None:
+    """The simulator's loop drives the container: each time the sim waits (for a command, or
+    for the next sample in real time), the estimator and controller first handle what it
+    published; the sim's own wait for messages from outside is taken only when they did
+    nothing (a sample incomplete, a command from another process)."""
+
+    def spin(timeout_sec: float) -> None:
+        if not container.advance():
+            sim.node.spin_once(min(timeout_sec, SPIN_S))
+            container.spin(0.0)
+            container.advance()
+        container.housekeeping()
+
+    container.controller.subscribe_inputs()
+    container.estimator.subscribe_inputs()
+    sim.spin = spin
+    sim_node.run(sim)
+    container.finish()
 
 
 @api.node_main
 def main() -> int:
-    """Run both nodes (``python -m container_node.node --ros-args ...``, the parameters of
-    both); bad parameters exit 2 with one line."""
+    """Run the nodes (``python -m container_node.node [all] --ros-args ...``, the parameters of
+    all of them); bad parameters exit 2 with one line."""
+    with_sim = "all" in sys.argv[1:sys.argv.index("--ros-args") if "--ros-args" in sys.argv
+                                  else None]
+    intra_process.enable()
     ns = topics.DEFAULT_NAMESPACE
-    estimator_node = api.create_node("estimator_node", namespace=ns)
-    controller_node = api.create_node("controller_node", namespace=ns)
+    names = ["estimator_node", "controller_node", *(["sim_node"] if with_sim else [])]
+    nodes = [api.create_node(name, namespace=ns) for name in names]
     try:
-        run(build(estimator_node),
-            ControllerNode(controller_node, declare_loop_parameters(controller_node)))
+        container = Container(build(nodes[0]),
+                              ControllerNode(nodes[1], declare_loop_parameters(nodes[1])))
+        if with_sim:
+            run_with_sim(sim_node.build(nodes[2]), container)
+        else:
+            container.run()
     finally:
-        controller_node.destroy_node()
-        estimator_node.destroy_node()
+        for node in reversed(nodes):
+            node.destroy_node()
     return 0
 
 

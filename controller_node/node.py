@@ -95,9 +95,6 @@ class ControllerNode:
         self.input_at: float | None = None   # when the last load-cell reading arrived
         self.compute = Durations()
         self.rate = RateMeter()
-        #: composed with the estimator in one process: estimates come by :meth:`handed_over`,
-        #: not from the ``state_estimate`` topic
-        self.intra_process = False
         self.rt = Realtime(RealtimeOptions())   # main() enters the practices the node asks for
         self.declare_run_time_parameters()
 
@@ -131,9 +128,8 @@ class ControllerNode:
 
     def subscribe_inputs(self) -> None:
         est, wrench = topics.STATE_ESTIMATE, topics.EXCITATION_WRENCH
-        if not self.intra_process:
-            fast_inputs.subscribe(self.node, est.type_name, est.name, self.params.reader_qos(est),
-                                  state_reader(), self.on_estimate)
+        fast_inputs.subscribe(self.node, est.type_name, est.name, self.params.reader_qos(est),
+                              state_reader(), self.on_estimate)
         fast_inputs.subscribe(self.node, wrench.type_name, wrench.name, self.params.qos(wrench),
                               wrench_reader("floor1", "wrench.force.x"), self.on_force)
 
@@ -144,15 +140,13 @@ class ControllerNode:
     def on_estimate(self, ns: int, physical: np.ndarray) -> None:
         self.matching.add_estimate(ns, physical, time.monotonic_ns())
 
-    def handed_over(self, ns: int, physical: np.ndarray) -> None:
-        """An estimate from the estimator in the same process (the values it published)."""
-        self.matching.add_estimate(ns, physical, time.monotonic_ns())
-
-    def process_ready(self) -> None:
-        """Answer pending estimates in order; in lock-step each waits for its load cell."""
+    def process_ready(self) -> int:
+        """Answer pending estimates in order (in lock-step each waits for its load cell); how
+        many were answered."""
         if self.matching.take_jump():        # a new run of the loop: disarm the watchdog
             self.controller.latest = None
             self.watchdog = EstimateWatchdog(self.controller, self.grid)
+        answered = 0
         while (m := self.matching.pop_ready(time.monotonic_ns())) is not None:
             started = time.perf_counter()
             t = self.grid.seconds(m.ns)
@@ -160,6 +154,8 @@ class ControllerNode:
             self.send(self.controller.command(t, estimate, m.force))
             self.compute.add(time.perf_counter() - started)
             self.rate.tick()
+            answered += 1
+        return answered
 
     def send(self, command: Command) -> None:
         self.pub.publish(self.out.cdr(command, self.grid.ns(command.t)))

@@ -120,9 +120,6 @@ class EstimatorNode:
                        "skipped_before_initialisation": 0}
         self.compute = Durations()
         self.rate = RateMeter()
-        #: composed with the controller in one process: ``handover(stamp_ns, physical)`` gets
-        #: every estimate as published (intra-process, no serialisation)
-        self.handover: Callable[[int, np.ndarray], None] | None = None
         self.rt = Realtime(RealtimeOptions())   # main() enters the practices the node asks for
         self.input_at: float | None = None   # when the last sample input arrived
         if isinstance(self.estimator, Filter):
@@ -198,8 +195,8 @@ class EstimatorNode:
         self.assembly.command_received(actuator, ns, value)
 
     # -- stepping ------------------------------------------------------------------------
-    def process_ready(self) -> None:
-        """Use every pending stamp that is ready, oldest first."""
+    def process_ready(self) -> int:
+        """Use every pending stamp that is ready, oldest first; how many were used."""
         if self.assembly.take_jump():        # a new run of the loop: a new filter
             counters = self.estimator.counters
             self.estimator = make_estimator(self.params.scene, design_model(self.params.scene))
@@ -207,8 +204,11 @@ class EstimatorNode:
             if isinstance(self.estimator, Filter):
                 self.estimator.set_noise(self.noise["process_noise_std"],
                                          self.noise["measurement_noise_std"])
+        used = 0
         while (ready := self.assembly.pop_ready(time.monotonic_ns())) is not None:
             self.use(ready)
+            used += 1
+        return used
 
     def use(self, ready: Ready) -> None:
         started = time.perf_counter()
@@ -229,8 +229,6 @@ class EstimatorNode:
         state, cov = self.out.cdr(estimate, ready.ns)
         self.state_pub.publish(state)
         self.cov_pub.publish(cov)
-        if self.handover is not None:
-            self.handover(ready.ns, estimate.physical)
         self.compute.add(time.perf_counter() - started)
         self.counts["estimates"] += 1
         self.rate.tick()
@@ -257,11 +255,8 @@ class EstimatorNode:
         self.diagnostics.publish(max(a.last_ns, 0), values, level, message)
 
     def peers_ready(self) -> bool:
-        """The controller reads the estimates (handed over when composed) and publishes the
-        scene's command topic."""
-        reads = self.handover is not None or reaches_peer(
-            self.node, self.state_pub)
-        return reads and has_publisher(
+        """The controller reads the estimates and publishes the scene's command topic."""
+        return reaches_peer(self.node, self.state_pub) and has_publisher(
             self.node, command_topic(self.params.scene).name)
 
     def run(self) -> None:

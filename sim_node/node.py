@@ -44,6 +44,7 @@ import functools
 import json
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -135,6 +136,10 @@ class SimNode:
         self.k = 0
         self.rt = Realtime(RealtimeOptions())   # main() enters the practices the node asks for
         self.pacer.start(time.monotonic_ns())   # again when the first sample is due
+        #: handles messages for at most the given seconds while the sim waits: the node's
+        #: ``spin_once``, or the composed process's (``container_node``)
+        self.spin: Callable[[float], None] = node.spin_once
+        self.result_file = ""
         node.add_on_set_parameters_callback(check_settable)   # nothing changes while it runs
 
     def writers(self, topic: str) -> list[tuple[bytes, str]]:
@@ -205,13 +210,13 @@ class SimNode:
     def wait_command(self, deadline_ns: int) -> bool:
         """Spin until the command stamped now arrives (True) or the monotonic ``deadline_ns``."""
         if self.active is None:
-            self.node.spin_once(0.0)
+            self.spin(0.0)
             return True
         while api.ok() and self.command_ns[self.active] != self.now_ns:
             remaining = (deadline_ns - time.monotonic_ns()) * 1e-9
             if remaining <= 0:
                 return False
-            self.node.spin_once(remaining)
+            self.spin(remaining)
         return True
 
     def degraded(self, missed: bool) -> bool:
@@ -235,7 +240,7 @@ class SimNode:
             self.command_timeout_periods * period)
 
     def sleep_until(self, when_ns: int) -> None:
-        wait_until(when_ns, time.monotonic_ns, self.node.spin_once, self.rt.spin_margin_ns,
+        wait_until(when_ns, time.monotonic_ns, self.spin, self.rt.spin_margin_ns,
                    api.ok)
 
     def status(self) -> tuple[dict[str, Any], int]:
@@ -362,35 +367,47 @@ def write_result(history: LoopHistory, path: Path) -> None:
              fine_velocities=history.fine_velocities)
 
 
+def build(node: api.Node) -> SimNode:
+    """The simulator on ``node`` from its parameters (InputError naming a wrong one), its
+    real-time practices entered."""
+    params = declare_loop_parameters(node)
+    result = node.declare_parameter("result_file", "", read_only=True).value
+    discovery = node.declare_parameter("discovery_timeout_s", 30.0, read_only=True).value
+    if not discovery >= 0:
+        raise InputError(f"parameter 'discovery_timeout_s': must be >= 0, got {discovery}")
+    # topics the launch's recorder must subscribe before lock-step starts ("*": all)
+    await_recorder = node.declare_parameter("await_recorder", [""], read_only=True).value
+    # the node allowed to command ("" : the first writer seen), e.g. "controller_node"
+    writer = node.declare_parameter("command_writer", "", read_only=True).value
+    timeout = node.declare_parameter("command_timeout_periods", 3, read_only=True).value
+    if not (isinstance(timeout, int) and timeout >= 1):
+        raise InputError(f"parameter 'command_timeout_periods': must be an integer >= 1, "
+                         f"got {timeout!r}")
+    miss_limit = node.declare_parameter("command_miss_limit", 0.25, read_only=True).value
+    if not (isinstance(miss_limit, float) and 0.0 <= miss_limit < 1.0):
+        raise InputError(f"parameter 'command_miss_limit': must be a float in [0, 1), "
+                         f"got {miss_limit!r}")
+    rt = declare_realtime(node)
+    sim = SimNode(node, params, float(discovery), list(await_recorder), str(writer), timeout,
+                  miss_limit)
+    sim.result_file = str(result)
+    sim.rt = start_realtime(node, rt)
+    return sim
+
+
+def run(sim: SimNode) -> None:
+    """The scene, then its result in ``result_file`` (when given and not interrupted)."""
+    history = sim.run()
+    if history is not None and sim.result_file:
+        write_result(history, Path(sim.result_file))
+
+
 @api.node_main
 def main() -> int:
     """Run the node (console script ``sim_node``); bad parameters exit 2 with one line."""
     node = api.create_node("sim_node", namespace=topics.DEFAULT_NAMESPACE)
     try:
-        params = declare_loop_parameters(node)
-        result = node.declare_parameter("result_file", "", read_only=True).value
-        discovery = node.declare_parameter("discovery_timeout_s", 30.0, read_only=True).value
-        if not discovery >= 0:
-            raise InputError(f"parameter 'discovery_timeout_s': must be >= 0, got {discovery}")
-        # topics the launch's recorder must subscribe before lock-step starts ("*": all)
-        await_recorder = node.declare_parameter("await_recorder", [""], read_only=True).value
-        # the node allowed to command ("" : the first writer seen), e.g. "controller_node"
-        writer = node.declare_parameter("command_writer", "", read_only=True).value
-        timeout = node.declare_parameter("command_timeout_periods", 3, read_only=True).value
-        if not (isinstance(timeout, int) and timeout >= 1):
-            raise InputError(f"parameter 'command_timeout_periods': must be an integer >= 1, "
-                             f"got {timeout!r}")
-        miss_limit = node.declare_parameter("command_miss_limit", 0.25, read_only=True).value
-        if not (isinstance(miss_limit, float) and 0.0 <= miss_limit < 1.0):
-            raise InputError(f"parameter 'command_miss_limit': must be a float in [0, 1), "
-                             f"got {miss_limit!r}")
-        rt = declare_realtime(node)
-        sim = SimNode(node, params, float(discovery), list(await_recorder), str(writer), timeout,
-                      miss_limit)
-        sim.rt = start_realtime(node, rt)
-        history = sim.run()
-        if history is not None and result:
-            write_result(history, Path(result))
+        run(build(node))
     finally:
         node.destroy_node()
     return 0

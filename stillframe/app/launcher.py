@@ -36,6 +36,10 @@ from stillframe.middleware import api, discovery, names
 NODES: tuple[str, ...] = ("sim_node", "estimator_node", "controller_node")
 #: the process that hosts the estimator and the controller with ``--compose``
 CONTAINER = "container_node"
+#: what ``--compose`` may put in the container: nothing, the estimator and controller, all
+COMPOSE = ("", "pair", "all")
+#: the loop's node processes that take real-time parameters besides the simulator's
+LOOP = ("estimator_node", "controller_node")
 #: the children whose middleware backend ``--backend NAME=BACKEND`` can choose
 BACKEND_TARGETS: tuple[str, ...] = (*NODES, "recorder", "monitor")
 MODES: tuple[str, ...] = ("lockstep", "realtime")
@@ -64,19 +68,19 @@ class NodeDiedError(RuntimeError):
 
 
 def node_command(package: str, scene: Path, overrides: Sequence[str], mode: str,
-                 params: dict[str, Any] | None = None) -> list[str]:
-    """``python -m PACKAGE.node --ros-args -p scene:=... -p overrides:=[...] -p mode:=...``.
+                 params: dict[str, Any] | None = None, args: Sequence[str] = ()) -> list[str]:
+    """``python -m PACKAGE.node ARGS --ros-args -p scene:=... -p overrides:=[...] -p mode:=...``.
 
     Overrides go as a JSON list of strings (JSON is YAML, so rcl-style parsing keeps each
     ``key=value`` whole even when the value is itself a list); an empty list is left out
     because ROS parameters cannot be empty arrays."""
-    args = [sys.executable, "-m", f"{package}.node", "--ros-args",
+    argv = [sys.executable, "-m", f"{package}.node", *args, "--ros-args",
             "-p", f"scene:={scene}", "-p", f"mode:={mode}"]
     if overrides:
-        args += ["-p", f"overrides:={json.dumps(list(overrides))}"]
+        argv += ["-p", f"overrides:={json.dumps(list(overrides))}"]
     for name, value in (params or {}).items():
-        args += ["-p", f"{name}:={json.dumps(value) if not isinstance(value, str) else value}"]
-    return args
+        argv += ["-p", f"{name}:={json.dumps(value) if not isinstance(value, str) else value}"]
+    return argv
 
 
 def parse_backends(specs: Sequence[str]) -> dict[str, str]:
@@ -282,8 +286,9 @@ class LaunchOptions:
     backends: list[str] = field(default_factory=list)
     #: ``stillframe monitor`` arguments (ports) to run the monitor beside the nodes; None: none
     monitor_args: list[str] | None = None
-    #: estimator and controller in one process (``container_node``, intra-process handover)
-    compose: bool = False
+    #: nodes in one process (``container_node``, intra-process handover): "" none, "pair"
+    #: the estimator and the controller, "all" the simulator too
+    compose: str = ""
     #: the loop nodes' real-time practices and CPUs (stillframe.loop.realtime; "": none)
     rt: str = ""
     rt_cpus: list[int] = field(default_factory=list)
@@ -339,17 +344,33 @@ class Launcher:
             children.append(("monitor", [sys.executable, "-m", "stillframe", "monitor",
                                          "--dashboard", "--use-sim-time", "--scene", str(scene),
                                          *sets, *o.monitor_args]))
-        nodes = nodes_for(load_scene(scene, o.overrides))
-        if o.compose and {"estimator_node", "controller_node"} <= set(nodes):
-            nodes = ["sim_node", CONTAINER]
-        # the container takes no real-time parameters (it composes two nodes' loops)
+        nodes = self.nodes()
+        # the pair's container takes no real-time parameters (it composes two nodes' loops);
+        # with the simulator in it, the simulator's practices are the process's
         rt = {"rt": o.rt, **({"rt_cpus": o.rt_cpus} if o.rt_cpus else {})} if o.rt else {}
+        sim = self.simulator()
         children += [(name, [*o.hosts.get("estimator_node" if name == CONTAINER else name, []),
                              *node_command(name, scene, o.overrides, o.mode, {
-                                 **shared, **(rt if name != CONTAINER else {}),
-                                 **(sim_params if name == "sim_node" else {})})])
+                                 **shared, **(rt if name in (sim, *LOOP) else {}),
+                                 **(sim_params if name == sim else {})},
+                                 ["all"] if name == sim == CONTAINER else [])])
                      for name in reversed(nodes)]
         return children
+
+    def nodes(self) -> list[str]:
+        """The node processes of the scene, a container in place of those it composes."""
+        o = self.options
+        if o.compose not in COMPOSE:
+            raise InputError(f"--compose {o.compose}: expected one of {', '.join(COMPOSE[1:])}")
+        nodes = nodes_for(load_scene(o.scene.resolve(), o.overrides))
+        if o.compose and {"estimator_node", "controller_node"} <= set(nodes):
+            return [CONTAINER] if o.compose == "all" else ["sim_node", CONTAINER]
+        return nodes
+
+    def simulator(self) -> str:
+        """The child that runs the simulator and writes the result."""
+        return CONTAINER if CONTAINER in self.nodes() and self.options.compose == "all" \
+            else "sim_node"
 
     def backend(self, child: str) -> str:
         """The middleware of a child (the container: the estimator's)."""
@@ -371,7 +392,7 @@ class Launcher:
                     self._wait_for_line(child, READY_LINES[name])
                 elif mixed:
                     self._wait_for_line(child, "middleware backend")
-            sim = next(c for c in self.processes.children if c.name == "sim_node")
+            sim = next(c for c in self.processes.children if c.name == self.simulator())
             while api.ok():
                 self.node.spin_once(0.1)
                 if self.statuses:
@@ -424,15 +445,16 @@ def run_scene(scene: Path, overrides: Sequence[str], out: Path, mode: str = "loc
               record: Path | None = None, lockstep_timeout_s: float | None = None,
               prepare: Callable[[Any], None] | None = None,
               record_topics: Sequence[str] = (), backends: Sequence[str] = (),
-              monitor_args: Sequence[str] | None = None, compose: bool = False,
+              monitor_args: Sequence[str] | None = None, compose: str = "",
               rt: str = "", rt_cpus: Sequence[int] = (),
               hosts: dict[str, list[str]] | None = None) -> LaunchResult:
     """Launch ``scene`` through the three nodes to its end; sim_node's results go to ``out``
     (``result.json``, ``result.npz``); ``record`` records ``record_topics`` (default all) into
     a bag; ``backends`` are ``--backend`` values (:func:`parse_backends`); ``monitor_args``
-    (e.g. ports) start ``stillframe monitor`` beside the nodes; ``compose`` runs the estimator
-    and the controller in one process (``container_node``); ``rt`` and ``rt_cpus`` are the
-    loop nodes' real-time practices and CPUs (:mod:`stillframe.loop.realtime`); ``hosts``
+    (e.g. ports) start ``stillframe monitor`` beside the nodes; ``compose`` runs nodes in one
+    process (``container_node``: "pair" the estimator and controller, "all" every node);
+    ``rt`` and ``rt_cpus`` are the loop nodes' real-time practices and CPUs
+    (:mod:`stillframe.loop.realtime`); ``hosts``
     runs nodes on other hosts (:attr:`LaunchOptions.hosts`).
     ``prepare(node)`` may subscribe the launcher's hidden node to more topics before the
     children start."""

@@ -17,6 +17,7 @@ t = 0 (or resumed after a long loss) does, and the assembly starts again at that
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -30,6 +31,8 @@ from stillframe.control.prediction import CommandLog
 JUMP_NS = 1_000_000_000
 #: Far-off stamps held at most (the oldest is dropped first).
 HELD_STAMPS = 8
+#: a reported actuation equals the command when within these (np.isclose's test)
+RTOL, ATOL = 1e-9, 1e-12
 
 
 class Pending:
@@ -191,19 +194,21 @@ class SampleAssembly:
         (it saturates, holds or zeroes them: a command is then no evidence, and taking it would
         let the estimator and the controller feed each other). Zero for the actuator not
         driven."""
-        reported = np.isfinite(p.applied)
-        commanded = np.array([self.in_effect(i, p.ns) for i in (0, 1)])
-        # a zero command applied as zero tells nothing (the controller's watchdog sends zero)
-        telling = reported & (commanded != 0.0)
-        self.applying = np.where(telling, np.isclose(p.applied, commanded, rtol=1e-9,
-                                                     atol=1e-12), self.applying)
-        control = np.where(reported, p.applied,
-                           np.where(self.applying, commanded, self.last_applied))
-        for log in self.commands:     # stamps are used in order: no later one looks further back
-            log.forget_before(self.grid.index(p.ns) - self.answer_lag)
-        control[[i for i in (0, 1) if i != self.active]] = 0.0
+        index = self.grid.index(p.ns) - self.answer_lag
+        control = np.zeros(2)
+        for i, log in enumerate(self.commands):
+            commanded = log.in_effect(index)
+            applied = float(p.applied[i])
+            reported = math.isfinite(applied)
+            # a zero command applied as zero tells nothing (the controller's watchdog sends zero)
+            if reported and commanded != 0.0:      # np.isclose(applied, commanded), in floats
+                self.applying[i] = abs(applied - commanded) <= ATOL + RTOL * abs(commanded)
+            if i == self.active:
+                control[i] = (applied if reported else commanded if self.applying[i]
+                              else self.last_applied[i])
+            log.forget_before(index)    # stamps are used in order: none looks further back
         self.last_applied = control
-        self.counts["applied_reported"] += bool(reported[self.active or 0])
+        self.counts["applied_reported"] += math.isfinite(p.applied[self.active or 0])
         return control
 
     def used(self, ns: int) -> None:

@@ -16,6 +16,7 @@ the process. ``ROS_DOMAIN_ID`` selects the domain; ``ROS_AUTOMATIC_DISCOVERY_RAN
 from __future__ import annotations
 
 import os
+import time
 from collections.abc import Callable
 from typing import Any, ClassVar
 
@@ -43,7 +44,7 @@ from cyclonedds.topic import Topic
 
 from stillframe.contract import messages
 from stillframe.errors import InputError
-from stillframe.middleware import dds_types, discovery, interface, names, params
+from stillframe.middleware import dds_types, discovery, interface, intra_process, names, params
 from stillframe.middleware.clock import Clock
 from stillframe.middleware.cyclone_raw import ANY_SAMPLES, matched_count, take_raw, write_raw
 from stillframe.middleware.logger import Logger
@@ -315,25 +316,37 @@ class DdsPublisher:
         )
         self.gid = self._writer.guid.bytes
         messages.prepare(ros_type)
+        #: the process's raw subscriptions of this topic (:mod:`.intra_process`; usually none)
+        self._local = intra_process.subscriptions(topic)
+        intra_process.add_publisher(topic)
 
     def publish(self, msg: Any) -> None:
         """Publish a ``rosbags`` message of this publisher's type, or its CDR bytes (written as
-        they are: a preallocated ``bytearray`` is not copied)."""
-        if isinstance(msg, bytes | bytearray):
-            write_raw(self._writer, msg)
-            return
+        they are: a preallocated ``bytearray`` is not copied), and hand the bytes to the
+        process's own subscriptions of the topic (:mod:`.intra_process`)."""
         if isinstance(msg, memoryview):
-            write_raw(self._writer, bytes(msg))
-            return
-        if getattr(msg, "__msgtype__", None) != self.msg_type:
-            raise InputError(
-                f"publisher on {self.topic_name} takes {self.msg_type}, "
-                f"got {getattr(msg, '__msgtype__', type(msg).__name__)}"
-            )
-        write_raw(self._writer, messages.serialize(msg))
+            msg = bytes(msg)
+        elif not isinstance(msg, bytes | bytearray):
+            if getattr(msg, "__msgtype__", None) != self.msg_type:
+                raise InputError(
+                    f"publisher on {self.topic_name} takes {self.msg_type}, "
+                    f"got {getattr(msg, '__msgtype__', type(msg).__name__)}"
+                )
+            msg = messages.serialize(msg)
+        write_raw(self._writer, msg)
+        if self._local:
+            cdr, now = bytes(msg), time.time_ns()
+            for deliver in self._local:
+                deliver(cdr, now, self.gid)
+
+    def release(self) -> None:
+        """Delete the writer."""
+        intra_process.remove_publisher(self.topic_name)
+        delete(self._writer)
 
     def get_subscription_count(self) -> int:
-        return matched_count(self._writer)
+        """Matched readers, the process's own subscriptions of the topic included."""
+        return matched_count(self._writer) + intra_process.subscription_count(self.topic_name)
 
     def wait_for_all_acked(self, timeout_sec: float) -> bool:
         """Block until every reliable reader acknowledged everything (True) or the timeout."""
@@ -345,18 +358,25 @@ class DdsSubscription:
 
     def __init__(
         self, node: DdsNode, ros_type: str, topic: str,
-        callback: Callable[..., None], qos: QoSProfile, raw: bool,
+        callback: Callable[..., None], qos: QoSProfile, raw: bool, intra: bool = False,
     ) -> None:
         self.topic_name = topic
         self.msg_type = ros_type
         self.qos_profile = qos
         self.raw = raw
         self.callback = callback
+        #: the process's own writers hand their samples over (:mod:`.intra_process`) and the
+        #: reader ignores them
+        self.intra = intra
         user_data = f"typehash={messages.type_hash(ros_type)};".encode()
+        reader_qos = dds_qos(qos, user_data, writer=False)
+        if intra:
+            reader_qos += Qos(Policy.IgnoreLocal.Participant)
+            intra_process.subscribe(topic, self.deliver_local)
         self._reader = DataReader(
             node.context.participant,
             node.context.topic(dds_types.dds_topic(topic), ros_type),
-            dds_qos(qos, user_data, writer=False),
+            reader_qos,
         )
         self.condition = ReadCondition(self._reader, ANY_SAMPLES)
         self.gid = self._reader.guid.bytes
@@ -365,7 +385,21 @@ class DdsSubscription:
         self._clock = node.get_clock()
 
     def get_publisher_count(self) -> int:
-        return matched_count(self._reader)
+        """Matched writers, the process's own publishers of the topic included when they hand
+        their samples over."""
+        local = intra_process.publisher_count(self.topic_name) if self.intra else 0
+        return matched_count(self._reader) + local
+
+    def release(self) -> None:
+        """Delete the reader."""
+        if self.intra:
+            intra_process.unsubscribe(self.topic_name, self.deliver_local)
+        delete(self._reader)
+
+    def deliver_local(self, cdr: bytes, source_timestamp: int, gid: bytes) -> None:
+        """A sample written in this process (:mod:`.intra_process`), received now."""
+        self.callback(cdr, interface.MessageInfo(source_timestamp,
+                                                 self._clock.now().nanoseconds, gid))
 
     def writer_gid(self, handle: int) -> bytes:
         """The GUID of the matched writer with instance handle ``handle`` (empty if gone)."""
@@ -523,7 +557,8 @@ class DdsNode:
     ) -> DdsSubscription:
         topic = self.resolve_topic_name(topic)
         sub = DdsSubscription(
-            self, messages.type_name(msg_type), topic, callback, as_profile(qos), raw
+            self, messages.type_name(msg_type), topic, callback, as_profile(qos), raw,
+            intra=raw and intra_process.enabled(),
         )
         self._subscriptions.append(sub)
         self._waitset.attach(sub.condition)
@@ -532,7 +567,7 @@ class DdsNode:
 
     def destroy_publisher(self, pub: DdsPublisher) -> None:
         self._publishers.remove(pub)
-        delete(pub._writer)
+        pub.release()
         self.context.publish_graph()
 
     def create_polled_subscription(
@@ -552,7 +587,7 @@ class DdsNode:
         else:
             self._waitset.detach(sub.condition)
             self._subscriptions.remove(sub)
-        delete(sub._reader)
+        sub.release()
         self.context.publish_graph()
 
     def create_timer(
@@ -616,7 +651,7 @@ class DdsNode:
             return
         delete(self._waitset)
         for entity in (*self._publishers, *self._subscriptions, *self._polled):
-            delete(getattr(entity, "_writer", None) or entity._reader)
+            entity.release()
         self._publishers.clear()
         self._subscriptions.clear()
         self._polled.clear()

@@ -26,7 +26,11 @@ from pathlib import Path
 from typing import Any
 
 from stillframe.app.commands.common import add_json_argument, emit_json
-from stillframe.app.commands.launch import add_realtime_arguments, realtime_arguments
+from stillframe.app.commands.launch import (
+    add_compose_arguments,
+    add_realtime_arguments,
+    realtime_arguments,
+)
 from stillframe.app.launcher import run_scene
 from stillframe.config.scene import load_scene
 from stillframe.contract.topics import DEFAULT_NAMESPACE, FLOOR_IMU, FORCE_CMD, TORQUE_CMD
@@ -54,8 +58,7 @@ def register(benches: argparse._SubParsersAction) -> None:
     parser.add_argument("--backend", dest="backends", action="append", default=[],
                         choices=api.BACKENDS,
                         help="measure this backend (repeatable; default: every one installed)")
-    parser.add_argument("--compose", action="store_true",
-                        help="also lock-step with the estimator and controller in one process")
+    add_compose_arguments(parser)
     add_realtime_arguments(parser)
     add_json_argument(parser)
     parser.set_defaults(func=run)
@@ -135,19 +138,21 @@ def observer_realtime(practices: str) -> Iterator[None]:
 
 def realtime(rate_hz: float, duration: float, out: Path, backend: str,
              rt: tuple[str, list[int]] = ("", []),
-             monitor_args: list[str] | None = None) -> dict[str, Any]:
-    """The LQG scene in real time at ``rate_hz`` through the nodes on ``backend``: latency and
-    deadline figures seen by an observer here; ``monitor_args`` start a monitor beside them."""
+             monitor_args: list[str] | None = None, compose: str = "") -> dict[str, Any]:
+    """The LQG scene in real time at ``rate_hz`` through the nodes on ``backend`` (composed as
+    ``compose`` says): latency and deadline figures seen by an observer here;
+    ``monitor_args`` start a monitor beside them."""
     log = LatencyLog(round(1e9 / rate_hz))
     with observer_backend(backend), observer_realtime(rt[0]):
         result = run_scene(SCENE, realtime_overrides(rate_hz, duration), out, "realtime",
                            prepare=observe(log), backends=[backend], rt=rt[0], rt_cpus=rt[1],
-                           monitor_args=monitor_args)
+                           monitor_args=monitor_args, compose=compose)
     e = result.evaluation
     summary = log.summary()
     seen = summary["answered"] + summary["unanswered"]
     within = summary["answered"] - summary["deadline_misses"]
-    return {"backend": backend, "rate_hz": rate_hz, "rt": rt[0], "rt_cpus": rt[1], **summary,
+    return {"backend": backend, "compose": compose, "rate_hz": rate_hz, "rt": rt[0],
+            "rt_cpus": rt[1], **summary,
             "within_period_pct": 100.0 * within / seen if seen else float("nan"),
             "sim_overruns": e.get("overruns"), "sim_deadline_misses": e.get("deadline_misses"),
             "steps": e["steps"], "load_1min": os.getloadavg()[0]}
@@ -185,9 +190,9 @@ def goal_rows(rows: list[dict[str, Any]], speeds: list[dict[str, Any]]) -> list[
     return out
 
 
-def lockstep(out: Path, backend: str, one: dict[str, Any], compose: bool) -> dict[str, Any]:
+def lockstep(out: Path, backend: str, one: dict[str, Any], compose: str) -> dict[str, Any]:
     """The full LQG scene through the nodes on ``backend`` against ``one`` (one process);
-    with ``compose`` also with the estimator and controller composed in one process."""
+    with ``compose`` ("pair", "all") also with those nodes composed in one process."""
     scene = load_scene(SCENE)
     started = time.perf_counter()
     nodes = run_scene(SCENE, [], out, "lockstep", backends=[backend]).evaluation
@@ -195,8 +200,8 @@ def lockstep(out: Path, backend: str, one: dict[str, Any], compose: bool) -> dic
     composed = {}
     if compose:
         c = run_scene(SCENE, [], out / "composed", "lockstep", backends=[backend],
-                      compose=True).evaluation
-        composed = {"composed_steps_per_s": c["steps"] / c["wall_s"],
+                      compose=compose).evaluation
+        composed = {"compose": compose, "composed_steps_per_s": c["steps"] / c["wall_s"],
                     "composed_over_one_process": one["loop_s"] / c["wall_s"],
                     "composed_over_nodes": nodes["wall_s"] / c["wall_s"]}
     return {**composed,
@@ -230,7 +235,7 @@ def run(args: argparse.Namespace) -> int:
                 print(f"{backend}: real time at {rate:g} Hz for {args.duration:g} s"
                       + (f" (--rt {rt[0]})" if rt[0] else ""), file=sys.stderr)
                 rows.append(realtime(rate, args.duration, Path(tmp) / f"{backend}{rate:g}",
-                                     backend, rt))
+                                     backend, rt, compose=args.compose))
             if args.lockstep:
                 print(f"{backend}: lock-step, the full LQG scene", file=sys.stderr)
                 speeds.append(lockstep(Path(tmp) / f"{backend}-lockstep", backend, one,
@@ -241,9 +246,9 @@ def run(args: argparse.Namespace) -> int:
                    "cpus": os.cpu_count()})
         return 0
     print(format_table(
-        ["backend", "rate [Hz]", "samples", "answered", "within period [%]", "p50 [us]",
+        ["backend", "composed", "rate [Hz]", "samples", "answered", "within period [%]", "p50 [us]",
          "p99 [us]", "max [us]", "deadline misses", "unanswered", "sim overruns", "load"],
-        [[r["backend"], f"{r['rate_hz']:g}", r["samples"], r["answered"],
+        [[r["backend"], r["compose"] or "-", f"{r['rate_hz']:g}", r["samples"], r["answered"],
           f"{r['within_period_pct']:.2f}", f"{r['p50_us']:.0f}",
           f"{r['p99_us']:.0f}", f"{r['max_us']:.0f}", r["deadline_misses"], r["unanswered"],
           r["sim_overruns"] if r["sim_overruns"] is not None else "-",
@@ -259,8 +264,9 @@ def run(args: argparse.Namespace) -> int:
         [[s["backend"], s["steps"], f"{s['nodes_wall_s']:.2f}", f"{s['nodes_steps_per_s']:.0f}",
           f"{s['nodes_realtime_ratio']:.2f}", f"{s['nodes_over_one_process']:.2f}",
           s["lockstep_timeouts"]] for s in speeds]
-        + [[f"{s['backend']} composed", s["steps"], "", f"{s['composed_steps_per_s']:.0f}", "",
-            f"{s['composed_over_one_process']:.2f}", ""] for s in speeds if args.compose]
+        + [[f"{s['backend']} composed ({s['compose']})", s["steps"], "",
+            f"{s['composed_steps_per_s']:.0f}", "", f"{s['composed_over_one_process']:.2f}", ""]
+           for s in speeds if args.compose]
         + [["one process", one["steps"], f"{one['loop_s']:.2f}",
             f"{one['steps'] / one['loop_s']:.0f}", "", "1.00", ""]]))
     return 0

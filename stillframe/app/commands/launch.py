@@ -73,9 +73,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                              "loop gives up samples, never loop time)")
     parser.add_argument("--out", type=Path, default=None, metavar="DIR",
                         help="keep sim_node's result.json and result.npz (histories) here")
-    parser.add_argument("--compose", action="store_true",
-                        help="estimator and controller in one process (container_node): "
-                             "estimates handed over in-process, still published")
+    add_compose_arguments(parser)
     add_realtime_arguments(parser)
     add_netns_arguments(parser)
     add_fault_argument(parser)
@@ -133,6 +131,17 @@ def print_evaluation(evaluation: dict[str, Any], scene: Scene) -> None:
     extras = [f"{key} {evaluation[key]}" for key in counters if key in evaluation]
     print(f"peak command {evaluation['peak_command']:.4g}; {evaluation['steps']} steps in "
           f"{evaluation['wall_s']:.2f} s wall" + (f"; {', '.join(extras)}" if extras else ""))
+
+
+def add_compose_arguments(parser: argparse.ArgumentParser) -> None:
+    """``--compose`` and ``--compose-all`` (shared with ``bench loop``)."""
+    group = parser.add_mutually_exclusive_group()
+    group.add_argument("--compose", dest="compose", action="store_const", const="pair",
+                       default="", help="estimator and controller in one process "
+                       "(container_node): samples handed over in-process, still published")
+    group.add_argument("--compose-all", dest="compose", action="store_const", const="all",
+                       help="simulator, estimator and controller in one process: one sample is "
+                            "one chain of calls, still published on every topic")
 
 
 def add_realtime_arguments(parser: argparse.ArgumentParser) -> None:
