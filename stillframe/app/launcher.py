@@ -207,7 +207,7 @@ class StatusLine:
         self.live = self.stream.isatty()
         self.every_s = every_s
         self.text = ""
-        self._last = 0.0
+        self._last: float | None = None     # when the last plain line was printed
         self._lock = threading.Lock()
 
     def width(self) -> int:
@@ -227,7 +227,7 @@ class StatusLine:
             now = time.monotonic()
             if self.live:
                 self.stream.write("\r\x1b[K" + text)
-            elif now - self._last >= self.every_s:
+            elif self._last is None or now - self._last >= self.every_s:
                 self.stream.write(text + "\n")
             else:
                 return
