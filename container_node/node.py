@@ -27,6 +27,9 @@ from stillframe.middleware import api, intra_process
 #: longest wait of one spin of the estimator's node [s]: the controller's messages (the load
 #: cell it matches) are taken at least this often
 SPIN_S = 0.001
+#: with the simulator composed, the watchdog and ``/diagnostics`` run when the sim may wait at
+#: least this long [s] (two status messages cost about 0.35 ms)
+HOUSEKEEPING_S = 0.0005
 
 
 class Container:
@@ -46,12 +49,14 @@ class Container:
         self.estimator.node.spin_once(min(timeout_sec, self.estimator.next_wait()))
         self.controller.node.spin_once(0.0)
 
-    def housekeeping(self) -> None:
-        """The controller's watchdog and both nodes' ``/diagnostics`` when due."""
+    def housekeeping(self) -> bool:
+        """The controller's watchdog and both nodes' ``/diagnostics`` when due; whether a
+        status was published."""
         self.controller.check_watchdog()
-        for node in (self.estimator, self.controller):
-            if node.diagnostics.due():
-                node.publish_status()
+        due = [node for node in (self.estimator, self.controller) if node.diagnostics.due()]
+        for node in due:
+            node.publish_status()
+        return bool(due)
 
     def finish(self) -> None:
         self.estimator.publish_status()
@@ -76,14 +81,20 @@ def run_with_sim(sim: sim_node.SimNode, container: Container) -> None:
     """The simulator's loop drives the container: each time the sim waits (for a command, or
     for the next sample in real time), the estimator and controller first handle what it
     published; the sim's own wait for messages from outside is taken only when they did
-    nothing (a sample incomplete, a command from another process)."""
+    nothing (a sample incomplete, a command from another process). The housekeeping runs when
+    the wait leaves time for it, and a wait after it is the sim's to recompute."""
 
     def spin(timeout_sec: float) -> None:
-        if not container.advance():
-            sim.node.spin_once(min(timeout_sec, SPIN_S))
-            container.spin(0.0)
-            container.advance()
-        container.housekeeping()
+        if container.advance():
+            if sim.pacer.lockstep:              # no deadline to keep: the status when due
+                container.housekeeping()
+            return
+        # never late for the next sample because of it; after it the sim recomputes its wait
+        if timeout_sec >= HOUSEKEEPING_S and container.housekeeping():
+            return
+        sim.node.spin_once(min(timeout_sec, SPIN_S))
+        container.spin(0.0)
+        container.advance()
 
     container.controller.subscribe_inputs()
     container.estimator.subscribe_inputs()

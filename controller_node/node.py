@@ -185,7 +185,7 @@ class ControllerNode:
                   "enabled": cmd.enabled,
                   "last_command": float(cmd.vector[self.controller.actuator]),
                   **self.matching.counts,
-                  **{f"compute_ms_{k}": v for k, v in self.compute.summary().items()}}
+                  **{f"compute_ms_{k}": v for k, v in self.compute.recent().items()}}
         problems = [text for flag, text in (
             (cmd.watchdog, f"watchdog: no fresh estimate for {self.controller.watchdog_periods} "
                            "periods (estimator stale or gone); commanding zero"),

@@ -244,7 +244,7 @@ class EstimatorNode:
                   "non_finite": c.non_finite, "missing": c.missing,
                   "rejected": c.rejected + a.counts["stale_messages"]
                   + a.counts["negative_stamps"] + a.counts["future_stamps"],
-                  **{f"compute_ms_{k}": v for k, v in self.compute.summary().items()}}
+                  **{f"compute_ms_{k}": v for k, v in self.compute.recent().items()}}
         idle_s = 0.0 if self.input_at is None else time.monotonic() - self.input_at
         values["input_age_s"] = idle_s
         level = WARN if values["rejected"] or a.counts["partial_updates"] else OK

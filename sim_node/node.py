@@ -244,7 +244,7 @@ class SimNode:
                    api.ok)
 
     def status(self) -> tuple[dict[str, Any], int]:
-        lat = self.latency.summary()
+        lat = self.latency.recent()
         elapsed = (time.monotonic_ns() - self.pacer.started_ns) * 1e-9
         values = {
             "mode": self.params.mode, "step": self.k, "sim_time_s": self.k * self.plant.period,
