@@ -2,12 +2,15 @@
 
 The observer subscribes to a sensor topic and to the command topics. A command carries the stamp
 of the sample it was computed from (docs/architecture.md, topic contract), so for each stamp t_k
-the latency
-is (receive time of the command stamped t_k) − (receive time of the sample stamped t_k), both
-on the observer's wall clock: the time the estimator and controller took, plus one extra hop. A
-command arriving later than one sample period after its sample missed its deadline (the next
-sample is already due); a sample never answered is counted separately, except the samples that
-came after the last command seen (still in flight when the run ended).
+the latency is (time of the command stamped t_k) − (time of the sample stamped t_k). The times are
+the source timestamps DDS carries with each sample (when its writer wrote it, on the host's wall
+clock): the hop to the estimator, the estimator's and controller's work and the hop between
+them, without the observer's own wake-ups, which a loaded machine delays by more than the loop
+takes (``bench loop`` on the dds backend). Where a backend gives no source timestamp (rclpy) they
+are the observer's receive times. A command later than one sample period after its sample
+missed its deadline (the next sample is already due); a sample never answered is counted
+separately, except the samples that came after the last command seen (still in flight when the
+run ended).
 """
 
 from __future__ import annotations
@@ -19,18 +22,18 @@ import numpy as np
 
 @dataclass
 class LatencyLog:
-    """Receive times (ns, observer's wall clock) by stamp (ns) of samples and commands."""
+    """Source (or receive) times (ns, wall clock) by stamp (ns) of samples and commands."""
 
     period_ns: int
     samples: dict[int, int] = field(default_factory=dict)
     commands: dict[int, int] = field(default_factory=dict)
 
-    def on_sample(self, stamp_ns: int, received_ns: int) -> None:
-        self.samples.setdefault(stamp_ns, received_ns)
+    def on_sample(self, stamp_ns: int, at_ns: int) -> None:
+        self.samples.setdefault(stamp_ns, at_ns)
 
-    def on_command(self, stamp_ns: int, received_ns: int) -> None:
+    def on_command(self, stamp_ns: int, at_ns: int) -> None:
         """The first command for a stamp counts (EUK and LQG answer on one topic each)."""
-        self.commands.setdefault(stamp_ns, received_ns)
+        self.commands.setdefault(stamp_ns, at_ns)
 
     def summary(self) -> dict[str, float | int]:
         """p50 / p99 / max latency in µs over the answered samples, deadline misses (latency

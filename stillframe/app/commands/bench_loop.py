@@ -84,20 +84,24 @@ def stamp_ns(cdr: bytes) -> int:
 
 def observe(log: LatencyLog) -> Any:
     """A ``prepare`` hook for :func:`stillframe.app.launcher.run_scene`: the launcher's node logs
-    floor-1 samples and both command topics, on the wall clock, reading only the stamps from the
-    raw bytes (the observer must keep up with 1 kHz on a loaded machine)."""
+    floor-1 samples and both command topics with their source timestamps
+    (:mod:`stillframe.loop.latency`), reading only the stamps from the raw bytes (the observer
+    must keep up with 1 kHz on a loaded machine)."""
 
     def prepare(node: Any) -> None:
         def topic(spec: Any) -> str:
             return f"{DEFAULT_NAMESPACE}/{spec.name}"
 
-        node.create_subscription(FLOOR_IMU[0].type_name, topic(FLOOR_IMU[0]),
-                                 lambda cdr, _: log.on_sample(stamp_ns(cdr), time.time_ns()),
+        def sample(cdr: bytes, info: Any) -> None:
+            log.on_sample(stamp_ns(cdr), info.source_timestamp)
+
+        def command(cdr: bytes, info: Any) -> None:
+            log.on_command(stamp_ns(cdr), info.source_timestamp)
+
+        node.create_subscription(FLOOR_IMU[0].type_name, topic(FLOOR_IMU[0]), sample,
                                  FLOOR_IMU[0].qos, raw=True)
         for spec in (TORQUE_CMD, FORCE_CMD):
-            node.create_subscription(spec.type_name, topic(spec),
-                                     lambda cdr, _: log.on_command(stamp_ns(cdr), time.time_ns()),
-                                     spec.qos, raw=True)
+            node.create_subscription(spec.type_name, topic(spec), command, spec.qos, raw=True)
 
     return prepare
 
