@@ -10,7 +10,10 @@ ends alike, each with its own peer process and topics:
   pre-serialized bytes (no Python (de)serialization at all);
 - ``typed``: ``cyclonedds``' own Python API (typed reader and writer of the generated struct,
   its pure-Python serializer) - what a hand-written cyclonedds program gets;
-- ``api``: the node API (``rosbags`` CDR, callbacks, the executor).
+- ``api``: the node API on each backend (``rosbags`` CDR, callbacks, the executor);
+- ``dds_raw``: the node API as the loop's nodes use it on the dds backend: a raw subscription
+  and a preallocated CDR buffer patched and written as it is (the fixed-layout codecs' path,
+  no ``rosbags``).
 
 The variants take turns in one-second blocks until each has pinged ``--duration`` seconds, so
 that the load of a shared machine affects them alike. Printed: RTT p50 / p99 / max, lost
@@ -45,7 +48,8 @@ from stillframe.middleware.qos import SENSOR_DATA
 
 IMU = "sensor_msgs/msg/Imu"
 #: raw and typed Cyclone, then the node API on each backend installed here
-VARIANTS = ("raw", "typed", *(b for b in api.BACKENDS if b == "dds" or api.has_rclpy()))
+VARIANTS = ("raw", "typed", "dds_raw",
+            *(b for b in api.BACKENDS if b == "dds" or api.has_rclpy()))
 STAMP = struct.Struct("<iI")  # header.stamp right after the 4-byte CDR encapsulation header
 BLOCK_S = 1.0
 BLOCK_DRAIN_NS = 20_000_000
@@ -123,15 +127,19 @@ class TypedPinger:
 
 
 class ApiPinger:
-    """The node API on one backend (its variant's name)."""
+    """The node API on one backend (the variant's name), or raw bytes through it
+    (``dds_raw``)."""
 
-    def __init__(self, node: api.Node) -> None:
+    def __init__(self, node: api.Node, variant: str) -> None:
         self.node = node
         self.rtts: list[int] = []
-        ping, pong = topics(node.backend)
+        ping, pong = topics(variant)
         self.pub = node.create_publisher(IMU, ping, "sensor_data")
-        self.sub = node.create_subscription(IMU, pong, self.on_pong, "sensor_data")
+        self.raw = variant == "dds_raw"
+        self.sub = node.create_subscription(IMU, pong, self.on_raw if self.raw else self.on_pong,
+                                            "sensor_data", raw=self.raw)
         self.ping = messages.new(IMU)
+        self.cdr = bytearray(pad4(messages.serialize(self.ping)))
 
     def ready(self) -> bool:
         return self.pub.get_subscription_count() > 0 and self.sub.get_publisher_count() > 0
@@ -139,9 +147,17 @@ class ApiPinger:
     def on_pong(self, msg: Any) -> None:
         self.rtts.append(time.monotonic_ns() - messages.stamp_ns(msg.header.stamp))
 
+    def on_raw(self, cdr: bytes, _info: Any) -> None:
+        sec, nanosec = STAMP.unpack_from(cdr, 4)
+        self.rtts.append(time.monotonic_ns() - (sec * 1_000_000_000 + nanosec))
+
     def send(self) -> None:
-        self.ping.header.stamp = messages.time_msg(time.monotonic_ns())
-        self.pub.publish(self.ping)
+        if self.raw:
+            STAMP.pack_into(self.cdr, 4, *now_stamp())
+            self.pub.publish(self.cdr)
+        else:
+            self.ping.header.stamp = messages.time_msg(time.monotonic_ns())
+            self.pub.publish(self.ping)
 
     def receive(self, timeout_ns: int) -> None:
         self.node.spin_once(timeout_ns * 1e-9)
@@ -185,18 +201,22 @@ def typed_peer() -> None:
             end.writer.write(sample)
 
 
-def api_peer(backend: str) -> None:
-    ping, pong = topics(backend)
-    node = api.create_node(f"bench_transport_peer_{backend}", argv=["bench"], backend=backend)
+def api_peer(variant: str) -> None:
+    """Echo through the node API: decoded messages, or the bytes as they came (``dds_raw``)."""
+    ping, pong = topics(variant)
+    raw = variant == "dds_raw"
+    node = api.create_node(f"bench_transport_peer_{variant}", argv=["bench"],
+                           backend="dds" if raw else variant)
     publisher = node.create_publisher(IMU, pong, "sensor_data")
-    node.create_subscription(IMU, ping, publisher.publish, "sensor_data")
+    node.create_subscription(IMU, ping, (lambda cdr, _info: publisher.publish(cdr)) if raw
+                             else publisher.publish, "sensor_data", raw=raw)
     api.spin(node)
     node.destroy_node()
 
 
 PEERS: dict[str, Callable[[], None]] = {
     "raw": raw_peer, "typed": typed_peer,
-    **{backend: functools.partial(api_peer, backend) for backend in api.BACKENDS},
+    **{variant: functools.partial(api_peer, variant) for variant in (*api.BACKENDS, "dds_raw")},
 }
 
 
@@ -230,12 +250,13 @@ def measure(rate: float, duration: float) -> dict[str, dict[str, float]]:
                           "--peer", variant], env=env, stderr=subprocess.DEVNULL)
         for variant in VARIANTS
     ]
-    nodes = {b: api.create_node(f"bench_transport_ping_{b}", argv=["bench"], backend=b)
-             for b in VARIANTS if b in api.BACKENDS}
+    nodes = {v: api.create_node(f"bench_transport_ping_{v}", argv=["bench"],
+                                backend="dds" if v == "dds_raw" else v)
+             for v in VARIANTS if v in (*api.BACKENDS, "dds_raw")}
     node = nodes["dds"]
     try:
         pingers = {"raw": RawPinger(), "typed": TypedPinger(),
-                   **{b: ApiPinger(n) for b, n in nodes.items()}}
+                   **{v: ApiPinger(n, v) for v, n in nodes.items()}}
         _wait_ready(node, pingers)
         sent = dict.fromkeys(VARIANTS, 0)
         blocks = math.ceil(duration / BLOCK_S)

@@ -17,14 +17,14 @@ def test_bench_transport_json_is_consistent(ros_domain: int) -> None:
     assert result.returncode == 0, result.stderr
     doc = json.loads(result.stdout)
     assert doc["backends"] == ["dds", "rclpy"]  # rclpy is installed by `make setup`
-    for variant in ("raw", "typed", "dds", "rclpy"):
+    for variant in ("raw", "typed", "dds_raw", "dds", "rclpy"):
         r = doc[variant]
         assert abs(r["sent"] - 200) <= 1  # 1 s at 200 Hz
         assert r["received"] + r["lost"] == r["sent"]
         assert r["received"] > 0.5 * r["sent"]
         assert 0 < r["p50_us"] <= r["p99_us"] <= r["max_us"]
     for key in ("p50_us", "p99_us"):
-        for backend in ("dds", "rclpy"):
-            assert np.isclose(doc["api_over_raw"][backend][key],
-                              doc[backend][key] / doc["raw"][key])
+        for variant in ("dds_raw", "dds", "rclpy"):
+            assert np.isclose(doc["api_over_raw"][variant][key],
+                              doc[variant][key] / doc["raw"][key])
         assert np.isclose(doc["rclpy_over_dds"][key], doc["rclpy"][key] / doc["dds"][key])

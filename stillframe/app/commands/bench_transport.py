@@ -35,7 +35,8 @@ def run(args: argparse.Namespace) -> int:
     results = measure(args.rate, args.duration)
     backends = [b for b in api.BACKENDS if b in results]
     keys = ("p50_us", "p99_us")
-    ratios = {b: {k: results[b][k] / results["raw"][k] for k in keys} for b in backends}
+    ratios = {v: {k: results[v][k] / results["raw"][k] for k in keys}
+              for v in (*backends, "dds_raw")}
     document = {"message": IMU, "qos": "sensor_data", "rate_hz": args.rate,
                 "duration_s": args.duration, "backends": backends,
                 **results, "api_over_raw": ratios}
@@ -47,8 +48,8 @@ def run(args: argparse.Namespace) -> int:
     rows = [[name, r["sent"], r["lost"], r["p50_us"], r["p99_us"], r["max_us"]]
             for name, r in results.items()]
     print(format_table(["variant", "sent", "lost", "p50 [us]", "p99 [us]", "max [us]"], rows))
-    for backend, ratio in ratios.items():
-        print(f"API on {backend} / raw Cyclone: p50 x{ratio['p50_us']:.2f}, "
+    for variant, ratio in ratios.items():
+        print(f"API on {variant} / raw Cyclone: p50 x{ratio['p50_us']:.2f}, "
               f"p99 x{ratio['p99_us']:.2f}")
     if "rclpy_over_dds" in document:
         r = document["rclpy_over_dds"]
