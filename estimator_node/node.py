@@ -89,6 +89,7 @@ from stillframe.loop.node_support import (
 )
 from stillframe.loop.realtime import Realtime, RealtimeOptions, declare_realtime, start_realtime
 from stillframe.loop.wiring import command_topic, design_model, estimator_inputs
+from stillframe.loop.writer_gate import InputGates
 from stillframe.middleware import api
 from stillframe.middleware.params import Parameter, SetParametersResult, finite_floats
 from stillframe.middleware.taps import TappedPublisher
@@ -113,9 +114,11 @@ class EstimatorNode:
         self.cov_pub = TappedPublisher(node, cov.type_name, cov.name, cov.qos)
         self.out = EstimateMessages()
         self.diagnostics = Diagnostics(node, params.diagnostics_period_s)
+        self.gates = InputGates(node, "command_writer", "sensor_writer")
         for i, spec in enumerate(COMMAND_TOPICS):
             fast_inputs.subscribe(node, spec.type_name, spec.name, params.reader_qos(spec),
-                                  command_reader(i), functools.partial(self.on_command, i))
+                                  command_reader(i), functools.partial(self.on_command, i),
+                                  self.gates.add(spec.name, "command_writer"))
         self.counts = {"estimates": 0, "initialised_from_measurements": 0,
                        "skipped_before_initialisation": 0}
         self.compute = Durations()
@@ -182,7 +185,7 @@ class EstimatorNode:
         }
         for spec in self.inputs:
             fast_inputs.subscribe(self.node, spec.type_name, spec.name, self.params.qos(spec),
-                                  *handlers[spec.name])
+                                  *handlers[spec.name], self.gates.add(spec.name, "sensor_writer"))
 
     def on_sensor(self, channel: int, ns: int, value: float, torque: float) -> None:
         self.input_at = time.monotonic()
@@ -246,14 +249,17 @@ class EstimatorNode:
                   "non_finite": c.non_finite, "missing": c.missing,
                   "rejected": c.rejected + a.counts["stale_messages"]
                   + a.counts["negative_stamps"] + a.counts["future_stamps"],
+                  "refused_writers": self.gates.refused(), **self.gates.values(),
                   **{f"compute_ms_{k}": v for k, v in self.compute.summary().items()}}
         idle_s = 0.0 if self.input_at is None else time.monotonic() - self.input_at
         values["input_age_s"] = idle_s
-        level = WARN if values["rejected"] or a.counts["partial_updates"] else OK
-        message = ""
+        level = WARN if (values["rejected"] or values["refused_writers"]
+                         or a.counts["partial_updates"]) else OK
+        stale = ""
         if idle_s > self.params.stale_input_s:
-            level, message = ERROR, (f"stale input: no sample for {idle_s:.3g} s "
-                                     "(simulator stale or gone)")
+            level, stale = ERROR, (f"stale input: no sample for {idle_s:.3g} s "
+                                   "(simulator stale or gone)")
+        message = "; ".join(m for m in (stale, self.gates.message()) if m)
         self.diagnostics.publish(max(a.last_ns, 0), values, level, message)
 
     def peers_ready(self) -> bool:
