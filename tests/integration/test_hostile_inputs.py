@@ -25,9 +25,11 @@ import pytest
 
 from stillframe.contract import messages, topics
 from stillframe.locations import REPO_ROOT
+from stillframe.loop import writer_gate
 from stillframe.loop.closed_loop import run_closed_loop
 from stillframe.middleware import api
 from stillframe.middleware.api import create_node, spin_until
+from tests.support.hostile_writer import loop_clock
 from tests.support.middleware import child_env, finish
 from tests.support.nodes import (
     SHORT_LQG,
@@ -114,35 +116,41 @@ class Flooded:
     evaluation: dict
     estimator: dict[str, str]
     controller: dict[str, str]
+    sim: dict[str, str]
     reference: object
 
 
-def _flood_run(tmp_path: Path, topic_set: str, flood_s: float, duration: float) -> Flooded:
+def _flood_run(tmp_path: Path, topic_set: str, flood_s: float, duration: float,
+               from_s: float = 1.0) -> Flooded:
     """Lock-step LQG for ``duration`` s of sim time through the three nodes while a real rclpy
     peer and a Cyclone writer of ours each send 5 kHz of hostile samples on ``topic_set``
-    (``own`` or ``unused``, ``tests/support/hostile_writer.py``) for ``flood_s`` s of wall time
-    from t = 1 s on. Fails on any crash (a node not exiting 0)."""
+    (``own``, ``unused`` or ``control``, ``tests/support/hostile_writer.py``) for ``flood_s`` s
+    of wall time from t = ``from_s`` on. The loop's writers are pinned by name, as ``stillframe
+    launch`` pins them; with ``control`` the controller follows ``/clock`` (``use_sim_time``).
+    Fails on any crash (a node not exiting 0)."""
     overrides = [f"duration={duration:g}", "controller.start=3", "evaluation.window=2"]
     result = tmp_path / "result.json"
     params = params_file(tmp_path, "thesis_lqg", overrides, result_file=str(result),
-                         command_writer="controller_node", diagnostics_period_s=0.2,
+                         command_writer="controller_node", sensor_writer="sim_node",
+                         estimate_writer="estimator_node", diagnostics_period_s=0.2,
                          lockstep_timeout_s=2.0)
-    peers = [start_node(name, params) for name in ("estimator_node", "controller_node")]
+    sim_time = ["-p", "use_sim_time:=true"] if topic_set == "control" else []
+    peers = [start_node("estimator_node", params),
+             start_node("controller_node", params, *sim_time)]
 
     def start_writers() -> list:
         return [subprocess.Popen([sys.executable, str(WRITER), backend, "5000", f"{flood_s:g}",
-                                  topic_set, "1"], env=child_env(), cwd=REPO_ROOT,
+                                  topic_set, f"{from_s:g}"], env=child_env(), cwd=REPO_ROOT,
                                  stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
                 for backend in ("rclpy", "dds")]
 
-    # the writers start before the sim and flood from the moment the loop reaches 1 s, so that
+    # the writers start before the sim and flood from the moment the loop reaches from_s, so that
     # a run shorter than a writer's start-up is flooded too
     writers = start_writers()
     sim = start_node("sim_node", params)
     watch = create_node("hostile_probe", argv=["test"])
     clock = [0]
-    watch.create_subscription(topics.CLOCK.type_name, "/clock",
-                              lambda m: clock.__setitem__(0, messages.stamp_ns(m.clock)), "clock")
+    watch.create_subscription(topics.CLOCK.type_name, "/clock", loop_clock(clock), "clock")
     statuses = Statuses(watch)
     try:
         assert all(w.stdout.readline().strip() == "ready" for w in writers)
@@ -153,7 +161,8 @@ def _flood_run(tmp_path: Path, topic_set: str, flood_s: float, duration: float) 
         assert spin_until(watch, lambda: sim.poll() is not None, 300)
         spin_until(watch, lambda: False, 0.5)
     finally:
-        sent = [finish(w, timeout=20)[0].split() for w in writers]
+        # the last line (Fast DDS logs its errors on stdout too)
+        sent = [finish(w, timeout=20)[0].splitlines()[-1].split() for w in writers]
         watch.destroy_node()
         codes = [stop(p) for p in peers]
         if sim.poll() is None:
@@ -169,8 +178,8 @@ def _flood_run(tmp_path: Path, topic_set: str, flood_s: float, duration: float) 
     assert flooded > 0                              # the loop ran during the flood
     with np.load(result.with_suffix(".npz")) as data:
         truth, command = data["truth"], data["command"]
-    est = statuses.latest["/frame/estimator_node"][2]
-    ctl = statuses.latest["/frame/controller_node"][2]
+    est, ctl, sim_status = (statuses.latest[f"/frame/{n}"][2]
+                            for n in ("estimator_node", "controller_node", "sim_node"))
     evaluation = json.loads(result.read_text())
     gate = evaluation["command_gates"]["floor3/force_cmd"]
     print("estimator:", {k: est[k] for k in ("negative_stamps", "future_stamps",
@@ -178,23 +187,53 @@ def _flood_run(tmp_path: Path, topic_set: str, flood_s: float, duration: float) 
                                              "malformed_samples")},
           "controller: rejected_force_stamps", ctl["rejected_force_stamps"],
           "sim, floor3/force_cmd:", {k: v for k, v in gate.items() if k.startswith("rejected")
-                                     and v})
-    return Flooded(truth, command, evaluation, est, ctl,
+                                     and v},
+          "refused by writer:", {n: {k: v for k, v in values.items()
+                                     if "_rejected_" in k and "_writer" in k and v != "0"}
+                                 for n, values in (("estimator", est), ("controller", ctl),
+                                                   ("sim", sim_status))})
+    return Flooded(truth, command, evaluation, est, ctl, sim_status,
                    run_closed_loop(thesis_scene("thesis_lqg", overrides)))
 
 
+def refused(values: dict[str, str], topic: str, reasons: tuple[str, ...]) -> int:
+    """A node's ``/diagnostics`` count of samples on ``topic`` refused for ``reasons``."""
+    key = topic.strip("/").replace("/", "_")
+    return sum(int(values[f"{key}_rejected_{r}"]) for r in reasons)
+
+
+#: per flooded topic set, when the flood starts [s of the loop's time]: on the control path when
+#: the control starts (``controller.start=3``), so that a stray command or estimate taken would
+#: show in the run
+FLOOD_FROM_S = {"unused": 1.0, "control": 3.0}
+#: per flooded topic set: (node, topic, reasons) that must have refused samples
+REFUSED = {
+    "unused": [("sim", "floor3/force_cmd", ("inactive_actuator",))],
+    "control": [("controller", "state_estimate", writer_gate.REASONS),
+                ("controller", "/clock", writer_gate.REASONS),
+                ("sim", "pendulum/torque_cmd", writer_gate.REASONS),
+                ("estimator", "pendulum/torque_cmd", writer_gate.REASONS)],
+}
+
+
 @pytest.mark.slow
-def test_flood_on_topics_the_loop_does_not_read_changes_nothing(ros_domain: int,
-                                                                tmp_path: Path) -> None:
+@pytest.mark.parametrize("topic_set", REFUSED)
+def test_flood_that_the_loop_refuses_changes_nothing(ros_domain: int, tmp_path: Path,
+                                                     topic_set: str) -> None:
     """10 kHz of hostile samples for 2 s (stamps 0, -5 s, +2e9 s; 1 MB and empty frame_id;
-    garbage and truncated CDR on the wire from rclpy) on ``floor3/force_cmd``,
-    ``floor3/load_cell`` and ``unused/imu``, from a real rclpy peer and a Cyclone writer: no
-    crash, the sim rejects and counts every command, and the run equals the one-process loop to
-    the last bit."""
-    got = _flood_run(tmp_path, "unused", 2.0, 8.0)
+    garbage and truncated CDR on the wire from rclpy), from a real rclpy peer and a Cyclone
+    writer, on topics the loop does not read (``floor3/force_cmd``, ``floor3/load_cell``,
+    ``unused/imu``) or on its control path and time from writers not the loop's
+    (``state_estimate``, ``/clock``, ``pendulum/torque_cmd``, also stamped with the loop's own
+    ``/clock``): no crash, each node that reads a flooded topic refuses and counts its samples,
+    and the run equals the one-process loop to the last bit."""
+    got = _flood_run(tmp_path, topic_set, 2.0, 8.0, FLOOD_FROM_S[topic_set])
     np.testing.assert_array_equal(got.truth, got.reference.truth)
     np.testing.assert_array_equal(got.command, got.reference.command)
-    assert got.evaluation["command_gates"]["floor3/force_cmd"]["rejected_inactive_actuator"] > 0
+    assert got.evaluation["lockstep_timeouts"] == 0
+    nodes = {"estimator": got.estimator, "controller": got.controller, "sim": got.sim}
+    for node, topic, reasons in REFUSED[topic_set]:
+        assert refused(nodes[node], topic, reasons) > 0, (node, topic)
     assert got.estimator["stale_messages"] == got.estimator["future_stamps"] == "0"
 
 
