@@ -139,7 +139,8 @@ class ControllerNode:
             fast_inputs.subscribe(self.node, est.type_name, est.name, self.params.reader_qos(est),
                                   state_reader(), self.on_estimate,
                                   self.gates.add(est.name, "estimate_writer"))
-        fast_inputs.subscribe(self.node, wrench.type_name, wrench.name, self.params.qos(wrench),
+        fast_inputs.subscribe(self.node, wrench.type_name, wrench.name,
+                              self.params.reader_qos(wrench),
                               wrench_reader("floor1", "wrench.force.x"), self.on_force,
                               self.gates.add(wrench.name, "sensor_writer"))
         if self.sim_time:       # the watchdog follows the simulator's /clock (module docstring)

@@ -184,7 +184,8 @@ class EstimatorNode:
                for channel, spec in enumerate(SENSOR_TOPICS)},
         }
         for spec in self.inputs:
-            fast_inputs.subscribe(self.node, spec.type_name, spec.name, self.params.qos(spec),
+            fast_inputs.subscribe(self.node, spec.type_name, spec.name,
+                                  self.params.reader_qos(spec),
                                   *handlers[spec.name], self.gates.add(spec.name, "sensor_writer"))
 
     def on_sensor(self, channel: int, ns: int, value: float, torque: float) -> None:

@@ -20,7 +20,6 @@ import os
 import signal
 import sys
 import time
-from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -45,15 +44,21 @@ BIG = "x" * 1_000_000
 HOSTILE_NS = {sec * 1_000_000_000 + nsec for sec, nsec in STAMPS}
 
 
-def loop_clock(clock: list[int]) -> Callable[[Any], None]:
-    """A ``/clock`` callback that keeps the loop's time in ``clock[0]`` (skipping the hostile
-    writers' stamps, when ``/clock`` is flooded)."""
+def follow_loop_clock(node: Any) -> list[int]:
+    """Subscribe ``/clock`` on ``node``; the loop's time is kept in the list's element (a
+    reader deep enough for a flooded ``/clock``, the hostile writers' stamps skipped)."""
+    from stillframe.middleware.qos import QoSProfile, Reliability
+
+    clock = [0]
+
     def on_clock(msg: Any) -> None:
         ns = msg.clock.sec * 1_000_000_000 + msg.clock.nanosec
         if ns not in HOSTILE_NS:
             clock[0] = ns
 
-    return on_clock
+    node.create_subscription("rosgraph_msgs/msg/Clock", "/clock", on_clock,
+                             QoSProfile(depth=1000, reliability=Reliability.BEST_EFFORT))
+    return clock
 
 
 def hostile(messages: Any, topic: str, i: int, clock_ns: int) -> Any:
@@ -90,8 +95,7 @@ def main() -> None:
     stop: list[int] = []
     signal.signal(signal.SIGTERM, lambda *_: stop.append(1))
     sent = garbage_sent = garbage_refused = i = 0
-    clock = [0]
-    node.create_subscription("rosgraph_msgs/msg/Clock", "/clock", loop_clock(clock), "clock")
+    clock = follow_loop_clock(node)
     # the loop's readers matched (the flood reaches them) and, with AFTER_CLOCK_S, the loop that
     # far (it runs meanwhile, however fast the machine)
     after_ns = round(float(sys.argv[5]) * 1e9) if len(sys.argv) > 5 else 0
