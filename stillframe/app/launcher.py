@@ -320,17 +320,14 @@ class Launcher:
     def commands(self) -> list[tuple[str, list[str]]]:
         """(name, argv) of each child, in start order."""
         o = self.options
-        sim_params: dict[str, Any] = {"result_file": str(o.result_file.resolve())}
+        sim_params: dict[str, Any] = {"result_file": str(o.result_file.resolve()),
+                                      "command_writer": "controller_node"}
         if o.record_dir is not None and o.mode == "lockstep":
             sim_params["await_recorder"] = [
                 names.resolve_topic(t) for t in o.record_topics] or ["*"]
-        # every loop node: the estimator's and controller's lock-step waits are parts of it;
-        # each input taken from the writers of the loop's node that publishes it
-        # (docs/reliability.md, writer identity)
-        shared: dict[str, Any] = {"command_writer": "controller_node",
-                                  "sensor_writer": "sim_node", "estimate_writer": "estimator_node"}
-        if o.lockstep_timeout_s is not None:
-            shared["lockstep_timeout_s"] = float(o.lockstep_timeout_s)
+        # every loop node: the estimator's and controller's lock-step waits are parts of it
+        shared = ({} if o.lockstep_timeout_s is None
+                  else {"lockstep_timeout_s": float(o.lockstep_timeout_s)})
         scene = o.scene.resolve()
         children = []
         if o.record_dir is not None:
