@@ -21,6 +21,12 @@ supervisor's zero command stamped with that time, once per sample time, and coun
 time rather than wall time: in lock-step the simulator then applies the zero command instead of
 timing out, and it needs no ``/clock``.
 
+Inputs are taken from one writer node per topic (:class:`stillframe.loop.writer_gate.WriterGate`):
+``state_estimate`` from the node ``estimate_writer`` names, the load cell and (with
+``use_sim_time``, read by the node itself for its watchdog) ``/clock`` from ``sensor_writer``'s
+("": the first writer seen); other writers' samples are refused, counted per topic and reason
+and named in ``/diagnostics``.
+
 When the loop's time goes back (a restarted simulator: an estimate stamped before the last one,
 with a load-cell reading of that stamp; :mod:`stillframe.loop.matching`) the watchdog is disarmed
 until the next estimate, and counted (``time_jumps``). With no load-cell reading for

@@ -36,6 +36,12 @@ a crash) starts a Kalman filter's mean from that sample's measurements
 state,
 at the first sample that carries all four measurements (earlier ones are skipped and counted).
 
+Every input is taken from one writer node per topic
+(:class:`stillframe.loop.writer_gate.WriterGate`): the sensors (and ``state_truth``) from the node
+the ``sensor_writer`` parameter names, the commands from ``command_writer``'s ("": the first
+writer seen); other writers' samples are refused before they are decoded, counted per topic and
+reason and named in ``/diagnostics``.
+
 Negative stamps are rejected and counted (``negative_stamps``). Messages not newer than the last
 stamp used (``stale_messages``) or more than a second after it (``future_stamps``) are counted
 and held apart; if every input of such a stamp arrives, the loop's time jumped (a simulator
