@@ -4,6 +4,10 @@
   1 MB ``frame_id`` on the topics this loop does not use (``floor3/force_cmd``,
   ``floor3/load_cell``: LQG drives the pendulum torque): the sim refuses them by reason
   (``inactive_actuator``), the estimator ignores them;
+- a 10 kHz flood from a real rclpy peer and a Cyclone writer on topics the loop does not read,
+  on its own sensor topics, and on its control path and time (``state_estimate``, ``/clock``,
+  ``pendulum/torque_cmd``): every node that reads a flooded topic refuses the samples by writer
+  (or, for the inactive actuator, by reason) and counts them;
 
 and the run equals the undisturbed one-process loop to the last bit. Truncated and garbage CDR
 are dropped and counted by the delivery path every subscription uses (``malformed_samples`` in
