@@ -21,6 +21,12 @@ supervisor's zero command stamped with that time, once per sample time, and coun
 time rather than wall time: in lock-step the simulator then applies the zero command instead of
 timing out, and it needs no ``/clock``.
 
+Inputs are taken from one writer node per topic (:class:`stillframe.loop.writer_gate.WriterGate`):
+``state_estimate`` from the node ``estimate_writer`` names, the load cell and (with
+``use_sim_time``, read by the node itself for its watchdog) ``/clock`` from ``sensor_writer``'s
+("": the first writer seen); other writers' samples are refused, counted per topic and reason
+and named in ``/diagnostics``.
+
 When the loop's time goes back (a restarted simulator: an estimate stamped before the last one,
 with a load-cell reading of that stamp; :mod:`stillframe.loop.matching`) the watchdog is disarmed
 until the next estimate, and counted (``time_jumps``). With no load-cell reading for
@@ -40,6 +46,7 @@ from stillframe.contract.codecs import (
     COMMAND_TOPICS,
     CommandMessage,
     SampleGrid,
+    clock_reader,
     state_reader,
     wrench_reader,
 )
@@ -66,6 +73,7 @@ from stillframe.loop.node_support import (
 from stillframe.loop.realtime import Realtime, RealtimeOptions, declare_realtime, start_realtime
 from stillframe.loop.watchdog import EstimateWatchdog
 from stillframe.loop.wiring import design_model
+from stillframe.loop.writer_gate import InputGates
 from stillframe.middleware import api
 from stillframe.middleware.params import Parameter, SetParametersResult, finite_floats
 from stillframe.middleware.taps import TappedPublisher
@@ -89,6 +97,8 @@ class ControllerNode:
         self.out = CommandMessage(self.controller.actuator)
         self.diagnostics = Diagnostics(node, params.diagnostics_period_s)
         self.sim_time = bool(node.get_parameter("use_sim_time").value)
+        self.clock_ns = 0                   # the newest /clock of the simulator (sim time)
+        self.gates = InputGates(node, "estimate_writer", "sensor_writer")
         self.matching = ForceMatching(round(params.lockstep_timeout_s / 4 * 1e9), params.lockstep)
         self.watchdog = EstimateWatchdog(self.controller, self.grid)
         self.last_command = Command(0.0)
@@ -127,15 +137,25 @@ class ControllerNode:
         return SetParametersResult(True)
 
     def subscribe_inputs(self) -> None:
-        est, wrench = topics.STATE_ESTIMATE, topics.EXCITATION_WRENCH
+        est, wrench, clock = topics.STATE_ESTIMATE, topics.EXCITATION_WRENCH, topics.CLOCK
         fast_inputs.subscribe(self.node, est.type_name, est.name, self.params.reader_qos(est),
-                              state_reader(), self.on_estimate)
-        fast_inputs.subscribe(self.node, wrench.type_name, wrench.name, self.params.qos(wrench),
-                              wrench_reader("floor1", "wrench.force.x"), self.on_force)
+                              state_reader(), self.on_estimate,
+                              self.gates.add(est.name, "estimate_writer"))
+        fast_inputs.subscribe(self.node, wrench.type_name, wrench.name,
+                              self.params.reader_qos(wrench),
+                              wrench_reader("floor1", "wrench.force.x"), self.on_force,
+                              self.gates.add(wrench.name, "sensor_writer"))
+        if self.sim_time:       # the watchdog follows the simulator's /clock (module docstring)
+            fast_inputs.subscribe(self.node, clock.type_name, clock.name, clock.qos,
+                                  clock_reader(), self.on_clock,
+                                  self.gates.add(clock.name, "sensor_writer"))
 
     def on_force(self, ns: int, force: float) -> None:
         self.input_at = time.monotonic()
         self.matching.add_force(ns, force)
+
+    def on_clock(self, ns: int) -> None:
+        self.clock_ns = ns
 
     def on_estimate(self, ns: int, physical: np.ndarray) -> None:
         self.matching.add_estimate(ns, physical, time.monotonic_ns())
@@ -166,7 +186,7 @@ class ControllerNode:
         ``use_sim_time``) when the estimates are stale (module docstring)."""
         ns = self.matching.sample_ns
         if self.sim_time:
-            ns = max(ns, self.node.get_clock().now().nanoseconds)
+            ns = max(ns, self.clock_ns)
         t = self.watchdog.due(ns, self.matching.waiting)
         if t is None:
             return
@@ -185,6 +205,7 @@ class ControllerNode:
                   "enabled": cmd.enabled,
                   "last_command": float(cmd.vector[self.controller.actuator]),
                   **self.matching.counts,
+                  "refused_writers": self.gates.refused(), **self.gates.values(),
                   **{f"compute_ms_{k}": v for k, v in self.compute.recent().items()}}
         problems = [text for flag, text in (
             (cmd.watchdog, f"watchdog: no fresh estimate for {self.controller.watchdog_periods} "
@@ -192,13 +213,15 @@ class ControllerNode:
             (c.runaway, f"control law output non-finite or beyond {RUNAWAY_FACTOR:g}x the "
                         f"limit {c.runaway} times"),
         ) if flag]
+        if intruders := self.gates.message():
+            problems.append(intruders)
         idle_s = 0.0 if self.input_at is None else time.monotonic() - self.input_at
         values["input_age_s"] = idle_s
         if idle_s > self.params.stale_input_s:
             problems.append(f"stale input: no load-cell reading for {idle_s:.3g} s "
                             "(simulator stale or gone)")
         level = ERROR if cmd.watchdog or idle_s > self.params.stale_input_s else (
-            WARN if problems else OK)
+            WARN if problems or values["refused_writers"] else OK)
         self.diagnostics.publish(max(self.matching.last_ns, 0), values, level, "; ".join(problems))
 
     def peers_ready(self) -> bool:

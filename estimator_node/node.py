@@ -36,6 +36,12 @@ a crash) starts a Kalman filter's mean from that sample's measurements
 state,
 at the first sample that carries all four measurements (earlier ones are skipped and counted).
 
+Every input is taken from one writer node per topic
+(:class:`stillframe.loop.writer_gate.WriterGate`): the sensors (and ``state_truth``) from the node
+the ``sensor_writer`` parameter names, the commands from ``command_writer``'s ("": the first
+writer seen); other writers' samples are refused before they are decoded, counted per topic and
+reason and named in ``/diagnostics``.
+
 Negative stamps are rejected and counted (``negative_stamps``). Messages not newer than the last
 stamp used (``stale_messages``) or more than a second after it (``future_stamps``) are counted
 and held apart; if every input of such a stamp arrives, the loop's time jumped (a simulator
@@ -89,6 +95,7 @@ from stillframe.loop.node_support import (
 )
 from stillframe.loop.realtime import Realtime, RealtimeOptions, declare_realtime, start_realtime
 from stillframe.loop.wiring import command_topic, design_model, estimator_inputs
+from stillframe.loop.writer_gate import InputGates
 from stillframe.middleware import api
 from stillframe.middleware.params import Parameter, SetParametersResult, finite_floats
 from stillframe.middleware.taps import TappedPublisher
@@ -113,9 +120,11 @@ class EstimatorNode:
         self.cov_pub = TappedPublisher(node, cov.type_name, cov.name, cov.qos)
         self.out = EstimateMessages()
         self.diagnostics = Diagnostics(node, params.diagnostics_period_s)
+        self.gates = InputGates(node, "command_writer", "sensor_writer")
         for i, spec in enumerate(COMMAND_TOPICS):
             fast_inputs.subscribe(node, spec.type_name, spec.name, params.reader_qos(spec),
-                                  command_reader(i), functools.partial(self.on_command, i))
+                                  command_reader(i), functools.partial(self.on_command, i),
+                                  self.gates.add(spec.name, "command_writer"))
         self.counts = {"estimates": 0, "initialised_from_measurements": 0,
                        "skipped_before_initialisation": 0}
         self.compute = Durations()
@@ -178,8 +187,9 @@ class EstimatorNode:
                for channel, spec in enumerate(SENSOR_TOPICS)},
         }
         for spec in self.inputs:
-            fast_inputs.subscribe(self.node, spec.type_name, spec.name, self.params.qos(spec),
-                                  *handlers[spec.name])
+            fast_inputs.subscribe(self.node, spec.type_name, spec.name,
+                                  self.params.reader_qos(spec),
+                                  *handlers[spec.name], self.gates.add(spec.name, "sensor_writer"))
 
     def on_sensor(self, channel: int, ns: int, value: float, torque: float) -> None:
         self.input_at = time.monotonic()
@@ -244,14 +254,17 @@ class EstimatorNode:
                   "non_finite": c.non_finite, "missing": c.missing,
                   "rejected": c.rejected + a.counts["stale_messages"]
                   + a.counts["negative_stamps"] + a.counts["future_stamps"],
+                  "refused_writers": self.gates.refused(), **self.gates.values(),
                   **{f"compute_ms_{k}": v for k, v in self.compute.recent().items()}}
         idle_s = 0.0 if self.input_at is None else time.monotonic() - self.input_at
         values["input_age_s"] = idle_s
-        level = WARN if values["rejected"] or a.counts["partial_updates"] else OK
-        message = ""
+        level = WARN if (values["rejected"] or values["refused_writers"]
+                         or a.counts["partial_updates"]) else OK
+        stale = ""
         if idle_s > self.params.stale_input_s:
-            level, message = ERROR, (f"stale input: no sample for {idle_s:.3g} s "
-                                     "(simulator stale or gone)")
+            level, stale = ERROR, (f"stale input: no sample for {idle_s:.3g} s "
+                                   "(simulator stale or gone)")
+        message = "; ".join(m for m in (stale, self.gates.message()) if m)
         self.diagnostics.publish(max(a.last_ns, 0), values, level, message)
 
     def peers_ready(self) -> bool:

@@ -18,9 +18,9 @@ With ``actuators.delay_periods`` = d ≥ 1 the command stamped t_k is applied fr
 for it, and a command not in when its period starts is the deadline miss; the safe state below
 counts its periods from t_k+d.
 
-Commands pass a :class:`stillframe.plant.command_gate.CommandGate` per topic: only one writer (by
-its
-writer GID; the first seen, or the node named by the ``command_writer`` parameter) may command,
+Commands pass a :class:`stillframe.loop.command_gate.CommandGate` per topic: only one node's
+writers (by their writer GIDs; the first seen, or the node named by the ``command_writer``
+parameter) may command,
 a second writer is reported in ``/diagnostics`` and ignored, and non-finite values, values beyond
 the actuator's limit and stamps from the future or before the held command are rejected and
 counted by reason.
@@ -61,6 +61,7 @@ from stillframe.contract.codecs import (
 from stillframe.contract.signals import Sample, actuator_of
 from stillframe.errors import InputError
 from stillframe.loop.closed_loop import LoopHistory, evaluate
+from stillframe.loop.command_gate import CommandGate
 from stillframe.loop.node_support import (
     ERROR,
     OK,
@@ -79,12 +80,12 @@ from stillframe.loop.pacing import Pacer, wait_until
 from stillframe.loop.realtime import Realtime, RealtimeOptions, declare_realtime, start_realtime
 from stillframe.loop.watchdog import MissRateGuard, command_expired
 from stillframe.loop.wiring import command_topic, estimator_inputs
+from stillframe.loop.writer_gate import InputGates
 from stillframe.middleware import api
 from stillframe.middleware.clock import ClockPublisher
 from stillframe.middleware.names import is_hidden
 from stillframe.middleware.taps import TappedPublisher
 from stillframe.plant.actuation_delay import ActuationDelay
-from stillframe.plant.command_gate import CommandGate
 from stillframe.plant.frame_plant import make_plant
 
 LOOP_NODES = ("sim_node", "estimator_node", "controller_node")
@@ -94,7 +95,7 @@ class SimNode:
     """The plant, its publishers and the command subscriptions of one node."""
 
     def __init__(self, node: api.Node, params: LoopParameters, discovery_timeout_s: float,
-                 await_recorder: list[str] | None = None, command_writer: str = "",
+                 await_recorder: list[str] | None = None,
                  command_timeout_periods: int = 3, command_miss_limit: float = 0.25) -> None:
         self.node = node
         self.command_timeout_periods = command_timeout_periods
@@ -112,7 +113,8 @@ class SimNode:
         self.messages = SensorMessages(scene.sensors)
         self.diagnostics = Diagnostics(node, params.diagnostics_period_s)
         limits = (scene.actuators.torque_limit, scene.actuators.force_limit)
-        self.gates = [CommandGate(limit, command_writer, functools.partial(self.writers, spec.name),
+        self.inputs = InputGates(node, "command_writer")
+        self.gates = [CommandGate(limit, self.inputs.add(spec.name, "command_writer"),
                                   active=i == self.active)
                       for i, (limit, spec) in enumerate(zip(limits, COMMAND_TOPICS, strict=True))]
         self.readers = [command_reader(i) for i in range(len(COMMAND_TOPICS))]
@@ -142,20 +144,18 @@ class SimNode:
         self.result_file = ""
         node.add_on_set_parameters_callback(check_settable)   # nothing changes while it runs
 
-    def writers(self, topic: str) -> list[tuple[bytes, str]]:
-        """(GID, node) of every writer of ``topic`` in the graph."""
-        return [(ep.endpoint_gid, f"{ep.node_namespace.rstrip('/')}/{ep.node_name}")
-                for ep in self.node.get_publishers_info_by_topic(topic)]
-
     def on_command(self, actuator: int, cdr: bytes, info: api.MessageInfo) -> None:
         """Take a command its topic's gate lets through (module docstring); count the others."""
+        gate = self.gates[actuator]
+        if not gate.admits(info.publisher_gid):
+            self.counts["rejected_commands"] += 1
+            return
         read = self.readers[actuator].read(cdr)
         if read is None:
             api.MALFORMED[COMMAND_TOPICS[actuator].name] += 1
             return
         ns, value = read
-        if not self.gates[actuator].check(value, ns, info.publisher_gid, self.now_ns,
-                                          self.command_ns[actuator]):
+        if not gate.check(value, ns, self.now_ns, self.command_ns[actuator]):
             self.counts["rejected_commands"] += 1
             return
         if (actuator == self.active and ns in self.published_at
@@ -256,17 +256,10 @@ class SimNode:
             "saturated_commands": self.plant.actuators.limited,
         }
         for gate, spec in zip(self.gates, COMMAND_TOPICS, strict=True):
-            prefix = spec.name.rsplit("/", 1)[-1]
+            prefix = spec.name.replace("/", "_")
             values.update({f"{prefix}_{key}": value for key, value in gate.report().items()})
         bad = sum(self.pacer.counts.values()) + sum(self.counts.values())
         return values, ERROR if self.guard.tripped else WARN if bad else OK
-
-    def intruder_message(self) -> str:
-        """Which second writers are being ignored, for the status message."""
-        return "; ".join(f"second writer on {spec.name} ignored: "
-                         f"{', '.join(gate.ignored())}"
-                         for gate, spec in zip(self.gates, COMMAND_TOPICS, strict=True)
-                         if gate.intruders)
 
     def degraded_message(self) -> str:
         g = self.guard
@@ -275,7 +268,7 @@ class SimNode:
 
     def publish_status(self) -> None:
         values, level = self.status()
-        message = "; ".join(m for m in (self.degraded_message(), self.intruder_message()) if m)
+        message = "; ".join(m for m in (self.degraded_message(), self.inputs.message()) if m)
         self.diagnostics.publish(self.now_ns, values, level, message)
 
     def step(self, k: int) -> np.ndarray | None:
@@ -377,8 +370,6 @@ def build(node: api.Node) -> SimNode:
         raise InputError(f"parameter 'discovery_timeout_s': must be >= 0, got {discovery}")
     # topics the launch's recorder must subscribe before lock-step starts ("*": all)
     await_recorder = node.declare_parameter("await_recorder", [""], read_only=True).value
-    # the node allowed to command ("" : the first writer seen), e.g. "controller_node"
-    writer = node.declare_parameter("command_writer", "", read_only=True).value
     timeout = node.declare_parameter("command_timeout_periods", 3, read_only=True).value
     if not (isinstance(timeout, int) and timeout >= 1):
         raise InputError(f"parameter 'command_timeout_periods': must be an integer >= 1, "
@@ -388,8 +379,7 @@ def build(node: api.Node) -> SimNode:
         raise InputError(f"parameter 'command_miss_limit': must be a float in [0, 1), "
                          f"got {miss_limit!r}")
     rt = declare_realtime(node)
-    sim = SimNode(node, params, float(discovery), list(await_recorder), str(writer), timeout,
-                  miss_limit)
+    sim = SimNode(node, params, float(discovery), list(await_recorder), timeout, miss_limit)
     sim.result_file = str(result)
     sim.rt = start_realtime(node, rt)
     return sim

@@ -313,3 +313,12 @@ def command_reader(actuator: int) -> TopicReader:
 
     out = CommandMessage(actuator)
     return TopicReader(out.msg, (*STAMP, out.field), _stamped, from_msg)
+
+
+def clock_reader() -> TopicReader:
+    """(sim time ns,) of ``/clock``."""
+    def from_msg(msg: Any) -> tuple[Any, ...]:
+        return (messages.stamp_ns(msg.clock),)
+
+    return TopicReader(messages.new(topics.CLOCK.type_name), ("clock.sec", "clock.nanosec"),
+                       _stamped, from_msg)

@@ -1,9 +1,11 @@
 """Subscriptions of the loop nodes that read their values straight from the CDR bytes.
 
-The hot path of the estimator, controller and simulator: a raw subscription hands the bytes to a
-:class:`stillframe.contract.codecs.TopicReader` (a few fields unpacked in place when the layout is
-the stack's own, ``rosbags`` otherwise), and the handler gets the values; bytes that are no valid
-message are counted in ``api.MALFORMED``, as the decoding subscriptions count them.
+The hot path of the estimator and the controller: a raw subscription checks the sample's writer
+against the topic's :class:`stillframe.loop.writer_gate.WriterGate` (a set lookup), hands the
+bytes to a :class:`stillframe.contract.codecs.TopicReader` (a few fields unpacked in place when
+the layout is the stack's own, ``rosbags`` otherwise), and the handler gets the values; bytes
+that are no valid message are counted in ``api.MALFORMED``, as the decoding subscriptions count
+them.
 """
 
 from __future__ import annotations
@@ -12,14 +14,19 @@ from collections.abc import Callable
 from typing import Any
 
 from stillframe.contract.codecs import TopicReader
+from stillframe.loop.writer_gate import WriterGate
 from stillframe.middleware import api
 
 
-def reading(topic: str, reader: TopicReader, handler: Callable[..., None]) -> Callable[..., None]:
-    """A raw subscription callback: ``handler(*reader.read(cdr))``."""
-    read = reader.read
+def reading(topic: str, reader: TopicReader, handler: Callable[..., None],
+            gate: WriterGate) -> Callable[..., None]:
+    """A raw subscription callback: ``handler(*reader.read(cdr))`` for the samples ``gate``
+    admits."""
+    read, admits = reader.read, gate.admits
 
-    def callback(cdr: bytes, info: Any) -> None:
+    def callback(cdr: bytes, info: api.MessageInfo) -> None:
+        if not admits(info.publisher_gid):
+            return
         values = read(cdr)
         if values is None:
             api.MALFORMED[topic] += 1
@@ -30,7 +37,8 @@ def reading(topic: str, reader: TopicReader, handler: Callable[..., None]) -> Ca
 
 
 def subscribe(node: api.Node, type_name: str, topic: str, qos: Any, reader: TopicReader,
-              handler: Callable[..., None]) -> Any:
-    """Subscribe ``topic`` raw, handing ``reader``'s values to ``handler``."""
-    return node.create_subscription(type_name, topic, reading(topic, reader, handler), qos,
+              handler: Callable[..., None], gate: WriterGate) -> Any:
+    """Subscribe ``topic`` raw, handing ``reader``'s values from the writers ``gate`` admits
+    to ``handler``."""
+    return node.create_subscription(type_name, topic, reading(topic, reader, handler, gate), qos,
                                     raw=True)

@@ -35,6 +35,11 @@ CONTROL_PATH = (topics.STATE_ESTIMATE, topics.TORQUE_CMD, topics.FORCE_CMD)
 #: After the peers are matched, spin this long so that the other side of every match (the
 #: remote writer's view) has caught up before the first sample (docs/nodes.md, start-up).
 SETTLE_S = 0.25
+#: How many samples the loop's own lock-step readers keep (KEEP_LAST): a flood from a stray
+#: writer (refused by writer, stillframe/loop/writer_gate.py) must not push the loop's own
+#: sample, estimate or command out of the queue before it is read; 1000 samples are 0.1 s of a
+#: 10 kHz flood.
+FLOOD_DEPTH = 1000
 #: the node name of ``stillframe record`` (it subscribes every topic at once)
 RECORDER_NODE = "stillframe_recorder"
 #: names an endpoint's node has before its node is known: ours, and rclpy's graph cache
@@ -85,8 +90,9 @@ class LoopParameters:
         return spec.qos
 
     def reader_qos(self, spec: topics.TopicSpec) -> QoSProfile | str:
-        """What the loop's own readers ask for: :meth:`qos`, except that in real time the
-        control path (:data:`CONTROL_PATH`: estimates and commands) is read BEST_EFFORT.
+        """What the loop's own readers ask for: :meth:`qos`, read :data:`FLOOD_DEPTH` deep in
+        lock-step, and in real time with the control path (:data:`CONTROL_PATH`: estimates and
+        commands) read BEST_EFFORT.
 
         The writers stay RELIABLE as the contract says (a recorder or a viewer still gets every
         sample), but a real-time loop has no use for a sample that comes late: a reliable reader
@@ -95,9 +101,11 @@ class LoopParameters:
         ms), and the loop then acts on old data. Read best effort, a lost estimate or command is
         one missed period: the simulator holds the last command (its command timeout brings the
         safe state), the controller answers the next estimate (docs/reliability.md)."""
-        if not self.lockstep and spec in CONTROL_PATH:
+        if self.lockstep:
+            return as_profile(self.qos(spec)).with_depth(FLOOD_DEPTH)
+        if spec in CONTROL_PATH:
             return replace(as_profile(spec.qos), reliability=Reliability.BEST_EFFORT)
-        return self.qos(spec)
+        return spec.qos
 
 
 def _overrides(value: Any) -> list[str]:

@@ -13,7 +13,11 @@ The loop is frozen (SIGSTOP on the sim) while the estimator restarts, so that th
 before it is back however fast the machine is.
 
 4. the sim is killed: the estimator and controller idle and report stale input; a new sim (at
-   t = 0 again) is taken as a restart and the loop resumes at once.
+   t = 0 again) is taken as a restart and the loop resumes at once. The estimator and controller
+   take their inputs from the writers of the nodes named (``sensor_writer:=sim_node``,
+   ``estimate_writer:=estimator_node``): the new sim's writers (new GIDs) are taken, none
+   refused. (Steps 1-3 take them from the first writer seen: the controller takes the restarted
+   estimator's, so control resumes.)
 """
 
 from __future__ import annotations
@@ -170,7 +174,8 @@ def test_sim_killed_loop_idles_reports_stale_input_and_resumes_with_a_new_sim(
     (tmp_path / "a").mkdir()
     (tmp_path / "b").mkdir()
     first = params_file(tmp_path / "a", "thesis_lqg", OVERRIDES, lockstep_timeout_s=0.2,
-                        diagnostics_period_s=0.05)
+                        diagnostics_period_s=0.05, sensor_writer="sim_node",
+                        estimate_writer="estimator_node")
     short = ["duration=4", "controller.start=1", "evaluation.window=1"]
     result = tmp_path / "b" / "result.json"
     second = params_file(tmp_path / "b", "thesis_lqg", short, lockstep_timeout_s=0.2,
@@ -204,6 +209,10 @@ def test_sim_killed_loop_idles_reports_stale_input_and_resumes_with_a_new_sim(
     estimator_values = statuses.latest["/frame/estimator_node"][2]
     controller_values = statuses.latest["/frame/controller_node"][2]
     assert estimator_values["time_jumps"] == "1" and controller_values["time_jumps"] == "1"
+    # the new sim's writers taken by the name pinned, none refused
+    assert estimator_values["refused_writers"] == controller_values["refused_writers"] == "0"
+    assert estimator_values["floor1_imu_writer"] == "/frame/sim_node"
+    assert controller_values["excitation_wrench_writer"] == "/frame/sim_node"
     with np.load(result.with_suffix(".npz")) as data:
         hist = dict(data)
     reference = run_closed_loop(thesis_scene("thesis_lqg", short))

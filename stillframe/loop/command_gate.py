@@ -1,0 +1,72 @@
+"""Command-path integrity: which actuator commands the simulator takes (issue 11, item 4).
+
+One :class:`CommandGate` per command topic. A command is taken only from *the* command writer:
+the writers of one node, decided by a :class:`stillframe.loop.writer_gate.WriterGate` (the first
+writer seen, or the node ``command_writer`` names; any other writer is reported and its samples
+are ignored). Commands from the command writer are rejected, and counted by reason, when their
+value is not finite or beyond the actuator's limit (:data:`HARD_LIMIT` without one), or their
+stamp lies in the future of the current sample or before the command already held; commands for
+an actuator the scene's controller does not drive are refused.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import Counter
+from dataclasses import dataclass, field
+
+from stillframe.loop import writer_gate
+from stillframe.loop.writer_gate import WriterGate
+
+#: reasons a command is rejected, in the order they are checked
+REASONS = ("inactive_actuator", *writer_gate.REASONS, "non_finite", "beyond_limit",
+           "future_stamp", "past_stamp")
+
+#: the bound on a command when the actuator has no limit (N m or N; far beyond any rig's
+#: actuator, it keeps values like 1e308 from reaching the integrator)
+HARD_LIMIT = 1e6
+
+
+@dataclass
+class CommandGate:
+    """The accept/reject decision for one command topic.
+
+    ``limit``: the actuator's saturation (None: :data:`HARD_LIMIT`); ``writer``: the topic's
+    writer gate; ``active``: whether the scene's controller drives this actuator (commands for
+    the other one are refused).
+    """
+
+    limit: float | None
+    writer: WriterGate
+    active: bool = True
+    rejected: Counter = field(default_factory=Counter)
+
+    def admits(self, gid: bytes) -> bool:
+        """Whether writer ``gid`` may command this actuator (checked before the sample is
+        decoded); counts the reason if not (the writer's reasons in the writer gate)."""
+        if self.active:
+            return self.writer.admits(gid)
+        self.rejected["inactive_actuator"] += 1
+        return False
+
+    def check(self, value: float, stamp_ns: int, now_ns: int, held_ns: int) -> bool:
+        """Whether the command ``value`` stamped ``stamp_ns`` (from an admitted writer) is taken
+        at sample ``now_ns`` with the command stamped ``held_ns`` held; counts the reason if
+        not."""
+        if not math.isfinite(value):
+            reason = "non_finite"
+        elif abs(value) > (HARD_LIMIT if self.limit is None else self.limit):
+            reason = "beyond_limit"
+        elif stamp_ns > now_ns:
+            reason = "future_stamp"
+        elif stamp_ns < held_ns:
+            reason = "past_stamp"
+        else:
+            return True
+        self.rejected[reason] += 1
+        return False
+
+    def report(self) -> dict[str, object]:
+        """For ``/diagnostics``: the writer taken, the writers ignored, rejections by reason."""
+        own = {f"rejected_{r}": self.rejected[r] for r in REASONS if r not in writer_gate.REASONS}
+        return {**self.writer.report(), **own}

@@ -1,0 +1,89 @@
+"""Writer identity on an input topic (:mod:`stillframe.loop.writer_gate`), on a hand-made graph
+and clock: one node's writers taken, others refused and counted by reason, restarts taken, and
+the graph asked only for writers not decided yet."""
+
+from __future__ import annotations
+
+from stillframe.loop.writer_gate import RECHECK_NS, WriterGate
+
+SIM, SIM2, STRAY, STRAY2 = b"a" * 16, b"b" * 16, b"s" * 16, b"t" * 16
+
+
+class Graph:
+    """The topic's writers, a clock, and how often the gate asked the graph."""
+
+    def __init__(self, *writers: tuple[bytes, str]) -> None:
+        self.writers = list(writers)
+        self.asked = 0
+        self.now = 0
+
+    def __call__(self) -> list[tuple[bytes, str]]:
+        self.asked += 1
+        return list(self.writers)
+
+    def gate(self, pinned: str = "") -> WriterGate:
+        return WriterGate(pinned, self, clock=lambda: self.now)
+
+
+def test_first_writer_seen_is_taken_others_refused_without_asking_again() -> None:
+    graph = Graph((SIM, "/frame/sim_node"), (STRAY, "/frame/stray"))
+    gate = graph.gate()
+    assert gate.admits(SIM) and not gate.admits(STRAY)
+    asked = graph.asked
+    assert all(gate.admits(SIM) for _ in range(100))            # a set lookup
+    assert not any(gate.admits(STRAY) for _ in range(100))
+    assert graph.asked == asked
+    assert dict(gate.rejected) == {"second_writer": 101}
+    report = gate.report()
+    assert report["writer"] == "/frame/sim_node" and report["ignored_writers"] == "/frame/stray"
+
+
+def test_a_restarted_node_is_taken_by_its_name_the_stray_still_refused() -> None:
+    for pinned in ("", "sim_node"):
+        graph = Graph((SIM, "/frame/sim_node"), (STRAY, "/frame/stray"))
+        gate = graph.gate(pinned)
+        assert gate.admits(SIM) and not gate.admits(STRAY)
+        graph.writers = [(SIM, "/frame/sim_node"), (SIM2, "/frame/sim_node"),
+                         (STRAY, "/frame/stray")]           # the old one not gone yet
+        assert gate.admits(SIM2) and not gate.admits(STRAY), pinned
+        assert dict(gate.rejected) == {"second_writer": 2}
+
+
+def test_an_unnamed_writer_is_asked_about_again_after_a_while() -> None:
+    graph = Graph()
+    gate = graph.gate("sim_node")
+    assert not gate.admits(STRAY)                           # not in the graph yet
+    graph.writers = [(STRAY, "/frame/stray"), (SIM, "/"), (SIM2, "/frame/sim_node")]
+    assert not gate.admits(STRAY)                           # asked a moment ago: not yet
+    asked = graph.asked
+    graph.now += RECHECK_NS
+    assert not gate.admits(STRAY) and graph.asked == asked + 1   # named now: a second writer
+    assert not gate.admits(SIM)                              # the graph has no name for it
+    assert gate.admits(SIM2)
+    assert dict(gate.rejected) == {"unknown_writer": 3, "second_writer": 1}
+    assert gate.report()["ignored_writers"] == f"/frame/stray,{SIM.hex()}"
+
+
+def test_first_seen_takes_an_unnamed_writer_once_the_one_taken_is_gone() -> None:
+    graph = Graph((SIM, "/"))
+    gate = graph.gate()
+    assert gate.admits(SIM)                                 # first seen, not named
+    graph.writers = [(SIM, "/"), (SIM2, "/")]
+    assert not gate.admits(SIM2)                            # cannot tell while SIM is there
+    graph.writers = [(SIM2, "/")]
+    graph.now += RECHECK_NS
+    assert gate.admits(SIM2)                                # SIM gone: a restart
+    assert gate.taken == {SIM2}
+    assert dict(gate.rejected) == {"unknown_writer": 1}
+
+
+def test_without_writer_ids_only_a_single_writer_is_safe() -> None:
+    graph = Graph((SIM, "/frame/sim_node"))
+    gate = graph.gate()
+    assert gate.admits(b"")
+    graph.writers.append((STRAY, "/frame/stray"))
+    assert gate.admits(b"")                                 # the count is kept for a while
+    graph.now += RECHECK_NS
+    assert not gate.admits(b"") and not gate.admits(b"")
+    assert graph.asked == 2
+    assert dict(gate.rejected) == {"ambiguous_writer": 2}
