@@ -35,16 +35,21 @@ HELD_STAMPS = 8
 RTOL, ATOL = 1e-9, 1e-12
 
 
+_NO_VALUES = np.full(len(SENSOR_TOPICS), np.nan)
+_NONE_PRESENT = np.zeros(len(SENSOR_TOPICS), dtype=bool)
+_NO_ACTUATION = np.full(2, np.nan)
+
+
 class Pending:
     """The inputs of one stamp received so far."""
 
     def __init__(self, ns: int, first_ns: int) -> None:
         self.ns = ns
         self.first_ns = first_ns        # when its first message arrived
-        self.values = np.full(len(SENSOR_TOPICS), np.nan)
-        self.present = np.zeros(len(SENSOR_TOPICS), dtype=bool)
+        self.values = _NO_VALUES.copy()     # copies of templates: cheaper than np.full
+        self.present = _NONE_PRESENT.copy()
         self.truth: np.ndarray | None = None
-        self.applied = np.full(2, np.nan)    # [torque, force] applied over the previous period
+        self.applied = _NO_ACTUATION.copy()  # [torque, force] applied over the previous period
 
 
 @dataclass
