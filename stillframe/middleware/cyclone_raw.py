@@ -9,9 +9,10 @@ module is what to adapt.
 
 from __future__ import annotations
 
+import ctypes
 from typing import Any
 
-from cyclonedds.core import DDSException, InstanceState, SampleState, ViewState
+from cyclonedds.core import DDSException, Entity, InstanceState, SampleState, ViewState, WaitSet
 from cyclonedds.pub import DataWriter
 from cyclonedds.sub import DataReader
 
@@ -55,3 +56,31 @@ def matched_count(entity: DataWriter | DataReader) -> int:
     if count < 0:
         raise DDSException(count, f"Occurred when counting the matched endpoints of {entity!r}")
     return int(count)
+
+
+def attach(waitset: WaitSet, entity: Entity) -> int:
+    """Attach ``entity`` to ``waitset``; the key :func:`wait_triggered` reports it by."""
+    waitset.attach(entity)
+    return attach_key(waitset, entity)
+
+
+def attach_key(waitset: WaitSet, entity: Entity) -> int:
+    """The key of an attached ``entity``: cyclonedds attaches each entity with the address of a
+    ``c_int`` it keeps beside it as the attach value."""
+    return next(ctypes.addressof(value) for attached, value in waitset.attached
+                if attached is entity)
+
+
+def wait_triggered(waitset: WaitSet, timeout_ns: int, keys: ctypes.Array) -> int:
+    """Wait up to ``timeout_ns`` (0: do not wait) for an attached entity to trigger; the number
+    of triggered ones, whose keys (:func:`attach`) are then the first entries of ``keys`` (at
+    most ``len(keys)``; the others stay triggered for the next wait)."""
+    ret = waitset._waitset_wait(waitset._ref, keys, len(keys), timeout_ns)
+    if ret < 0:
+        raise DDSException(ret, f"Occurred while waiting in {waitset!r}")
+    return min(int(ret), len(keys))
+
+
+def key_slots(count: int) -> ctypes.Array:
+    """Room for the keys of ``count`` triggered entities (:func:`wait_triggered`)."""
+    return (ctypes.c_void_p * max(count, 1))()

@@ -46,7 +46,16 @@ from stillframe.contract import messages
 from stillframe.errors import InputError
 from stillframe.middleware import dds_types, discovery, interface, intra_process, names, params
 from stillframe.middleware.clock import Clock
-from stillframe.middleware.cyclone_raw import ANY_SAMPLES, matched_count, take_raw, write_raw
+from stillframe.middleware.cyclone_raw import (
+    ANY_SAMPLES,
+    attach,
+    attach_key,
+    key_slots,
+    matched_count,
+    take_raw,
+    wait_triggered,
+    write_raw,
+)
 from stillframe.middleware.logger import Logger
 from stillframe.middleware.qos import (
     CLOCK,
@@ -500,6 +509,9 @@ class DdsNode:
         self._polled: list[DdsSubscription] = []    # readers outside the wait set
         self._timers: list[DdsTimer] = []
         self._waitset = WaitSet(self.context.participant)
+        #: what to run for each entity attached to the wait set, by its key (cyclone_raw.attach)
+        self._handlers: dict[int, Callable[[], Any]] = {}
+        self._triggered = key_slots(0)
         sim_time = self.declare_parameter("use_sim_time", False, read_only=True).value
         self._clock = Clock(sim=bool(sim_time))
         self.context.nodes.append(self)
@@ -561,7 +573,7 @@ class DdsNode:
             intra=raw and intra_process.enabled(),
         )
         self._subscriptions.append(sub)
-        self._waitset.attach(sub.condition)
+        self.attach(sub.condition, sub.take_and_dispatch)
         self.context.publish_graph()
         return sub
 
@@ -585,7 +597,7 @@ class DdsNode:
         if sub in self._polled:
             self._polled.remove(sub)
         else:
-            self._waitset.detach(sub.condition)
+            self.detach(sub.condition)
             self._subscriptions.remove(sub)
         sub.release()
         self.context.publish_graph()
@@ -628,6 +640,15 @@ class DdsNode:
         )
 
     # -- execution ---------------------------------------------------------------------------
+    def attach(self, condition: Any, handler: Callable[[], Any]) -> None:
+        """Run ``handler`` when ``condition`` triggers the node's wait set."""
+        self._handlers[attach(self._waitset, condition)] = handler
+        self._triggered = key_slots(len(self._handlers))
+
+    def detach(self, condition: Any) -> None:
+        del self._handlers[attach_key(self._waitset, condition)]
+        self._waitset.detach(condition)
+
     def spin_once(self, timeout_sec: float | None = None) -> None:
         """Wait for data or the next timer (at most ``timeout_sec``), then run callbacks."""
         if not interface.ok():
@@ -638,10 +659,10 @@ class DdsNode:
             due = timer.time_until_call_ns()
             if due is not None:
                 wait_ns = min(wait_ns, max(due, 0))
-        if wait_ns > 0:
-            self._waitset.wait(wait_ns)
-        for sub in list(self._subscriptions):
-            sub.take_and_dispatch()
+        keys = self._triggered
+        for key in keys[:wait_triggered(self._waitset, wait_ns, keys)]:
+            if (handler := self._handlers.get(key)) is not None:   # a callback may detach one
+                handler()
         for timer in list(self._timers):
             timer.call_if_due()
 

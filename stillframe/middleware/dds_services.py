@@ -232,7 +232,7 @@ class ServiceNode(DdsNode):
         """Serve ``service`` with ``callback(request) -> response`` while the node spins."""
         served = DdsService(self, srv_type, self.resolve_service_name(service), callback)
         self._services.append(served)
-        self._waitset.attach(served.condition)
+        self.attach(served.condition, served.take_and_answer)
         self.context.publish_graph()
         return served
 
@@ -263,14 +263,9 @@ class ServiceNode(DdsNode):
     def _endpoints(self) -> list[_Endpoints]:
         return [*self._services, *self._clients]
 
-    def spin_once(self, timeout_sec: float | None = None) -> None:
-        super().spin_once(timeout_sec)
-        for served in self._services:
-            served.take_and_answer()
-
     def destroy_node(self) -> None:
         for served in self._services:
-            self._waitset.detach(served.condition)
+            self.detach(served.condition)
         for endpoint in self._endpoints():
             endpoint.destroy()
         self._services.clear()
