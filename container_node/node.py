@@ -1,8 +1,8 @@
 """container_node: the loop's nodes in one process, as a ROS 2 component container with
-intra-process communication (``stillframe launch --compose``, docs/nodes.md).
+intra-process communication (``stillframe launch --compose`` / ``--compose-all``, docs/nodes.md).
 
 - ``python -m container_node.node --ros-args ...``: estimator_node and controller_node;
-- ``python -m container_node.node all --ros-args ...``: sim_node too (``--compose all``).
+- ``python -m container_node.node all --ros-args ...``: sim_node too (``--compose-all``).
 
 Every node keeps its name, parameters, ``/diagnostics`` and topics, and everything is still
 published for the recorder and the monitor. Between the nodes of the container the samples are

@@ -369,7 +369,7 @@ class Launcher:
 
     def simulator(self) -> str:
         """The child that runs the simulator and writes the result."""
-        return CONTAINER if CONTAINER in self.nodes() and self.options.compose == "all" \
+        return CONTAINER if self.options.compose == "all" and CONTAINER in self.nodes() \
             else "sim_node"
 
     def backend(self, child: str) -> str:
@@ -392,7 +392,8 @@ class Launcher:
                     self._wait_for_line(child, READY_LINES[name])
                 elif mixed:
                     self._wait_for_line(child, "middleware backend")
-            sim = next(c for c in self.processes.children if c.name == self.simulator())
+            simulator = self.simulator()
+            sim = next(c for c in self.processes.children if c.name == simulator)
             while api.ok():
                 self.node.spin_once(0.1)
                 if self.statuses:
