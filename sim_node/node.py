@@ -104,6 +104,7 @@ class SimNode:
         self.discovery_timeout_s = discovery_timeout_s
         scene = params.scene
         self.plant = make_plant(scene)
+        self.plant.warm_up()                # its kernels now, not in the first sample
         self.grid = SampleGrid(self.plant.period)
         self.active = actuator_of(scene)
         self.clock = ClockPublisher(node)

@@ -117,6 +117,14 @@ class Plant:
         """True [x1, x2, x3, φ, ẋ1, ẋ2, ẋ3, φ̇]."""
         return self.x[self.physical_index].copy()
 
+    def warm_up(self) -> None:
+        """Load (or compile) the compiled kernels now, with one substep on a copy of the state
+        that is thrown away: the first ``advance`` otherwise takes them in, about 0.2 s, inside
+        the loop (a late first sample in real time). The plant's state does not change."""
+        if self.compiled is not None:
+            self.compiled.run(self.integrator.name, self.x.copy(), self.h, 1, self.load,
+                              control=self.system.control, t0=self.t)
+
     def sample(self) -> Sample:
         """Sensor readings and ground truth at the current time t_k."""
         t = self.t

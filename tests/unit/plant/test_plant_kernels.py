@@ -32,3 +32,21 @@ def test_compiled_substeps_equal_the_integrators(overrides: list[str]) -> None:
     for a, b in zip(compiled.truth_history(), stepped.truth_history(), strict=True):
         np.testing.assert_allclose(a, b, rtol=0, atol=1e-11 * np.max(np.abs(b)))
     assert np.max(np.abs(stepped.x)) > 1e-3      # the run moved
+
+
+def test_warm_up_leaves_the_trajectory_as_it_was() -> None:
+    """``warm_up`` (the kernels loaded before the loop) changes nothing: the same samples and
+    states, bit for bit, as a plant that was not warmed up."""
+    scene = lumped_scene(["initial.phi=0.05", "sensors.accelerometer_noise_std=0.01"])
+    warmed, cold = Plant(scene), Plant(scene)
+    warmed.warm_up()
+    np.testing.assert_array_equal(warmed.x, cold.x)
+    for k in range(16):
+        a, b = warmed.sample(), cold.sample()
+        np.testing.assert_array_equal(a.measurements, b.measurements)
+        command = np.array([0.02 * np.sin(0.3 * k), 0.0])
+        warmed.advance(command)
+        cold.advance(command)
+    np.testing.assert_array_equal(warmed.x, cold.x)
+    for a, b in zip(warmed.truth_history(), cold.truth_history(), strict=True):
+        np.testing.assert_array_equal(a, b)
