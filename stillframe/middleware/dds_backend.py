@@ -660,8 +660,12 @@ class DdsNode:
             if due is not None:
                 wait_ns = min(wait_ns, max(due, 0))
         keys = self._triggered
-        for key in keys[:wait_triggered(self._waitset, wait_ns, keys)]:
-            if (handler := self._handlers.get(key)) is not None:   # a callback may detach one
+        triggered = set(keys[:wait_triggered(self._waitset, wait_ns, keys)])
+        # in the order the entities were made, as before (the wait set's order is its own): a
+        # callback that answers a sample must not run before the other topics of that sample
+        # are taken, or the answer's reply can overwrite one of them (a depth-1 /clock reader)
+        for key, handler in list(self._handlers.items()):
+            if key in triggered:
                 handler()
         for timer in list(self._timers):
             timer.call_if_due()
