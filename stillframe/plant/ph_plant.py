@@ -48,6 +48,9 @@ class PHPlant:
         self._fine: list[tuple[float, ...]] = []
         self._record(0.0)
 
+    def warm_up(self) -> None:
+        """Nothing to load before the loop (:meth:`Plant.warm_up`): the pHDAE steps in numpy."""
+
     def inputs(self, t: float) -> np.ndarray:
         u = self.control.copy()
         if self.load is not None:
