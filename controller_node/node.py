@@ -238,6 +238,7 @@ class ControllerNode:
             self.node.spin_once(0.05 if left is None else min(left * 1e-9, 0.05))
             self.process_ready()
             self.rt.idle()
+            self.gates.keep_graph_read()
             self.check_watchdog()
             if self.diagnostics.due():
                 self.publish_status()

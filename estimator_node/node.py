@@ -282,6 +282,7 @@ class EstimatorNode:
             self.node.spin_once(self.next_wait())
             self.process_ready()
             self.rt.idle()
+            self.gates.keep_graph_read()
             if self.diagnostics.due():
                 self.publish_status()
         self.publish_status()

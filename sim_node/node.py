@@ -324,6 +324,7 @@ class SimNode:
                         " starting anyway")
         n = round(p.scene.duration / plant.period)
         rows = np.empty((n, 12))
+        self.inputs.read_graph()
         self.pacer.start(time.monotonic_ns())
         wall = time.perf_counter()
         for k in range(n):

@@ -9,7 +9,11 @@ The node parameter ``rt`` names the practices to apply (``all``, or a comma list
   delivery threads (not inherited by child processes), and a timer slack of 1 ns;
 - ``affinity``: every thread pinned to the CPUs of ``rt_cpus`` (e.g. ``[1]``);
 - ``spin``: sim_node sleeps until ``spin_margin_us`` before a due time and polls from there
-  (:func:`stillframe.loop.pacing.wait_until`).
+  (:func:`stillframe.loop.pacing.wait_until`);
+- ``cpu_latency``: a PM QoS request of 0 µs CPU wake-up latency (``/dev/cpu_dma_latency``, as
+  cyclictest makes by default) held while the node runs: idle CPUs poll instead of halting, so a
+  message wakes its reader without an idle exit (on a VM, without the host rescheduling the
+  virtual CPU). It holds for the whole machine and ends when the process does.
 
 A practice the OS refuses (no root, no ``CAP_SYS_NICE``, no ``RLIMIT_MEMLOCK``) is skipped with one
 warning naming it and why; the node runs on without it.
@@ -21,12 +25,13 @@ import contextlib
 import ctypes
 import gc
 import os
+import struct
 from dataclasses import dataclass, field
 from typing import Any
 
 from stillframe.errors import InputError
 
-PRACTICES = ("mlock", "gc", "fifo", "affinity", "spin")
+PRACTICES = ("mlock", "gc", "fifo", "affinity", "spin", "cpu_latency")
 MCL_CURRENT, MCL_FUTURE = 1, 2
 PR_SET_TIMERSLACK = 29
 #: name prefixes of the threads a sample passes through: Cyclone's receive threads (``recv``,
@@ -39,6 +44,8 @@ NO_PINNING = -1
 GC_YOUNG = 700
 #: generation-0 collections before :meth:`Realtime.idle` collects generation 1
 GC_OLDER = 10
+#: the PM QoS interface for the CPUs' wake-up latency (kernel: Documentation/power/pm_qos_interface)
+CPU_LATENCY_DEVICE = "/dev/cpu_dma_latency"
 
 
 @dataclass
@@ -90,6 +97,19 @@ def declare_realtime(node: Any) -> RealtimeOptions:
     return RealtimeOptions(practices, priority, cpus, margin)
 
 
+def hold_cpu_latency(latency_us: int = 0, device: str = CPU_LATENCY_DEVICE) -> int:
+    """Request at most ``latency_us`` of CPU wake-up latency for as long as the returned file
+    descriptor stays open (the kernel drops the request when it is closed, or the process ends).
+    OSError when the device is missing or not writable (it needs root)."""
+    fd = os.open(device, os.O_WRONLY)
+    try:
+        os.write(fd, struct.pack("i", latency_us))
+    except OSError:
+        os.close(fd)
+        raise
+    return fd
+
+
 def _threads() -> list[int]:
     """The thread ids of this process (scheduling and affinity are per thread on Linux)."""
     return [int(t) for t in os.listdir("/proc/self/task")]
@@ -134,6 +154,7 @@ class Realtime:
     refused: list[str] = field(default_factory=list)
     gc_off: bool = False
     young_collections: int = 0
+    cpu_latency_fd: int | None = None
 
     @property
     def spin_margin_ns(self) -> int:
@@ -160,6 +181,8 @@ class Realtime:
             self.applied.append("gc frozen and off in the loop")
         if "spin" in asked:
             self.applied.append(f"sleep/spin timing ({self.options.spin_margin_us:g} us)")
+        if "cpu_latency" in asked:
+            self._cpu_latency()
 
     def _try(self, name: str, call: Any, done: str) -> bool:
         try:
@@ -177,6 +200,15 @@ class Realtime:
         else:
             self.refused.append(f"mlockall refused: {_errno_text(ctypes.get_errno())} "
                                 "(needs CAP_IPC_LOCK or a larger RLIMIT_MEMLOCK)")
+
+    def _cpu_latency(self) -> None:
+        try:
+            self.cpu_latency_fd = hold_cpu_latency()
+        except OSError as exc:
+            self.refused.append(f"{CPU_LATENCY_DEVICE} refused: {_errno_text(exc.errno or 0)} "
+                                "(needs root)")
+            return
+        self.applied.append("CPUs kept out of idle states (PM QoS 0 us)")
 
     def _fifo(self) -> None:
         param = os.sched_param(self.options.priority)
@@ -201,6 +233,9 @@ class Realtime:
         if self.gc_off:
             gc.enable()
             self.gc_off = False
+        if self.cpu_latency_fd is not None:
+            os.close(self.cpu_latency_fd)
+            self.cpu_latency_fd = None
 
     def report(self, logger: Any) -> None:
         """One info line of what is in effect, one warning per refused practice."""

@@ -11,7 +11,9 @@ cannot name yet once every writer taken so far has left the graph (a restart bef
 arrived).
 
 The hot path is a set lookup: a GID already taken or already refused is decided without the
-graph. The graph is asked only for a GID not seen before, and at most every
+graph, and so is an unpinned gate's first writer (reading the graph costs about 9 ms in a running
+loop, which the first sample then paid in each node). The graph is asked only for a later GID not
+seen before, and at most every
 :data:`RECHECK_NS` for one it could not name yet (``unknown_writer``) or, where the middleware
 gives no GID (real rclpy Jazzy: its message info has none), for how many writers the topic has:
 while the graph shows more than one, every sample is refused (``ambiguous_writer``), since the
@@ -91,6 +93,9 @@ class WriterGate:
             if now >= self.blind_until:
                 self.blind_writers, self.blind_until = len(self.writers()), now + RECHECK_NS
             return "ambiguous_writer" if self.blind_writers > 1 else None
+        if not self.taken and not self.pinned:
+            self.taken.add(gid)             # the first writer seen: no need to ask the graph
+            return None
         if now < self.unresolved.get(gid, now - RECHECK_NS) + RECHECK_NS:
             return "unknown_writer"         # asked the graph a moment ago
         listed = self.writers()
@@ -98,9 +103,7 @@ class WriterGate:
         name = graph.get(gid)
         wanted = self.pinned or self.owner or next(
             (graph[g] for g in self.taken if g in graph), "")
-        if not self.taken and not self.pinned:
-            pass                            # the first writer seen
-        elif name is not None and wanted:
+        if name is not None and wanted:
             if not same_node(name, wanted):
                 self.intruders.add(gid)
                 self.unresolved.pop(gid, None)
@@ -126,6 +129,9 @@ class WriterGate:
 
     def report(self) -> dict[str, object]:
         """For ``/diagnostics``: the node taken, the writers ignored, refusals by reason."""
+        if not self.owner and self.taken:   # the first writer was taken without its name
+            self.owner = next((name for g, name in self.writers()
+                               if g in self.taken and name.strip("/")), "")
         taken = self.owner or ", ".join(sorted(self.name_of(g) for g in self.taken))
         return {"writer": taken, "ignored_writers": ",".join(self.ignored()),
                 **{f"rejected_{r}": self.rejected[r] for r in REASONS}}
@@ -140,6 +146,8 @@ class InputGates:
         self.node = node
         self.gates: dict[str, WriterGate] = {}
         self.pins: dict[str, str] = {}
+        self.first_taken = False        # a gate has taken a writer (:meth:`keep_graph_read`)
+        self.next_graph_read = 0
         for name in parameters:
             pinned = node.declare_parameter(name, "", read_only=True).value
             if not isinstance(pinned, str):
@@ -151,6 +159,24 @@ class InputGates:
         gate = WriterGate(self.pins[parameter], graph_writers(self.node, topic))
         self.gates[topic] = gate
         return gate
+
+    def read_graph(self) -> None:
+        """Read the graph for every gate's topic (the middleware reads only what changed since
+        its last read; its first read of a running loop's 55 endpoints takes milliseconds)."""
+        for gate in self.gates.values():
+            gate.writers()
+
+    def keep_graph_read(self) -> None:
+        """Until a first sample is taken, read the graph every :data:`RECHECK_NS`: a node
+        calls this in its loop, so that the graph is read while it waits for the simulator,
+        not in the first report or decision that needs it, inside the loop."""
+        if self.first_taken:
+            return
+        if any(gate.taken for gate in self.gates.values()):
+            self.first_taken = True
+        elif (now := time.monotonic_ns()) >= self.next_graph_read:
+            self.read_graph()
+            self.next_graph_read = now + RECHECK_NS
 
     def values(self) -> dict[str, object]:
         """Every gate's report, keys prefixed by the topic (``/`` as ``_``)."""

@@ -74,7 +74,12 @@ DISCOVERY_TYPE = "rmw_dds_common/msg/ParticipantEntitiesInfo"
 MAX_WAIT_NS = 100_000_000
 #: Samples taken from one reader per ``spin_once``.
 TAKE_BATCH = 256
-_ALIVE = SampleState.Any | ViewState.Any | InstanceState.Alive
+#: builtin-topic samples read per call
+GRAPH_BATCH = 64
+#: builtin-topic samples not read yet, of alive entities and of vanished ones
+_NEW_ALIVE = SampleState.NotRead | ViewState.Any | InstanceState.Alive
+_NEW_GONE = (SampleState.NotRead | ViewState.Any | InstanceState.NotAliveDisposed
+             | InstanceState.NotAliveNoWriters)
 _RELIABLE_BLOCKING_NS = 100_000_000  # rmw_cyclonedds' max_blocking_time
 
 
@@ -185,7 +190,12 @@ class Context:
         self._discovery_writer = DataWriter(
             self.participant, self.topic(DISCOVERY_TOPIC, DISCOVERY_TYPE), dds_qos(discovery_qos)
         )
-        self._graph_readers: dict[str, tuple[BuiltinDataReader, ReadCondition]] = {}
+        #: per kind of builtin topic: its reader, and conditions for the samples not read yet
+        #: of alive and of vanished entities
+        self._graph_readers: dict[str, tuple[BuiltinDataReader, ReadCondition,
+                                             ReadCondition]] = {}
+        #: per kind, the alive entities by key, kept up to date by each read
+        self._graph_known: dict[str, dict[Any, Any]] = {}
         #: per kind, the alive samples of the last read (read again only after a change) and
         #: how many reads that was
         self._graph_samples: dict[str, tuple[int, list[Any]]] = {}
@@ -244,8 +254,10 @@ class Context:
     def _alive(self, kind: str) -> tuple[int, list[Any]]:
         """How many reads so far, and the alive samples of a builtin topic. Read only when the
         reader has data available (a new, changed or vanished entity; a read resets that
-        status): converting every endpoint's QoS in cyclonedds' Python is what a read costs,
-        and a follower asking for the graph ten times a second spent a whole core on it."""
+        status), and then only the samples not read before: converting an endpoint's QoS in
+        cyclonedds' Python costs about 0.15 ms, so reading all 55 of a running loop took 5 to
+        11 ms, which a node asking the graph inside its loop paid as a late sample. A vanished
+        entity comes as a not-read sample of a not-alive instance, by its key."""
         if kind not in self._graph_readers:
             builtin = {
                 "participant": BuiltinTopicDcpsParticipant,
@@ -253,12 +265,19 @@ class Context:
                 "subscription": BuiltinTopicDcpsSubscription,
             }[kind]
             reader = BuiltinDataReader(self.participant, builtin)
-            self._graph_readers[kind] = (reader, ReadCondition(reader, _ALIVE))
-        reader, alive = self._graph_readers[kind]
+            self._graph_readers[kind] = (reader, ReadCondition(reader, _NEW_ALIVE),
+                                         ReadCondition(reader, _NEW_GONE))
+            self._graph_known[kind] = {}
+        reader, fresh, gone = self._graph_readers[kind]
         if kind not in self._graph_samples or (
                 reader.get_status_changes() & DDSStatus.DataAvailable):
+            known = self._graph_known[kind]
+            for sample in _read_all(reader, gone):
+                known.pop(sample.key, None)
+            for sample in _read_all(reader, fresh):
+                known[sample.key] = sample
             reads = self._graph_samples.get(kind, (0, []))[0] + 1
-            self._graph_samples[kind] = (reads, reader.read(N=100_000, condition=alive))
+            self._graph_samples[kind] = (reads, list(known.values()))
         return self._graph_samples[kind]
 
     def node_names(self) -> dict[bytes, list[tuple[str, str, set[bytes]]]]:
@@ -304,6 +323,17 @@ class Context:
             ))
         self._endpoints[kind] = ((reads, owners), result)
         return result
+
+
+def _read_all(reader: BuiltinDataReader, condition: ReadCondition) -> list[Any]:
+    """Every sample ``condition`` selects, read :data:`GRAPH_BATCH` at a time (cyclonedds
+    allocates room for as many samples as asked for on every read)."""
+    found: list[Any] = []
+    while True:
+        batch = reader.read(N=GRAPH_BATCH, condition=condition)
+        found += batch
+        if len(batch) < GRAPH_BATCH:
+            return found
 
 
 def _gid_array(gid: bytes) -> Any:

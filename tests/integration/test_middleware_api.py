@@ -69,6 +69,43 @@ def test_remap_and_destroy(ros_domain: int) -> None:
         node.destroy_node()
 
 
+def test_the_graph_reads_only_what_changed(ros_domain: int,
+                                          monkeypatch: pytest.MonkeyPatch) -> None:
+    """After a first full read, a new publisher costs the graph one sample read (not all of
+    them again) and a destroyed one a vanished-instance sample; the answers still list exactly
+    the publishers that exist."""
+    from cyclonedds.builtin import BuiltinDataReader
+
+    node = create_node("counter", namespace="/frame", argv=["test"], backend="dds")
+    try:
+        pubs = [node.create_publisher("std_msgs/msg/Header", f"many_{i}", 10) for i in range(30)]
+
+        def topics() -> set[str]:
+            return {t for t, _ in node.get_topic_names_and_types() if "/many_" in t}
+
+        assert spin_until(node, lambda: len(topics()) == 30, 10)
+        read = BuiltinDataReader.read
+        counted: list[int] = []
+
+        def counting(self: BuiltinDataReader, N: int = 1, condition: object = None) -> list:
+            found = read(self, N, condition)
+            counted.append(len(found))
+            return found
+
+        monkeypatch.setattr(BuiltinDataReader, "read", counting)
+        extra = node.create_publisher("std_msgs/msg/Header", "many_extra", 10)
+        assert spin_until(node, lambda: "/frame/many_extra" in topics(), 10)
+        assert sum(counted) == 1                    # the new one, not 31
+        counted.clear()
+        node.destroy_publisher(extra)
+        node.destroy_publisher(pubs[0])
+        assert spin_until(node, lambda: len(topics()) == 29, 10)
+        assert sum(counted) == 2                    # the two that vanished
+        assert topics() == {f"/frame/many_{i}" for i in range(1, 30)}
+    finally:
+        node.destroy_node()
+
+
 def test_message_helpers() -> None:
     assert messages.type_name("sensor_msgs/Imu") == "sensor_msgs/msg/Imu"
     js = messages.new("sensor_msgs/msg/JointState", name=["phi"], position=[1])

@@ -200,22 +200,26 @@ def goal_rows(rows: list[dict[str, Any]], speeds: list[dict[str, Any]]) -> list[
     return out
 
 
-def lockstep(out: Path, backend: str, one: dict[str, Any], compose: str) -> dict[str, Any]:
-    """The full LQG scene through the nodes on ``backend`` against ``one`` (one process);
-    with ``compose`` ("pair", "all") also with those nodes composed in one process."""
+def lockstep(out: Path, backend: str, one: dict[str, Any], compose: str,
+             rt: tuple[str, list[int]] = ("", [])) -> dict[str, Any]:
+    """The full LQG scene through the nodes on ``backend`` (with the real-time practices ``rt``)
+    against ``one`` (one process); with ``compose`` ("pair", "all") also with those nodes
+    composed in one process."""
     scene = load_scene(SCENE)
     started = time.perf_counter()
-    nodes = run_scene(SCENE, [], out, "lockstep", backends=[backend]).evaluation
+    nodes = run_scene(SCENE, [], out, "lockstep", backends=[backend], rt=rt[0],
+                      rt_cpus=rt[1]).evaluation
     launch_wall = time.perf_counter() - started
     composed = {}
     if compose:
         c = run_scene(SCENE, [], out / "composed", "lockstep", backends=[backend],
-                      compose=compose).evaluation
+                      compose=compose, rt=rt[0], rt_cpus=rt[1]).evaluation
         composed = {"compose": compose, "composed_steps_per_s": c["steps"] / c["wall_s"],
                     "composed_over_one_process": one["loop_s"] / c["wall_s"],
                     "composed_over_nodes": nodes["wall_s"] / c["wall_s"]}
     return {**composed,
-        "backend": backend, "scene": scene.name, "steps": nodes["steps"], "sim_s": scene.duration,
+        "backend": backend, "rt": rt[0], "scene": scene.name, "steps": nodes["steps"],
+        "sim_s": scene.duration,
         "nodes_wall_s": nodes["wall_s"], "launch_wall_s": launch_wall,
         "nodes_steps_per_s": nodes["steps"] / nodes["wall_s"],
         "nodes_realtime_ratio": scene.duration / nodes["wall_s"],
@@ -250,7 +254,7 @@ def run(args: argparse.Namespace) -> int:
             if args.lockstep:
                 print(f"{backend}: lock-step, the full LQG scene", file=sys.stderr)
                 speeds.append(lockstep(Path(tmp) / f"{backend}-lockstep", backend, one,
-                                       args.compose))
+                                       args.compose, rt))
     goals = goal_rows(rows, speeds)
     if args.json:
         emit_json({"realtime": rows, "lockstep": speeds, "goals": goals,

@@ -148,7 +148,7 @@ def add_realtime_arguments(parser: argparse.ArgumentParser) -> None:
     """``--rt [PRACTICES]`` and ``--rt-cpus`` (shared with ``bench loop``)."""
     parser.add_argument("--rt", nargs="?", const="all", default="", metavar="PRACTICES",
                         help="real-time mode for the loop nodes: 'all' (the default with --rt) "
-                             "or a comma list of mlock, gc, fifo, affinity, spin "
+                             "or a comma list of mlock, gc, fifo, affinity, spin, cpu_latency "
                              "(docs/realtime.md)")
     parser.add_argument("--rt-cpus", default="", metavar="CPUS",
                         help="with --rt affinity: pin the loop nodes to these CPUs (e.g. 1)")

@@ -7,6 +7,7 @@ from __future__ import annotations
 import gc
 import json
 import os
+import struct
 import subprocess
 import sys
 
@@ -16,6 +17,7 @@ from stillframe.errors import InputError
 from stillframe.locations import REPO_ROOT
 from stillframe.loop.pacing import wait_until
 from stillframe.loop.realtime import (
+    CPU_LATENCY_DEVICE,
     GC_YOUNG,
     PRACTICES,
     Realtime,
@@ -99,11 +101,39 @@ def test_an_unprivileged_process_is_told_what_was_refused_and_why() -> None:
     cpu = max(os.sched_getaffinity(0))
     before = ("import resource; resource.setrlimit(resource.RLIMIT_RTPRIO, (0, 0)); "
               "resource.setrlimit(resource.RLIMIT_MEMLOCK, (65536, 65536)); os.setuid(65534)")
-    out = run_child(ENTER.format(before=before, practices='{"fifo", "mlock", "gc"}', cpu=cpu))
+    out = run_child(ENTER.format(before=before, practices='{"fifo", "mlock", "gc", "cpu_latency"}',
+                                 cpu=cpu))
     assert any(r.startswith("SCHED_FIFO refused: Operation not permitted") for r in out["refused"])
     assert any(r.startswith("mlockall refused:") for r in out["refused"])
+    assert f"{CPU_LATENCY_DEVICE} refused: Permission denied (errno 13) (needs root)" in out[
+        "refused"][-1]
     assert out["applied"] == ["gc frozen and off in the loop"]
     assert all(t[0] == out["other"] for t in out["threads"].values())
+
+
+def cpu_latency_us() -> int:
+    """The kernel's aggregate of every CPU-latency request (reading the device gives it)."""
+    with open(CPU_LATENCY_DEVICE, "rb") as device:
+        return struct.unpack("i", device.read(4))[0]
+
+
+@pytest.mark.skipif(not (ROOT and os.path.exists(CPU_LATENCY_DEVICE)),
+                    reason="the PM QoS device needs root")
+def test_cpu_latency_is_held_at_zero_while_entered_and_released_on_leave() -> None:
+    """The kernel's own aggregate is the independent check: 0 µs while the practice holds
+    it, back to what it was when the node leaves (or ends)."""
+    before = cpu_latency_us()
+    if before == 0:
+        pytest.skip("another process holds the CPU latency at 0 already")
+    rt = Realtime(RealtimeOptions(frozenset({"cpu_latency"})))
+    rt.enter()
+    try:
+        assert rt.refused == [] and rt.applied == ["CPUs kept out of idle states (PM QoS 0 us)"]
+        assert cpu_latency_us() == 0
+    finally:
+        rt.leave()
+    assert cpu_latency_us() == before
+    assert rt.cpu_latency_fd is None
 
 
 def test_collector_is_off_in_the_loop_and_idle_collects_the_young_generation() -> None:

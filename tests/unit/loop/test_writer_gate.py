@@ -4,7 +4,9 @@ the graph asked only for writers not decided yet."""
 
 from __future__ import annotations
 
-from stillframe.loop.writer_gate import RECHECK_NS, WriterGate
+import unittest.mock
+
+from stillframe.loop.writer_gate import RECHECK_NS, InputGates, WriterGate
 
 SIM, SIM2, STRAY, STRAY2 = b"a" * 16, b"b" * 16, b"s" * 16, b"t" * 16
 
@@ -28,7 +30,8 @@ class Graph:
 def test_first_writer_seen_is_taken_others_refused_without_asking_again() -> None:
     graph = Graph((SIM, "/frame/sim_node"), (STRAY, "/frame/stray"))
     gate = graph.gate()
-    assert gate.admits(SIM) and not gate.admits(STRAY)
+    assert gate.admits(SIM) and graph.asked == 0            # the first one: no graph needed
+    assert not gate.admits(STRAY)
     asked = graph.asked
     assert all(gate.admits(SIM) for _ in range(100))            # a set lookup
     assert not any(gate.admits(STRAY) for _ in range(100))
@@ -87,3 +90,27 @@ def test_without_writer_ids_only_a_single_writer_is_safe() -> None:
     assert not gate.admits(b"") and not gate.admits(b"")
     assert graph.asked == 2
     assert dict(gate.rejected) == {"ambiguous_writer": 2}
+
+
+class Parameters:
+    """The node side :class:`InputGates` needs: read-only string parameters, all empty."""
+
+    def declare_parameter(self, name: str, value: str, read_only: bool) -> object:
+        return type("Parameter", (), {"value": value})()
+
+
+def test_the_graph_is_kept_read_until_a_first_writer_is_taken_then_left_alone() -> None:
+    gates = InputGates(Parameters(), "sensor_writer")  # type: ignore[arg-type]
+    graphs = {topic: Graph((SIM, "/frame/sim_node")) for topic in ("/a", "/b")}
+    for topic, graph in graphs.items():
+        gates.gates[topic] = graph.gate()
+    clock = iter(range(0, 10 * RECHECK_NS, RECHECK_NS // 2))
+    with unittest.mock.patch("time.monotonic_ns", lambda: next(clock)):
+        for _ in range(4):                                  # 0, 0.5, 1, 1.5 recheck periods
+            gates.keep_graph_read()
+        assert [g.asked for g in graphs.values()] == [2, 2]     # every RECHECK_NS
+        assert gates.gates["/a"].admits(SIM)
+        for _ in range(6):
+            gates.keep_graph_read()
+    assert [g.asked for g in graphs.values()] == [2, 2]         # not once a writer is taken
+    assert gates.values()["a_writer"] == "/frame/sim_node"      # named when reported
