@@ -47,7 +47,11 @@ class Clock:
         self._sim_ns = 0
 
     def now(self) -> Time:
-        return Time(self._sim_ns if self.sim else time.time_ns())
+        return Time(self.now_ns())
+
+    def now_ns(self) -> int:
+        """:meth:`now` in nanoseconds, without the :class:`Time` (once per received sample)."""
+        return self._sim_ns if self.sim else time.time_ns()
 
     def set_sim_time(self, nanoseconds: int) -> None:
         """Advance sim time (called for each ``/clock`` message)."""

@@ -15,6 +15,7 @@ the process. ``ROS_DOMAIN_ID`` selects the domain; ``ROS_AUTOMATIC_DISCOVERY_RAN
 
 from __future__ import annotations
 
+import itertools
 import os
 import time
 from collections.abc import Callable
@@ -437,8 +438,7 @@ class DdsSubscription:
 
     def deliver_local(self, cdr: bytes, source_timestamp: int, gid: bytes) -> None:
         """A sample written in this process (:mod:`.intra_process`), received now."""
-        self.callback(cdr, interface.MessageInfo(source_timestamp,
-                                                 self._clock.now().nanoseconds, gid))
+        self.callback(cdr, interface.MessageInfo(source_timestamp, self._clock.now_ns(), gid))
 
     def writer_gid(self, handle: int) -> bytes:
         """The GUID of the matched writer with instance handle ``handle`` (empty if gone)."""
@@ -456,7 +456,7 @@ class DdsSubscription:
 
     def _info(self, info: Any) -> interface.MessageInfo:
         """A raw sample's info, received now."""
-        return interface.MessageInfo(info.source_timestamp, self._clock.now().nanoseconds,
+        return interface.MessageInfo(info.source_timestamp, self._clock.now_ns(),
                                      self.writer_gid(info.publication_handle))
 
     def take(self) -> list[tuple[bytes, interface.MessageInfo]]:
@@ -541,6 +541,9 @@ class DdsNode:
         self._waitset = WaitSet(self.context.participant)
         #: what to run for each entity attached to the wait set, by its key (cyclone_raw.attach)
         self._handlers: dict[int, Callable[[], Any]] = {}
+        #: attach key -> rank in the order the entities were attached (the handlers' order)
+        self._made: dict[int, int] = {}
+        self._attached = itertools.count()
         self._triggered = key_slots(0)
         sim_time = self.declare_parameter("use_sim_time", False, read_only=True).value
         self._clock = Clock(sim=bool(sim_time))
@@ -672,11 +675,14 @@ class DdsNode:
     # -- execution ---------------------------------------------------------------------------
     def attach(self, condition: Any, handler: Callable[[], Any]) -> None:
         """Run ``handler`` when ``condition`` triggers the node's wait set."""
-        self._handlers[attach(self._waitset, condition)] = handler
+        key = attach(self._waitset, condition)
+        self._handlers[key] = handler
+        self._made[key] = next(self._attached)
         self._triggered = key_slots(len(self._handlers))
 
     def detach(self, condition: Any) -> None:
-        del self._handlers[attach_key(self._waitset, condition)]
+        key = attach_key(self._waitset, condition)
+        del self._handlers[key], self._made[key]
         self._waitset.detach(condition)
 
     def spin_once(self, timeout_sec: float | None = None) -> None:
@@ -690,12 +696,14 @@ class DdsNode:
             if due is not None:
                 wait_ns = min(wait_ns, max(due, 0))
         keys = self._triggered
-        triggered = set(keys[:wait_triggered(self._waitset, wait_ns, keys)])
+        count = wait_triggered(self._waitset, wait_ns, keys)
         # in the order the entities were made, as before (the wait set's order is its own): a
         # callback that answers a sample must not run before the other topics of that sample
         # are taken, or the answer's reply can overwrite one of them (a depth-1 /clock reader)
-        for key, handler in list(self._handlers.items()):
-            if key in triggered:
+        triggered = keys[:count] if count < 2 else sorted(keys[:count], key=self._made.__getitem__)
+        for key in triggered:
+            handler = self._handlers.get(key)   # None: detached by an earlier callback
+            if handler is not None:
                 handler()
         for timer in list(self._timers):
             timer.call_if_due()
