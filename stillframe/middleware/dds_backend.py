@@ -56,6 +56,7 @@ from stillframe.middleware.cyclone_raw import (
     take_raw,
     wait_triggered,
     write_raw,
+    writer_guid,
 )
 from stillframe.middleware.logger import Logger
 from stillframe.middleware.qos import (
@@ -443,10 +444,10 @@ class DdsSubscription:
     def writer_gid(self, handle: int) -> bytes:
         """The GUID of the matched writer with instance handle ``handle`` (empty if gone)."""
         if handle not in self._writer_gids:
-            endpoint = self._reader.get_matched_publication_data(handle)
-            if endpoint is None:
+            guid = writer_guid(self._reader, handle)
+            if guid is None:
                 return b""
-            self._writer_gids[handle] = endpoint.key.bytes
+            self._writer_gids[handle] = guid
         return self._writer_gids[handle]
 
     def _taken(self) -> list[tuple[Any, Any]]:

@@ -169,3 +169,33 @@ def test_matched_counts_follow_endpoints_as_they_join(ros_domain: int) -> None:
         assert all(s.get_publisher_count() == 1 for s in subs)
     finally:
         node.destroy_node()
+
+
+def test_writer_guid_is_the_writers_own(ros_domain: int) -> None:
+    """``cyclone_raw.writer_guid`` (the key only) equals cyclonedds' full matched-publication
+    data and the writer's own GUID, for two writers in another participant; an unknown handle
+    gives None."""
+    from cyclonedds.domain import DomainParticipant
+    from cyclonedds.pub import DataWriter
+    from cyclonedds.topic import Topic
+
+    from stillframe.middleware import dds_types
+    from stillframe.middleware.cyclone_raw import writer_guid
+
+    node = create_node("guids", argv=["test"], backend="dds")
+    try:
+        sub = node.create_subscription("std_msgs/msg/Header", "/guids", lambda *_: None, 10,
+                                       raw=True)
+        other = DomainParticipant(ros_domain)
+        topic = Topic(other, dds_types.dds_topic("/guids"),
+                      dds_types.idl_struct("std_msgs/msg/Header"))
+        writers = [DataWriter(other, topic) for _ in range(2)]
+        assert spin_until(node, lambda: sub.get_publisher_count() == 2, 10)
+        reader = sub._reader
+        handles = reader.get_matched_publications()
+        assert {writer_guid(reader, h) for h in handles} == {w.guid.bytes for w in writers}
+        assert all(writer_guid(reader, h) == reader.get_matched_publication_data(h).key.bytes
+                   for h in handles)
+        assert writer_guid(reader, 12345) is None
+    finally:
+        node.destroy_node()
