@@ -97,11 +97,11 @@ def declare_realtime(node: Any) -> RealtimeOptions:
     return RealtimeOptions(practices, priority, cpus, margin)
 
 
-def hold_cpu_latency(latency_us: int = 0, device: str = CPU_LATENCY_DEVICE) -> int:
+def hold_cpu_latency(latency_us: int = 0) -> int:
     """Request at most ``latency_us`` of CPU wake-up latency for as long as the returned file
     descriptor stays open (the kernel drops the request when it is closed, or the process ends).
     OSError when the device is missing or not writable (it needs root)."""
-    fd = os.open(device, os.O_WRONLY)
+    fd = os.open(CPU_LATENCY_DEVICE, os.O_WRONLY)
     try:
         os.write(fd, struct.pack("i", latency_us))
     except OSError:
