@@ -50,15 +50,10 @@ class Container:
         self.controller.node.spin_once(0.0)
 
     def housekeeping(self) -> bool:
-        """The controller's watchdog and both nodes' ``/diagnostics`` when due (and, until
-        their first sample, their reads of the graph); whether a status was published."""
-        self.controller.check_watchdog()
-        self.estimator.gates.keep_graph_read()
-        self.controller.gates.keep_graph_read()
-        due = [node for node in (self.estimator, self.controller) if node.diagnostics.due()]
-        for node in due:
-            node.publish_status()
-        return bool(due)
+        """Both nodes' housekeeping (the controller's watchdog, the graph reads until the first
+        sample, ``/diagnostics`` when due); whether a status was published."""
+        published = [node.housekeeping() for node in (self.estimator, self.controller)]
+        return any(published)
 
     def finish(self) -> None:
         self.estimator.publish_status()

@@ -238,11 +238,18 @@ class ControllerNode:
             self.node.spin_once(0.05 if left is None else min(left * 1e-9, 0.05))
             self.process_ready()
             self.rt.idle()
-            self.gates.keep_graph_read()
-            self.check_watchdog()
-            if self.diagnostics.due():
-                self.publish_status()
+            self.housekeeping()
         self.publish_status()
+
+    def housekeeping(self) -> bool:
+        """Between samples: the watchdog, the graph read until the first sample,
+        ``/diagnostics`` when due; whether a status was published."""
+        self.check_watchdog()
+        self.gates.keep_graph_read()
+        if not self.diagnostics.due():
+            return False
+        self.publish_status()
+        return True
 
 
 @api.node_main

@@ -282,10 +282,17 @@ class EstimatorNode:
             self.node.spin_once(self.next_wait())
             self.process_ready()
             self.rt.idle()
-            self.gates.keep_graph_read()
-            if self.diagnostics.due():
-                self.publish_status()
+            self.housekeeping()
         self.publish_status()
+
+    def housekeeping(self) -> bool:
+        """Between samples: the graph read until the first one, ``/diagnostics`` when due;
+        whether a status was published."""
+        self.gates.keep_graph_read()
+        if not self.diagnostics.due():
+            return False
+        self.publish_status()
+        return True
 
 
 def build(node: api.Node) -> EstimatorNode:
