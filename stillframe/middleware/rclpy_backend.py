@@ -18,7 +18,6 @@ from typing import Any
 import rclpy
 from rcl_interfaces.msg import ParameterDescriptor
 from rcl_interfaces.msg import SetParametersResult as RclpySetParametersResult
-from rclpy.callback_groups import CallbackGroup
 from rclpy.clock import ClockType
 from rclpy.duration import Duration
 from rclpy.executors import SingleThreadedExecutor
@@ -46,6 +45,11 @@ from stillframe.middleware.qos import (
     QoSProfile,
     Reliability,
     as_profile,
+)
+from stillframe.middleware.rclpy_wait import (
+    NEVER_EXECUTED,
+    SUBSCRIPTIONS_WAITED_HERE,
+    SubscriptionWait,
 )
 
 MAX_WAIT_S = 0.1
@@ -127,6 +131,9 @@ class RclpyClock(Clock):
     def now(self) -> Time:
         return Time(self._clock.now().nanoseconds)
 
+    def now_ns(self) -> int:
+        return self._clock.now().nanoseconds
+
 
 class RclpyPublisher:
     def __init__(self, pub: Any, msg_type: str) -> None:
@@ -143,23 +150,6 @@ class RclpyPublisher:
 
     def wait_for_all_acked(self, timeout_sec: float) -> bool:
         return self._pub.wait_for_all_acked(Duration(nanoseconds=int(timeout_sec * 1e9)))
-
-
-class NeverExecuted(CallbackGroup):
-    """A callback group the executor never runs: its subscriptions stay out of the executor's
-    wait set, so their samples wake nothing (they are taken by polling)."""
-
-    def can_execute(self, entity: Any) -> bool:
-        return False
-
-    def beginning_execution(self, entity: Any) -> bool:
-        return False
-
-    def ending_execution(self, entity: Any) -> None:
-        """Nothing runs, so nothing ends."""
-
-
-NEVER_EXECUTED = NeverExecuted()
 
 
 class RclpyPolledSubscription:
@@ -187,10 +177,8 @@ class RclpyNode:
     """:class:`.interface.Node` over an ``rclpy.node.Node``."""
 
     backend = "rclpy"
-    #: rclpy's SingleThreadedExecutor. Its experimental EventsExecutor (C++) ran lock-step 1.7x
-    #: faster, but crashed in spin_once ("SystemError: null argument to internal routine") in
-    #: the launcher's node during a real-time bench run, so it is not used.
-    _executor: SingleThreadedExecutor | None = None
+    #: the process's wait (:mod:`.rclpy_wait`), beside rclpy's SingleThreadedExecutor
+    _wait: SubscriptionWait | None = None
 
     def __init__(self, name: str, namespace: str, args: list[str]) -> None:
         if not rclpy.ok():
@@ -198,9 +186,9 @@ class RclpyNode:
         self._node = rclpy.create_node(name, namespace=namespace)
         self.user_args = rclpy.utilities.remove_ros_args(["stillframe", *args])[1:]
         self._clock = RclpyClock(self._node.get_clock())
-        if RclpyNode._executor is None:
-            RclpyNode._executor = SingleThreadedExecutor()
-        RclpyNode._executor.add_node(self._node)
+        if RclpyNode._wait is None:
+            RclpyNode._wait = SubscriptionWait(SingleThreadedExecutor())
+        RclpyNode._wait.add_node(self._node)
 
     def get_name(self) -> str:
         return self._node.get_name()
@@ -244,7 +232,7 @@ class RclpyNode:
                 return None
             future = client.call_async(
                 deserialize_message(messages.serialize(request), srv_class.Request))
-            RclpyNode._executor.spin_until_future_complete(future, timeout_sec=timeout_sec)
+            RclpyNode._wait.executor.spin_until_future_complete(future, timeout_sec=timeout_sec)
             if not future.done():
                 return None
             return rosbags_message(future.result(), f"{srv_type}_Response")
@@ -268,15 +256,15 @@ class RclpyNode:
 
         def on_data(data: bytes, info: dict) -> None:
             if raw:
-                now = self._clock.now().nanoseconds
+                now = self._clock.now_ns()
                 gid = bytes(info.get("publisher_gid") or b"")   # absent in Jazzy's rclpy
                 callback(data, interface.MessageInfo(now, now, gid))
             else:
                 interface.deliver(callback, data, name, topic)
 
         return self._node.create_subscription(
-            ros_message_class(name), topic, on_data, rclpy_qos(as_profile(qos)), raw=True
-        )
+            ros_message_class(name), topic, on_data, rclpy_qos(as_profile(qos)),
+            callback_group=SUBSCRIPTIONS_WAITED_HERE, raw=True)
 
     def create_polled_subscription(
         self, msg_type: str | type, topic: str, qos: QoSProfile | str | int,
@@ -324,12 +312,12 @@ class RclpyNode:
     def spin_once(self, timeout_sec: float | None = None) -> None:
         if interface.ok():
             interface.freeze_setup_objects()
-            wait = MAX_WAIT_S if timeout_sec is None else min(MAX_WAIT_S, timeout_sec)
-            RclpyNode._executor.spin_once(timeout_sec=wait)
+            wait = MAX_WAIT_S if timeout_sec is None else min(MAX_WAIT_S, max(0.0, timeout_sec))
+            RclpyNode._wait.spin_once(round(wait * 1e9))
 
     def destroy_node(self) -> None:
-        RclpyNode._executor.remove_node(self._node)
+        RclpyNode._wait.remove_node(self._node)
         self._node.destroy_node()
-        if not RclpyNode._executor.get_nodes():
-            RclpyNode._executor = None
+        if not RclpyNode._wait.executor.get_nodes():
+            RclpyNode._wait = None
             rclpy.try_shutdown()
