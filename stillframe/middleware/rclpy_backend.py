@@ -4,8 +4,8 @@ Messages stay ``rosbags`` instances: they are published as CDR bytes (rclpy publ
 serialized messages as they are) and subscriptions take CDR bytes (``raw=True`` in rclpy)
 that ``rosbags`` decodes, so no message conversion code exists. rclpy parses ``--ros-args``
 itself; signals are left to :mod:`.api` (rclpy's own handlers are not installed).
-Raw subscriptions get the receive time as ``source_timestamp`` too: rclpy's callbacks do not
-carry the DDS sample info.
+Raw subscriptions get the writer's source timestamp from the message info rcl takes with each
+sample (Jazzy's carries no publisher GID).
 """
 
 from __future__ import annotations
@@ -135,6 +135,13 @@ class RclpyClock(Clock):
         return self._clock.now().nanoseconds
 
 
+def message_info(info: dict, clock: Clock) -> interface.MessageInfo:
+    """A sample's info from rcl's: the writer's source timestamp, received now on the node's
+    clock, the publisher's GID where rclpy gives it (Jazzy's does not)."""
+    return interface.MessageInfo(info["source_timestamp"], clock.now_ns(),
+                                 bytes(info.get("publisher_gid") or b""))
+
+
 class RclpyPublisher:
     def __init__(self, pub: Any, msg_type: str) -> None:
         self._pub = pub
@@ -166,10 +173,7 @@ class RclpyPolledSubscription:
         with self.subscription.handle:
             while (got := self.subscription.handle.take_message(
                     self.subscription.msg_type, True)) is not None:
-                data, info = got
-                now = self._clock.now().nanoseconds
-                gid = bytes(info.get("publisher_gid") or b"")   # absent in Jazzy's rclpy
-                taken.append((data, interface.MessageInfo(now, now, gid)))
+                taken.append((got[0], message_info(got[1], self._clock)))
         return taken
 
 
@@ -256,9 +260,7 @@ class RclpyNode:
 
         def on_data(data: bytes, info: dict) -> None:
             if raw:
-                now = self._clock.now_ns()
-                gid = bytes(info.get("publisher_gid") or b"")   # absent in Jazzy's rclpy
-                callback(data, interface.MessageInfo(now, now, gid))
+                callback(data, message_info(info, self._clock))
             else:
                 interface.deliver(callback, data, name, topic)
 

@@ -26,7 +26,7 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 
 #: how often rclpy's executor runs when nothing in this wait set asked for it
-EXECUTOR_POLL_NS = 50_000_000
+EXECUTOR_POLL_NS = 1_000_000_000
 
 
 class NeverExecuted(CallbackGroup):

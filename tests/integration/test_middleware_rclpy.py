@@ -3,6 +3,8 @@ backend, and its wait (:mod:`stillframe.middleware.rclpy_wait`) beside rclpy's e
 
 from __future__ import annotations
 
+import time
+
 import pytest
 
 rclpy = pytest.importorskip(
@@ -28,13 +30,19 @@ def test_round_trip_over_rclpy(ros_domain: int, monkeypatch: pytest.MonkeyPatch)
         pub = node.create_publisher("sensor_msgs/msg/JointState", "js", "default")
         node.create_subscription("sensor_msgs/msg/JointState", "js", got.append, "default")
         node.create_subscription("sensor_msgs/msg/JointState", "js",
-                                 lambda data, info: raw.append(data), SENSOR_DATA, raw=True)
+                                 lambda data, info: raw.append((data, info)), SENSOR_DATA,
+                                 raw=True)
         assert spin_until(node, lambda: pub.get_subscription_count() == 2, 10)
         msg = messages.new("sensor_msgs/msg/JointState", name=["phi"], position=[0.5])
+        before = time.time_ns()
         pub.publish(msg)
+        after = time.time_ns()
         assert spin_until(node, lambda: got and raw, 10)
         assert got[0].name == ["phi"] and got[0].position.tolist() == [0.5]
-        assert messages.deserialize(raw[0], "sensor_msgs/msg/JointState").position[0] == 0.5
+        data, info = raw[0]
+        assert messages.deserialize(data, "sensor_msgs/msg/JointState").position[0] == 0.5
+        # the writer's source timestamp (inside the publish call), not the receive time
+        assert before <= info.source_timestamp <= after <= info.received_timestamp
         topics = dict(node.get_topic_names_and_types())
         assert topics["/frame/js"] == ["sensor_msgs/msg/JointState"]
         info = node.get_publishers_info_by_topic("/frame/js")[0]
