@@ -69,6 +69,9 @@ class WriterGate:
     pinned: str
     writers: GraphWriters
     clock: Callable[[], int] = time.monotonic_ns
+    #: how many writers the topic has in the graph (None: ``len(writers())``), asked every
+    #: :data:`RECHECK_NS` inside the loop for samples without a GID, so it must be cheap
+    count_writers: Callable[[], int] | None = None
     owner: str = ""                 # the node taken, ``/namespace/name`` ("" while not known)
     taken: set[bytes] = field(default_factory=set)
     intruders: set[bytes] = field(default_factory=set)
@@ -91,7 +94,8 @@ class WriterGate:
         now = self.clock()
         if not gid:
             if now >= self.blind_until:
-                self.blind_writers, self.blind_until = len(self.writers()), now + RECHECK_NS
+                count = self.count_writers() if self.count_writers else len(self.writers())
+                self.blind_writers, self.blind_until = count, now + RECHECK_NS
             return "ambiguous_writer" if self.blind_writers > 1 else None
         if not self.taken and not self.pinned:
             self.taken.add(gid)             # the first writer seen: no need to ask the graph
@@ -117,6 +121,10 @@ class WriterGate:
         self.owner = name or self.owner
         self.unresolved.pop(gid, None)
         return None
+
+    def has_seen_samples(self) -> bool:
+        """Whether samples came: from a writer taken, or without a GID (its writers counted)."""
+        return bool(self.taken) or self.blind_until >= 0
 
     def name_of(self, gid: bytes) -> str:
         """The node of writer ``gid`` in the graph, its GID in hex while the graph has none."""
@@ -156,7 +164,8 @@ class InputGates:
 
     def add(self, topic: str, parameter: str) -> WriterGate:
         """The gate of ``topic``, taking the writers of the node ``parameter`` names."""
-        gate = WriterGate(self.pins[parameter], graph_writers(self.node, topic))
+        gate = WriterGate(self.pins[parameter], graph_writers(self.node, topic),
+                          count_writers=lambda: self.node.count_publishers(topic))
         self.gates[topic] = gate
         return gate
 
@@ -172,7 +181,7 @@ class InputGates:
         not in the first report or decision that needs it, inside the loop."""
         if self.first_taken:
             return
-        if any(gate.taken for gate in self.gates.values()):
+        if any(gate.has_seen_samples() for gate in self.gates.values()):
             self.first_taken = True
         elif (now := time.monotonic_ns()) >= self.next_graph_read:
             self.read_graph()

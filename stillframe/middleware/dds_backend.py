@@ -662,6 +662,9 @@ class DdsNode:
         full = names.resolve_topic(topic, self._namespace, self._name)
         return [ep for ep in self.context.endpoints("publication") if ep.topic_name == full]
 
+    def count_publishers(self, topic: str) -> int:
+        return len(self.get_publishers_info_by_topic(topic))
+
     def get_subscriptions_info_by_topic(self, topic: str) -> list[interface.TopicEndpointInfo]:
         full = names.resolve_topic(topic, self._namespace, self._name)
         return [ep for ep in self.context.endpoints("subscription") if ep.topic_name == full]

@@ -305,6 +305,10 @@ class RclpyNode:
     def get_publishers_info_by_topic(self, topic: str) -> list[interface.TopicEndpointInfo]:
         return self._endpoints(topic, self._node.get_publishers_info_by_topic(topic))
 
+    def count_publishers(self, topic: str) -> int:
+        """rcl's count (a C call: about 6 µs where the endpoint list takes 44)."""
+        return self._node.count_publishers(topic)
+
     def get_subscriptions_info_by_topic(self, topic: str) -> list[interface.TopicEndpointInfo]:
         return self._endpoints(topic, self._node.get_subscriptions_info_by_topic(topic))
 

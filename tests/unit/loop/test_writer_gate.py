@@ -114,3 +114,41 @@ def test_the_graph_is_kept_read_until_a_first_writer_is_taken_then_left_alone() 
             gates.keep_graph_read()
     assert [g.asked for g in graphs.values()] == [2, 2]         # not once a writer is taken
     assert gates.values()["a_writer"] == "/frame/sim_node"      # named when reported
+
+
+class CountingNode(Parameters):
+    """A node whose graph has one writer per topic, counting how it was asked."""
+
+    def __init__(self) -> None:
+        self.counted: list[str] = []
+        self.listed: list[str] = []
+
+    def count_publishers(self, topic: str) -> int:
+        self.counted.append(topic)
+        return 1
+
+    def get_publishers_info_by_topic(self, topic: str) -> list[object]:
+        self.listed.append(topic)
+        return [type("Endpoint", (), {"endpoint_gid": SIM, "node_namespace": "/frame",
+                                      "node_name": "sim_node"})()]
+
+
+def test_without_writer_ids_the_writers_are_counted_not_listed_and_the_graph_left_alone(
+) -> None:
+    """rclpy (Jazzy) gives no writer GIDs: the gate asks the node for the count of the topic's
+    writers (a C call there), never for the endpoint list (44 µs), and a sample without a GID
+    ends the graph reads before the first sample as a taken writer does."""
+    node = CountingNode()
+    gates = InputGates(node, "sensor_writer")  # type: ignore[arg-type]
+    gate = gates.add("/a", "sensor_writer")
+    clock = iter(range(0, 10 * RECHECK_NS, RECHECK_NS))
+    with unittest.mock.patch("time.monotonic_ns", lambda: next(clock)):
+        gates.keep_graph_read()                             # t = 0: read before any sample
+        assert node.listed == ["/a"]
+        gate.clock = lambda: 0
+        assert gate.admits(b"") and node.counted == ["/a"]
+        gate.clock = lambda: RECHECK_NS
+        assert gate.admits(b"") and node.counted == ["/a", "/a"]
+        for _ in range(5):
+            gates.keep_graph_read()
+    assert node.listed == ["/a"] and not gate.rejected
