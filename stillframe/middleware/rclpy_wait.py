@@ -18,10 +18,12 @@ out: QoS events and guard conditions.
 
 from __future__ import annotations
 
+import contextlib
 import time
 from typing import Any
 
 from rclpy.callback_groups import CallbackGroup
+from rclpy.exceptions import InvalidHandle
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 
@@ -71,7 +73,8 @@ class SubscriptionWait:
         """Wait up to ``timeout_ns`` for a sample, a timer, a request or a response. Take every
         sample of each ready subscription of :data:`SUBSCRIPTIONS_WAITED_HERE` into its
         callback (subscriptions in creation order); let rclpy's executor run one callback if
-        anything else is ready."""
+        anything else is ready. ``timeout_ns`` 0 only takes what the subscriptions hold: rmw's
+        wait costs 25 – 85 µs even then (a timed futex wait in Fast DDS), seven empty takes 5."""
         own, executed = [], []
         for node in self._nodes:
             for sub in node._subscriptions:
@@ -79,6 +82,10 @@ class SubscriptionWait:
                     own.append(sub)
                 elif sub.callback_group is not NEVER_EXECUTED:
                     executed.append(sub)
+        if timeout_ns == 0 and time.monotonic_ns() < self._next_poll_ns:
+            for sub in own:
+                self._take_all(sub)
+            return
         timers = [t for node in self._nodes for t in node._timers]
         services = [s for node in self._nodes for s in node._services]
         clients = [c for node in self._nodes for c in node._clients]
@@ -97,9 +104,8 @@ class SubscriptionWait:
             wait_set.add_client(client.handle)
         wait_set.wait(timeout_ns)
         ready = wait_set.get_ready_entities("subscription")
-        for sub in own:
-            if ready and sub.handle.pointer in ready:
-                self._take_all(sub)
+        for sub in [sub for sub in own if ready and sub.handle.pointer in ready]:
+            self._take_all(sub)
         now = time.monotonic_ns()
         if (now >= self._next_poll_ns
                 or any(sub.handle.pointer in ready for sub in executed)
@@ -121,7 +127,8 @@ class SubscriptionWait:
 
     @staticmethod
     def _take_all(sub: Any) -> None:
-        """Every sample ``sub`` holds, oldest first, into its callback (``(data, info)``)."""
-        with sub.handle:
+        """Every sample ``sub`` holds, oldest first, into its callback (``(data, info)``); none
+        if an earlier callback of this wait destroyed it (as rclpy's executor skips it)."""
+        with contextlib.suppress(InvalidHandle), sub.handle:
             while (taken := sub.handle.take_message(sub.msg_type, sub.raw)) is not None:
                 sub.callback(*taken)

@@ -54,12 +54,14 @@ def test_round_trip_over_rclpy(ros_domain: int, monkeypatch: pytest.MonkeyPatch)
         node.destroy_node()
 
 
-def test_one_spin_takes_every_waiting_sample_in_order(ros_domain: int,
-                                                      monkeypatch: pytest.MonkeyPatch) -> None:
+@pytest.mark.parametrize("timeout_sec", [1.0, 0.0])
+def test_one_spin_takes_every_waiting_sample_in_order(
+        ros_domain: int, monkeypatch: pytest.MonkeyPatch, timeout_sec: float) -> None:
     """rclpy's executor runs one callback per ``spin_once``; the backend's wait takes every
     sample that has arrived, each topic's in the order written, the topics in the order their
-    subscriptions were made (as the dds backend)."""
+    subscriptions were made (as the dds backend); with no timeout, without rmw's wait."""
     monkeypatch.setenv("STILLFRAME_RMW", "rclpy")
+    monkeypatch.setattr(rclpy_wait, "EXECUTOR_POLL_NS", 3600 * 10**9)
     node = create_node("rclpy_wait_check", argv=["test"])
     try:
         got: list[tuple[str, str]] = []
@@ -76,7 +78,7 @@ def test_one_spin_takes_every_waiting_sample_in_order(ros_domain: int,
             pubs[name].publish(messages.new("std_msgs/msg/String", data=data))
         # acknowledged: every sample is in the subscriptions' histories before the one spin
         assert all(p.wait_for_all_acked(10.0) for p in pubs.values())
-        node.spin_once(1.0)
+        node.spin_once(timeout_sec)
         assert got == [("b", "1"), ("b", "2"), ("a", "1"), ("a", "2"), ("a", "3")]
     finally:
         node.destroy_node()
@@ -102,3 +104,27 @@ def test_rclpy_s_own_clock_subscription_and_timers_still_run(
                           or follower.get_clock().now().nanoseconds == sim_ns, 10)
     finally:
         follower.destroy_node()
+
+
+def test_a_subscription_destroyed_by_an_earlier_callback_of_the_same_wait_is_skipped(
+        ros_domain: int, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv("STILLFRAME_RMW", "rclpy")
+    node = create_node("rclpy_wait_destroy", argv=["test"])
+    try:
+        got: list[str] = []
+        pubs = [node.create_publisher("std_msgs/msg/String", name, 10) for name in ("a", "b")]
+        subs: list = []
+        subs.append(node.create_subscription(
+            "std_msgs/msg/String", "a",
+            lambda msg: (got.append(f"a{msg.data}"), node.destroy_subscription(subs[1])), 10))
+        subs.append(node.create_subscription(
+            "std_msgs/msg/String", "b", lambda msg: got.append(f"b{msg.data}"), 10))
+        assert spin_until(node, lambda: all(p.get_subscription_count() for p in pubs), 10)
+        for pub in pubs:
+            pub.publish(messages.new("std_msgs/msg/String", data="1"))
+        assert all(p.wait_for_all_acked(10.0) for p in pubs)
+        node.spin_once(1.0)
+        node.spin_once(0.1)
+        assert got == ["a1"]
+    finally:
+        node.destroy_node()
