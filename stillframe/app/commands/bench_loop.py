@@ -13,7 +13,9 @@ three nodes on it, so the backends are compared in the same run. ``--compose`` /
 ``--compose-all`` run the real-time runs with those nodes in one process and add a composed
 lock-step run; ``--rt`` runs the nodes with the real-time practices of docs/realtime.md. The
 figures are printed beside the goals of issue 10, with the machine's load average during each
-real-time run (the machine may be shared).
+real-time run (the machine may be shared); ``--stall-probe`` runs cyclictest beside each
+real-time run (:mod:`stillframe.bench.stall_probe`) and prints the machine's own stalls, which
+no practice of the loop can remove.
 """
 
 from __future__ import annotations
@@ -36,6 +38,7 @@ from stillframe.app.commands.launch import (
     realtime_arguments,
 )
 from stillframe.app.launcher import run_scene
+from stillframe.bench.stall_probe import stall_probe
 from stillframe.config.scene import load_scene
 from stillframe.contract.topics import DEFAULT_NAMESPACE, FLOOR_IMU, FORCE_CMD, TORQUE_CMD
 from stillframe.errors import InputError
@@ -64,6 +67,9 @@ def register(benches: argparse._SubParsersAction) -> None:
     parser.add_argument("--backend", dest="backends", action="append", default=[],
                         choices=api.BACKENDS,
                         help="measure this backend (repeatable; default: every one installed)")
+    parser.add_argument("--stall-probe", action="store_true",
+                        help="run cyclictest (rt-tests, root) beside each real-time run: "
+                             "the machine's stalls of 1 ms or more, and its worst")
     add_compose_arguments(parser)
     add_realtime_arguments(parser)
     add_json_argument(parser)
@@ -148,12 +154,14 @@ def observer_realtime(practices: str) -> Iterator[None]:
 
 def realtime(rate_hz: float, duration: float, out: Path, backend: str,
              rt: tuple[str, list[int]] = ("", []),
-             monitor_args: list[str] | None = None, compose: str = "") -> dict[str, Any]:
+             monitor_args: list[str] | None = None, compose: str = "",
+             probe: bool = False) -> dict[str, Any]:
     """The LQG scene in real time at ``rate_hz`` through the nodes on ``backend`` (composed as
     ``compose`` says): latency and deadline figures seen by an observer here;
-    ``monitor_args`` start a monitor beside them."""
+    ``monitor_args`` start a monitor beside them; ``probe``: cyclictest beside them."""
     log = LatencyLog(round(1e9 / rate_hz))
-    with observer_backend(backend), observer_realtime(rt[0]):
+    with (observer_backend(backend), observer_realtime(rt[0]),
+          stall_probe() if probe else contextlib.nullcontext() as stalls):
         result = run_scene(SCENE, realtime_overrides(rate_hz, duration), out, "realtime",
                            prepare=observe(log), backends=[backend], rt=rt[0], rt_cpus=rt[1],
                            monitor_args=monitor_args, compose=compose)
@@ -165,7 +173,8 @@ def realtime(rate_hz: float, duration: float, out: Path, backend: str,
             "rt_cpus": rt[1], **summary,
             "within_period_pct": 100.0 * within / seen if seen else float("nan"),
             "sim_overruns": e.get("overruns"), "sim_deadline_misses": e.get("deadline_misses"),
-            "steps": e["steps"], "load_1min": os.getloadavg()[0]}
+            "steps": e["steps"], "load_1min": os.getloadavg()[0],
+            **(stalls.summary if stalls else {})}
 
 
 #: the goals of issue 10: (figure, key, rate or None, test, goal text)
@@ -250,7 +259,8 @@ def run(args: argparse.Namespace) -> int:
                 print(f"{backend}: real time at {rate:g} Hz for {args.duration:g} s"
                       + (f" (--rt {rt[0]})" if rt[0] else ""), file=sys.stderr)
                 rows.append(realtime(rate, args.duration, Path(tmp) / f"{backend}{rate:g}",
-                                     backend, rt, compose=args.compose))
+                                     backend, rt, compose=args.compose,
+                                     probe=args.stall_probe))
             if args.lockstep:
                 print(f"{backend}: lock-step, the full LQG scene", file=sys.stderr)
                 speeds.append(lockstep(Path(tmp) / f"{backend}-lockstep", backend, one,
@@ -262,11 +272,13 @@ def run(args: argparse.Namespace) -> int:
         return 0
     print(format_table(
         ["backend", "composed", "rate [Hz]", "samples", "answered", "within period [%]", "p50 [us]",
-         "p99 [us]", "max [us]", "deadline misses", "unanswered", "sim overruns", "load"],
+         "p99 [us]", "max [us]", "deadline misses", "unanswered", "sim overruns",
+         "machine stalls (worst [us])", "load"],
         [[r["backend"], r["compose"] or "-", f"{r['rate_hz']:g}", r["samples"], r["answered"],
           f"{r['within_period_pct']:.2f}", f"{r['p50_us']:.0f}",
           f"{r['p99_us']:.0f}", f"{r['max_us']:.0f}", r["deadline_misses"], r["unanswered"],
           r["sim_overruns"] if r["sim_overruns"] is not None else "-",
+          f"{r['probe_stalls']} ({r['probe_max_us']})" if "probe_stalls" in r else "-",
           f"{r['load_1min']:.2f}"] for r in rows]))
     print(format_table(["figure", "backend", "measured", "goal", "met"],
                        [[g["figure"], g["backend"], f"{g['value']:.4g}", g["goal"],
