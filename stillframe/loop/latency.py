@@ -6,10 +6,9 @@ the latency is (time of the command stamped t_k) − (time of the sample stamped
 the source timestamps DDS carries with each sample (when its writer wrote it, on the host's wall
 clock): the hop to the estimator, the estimator's and controller's work and the hop between
 them, without the observer's own wake-ups, which a loaded machine delays by more than the loop
-takes. A command later than one sample period after its sample
-missed its deadline (the next sample is already due); a sample never answered is counted
-separately, except the samples that came after the last command seen (still in flight when the
-run ended).
+takes. A command later than one sample period after its sample missed its deadline (the next
+sample is already due); a sample never answered is counted separately, except the samples that
+came after the last command seen (still in flight when the run ended).
 """
 
 from __future__ import annotations

@@ -2,8 +2,8 @@
 handed to the callbacks directly, as the ``dds`` backend's ``spin_once`` does.
 
 rclpy's ``SingleThreadedExecutor`` builds a new wait set in Python on every ``spin_once`` and runs
-each message as a ``Task``, one message per call: 227 µs to wait for and take 7 messages in one
-process where this wait takes 19 µs (`stillframe bench hops`, docs/realtime.md). Its C++
+each message as a ``Task``, one message per call: 258 µs to wait for and take 7 messages in one
+process where this wait takes 49 – 53 µs (`stillframe bench hops`, docs/realtime.md). Its C++
 ``EventsExecutor`` is not usable in Jazzy (rclpy 7.1.6): it fails with "SystemError: null argument
 to internal routine" on every subscription whose callback takes a ``MessageInfo``, and it ignores
 callback groups (ros2/rclpy#1478), so it would take the polled subscriptions' samples.
@@ -104,11 +104,11 @@ class SubscriptionWait:
             wait_set.add_client(client.handle)
         wait_set.wait(timeout_ns)
         ready = wait_set.get_ready_entities("subscription")
+        others_ready = any(sub.handle.pointer in ready for sub in executed)
         for sub in [sub for sub in own if ready and sub.handle.pointer in ready]:
             self._take_all(sub)
         now = time.monotonic_ns()
-        if (now >= self._next_poll_ns
-                or any(sub.handle.pointer in ready for sub in executed)
+        if (now >= self._next_poll_ns or others_ready
                 or wait_set.get_ready_entities("timer")
                 or wait_set.get_ready_entities("service")
                 or wait_set.get_ready_entities("client")):
