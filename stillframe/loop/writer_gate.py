@@ -154,7 +154,7 @@ class InputGates:
         self.node = node
         self.gates: dict[str, WriterGate] = {}
         self.pins: dict[str, str] = {}
-        self.first_taken = False        # a gate has taken a writer (:meth:`keep_graph_read`)
+        self.samples_seen = False       # a gate has seen samples (:meth:`keep_graph_read`)
         self.next_graph_read = 0
         for name in parameters:
             pinned = node.declare_parameter(name, "", read_only=True).value
@@ -176,13 +176,13 @@ class InputGates:
             gate.writers()
 
     def keep_graph_read(self) -> None:
-        """Until a first sample is taken, read the graph every :data:`RECHECK_NS`: a node
+        """Until a first sample comes, read the graph every :data:`RECHECK_NS`: a node
         calls this in its loop, so that the graph is read while it waits for the simulator,
         not in the first report or decision that needs it, inside the loop."""
-        if self.first_taken:
+        if self.samples_seen:
             return
         if any(gate.has_seen_samples() for gate in self.gates.values()):
-            self.first_taken = True
+            self.samples_seen = True
         elif (now := time.monotonic_ns()) >= self.next_graph_read:
             self.read_graph()
             self.next_graph_read = now + RECHECK_NS
