@@ -146,9 +146,11 @@ def test_bad_study_input_is_one_line_exit_2(capsys):
 @pytest.mark.long
 def test_bench_sweeps_give_the_same_results_on_the_executor():
     """bench identify's cases and bench fidelity's work-precision errors, serial here and on an
-    external two-worker cluster: equal (CPU times aside; the identification to 1e-4 relative, the
-    fidelity errors to 1e-9 of the output scale, as this process's BLAS may use threads where
-    the single-threaded workers do not)."""
+    external two-worker cluster: equal (CPU times aside), to what the BLAS's thread count changes:
+    this process's BLAS may use threads where the single-threaded workers do not. The errors are
+    relative to the true modes, so they agree to 1e-5 of a frequency and 1e-3 of a damping ratio
+    (the one-thread and two-thread BLAS differ by 7e-7 and 6e-5 on the first case here); the
+    fidelity errors to 1e-9 of the output scale."""
     from stillframe.fidelity.work_precision import sweep
     from stillframe.identification.sweep import METHODS, cases, run_case
     from stillframe.studies.executor import mapper
@@ -163,8 +165,8 @@ def test_bench_sweeps_give_the_same_results_on_the_executor():
         for method in METHODS:
             a, b = spread_case[method], here[method]
             assert a["missed"] == b["missed"]
-            assert a["frequency_error"] == pytest.approx(b["frequency_error"], rel=1e-4)
-            assert a["damping_error"] == pytest.approx(b["damping_error"], rel=1e-4)
+            assert a["frequency_error"] == pytest.approx(b["frequency_error"], rel=0, abs=1e-5)
+            assert a["damping_error"] == pytest.approx(b["damping_error"], rel=0, abs=1e-3)
     serial = sweep(quick=True, duration=0.1)
 
     def cases_of(result: dict) -> list:
