@@ -8,7 +8,11 @@ clock): the hop to the estimator, the estimator's and controller's work and the 
 them, without the observer's own wake-ups, which a loaded machine delays by more than the loop
 takes. A command later than one sample period after its sample missed its deadline (the next
 sample is already due); a sample never answered is counted separately, except the samples that
-came after the last command seen (still in flight when the run ended).
+came after the last command seen (still in flight when the run ended), and the samples before
+the first command seen, counted as ``unobserved``: until a command reaches the observer, its
+reader may not be matched with the controller's writer yet (on Fast DDS that took up to 1.5 s
+after the loop started, and every sample of that time looked unanswered). sim_node's own count
+of late commands covers that time.
 """
 
 from __future__ import annotations
@@ -35,19 +39,24 @@ class LatencyLog:
 
     def summary(self) -> dict[str, float | int]:
         """p50 / p99 / max latency in µs over the answered samples, deadline misses (latency
-        above one period), unanswered samples."""
+        above one period), unanswered samples, samples before the first command
+        (``unobserved``)."""
         answered = sorted(set(self.samples) & set(self.commands))
         latency_us = np.array([(self.commands[s] - self.samples[s]) * 1e-3 for s in answered])
-        last = max(self.commands, default=-1)
-        unanswered = sum(1 for s in self.samples if s not in self.commands and s <= last)
+        first, last = min(self.commands, default=0), max(self.commands, default=-1)
+        unanswered = sum(1 for s in self.samples
+                         if s not in self.commands and first <= s <= last)
+        unobserved = sum(1 for s in self.samples if s < first)
         if latency_us.size == 0:
             return {"samples": len(self.samples), "answered": 0, "unanswered": unanswered,
+                    "unobserved": unobserved,
                     "p50_us": float("nan"), "p99_us": float("nan"), "max_us": float("nan"),
                     "deadline_misses": 0}
         return {
             "samples": len(self.samples),
             "answered": len(answered),
             "unanswered": unanswered,
+            "unobserved": unobserved,
             "p50_us": float(np.percentile(latency_us, 50)),
             "p99_us": float(np.percentile(latency_us, 99)),
             "max_us": float(latency_us.max()),

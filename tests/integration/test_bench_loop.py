@@ -47,6 +47,19 @@ def test_unanswered_samples_before_the_last_command_are_counted() -> None:
     assert (s["answered"], s["unanswered"], s["deadline_misses"]) == (2, 2, 0)
 
 
+def test_samples_before_the_first_command_are_unobserved_not_unanswered() -> None:
+    """Until the observer's command reader is matched with the controller's writer (on Fast
+    DDS up to 1.5 s into a run), no command can reach it: samples 0 and 1 are unobserved; the
+    missing command of sample 4, between the first and the last command seen, is unanswered."""
+    log = LatencyLog(period_ns=MS)
+    for k in range(7):
+        log.on_sample(k * MS, k * MS)
+    for k in (2, 3, 5):
+        log.on_command(k * MS, k * MS + 100)
+    s = log.summary()
+    assert (s["unobserved"], s["answered"], s["unanswered"]) == (2, 3, 1)
+
+
 def test_empty_log_reports_nan_not_an_error() -> None:
     s = LatencyLog(period_ns=MS).summary()
     assert s["answered"] == 0 and math.isnan(s["p50_us"])
@@ -97,3 +110,4 @@ def test_bench_loop_rejects_a_bad_rate_and_rt_practice() -> None:
     assert done.returncode == 2 and "--rate must be 1..10000 Hz" in done.stderr
     done = run_stillframe("bench", "loop", "--rt", "turbo", "--backend", "dds")
     assert done.returncode == 2 and "unknown practice(s) turbo" in done.stderr
+

@@ -272,12 +272,12 @@ def run(args: argparse.Namespace) -> int:
         return 0
     print(format_table(
         ["backend", "composed", "rate [Hz]", "samples", "answered", "within period [%]", "p50 [us]",
-         "p99 [us]", "max [us]", "deadline misses", "unanswered", "sim overruns",
+         "p99 [us]", "max [us]", "deadline misses", "unanswered", "unobserved", "sim overruns",
          "machine stalls (worst [us])", "load"],
         [[r["backend"], r["compose"] or "-", f"{r['rate_hz']:g}", r["samples"], r["answered"],
           f"{r['within_period_pct']:.2f}", f"{r['p50_us']:.0f}",
           f"{r['p99_us']:.0f}", f"{r['max_us']:.0f}", r["deadline_misses"], r["unanswered"],
-          r["sim_overruns"] if r["sim_overruns"] is not None else "-",
+          r["unobserved"], r["sim_overruns"] if r["sim_overruns"] is not None else "-",
           f"{r['probe_stalls']} ({r['probe_max_us']})" if "probe_stalls" in r else "-",
           f"{r['load_1min']:.2f}"] for r in rows]))
     print(format_table(["figure", "backend", "measured", "goal", "met"],
