@@ -407,6 +407,7 @@ class Launcher:
                 raise KeyboardInterrupt
             for child in reversed(self.processes.children):
                 self.processes.stop(child)
+            self.node.spin_once(0.0)    # the nodes' last statuses, written as they stopped
             if (dead := self.processes.first_failure()) is not None:
                 raise NodeDiedError.exited(dead)
         finally:

@@ -40,6 +40,20 @@ print("waiting", flush=True)
 time.sleep({life!r})
 sys.exit({code!r})
 """
+#: a controller that reports once, as it stops (a real node's last status counts the whole run)
+STATUS_AT_STOP = """\
+from stillframe.contract import topics
+from stillframe.loop.node_support import Diagnostics
+from stillframe.middleware import api
+node = api.create_node("controller_node", namespace=topics.DEFAULT_NAMESPACE)
+diagnostics = Diagnostics(node, 3600.0)
+api.spin_until(node, lambda: diagnostics.pub.get_subscription_count() > 0, 30)
+print("waiting", flush=True)
+while api.ok():
+    node.spin_once(0.1)
+diagnostics.publish(0, {{"watchdog": 7}})
+diagnostics.pub.wait_for_all_acked(10.0)
+"""
 RESULT = {"reduction_pct": {"displacement": [71.0, 75.0, 57.0], "velocity": [73.0, 80.0, 70.0]},
           "peak_command": 0.25, "lockstep_timeouts": 0, "steps": 1600, "wall_s": 1.0}
 
@@ -136,6 +150,19 @@ def test_launch_passes_sim_nodes_result_through_and_stops_the_others(
                           .split("sim argv ", 1)[1])
     assert "mode:=realtime" in sim_argv and 'overrides:=["duration=60"]' in sim_argv
     assert not any(alive(pid) for pid in pids.values())
+
+
+def test_the_nodes_last_statuses_written_as_they_stop_are_in_the_result(
+        tmp_path: Path, ros_domain: int) -> None:
+    """The controller reports only after the launcher stopped it (forced: its status period is
+    an hour): the launcher still takes that status before it returns. The simulator's 3 s
+    leave the controller time to match the launcher's reader."""
+    write_stand_ins(tmp_path, sim_seconds=3.0)
+    (tmp_path / "controller_node" / "node.py").write_text(STATUS_AT_STOP.format())
+    proc = start_launch(tmp_path, "--json", "--mode", "realtime")
+    out, err = proc.communicate(timeout=120)
+    assert proc.returncode == 0, err
+    assert json.loads(out)["diagnostics"]["/frame/controller_node"]["watchdog"] == "7"
 
 
 def test_ctrl_c_stops_every_child(tmp_path: Path, ros_domain: int) -> None:

@@ -45,8 +45,11 @@ def test_composed_run_equals_one_process(ros_domain: int, tmp_path: Path, compos
         counts = {c.topic: c.msgcount for c in reader.connections}
     for topic in (FLOOR_IMU[0], STATE_ESTIMATE, TORQUE_CMD):
         assert 150 <= counts[f"{DEFAULT_NAMESPACE}/{topic.name}"] <= 192, topic.name
-    assert {"controller_node", "estimator_node", "sim_node"} <= {
-        name.rsplit("/", 1)[-1] for name in result.diagnostics}
+    statuses = {name.rsplit("/", 1)[-1]: values for name, values in result.diagnostics.items()}
+    assert {"controller_node", "estimator_node", "sim_node"} <= set(statuses)
+    # the last statuses, written as the nodes stopped, count the whole run
+    assert statuses["controller_node"]["commands"] == "192"
+    assert statuses["estimator_node"]["estimates"] == "192"
 
 
 def test_compose_replaces_the_two_processes_by_the_container(ros_domain: int) -> None:
