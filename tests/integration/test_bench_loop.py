@@ -8,7 +8,13 @@ import math
 import numpy as np
 import pytest
 
-from stillframe.app.commands.bench_loop import goal_rows, realtime_overrides, stamp_ns
+from stillframe.app.commands.bench_loop import (
+    goal_rows,
+    realtime_overrides,
+    stamp_ns,
+    watchdog_zeros,
+    within_period_pct,
+)
 from stillframe.config.scene import load_scene
 from stillframe.contract import messages
 from stillframe.locations import REPO_ROOT
@@ -58,6 +64,19 @@ def test_samples_before_the_first_command_are_unobserved_not_unanswered() -> Non
         log.on_command(k * MS, k * MS + 100)
     s = log.summary()
     assert (s["unobserved"], s["answered"], s["unanswered"]) == (2, 3, 1)
+
+
+def test_the_watchdog_s_zeros_are_not_answers_within_the_period() -> None:
+    """1000 samples seen, 990 answered of which 4 late, 10 unanswered; the controller's last
+    status counts 6 watchdog zeros: (990 - 4 - 6) / 1000 within the period."""
+    summary = {"answered": 990, "unanswered": 10, "deadline_misses": 4}
+    statuses = {"/frame/estimator_node": {"watchdog": "99"},
+                "/frame/controller_node": {"commands": "990", "watchdog": "6"}}
+    zeros = watchdog_zeros(statuses)
+    assert zeros == 6 and within_period_pct(summary, zeros) == pytest.approx(98.0)
+    assert watchdog_zeros({"/frame/sim_node": {"step": "3"}}) is None
+    assert math.isnan(within_period_pct({"answered": 0, "unanswered": 0,
+                                         "deadline_misses": 0}, 0))
 
 
 def test_empty_log_reports_nan_not_an_error() -> None:
