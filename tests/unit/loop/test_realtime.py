@@ -52,7 +52,13 @@ def run_child(code: str) -> dict:
 
 ENTER = """
 import ctypes, json, os, threading, time
+os.environ["OPENBLAS_NUM_THREADS"] = "2"     # numpy's and scipy's BLAS: two threads each
+import numpy, scipy.linalg
+from threadpoolctl import threadpool_info
 from stillframe.loop.realtime import Realtime, RealtimeOptions
+
+def blas_threads():
+    return sorted(i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas")
 
 def named(name):   # a thread with an OS name, as Cyclone names its threads
     ctypes.CDLL(None).prctl(15, name.encode())
@@ -75,8 +81,11 @@ child = os.fork()
 if child == 0:
     os._exit(0 if os.sched_getscheduler(0) == os.SCHED_OTHER else 1)
 _, status = os.waitpid(child, 0)
+blas = blas_threads()
+rt.leave()
 print(json.dumps({{"applied": rt.applied, "refused": rt.refused, "threads": threads,
-    "child_other": status == 0, "fifo": os.SCHED_FIFO, "other": os.SCHED_OTHER}}))
+    "child_other": status == 0, "fifo": os.SCHED_FIFO, "other": os.SCHED_OTHER,
+    "blas": blas, "blas_after_leave": blas_threads()}}))
 """
 
 
@@ -92,6 +101,8 @@ def test_fifo_affinity_and_mlock_reach_every_thread_and_not_children() -> None:
     assert threads["tev"][:2] == [other, 0]               # housekeeping stays SCHED_OTHER
     assert all(t[2] == [cpu] for t in threads.values())     # affinity: every thread
     assert out["child_other"]                               # SCHED_RESET_ON_FORK
+    # the BLAS worker threads would stay SCHED_OTHER: the BLAS runs on the calling thread
+    assert out["blas"] == [1, 1] and out["blas_after_leave"] == [2, 2]
     with open("/proc/self/status") as status:               # this process is untouched
         assert "VmLck:\t       0 kB" in status.read()
 
@@ -108,6 +119,7 @@ def test_an_unprivileged_process_is_told_what_was_refused_and_why() -> None:
     assert f"{CPU_LATENCY_DEVICE} refused: Permission denied (errno 13) (needs root)" in out[
         "refused"][-1]
     assert out["applied"] == ["gc frozen and off in the loop"]
+    assert out["blas"] == [2, 2]                            # no SCHED_FIFO: no need
     assert all(t[0] == out["other"] for t in out["threads"].values())
 
 
