@@ -129,4 +129,3 @@ def test_bench_loop_rejects_a_bad_rate_and_rt_practice() -> None:
     assert done.returncode == 2 and "--rate must be 1..10000 Hz" in done.stderr
     done = run_stillframe("bench", "loop", "--rt", "turbo", "--backend", "dds")
     assert done.returncode == 2 and "unknown practice(s) turbo" in done.stderr
-

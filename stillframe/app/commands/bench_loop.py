@@ -186,8 +186,8 @@ def watchdog_zeros(statuses: dict[str, dict[str, str]]) -> int | None:
 def within_period_pct(summary: dict[str, Any], zeros: int) -> float:
     """The share of the samples seen that the control law answered within the period: the
     answered ones less the late ones and less the watchdog's ``zeros``. A zero goes out at the
-    newest sample's stamp when the estimates fell 3 periods behind, so it is the first command
-    of its stamp that the observer sees, and in time, though the law never answered that
+    newest sample's stamp when the estimates fell ``watchdog_periods`` behind, so it is the first
+    command of its stamp that the observer sees, and in time, though the law never answered that
     sample."""
     seen = summary["answered"] + summary["unanswered"]
     within = summary["answered"] - summary["deadline_misses"] - zeros
