@@ -46,6 +46,7 @@ from stillframe.locations import SCENES_DIR
 from stillframe.loop.closed_loop import run_closed_loop
 from stillframe.loop.latency import LatencyLog
 from stillframe.loop.realtime import Realtime, RealtimeOptions, parse_practices
+from stillframe.loop.writer_gate import same_node
 from stillframe.middleware import api
 from stillframe.text_table import format_table
 
@@ -180,7 +181,7 @@ def watchdog_zeros(statuses: dict[str, dict[str, str]]) -> int | None:
     """The zero commands controller_node's watchdog sent (its last ``/diagnostics``); None
     without a status of it."""
     return next((int(values["watchdog"]) for name, values in statuses.items()
-                 if name.rsplit("/", 1)[-1] == "controller_node" and "watchdog" in values), None)
+                 if same_node(name, "controller_node") and "watchdog" in values), None)
 
 
 def within_period_pct(summary: dict[str, Any], zeros: int) -> float:
