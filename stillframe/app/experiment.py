@@ -15,7 +15,8 @@ For a scene (its plant: the nonlinear lumped or FE model, or an identified linea
 4. **Closed loop** on the plant through the three nodes.
 5. The same loop **designed on the true model** (``design.model: scene``, or the plant's file).
 
-The loop is the scene's own when it has an LQG controller, else the thesis's LQG set-up (§5.6:
+The loop is the scene's own when it has an LQG controller, else (no controller, or another kind:
+the experiment compares LQG designs) the thesis's LQG set-up (§5.6:
 Kalman filter, eq. 5.229–5.230 weights, control from 25 s of 50 s, 10 s windows) with the torque
 limited to 0.05 N m in controller and actuator (:data:`LQG_LOOP`). ``--set`` overrides apply to
 both runs and to the test, except what the test must be (excitation, no controller, duration).
@@ -28,7 +29,7 @@ import math
 import shutil
 import sys
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -41,7 +42,8 @@ from stillframe.config.schema import Section
 from stillframe.contract import topics
 from stillframe.design.identified import load_identified_structure, resolve_model_file
 from stillframe.dynamics.models import build_model
-from stillframe.errors import InputError
+from stillframe.app.experiment_test_force import test_force
+from stillframe.errors import IdentificationError, InputError
 from stillframe.identification.structure_model import (
     IdentifiedStructure,
     identify_structure,
@@ -70,12 +72,14 @@ Progress = Callable[[str], None]
 class IdentificationTest:
     """The identification test: force std [N], duration [s], noise seed."""
 
-    force_std: float = 0.1
+    force_std: float | None = None
+    """None: :func:`stillframe.app.experiment_test_force.test_force` chooses it."""
     duration: float = 64.0
     seed: int = 0
 
     def check(self) -> None:
-        if not (self.force_std > 0 and math.isfinite(self.force_std)):
+        if self.force_std is not None and not (self.force_std > 0
+                                               and math.isfinite(self.force_std)):
             raise InputError(f"--test-force {self.force_std:g}: must be a positive force [N]")
         if not (self.duration > 0 and math.isfinite(self.duration)):
             raise InputError(f"--test-duration {self.duration:g}: must be positive [s]")
@@ -111,16 +115,13 @@ def identification_test_overrides(scene: Section, user: Sequence[str],
     step that divides the period): white noise on floor 1 held over a sample period."""
     return [*TEST_SENSORS, *user,
             "excitation.type=white_noise", "excitation.floor=1",
-            f"excitation.std={test.force_std:.17g}",
+            f"excitation.std={test_force(scene, test.force_std):.17g}",
             f"excitation.rate_hz={scene.sensors.rate_hz:.17g}", f"excitation.seed={test.seed}",
             "estimator.type=none", "controller.type=none", f"duration={test.duration:.17g}"]
 
 
 def loop_overrides(scene: Section, user: Sequence[str]) -> list[str]:
     """The closed loop's overrides (before the design): the scene's LQG loop or :data:`LQG_LOOP`."""
-    if scene.controller.type not in ("none", "lqg"):
-        raise InputError(f"controller.type: {scene.controller.type}; the experiment designs an "
-                         "LQG (use a scene without controller or with lqg)")
     if scene.excitation.type == "none":
         raise InputError("excitation.type: none; the closed loop needs a disturbance to reduce "
                          "(e.g. the thesis's harmonics of scenes/thesis_lumped.yaml)")
@@ -177,6 +178,7 @@ def run_experiment(scene_path: Path, user: Sequence[str], out: Path, test: Ident
     probe = load_scene(scene_path, [*user, "controller.type=none"])  # rate and step only
     user = [*integrator_override(probe), *user]
     scene = load_scene(scene_path, user)
+    test = replace(test, force_std=test_force(scene, test.force_std))
     ident_set = identification_test_overrides(scene, user, test)
     loop_base = loop_overrides(scene, user)
     model_file = (out / "model.npz").resolve()
@@ -197,9 +199,9 @@ def run_experiment(scene_path: Path, user: Sequence[str], out: Path, test: Ident
     record = read_record(out / "bag", [Channel(INPUT_TOPIC)], [Channel(t) for t in OUTPUT_TOPICS])
     try:
         identified = identify_structure(record.u, record.y, record.dt, scene.rig)
-    except InputError as exc:
-        raise InputError(f"the test in {out / 'bag'} did not identify the structure ({exc}); "
-                         "a stronger or longer test may (--test-force, --test-duration)") from None
+    except (InputError, IdentificationError) as exc:
+        raise type(exc)(f"the test in {out / 'bag'} ({test.force_std:g} N, {record.samples} "
+                        f"samples) did not identify the structure: {exc}") from None
     save_structure(model_file, identified, [str(c) for c in record.inputs],
                    [str(c) for c in record.outputs], {"bag": str(out / "bag")})
     evaluation, histories = {}, {}

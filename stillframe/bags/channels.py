@@ -4,7 +4,7 @@ A channel is ``TOPIC[:FIELD]``: FIELD is a dotted path into the message, with ``
 element of an array (``wrench.force.x``, ``position[0]``). Without FIELD the topic contract's
 quantity for the topic's type is taken (docs/architecture.md, topic contract). Bags are read with
 ``rosbags.highlevel.AnyReader``, so sqlite3 and MCAP bags, including ones written by
-``ros2 bag record``, are read alike. Each sample is placed at its header stamp (the measurement
+``ros2 bag record``, are read alike; a lone ``.mcap`` file with :mod:`stillframe.bags.lone_mcap`. Each sample is placed at its header stamp (the measurement
 time in the contract), or at its log time when the message has no header or all its stamps are
 zero. Channels must be uniformly sampled at one rate without gaps; they are aligned sample by
 sample on their common time span. Preprocessing applies the same linear filter to inputs and
@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 from scipy import signal
 
+from stillframe.bags.lone_mcap import is_lone_mcap, open_lone_mcap
 from stillframe.bags.storage import open_bag
 from stillframe.contract.messages import TYPESTORE
 from stillframe.contract.topics import CONTRACT
@@ -140,7 +141,8 @@ def _stamp_ns(msg: object) -> int | None:
 
 def read_series(bag: str | Path, channels: Sequence[Channel]) -> list[Series]:
     """Read each channel's samples from the bag (one pass over the needed topics)."""
-    with open_bag(bag, TYPESTORE) as reader:
+    opener = open_lone_mcap if is_lone_mcap(bag) else open_bag
+    with opener(bag, TYPESTORE) as reader:
         types: dict[str, set[str]] = {}
         for c in reader.connections:
             types.setdefault(c.topic, set()).add(c.msgtype)

@@ -128,7 +128,8 @@ def test_json_schema_and_auto_order(noisy_bag: Path, method: str) -> None:
     freqs = [m["frequency_hz"] for m in doc["modes"]]
     assert freqs == sorted(freqs) and len(freqs) == 3
     for mode in doc["modes"]:
-        assert set(mode) == {"frequency_hz", "damping_ratio", "shape", "consistent"}
+        assert set(mode) == {"frequency_hz", "damping_ratio", "shape", "consistent",
+                             "frequency_ci_hz", "damping_ci"}  # refined by default
         assert mode["consistent"] is True  # three physical modes, clearly in the record
         shape = np.array(mode["shape"])
         assert shape.shape == (3, 2)  # [magnitude, phase_rad] per output
@@ -189,9 +190,9 @@ def test_save_model_with_mkr_recovers_m_k_r(clean_bag: Path, tmp_path: Path) -> 
     assert model.provenance["rayleigh_beta"] == pytest.approx(2e-4, rel=1e-3)
 
 
-@pytest.mark.parametrize("extra", [[], ["--refine"]])
+@pytest.mark.parametrize("extra", [[], ["--fast"]])
 def test_plots_are_written(noisy_bag: Path, tmp_path: Path, extra: list[str]) -> None:
-    """With --refine the stabilization diagram also carries the 95 % intervals."""
+    """By default (refined) the stabilization diagram also carries the 95 % intervals."""
     out = tmp_path / "plots"
     result = stillframe("identify", str(noisy_bag), *CHANNELS, "--order", "6", "--plots",
                         str(out), "--progress", *extra)
@@ -275,3 +276,34 @@ def test_refuses_record_too_short_for_order(tmp_path: Path) -> None:
 def test_refuses_a_directory_that_is_no_bag(tmp_path: Path) -> None:
     assert "metadata.yaml: missing (not a rosbag2 directory?)" in refuse(
         tmp_path, *CHANNELS, exit_code=BagError.exit_code)
+
+
+def test_all_zero_field_is_refused_by_topic_and_field(noisy_bag: Path) -> None:
+    """Issue 27: the excitation's wrench.force.y is all zero; exit 5 naming topic and field."""
+    msg = refuse(noisy_bag, "--input", f"{FORCE_TOPIC}:wrench.force.y", *CHANNELS[2:],
+                 exit_code=IdentificationError.exit_code)
+    assert f"channel {FORCE_TOPIC}:wrench.force.y is all zero" in msg
+
+
+def test_fast_path_warns_that_it_is_not_refined(noisy_bag: Path) -> None:
+    result = stillframe("identify", str(noisy_bag), *CHANNELS, "--order", "6", "--fast")
+    assert result.returncode == 0, result.stderr
+    assert "stillframe identify: warning: not refined" in result.stderr
+
+
+def test_a_lone_mcap_file_gives_the_bags_result(noisy_bag: Path) -> None:
+    """Issue 31 item 5: the bag's .mcap alone, as the help promises, gives the same document."""
+    (mcap,) = noisy_bag.glob("*.mcap")
+    assert identify_json(mcap, "--order", "6") == identify_json(noisy_bag, "--order", "6")
+
+
+@pytest.mark.parametrize("scale", [1e-300, 1e300])
+def test_outputs_in_any_units_give_the_same_modes(tmp_path: Path, scale: float) -> None:
+    """Issue 31 item 5: accelerations written scaled by 1e±300 into the bag: the same modes."""
+    force, acc = simulate(1024, DT, seed=8, noise=0.02)
+    plain = identify_json(write_frame_bag(tmp_path / "plain", force, acc, DT), "--order", "6")
+    scaled = identify_json(write_frame_bag(tmp_path / "scaled", force, acc * scale, DT),
+                           "--order", "6")
+    for key in ("frequency_hz", "damping_ratio"):
+        np.testing.assert_allclose([m[key] for m in scaled["modes"]],
+                                   [m[key] for m in plain["modes"]], rtol=1e-5)
