@@ -35,6 +35,7 @@ from typing import Any
 
 import numpy as np
 
+from stillframe.app.experiment_test_force import test_force
 from stillframe.app.launcher import run_scene
 from stillframe.bags.channels import Channel, read_record
 from stillframe.config.scene import load_scene
@@ -42,7 +43,6 @@ from stillframe.config.schema import Section
 from stillframe.contract import topics
 from stillframe.design.identified import load_identified_structure, resolve_model_file
 from stillframe.dynamics.models import build_model
-from stillframe.app.experiment_test_force import test_force
 from stillframe.errors import IdentificationError, InputError
 from stillframe.identification.structure_model import (
     IdentifiedStructure,

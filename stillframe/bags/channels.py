@@ -4,10 +4,10 @@ A channel is ``TOPIC[:FIELD]``: FIELD is a dotted path into the message, with ``
 element of an array (``wrench.force.x``, ``position[0]``). Without FIELD the topic contract's
 quantity for the topic's type is taken (docs/architecture.md, topic contract). Bags are read with
 ``rosbags.highlevel.AnyReader``, so sqlite3 and MCAP bags, including ones written by
-``ros2 bag record``, are read alike; a lone ``.mcap`` file with :mod:`stillframe.bags.lone_mcap`. Each sample is placed at its header stamp (the measurement
-time in the contract), or at its log time when the message has no header or all its stamps are
-zero. Channels must be uniformly sampled at one rate without gaps; they are aligned sample by
-sample on their common time span. Preprocessing applies the same linear filter to inputs and
+``ros2 bag record``, are read alike; a lone ``.mcap`` file with :mod:`stillframe.bags.lone_mcap`.
+Each sample is placed at its header stamp (the measurement time in the contract), or at its log
+time when the message has no header or all its stamps are zero. Channels must be uniformly
+sampled at one rate without gaps; they are aligned sample by sample on their common time span. Preprocessing applies the same linear filter to inputs and
 outputs, so the input-output relation that identification estimates is kept.
 """
 
@@ -34,6 +34,11 @@ DEFAULT_FIELDS: dict[str, str] = {"std_msgs/msg/Float64": "data"} | {
 #: Largest deviation of one sampling step from the median step, relative to the median step.
 DEFAULT_JITTER = 0.05
 
+#: SI unit of a field by its message member (REP 103; JointState of a revolute joint: rad)
+FIELD_UNITS: dict[str, str] = {
+    "linear_acceleration": "m/s²", "angular_velocity": "rad/s", "force": "N", "torque": "N m",
+    "position": "rad", "velocity": "rad/s", "effort": "N m"}
+
 _PATH_ITEM = re.compile(r"^([A-Za-z_]\w*)((?:\[\d+\])*)$")
 
 
@@ -54,6 +59,14 @@ class Channel:
         if path:
             _split_path(path, spec)
         return cls(topic, path or None)
+
+    @property
+    def unit(self) -> str | None:
+        """The SI unit of the field (:data:`FIELD_UNITS`), None when unknown."""
+        for part in (self.field or "").split("."):
+            if (unit := FIELD_UNITS.get(part.split("[")[0])) is not None:
+                return unit
+        return None
 
     def __str__(self) -> str:
         return f"{self.topic}:{self.field}" if self.field else self.topic

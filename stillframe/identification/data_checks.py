@@ -88,8 +88,7 @@ def check_length(samples: int, needed: int, order: int, names: Sequence[str], wh
 def _excitation_order_rank(u: Array, order: int) -> tuple[int, float]:
     """Rank of ``R_n`` (see module) and its smallest relative eigenvalue."""
     u = u / channel_scales(u)
-    n_samples, r = u.shape
-    rows = n_samples - order + 1
+    rows = u.shape[0] - order + 1
     phi = np.hstack([u[order - 1 - i: order - 1 - i + rows] for i in range(order)])
     eig = np.linalg.eigvalsh(phi.T @ phi / rows)
     top = max(float(eig[-1]), np.finfo(float).tiny)

@@ -291,10 +291,11 @@ def identify(
         uncertain = uncertain_modes(modes, refinement.frequency_ci_hz, refinement.damping_ci)
         notes += residual_warnings(y, refinement.errors)
     units = _Units(u_scale, y_scale)
-    A, B, C, D, G = A, units.B(B), units.C(C), units.D(D), None if G is None else units.G(G)
+    B, C, D = units.input_matrix(B), units.output_matrix(C), units.feedthrough(D)
+    G = None if G is None else units.gain(G)
     return Identification(
         A=A, B=B, C=C, D=D, G=G, dt=float(dt), order=chosen, order_gap=gap,
-        hankel_singular_values=s, markov=units.D(markov), method=method, observer_order=p,
+        hankel_singular_values=s, markov=units.feedthrough(markov), method=method, observer_order=p,
         dimensions=dims, factorization=fac,
         modes=modal_parameters(A, C, float(dt), reference=reference_sensor),
         consistent=consistent,
@@ -314,21 +315,22 @@ class _Units:
     u_scale: Array
     y_scale: Array
 
-    def B(self, B: Array) -> Array:
+    def input_matrix(self, B: Array) -> Array:
         return B / self.u_scale[None, :]
 
-    def C(self, C: Array) -> Array:
+    def output_matrix(self, C: Array) -> Array:
         return self.y_scale[:, None] * C
 
-    def D(self, D: Array) -> Array:
+    def feedthrough(self, D: Array) -> Array:
         """``D`` or a stack of Markov parameters ``(..., m, r)``."""
         return self.y_scale[:, None] * D / self.u_scale[None, :]
 
-    def G(self, G: Array) -> Array:
+    def gain(self, G: Array) -> Array:
         return G / self.y_scale[None, :]
 
     def refinement(self, ref: Refinement, A: Array, C: Array, dt: float,
                    reference: int | None) -> Refinement:
-        return replace(ref, B=self.B(ref.B), C=self.C(ref.C), D=self.D(ref.D), K=self.G(ref.K),
+        return replace(ref, B=self.input_matrix(ref.B), C=self.output_matrix(ref.C),
+                       D=self.feedthrough(ref.D), K=self.gain(ref.K),
                        errors=ref.errors * self.y_scale[None, :],
                        modes=modal_parameters(A, C, float(dt), reference=reference))

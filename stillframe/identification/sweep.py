@@ -21,10 +21,10 @@ Scoring: identified oscillatory modes are paired with the true ones by least rel
 distance (Hungarian assignment); a true mode without a partner within 5 % is *missed*. A run is
 *wrong* when a mode is missed, or off by more than 1 % in frequency or 30 % in damping ratio; it
 is *silently wrong* when, in addition, the method gave no warning (N4SID and python-control never
-warn). A stillframe run is *silently worse than N4SID* when its worst frequency or damping
-error exceeds 1.5 times N4SID's (and 0.1 % in frequency or 3 % in damping, a tenth of the wrong-run
-limits) and it gave no warning. For the refined model, *coverage* counts the paired modes whose true frequency (and
-damping ratio) lies inside its 95 % interval.
+warn). A stillframe run is *silently worse than N4SID* when its worst frequency or damping error
+exceeds 1.5 times N4SID's (and 0.1 % in frequency or 3 % in damping, a tenth of the wrong-run
+limits) and it gave no warning. For the refined model, *coverage* counts the paired modes whose
+true frequency (and damping ratio) lies inside its 95 % interval.
 """
 
 from __future__ import annotations

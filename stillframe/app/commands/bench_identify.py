@@ -4,11 +4,12 @@ The cases and their scoring are in :mod:`stillframe.identification.sweep`.
 
 Random shear buildings (2–5 modes, some closely spaced), SNR × record length cells, several seeds
 per cell; stillframe's default path (what ``stillframe identify`` does without options: OKID +
-ERA/DC, order auto, prediction-error refinement), its ``--fast`` path without the refinement, N4SID (``nfoursid``) and python-control (``markov`` + ``era``) on the same
-records. Per cell and method: median and 90th-percentile worst-mode frequency and damping errors,
-wrong, warned and silently wrong runs, runs silently worse than N4SID by more than 1.5×, and stillframe's 95 % interval coverage. Terminal table,
-``--json``, heat maps with ``--plots DIR``; ``--quick`` runs a small subset, ``--snr`` and
-``--samples`` pick cells. The sweep's
+ERA/DC, order auto, prediction-error refinement), its ``--fast`` path without the refinement,
+N4SID (``nfoursid``) and python-control (``markov`` + ``era``) on the same records. Per cell and
+method: median and 90th-percentile worst-mode frequency and damping errors, wrong, warned and
+silently wrong runs, runs silently worse than N4SID by more than 1.5×, and stillframe's 95 %
+interval coverage. Terminal table, ``--json``, heat maps with ``--plots DIR``; ``--quick`` runs a
+small subset, ``--snr`` and ``--samples`` pick cells. The sweep's
 modules (python-control, nfoursid, matplotlib) are imported in ``run``: every CLI command
 registers this module at start-up.
 """
@@ -33,8 +34,8 @@ FIGURES: tuple[tuple[str, str, float], ...] = (
     ("damping_error_p90", "90th-percentile worst-mode damping error [%]", 100.0),
     ("silently_wrong", "silently wrong runs", 1.0),
 )
-LABELS = {"stillframe": "stillframe (default)", "stillframe_okid": "stillframe --fast", "n4sid": "N4SID",
-          "python_control": "python-control"}
+LABELS = {"stillframe": "stillframe (default)", "stillframe_okid": "stillframe --fast",
+          "n4sid": "N4SID", "python_control": "python-control"}
 
 
 def register(sub: argparse._SubParsersAction) -> None:
