@@ -7,8 +7,9 @@ quantity for the topic's type is taken (docs/architecture.md, topic contract). B
 ``ros2 bag record``, are read alike; a lone ``.mcap`` file with :mod:`stillframe.bags.lone_mcap`.
 Each sample is placed at its header stamp (the measurement time in the contract), or at its log
 time when the message has no header or all its stamps are zero. Channels must be uniformly
-sampled at one rate without gaps; they are aligned sample by sample on their common time span. Preprocessing applies the same linear filter to inputs and
-outputs, so the input-output relation that identification estimates is kept.
+sampled at one rate without gaps; they are aligned sample by sample on their common time span.
+Preprocessing applies the same linear filter to inputs and outputs, so the input-output relation
+that identification estimates is kept.
 """
 
 from __future__ import annotations
