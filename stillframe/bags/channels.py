@@ -292,9 +292,12 @@ def preprocess(data: np.ndarray, dt: float, *, detrend: bool = False,
 
 def read_record(bag: str | Path, inputs: Sequence[Channel], outputs: Sequence[Channel], *,
                 detrend: bool = False, lowpass_hz: float | None = None, decimate: int = 1,
-                max_jitter: float = DEFAULT_JITTER) -> Record:
-    """Read, check, align and preprocess the input and output channels of a bag."""
-    if not inputs:
+                max_jitter: float = DEFAULT_JITTER, output_only: bool = False) -> Record:
+    """Read, check, align and preprocess the input and output channels of a bag (no inputs with
+    ``output_only``, which refuses any)."""
+    if output_only and inputs:
+        raise InputError("output-only identification takes no --input channel")
+    if not inputs and not output_only:
         raise InputError("give at least one --input channel")
     if not outputs:
         raise InputError("give at least one --output channel")

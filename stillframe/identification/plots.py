@@ -17,6 +17,7 @@ from matplotlib.ticker import MaxNLocator
 from stillframe.bags.channels import Record
 from stillframe.identification.frf import h1_frf, model_frf, segment_length
 from stillframe.identification.pipeline import Identification
+from stillframe.identification.ssi_cov import OutputOnlyIdentification
 from stillframe.identification.stabilization import stabilization_diagram as stabilization_rows
 
 
@@ -62,7 +63,7 @@ def stabilization_diagram(orders: Sequence[int], frequencies_hz: Sequence[np.nda
     if frequency_ci_hz is not None:
         ci = np.asarray(frequency_ci_hz, dtype=float)
         ax.hlines(np.full(len(ci), chosen), ci[:, 0], ci[:, 1], color="C1", lw=6, alpha=0.6,
-                  label="95 % interval (refined model)")
+                  label="95 % interval (chosen model)")
     for n, f, ok in zip(orders, frequencies_hz, stable, strict=True):
         f, ok = np.asarray(f), np.asarray(ok, dtype=bool)
         ax.plot(f[ok], np.full(ok.sum(), n), "o", color="C0", ms=4)
@@ -205,6 +206,45 @@ def identification_plots(ident: Identification, record: Record, directory: str |
             output_units=[c.unit for c in record.outputs], segments=measured.segments),
         mode_shapes(ident.modes.frequency_hz, ident.modes.damping_ratio, ident.modes.shapes,
                     names, out / "mode_shapes.png"),
+    ]
+
+
+def mac_matrix(frequency_hz: np.ndarray, values: np.ndarray, path: Path,
+               title: str = "AutoMAC of the identified modes") -> Path:
+    """The MAC between every pair of modes as a grid (1 on the diagonal)."""
+    labels = [f"{f:.3g} Hz" for f in frequency_hz]
+    fig, ax = plt.subplots(figsize=(1.1 * len(labels) + 3, 1.0 * len(labels) + 2.5))
+    image = ax.imshow(values, vmin=0, vmax=1, cmap="viridis")
+    for i in range(len(labels)):
+        for j in range(len(labels)):
+            ax.text(j, i, f"{values[i, j]:.2f}", ha="center", va="center", color="w", fontsize=8)
+    ax.set_xticks(range(len(labels)), labels, rotation=45, fontsize=8)
+    ax.set_yticks(range(len(labels)), labels, fontsize=8)
+    ax.set_title(title, fontsize=9)
+    fig.colorbar(image, ax=ax, label="MAC")
+    fig.tight_layout()
+    return _save(fig, path)
+
+
+def output_only_plots(ident: OutputOnlyIdentification, record: Record, directory: str | Path
+                      ) -> list[Path]:
+    """SSI-COV's figures: singular values of the covariances' Toeplitz matrix, stabilization
+    diagram with the 95 % intervals, mode shapes and the AutoMAC."""
+    out = Path(directory)
+    names = [str(c) for c in record.outputs]
+    fac = ident.factorization
+    top = min(max(2 * ident.order, 20), fac.numerical_rank)
+    rows = stabilization_rows(fac, ident.dt, range(2, top + 1, 2))
+    return [
+        hankel_singular_values(ident.singular_values, ident.order,
+                               out / "singular_values.png",
+                               title="Singular values of the output covariances (SSI-COV)"),
+        stabilization_diagram([r.order for r in rows], [r.modes.frequency_hz for r in rows],
+                              [r.stable for r in rows], ident.order, out / "stabilization.png",
+                              nyquist_hz=0.5 / ident.dt, frequency_ci_hz=ident.frequency_ci_hz),
+        mode_shapes(ident.modes.frequency_hz, ident.modes.damping_ratio, ident.modes.shapes,
+                    names, out / "mode_shapes.png"),
+        mac_matrix(ident.modes.frequency_hz, ident.auto_mac, out / "mac.png"),
     ]
 
 

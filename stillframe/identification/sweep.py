@@ -6,7 +6,8 @@ A *case* is one random building, one record length, one signal-to-noise ratio an
 which also gives 95 % intervals), the fast path without the refinement (``stillframe_okid``,
 ``refine=False``), N4SID (``nfoursid``, PO-MOESP) and python-control
 (``markov`` + ``eigensys_realization``); the last two are given the true order, stillframe
-chooses its own. :func:`run_cases` maps it over a
+chooses its own. Output-only (the force unmeasured): stillframe's SSI-COV (order auto, jackknife
+intervals) and pyOMA2's SSI-COV given the true order. :func:`run_cases` maps it over a
 list of cases (serially, with progress); the function is top-level and picklable so a parallel
 executor can map it instead.
 
@@ -43,6 +44,7 @@ from scipy.linalg import eigh
 from stillframe.identification.modal import modal_parameters
 from stillframe.identification.n4sid import identify_n4sid
 from stillframe.identification.pipeline import identify
+from stillframe.identification.ssi_cov import identify_output_only
 
 Array = NDArray[np.float64]
 
@@ -52,7 +54,12 @@ SEEDS = 10
 QUICK_SNR_DB: tuple[float, ...] = (40.0, 15.0)
 QUICK_LENGTHS: tuple[int, ...] = (1024, 256)
 QUICK_SEEDS = 3
-METHODS: tuple[str, ...] = ("stillframe", "stillframe_okid", "n4sid", "python_control")
+METHODS: tuple[str, ...] = ("stillframe", "stillframe_okid", "n4sid", "python_control",
+                            "ssi_cov", "pyoma2_ssi_cov")
+OUTPUT_ONLY: tuple[str, ...] = ("ssi_cov", "pyoma2_ssi_cov")
+"""Methods given the outputs alone (the white force on floor 1 is then an unmeasured, ambient
+excitation)."""
+PYOMA2_BLOCK_ROWS = 20
 
 FREQUENCY_LIMIT, DAMPING_LIMIT = 0.01, 0.30
 """A run is wrong beyond these relative errors (issue 12)."""
@@ -220,9 +227,33 @@ def _python_control(record: Record, order: int) -> Identified:
     return modes.frequency_hz, modes.damping_ratio, [], None, None
 
 
+def _ssi_cov(record: Record, order: int) -> Identified:
+    ident = identify_output_only(record.y, record.dt)
+    return (ident.modes.frequency_hz, ident.modes.damping_ratio, list(ident.warnings),
+            ident.frequency_ci_hz, ident.damping_ci)
+
+
+def _pyoma2_ssi_cov(record: Record, order: int) -> Identified:
+    """pyOMA2's SSI-COV (its covariance Hankel matrix and shift-structure realization) at the
+    true order; eigenvalues to modes with numpy here."""
+    import logging
+    import os
+
+    os.environ.setdefault("TQDM_DISABLE", "1")  # pyOMA2's progress bars
+    logging.getLogger("pyoma2").setLevel(logging.WARNING)  # and its per-call INFO lines
+    from pyoma2.functions.ssi import SSI, build_hank
+
+    block_rows = min(PYOMA2_BLOCK_ROWS, record.y.shape[0] // 8)
+    hankel, _ = build_hank(record.y.T, record.y.T, block_rows, "cov")
+    _, a_list, _ = SSI(hankel, block_rows, order)
+    lam = np.log(np.linalg.eigvals(a_list[order]).astype(complex)) / record.dt
+    lam = lam[lam.imag > 0]
+    return np.abs(lam) / (2 * np.pi), -lam.real / np.abs(lam), [], None, None
+
+
 IDENTIFIERS: dict[str, Callable[[Record, int], Identified]] = {
     "stillframe": _stillframe, "stillframe_okid": _stillframe_okid, "n4sid": _n4sid,
-    "python_control": _python_control,
+    "python_control": _python_control, "ssi_cov": _ssi_cov, "pyoma2_ssi_cov": _pyoma2_ssi_cov,
 }
 
 

@@ -310,3 +310,24 @@ def test_outputs_in_any_units_give_the_same_modes(tmp_path: Path, scale: float) 
     for key in ("frequency_hz", "damping_ratio"):
         np.testing.assert_allclose([m[key] for m in scaled["modes"]],
                                    [m[key] for m in plain["modes"]], rtol=1e-4)
+
+
+def test_ssi_cov_is_output_only_with_intervals_and_mac(noisy_bag: Path, tmp_path: Path) -> None:
+    """Issue 27 must show 6: the bag's three accelerations alone; the frame's modes within 1 %,
+    each with an interval, the AutoMAC, the figures; an --input is refused."""
+    outputs = CHANNELS[2:]
+    result = stillframe("identify", str(noisy_bag), *outputs, "--method", "ssi-cov", "--order",
+                        "6", "--json", "--plots", str(tmp_path / "p"))
+    assert result.returncode == 0, result.stderr
+    doc = json.loads(result.stdout)
+    assert doc["method"] == "ssi-cov" and doc["order"] == 6
+    np.testing.assert_allclose([m["frequency_hz"] for m in doc["modes"]], true_modes()[0],
+                               rtol=1e-2)
+    for mode in doc["modes"]:
+        lo, hi = mode["frequency_ci_hz"]
+        assert lo <= mode["frequency_hz"] <= hi
+    assert np.allclose(np.diag(doc["auto_mac"]), 1.0)
+    assert {p.name for p in (tmp_path / "p").iterdir()} == {
+        "singular_values.png", "stabilization.png", "mode_shapes.png", "mac.png"}
+    msg = refuse(noisy_bag, *CHANNELS, "--method", "ssi-cov")
+    assert "output-only identification takes no --input" in msg

@@ -35,7 +35,9 @@ FIGURES: tuple[tuple[str, str, float], ...] = (
     ("silently_wrong", "silently wrong runs", 1.0),
 )
 LABELS = {"stillframe": "stillframe (default)", "stillframe_okid": "stillframe --fast",
-          "n4sid": "N4SID", "python_control": "python-control"}
+          "n4sid": "N4SID", "python_control": "python-control",
+          "ssi_cov": "stillframe ssi-cov (output-only)",
+          "pyoma2_ssi_cov": "pyOMA2 SSIcov (output-only)"}
 
 
 def register(sub: argparse._SubParsersAction) -> None:

@@ -17,6 +17,7 @@ from stillframe.app.commands.common import add_json_argument, emit_json
 from stillframe.errors import InputError
 
 if TYPE_CHECKING:
+    from stillframe.bags.channels import Record
     from stillframe.identification.mkr import PhysicalModel
     from stillframe.identification.pipeline import Identification
 
@@ -36,6 +37,7 @@ def _order(text: str) -> int | str:
 
 def register(sub: argparse._SubParsersAction) -> None:
     from stillframe.identification.pipeline import METHODS
+    from stillframe.identification.ssi_cov import OUTPUT_ONLY_METHODS
 
     parser = sub.add_parser(
         "identify", help="identify a state-space model and its modes from a rosbag2 bag",
@@ -48,7 +50,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     parser.add_argument("--output", dest="outputs", action="append", default=[],
                         metavar="TOPIC[:FIELD]", help="output channel (repeatable), e.g. "
                         "/frame/floor1/imu:linear_acceleration.x")
-    parser.add_argument("--method", choices=METHODS, default="okid-eradc")
+    parser.add_argument("--method", choices=(*METHODS, *OUTPUT_ONLY_METHODS),
+                        default="okid-eradc",
+                        help="input-output methods (default okid-eradc), or ssi-cov: output-only "
+                        "(operational modal analysis, no --input)")
     parser.add_argument("--order", type=_order, default="auto", metavar="N|auto",
                         help="model order, or auto: the largest Hankel singular-value gap")
     parser.add_argument("--max-order", type=int, default=None, metavar="N",
@@ -124,6 +129,37 @@ def _physical(args: argparse.Namespace, ident: Identification
                       "R": physical.R.tolist(), "rayleigh_alpha": alpha, "rayleigh_beta": beta}
 
 
+def run_output_only(args: argparse.Namespace, record: Record, progress: Progress) -> int:
+    """``--method ssi-cov``: SSI-COV on the outputs (:mod:`stillframe.identification.ssi_cov`)."""
+    from stillframe.identification.report import modes_table, output_only_document
+    from stillframe.identification.ssi_cov import identify_output_only
+
+    for option, given in (("--mkr", args.mkr), ("--save-model", args.save_model),
+                          ("--fast", args.fast), ("--combined", args.combined)):
+        if given:
+            raise InputError(f"{option} needs an input-output model: not with --method ssi-cov")
+    ident = identify_output_only(record.y, record.dt, args.order, max_order=args.max_order,
+                                 output_names=[str(c) for c in record.outputs])
+    progress(f"order {ident.order}, {len(ident.modes)} modes")
+    for warning in ident.warnings:
+        print(f"stillframe identify: warning: {warning}", file=sys.stderr)
+    if args.plots:
+        from stillframe.identification.plots import output_only_plots
+
+        progress(f"writing plots to {args.plots}")
+        output_only_plots(ident, record, args.plots)
+    if args.json:
+        emit_json(output_only_document(ident, args.order == "auto"))
+        return 0
+    names = [str(c) for c in record.outputs]
+    print(f"{args.bag}: {record.samples} samples, dt = {record.dt:g} s; method ssi-cov "
+          f"(output-only, {ident.block_rows} block rows), order {ident.order}")
+    print("outputs: " + ", ".join(f"y{i + 1} = {n}" for i, n in enumerate(names)))
+    print(modes_table(ident.modes, ident.consistent, [f"y{i + 1}" for i in range(len(names))],
+                      ident))
+    return 0
+
+
 def run(args: argparse.Namespace) -> int:
     from stillframe.bags.channels import DEFAULT_JITTER, Channel, read_record
     from stillframe.identification.pipeline import identify
@@ -136,8 +172,12 @@ def run(args: argparse.Namespace) -> int:
     if not 0 < jitter < 0.5:
         raise InputError(f"--max-jitter {jitter}: must lie between 0 and 0.5")
     progress(f"reading {args.bag}")
+    output_only = args.method == "ssi-cov"
     record = read_record(args.bag, inputs, outputs, detrend=args.detrend,
-                         lowpass_hz=args.lowpass, decimate=args.decimate, max_jitter=jitter)
+                         lowpass_hz=args.lowpass, decimate=args.decimate, max_jitter=jitter,
+                         output_only=output_only)
+    if output_only:
+        return run_output_only(args, record, progress)
     progress(f"{record.samples} samples at {1 / record.dt:g} Hz; identifying ({args.method})")
     if args.fast and args.refine:
         raise InputError("--fast skips the refinement that --refine asks for: give one")
