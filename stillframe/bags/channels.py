@@ -14,8 +14,9 @@ that identification estimates is kept.
 
 from __future__ import annotations
 
+import functools
 import re
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -145,7 +146,21 @@ def _extract(msg: object, path: list[tuple[str, list[int]]], channel: Channel,
     return float(value)
 
 
-def _stamp_ns(msg: object) -> int | None:
+def field_reader(channel: Channel, msgtype: str) -> tuple[Channel, Callable[[object], float]]:
+    """The channel with its field resolved (the contract's default when none is given) and a
+    function reading that field's value from a deserialised message (for live subscribers such
+    as the modal tracker)."""
+    full = Channel(channel.topic, channel.field or _default_field(channel.topic, msgtype))
+    path = _split_path(full.field, str(full))
+    return full, functools.partial(_read_field, path=path, channel=full, msgtype=msgtype)
+
+
+def _read_field(msg: object, *, path: list[tuple[str, list[int]]], channel: Channel,
+                msgtype: str) -> float:
+    return _extract(msg, path, channel, msgtype)
+
+
+def stamp_ns(msg: object) -> int | None:
     header = getattr(msg, "header", None)
     stamp = getattr(header, "stamp", None)
     if stamp is None:
@@ -179,7 +194,7 @@ def read_series(bag: str | Path, channels: Sequence[Channel]) -> list[Series]:
         values: list[list[float]] = [[] for _ in resolved]
         for connection, logtime, raw in reader.messages(connections=wanted):
             msg = reader.deserialize(raw, connection.msgtype)
-            stamps[connection.topic].append(_stamp_ns(msg))
+            stamps[connection.topic].append(stamp_ns(msg))
             logtimes[connection.topic].append(logtime)
             for i, (full, items, msgtype) in enumerate(resolved):
                 if full.topic == connection.topic:
