@@ -34,15 +34,11 @@ def modes_document(modes: ModalTable, consistent: Sequence[bool],
     return docs
 
 
-def identification_document(ident: Identification, order_auto: bool) -> dict[str, Any]:
-    """``{"order", "dt", "modes", "hankel_singular_values", "method", ...}``."""
+def _document(ident: Identification | OutputOnlyIdentification, intervals: WithIntervals | None,
+              order_auto: bool, extra: dict[str, Any]) -> dict[str, Any]:
     doc: dict[str, Any] = {
-        "order": ident.order,
-        "dt": ident.dt,
-        "method": ident.method,
-        "modes": modes_document(ident.modes, ident.consistent, ident.refinement),
-        "hankel_singular_values": [float(s) for s in ident.hankel_singular_values],
-        "observer_order": ident.observer_order,
+        "order": ident.order, "dt": ident.dt, "method": ident.method,
+        "modes": modes_document(ident.modes, ident.consistent, intervals), **extra,
         "order_gap": ident.order_gap if np.isfinite(ident.order_gap) else None,
         "warnings": list(ident.warnings),
     }
@@ -50,24 +46,22 @@ def identification_document(ident: Identification, order_auto: bool) -> dict[str
         doc["order_selection"] = {"criterion": "largest sigma_n / sigma_n+1",
                                   "gap": ident.order_gap}
     return doc
+
+
+def identification_document(ident: Identification, order_auto: bool) -> dict[str, Any]:
+    """``{"order", "dt", "modes", "hankel_singular_values", "method", ...}``."""
+    return _document(ident, ident.refinement, order_auto, {
+        "hankel_singular_values": [float(s) for s in ident.hankel_singular_values],
+        "observer_order": ident.observer_order})
 
 
 def output_only_document(ident: OutputOnlyIdentification, order_auto: bool) -> dict[str, Any]:
     """The SSI-COV result: ``{"order", "dt", "method", "modes" (with intervals), "auto_mac",
     "singular_values", "block_rows", "order_gap", "warnings"}``."""
-    doc: dict[str, Any] = {
-        "order": ident.order, "dt": ident.dt, "method": ident.method,
-        "modes": modes_document(ident.modes, ident.consistent, ident),
+    return _document(ident, ident, order_auto, {
         "auto_mac": ident.auto_mac.tolist(),
         "singular_values": [float(s) for s in ident.singular_values],
-        "block_rows": ident.block_rows,
-        "order_gap": ident.order_gap if np.isfinite(ident.order_gap) else None,
-        "warnings": list(ident.warnings),
-    }
-    if order_auto:
-        doc["order_selection"] = {"criterion": "largest sigma_n / sigma_n+1",
-                                  "gap": ident.order_gap}
-    return doc
+        "block_rows": ident.block_rows})
 
 
 def modes_table(modes: ModalTable, consistent: Sequence[bool], output_names: list[str],

@@ -43,7 +43,7 @@ from stillframe.identification.data_checks import (
     check_length,
     check_values,
 )
-from stillframe.identification.era import RANK_TOLERANCE, auto_order, order_gap
+from stillframe.identification.era import auto_order, numerical_rank, order_gap
 from stillframe.identification.modal import ModalTable, mac, modal_parameters
 from stillframe.identification.quality import quality_warnings, uncertain_modes
 from stillframe.identification.stabilization import matching_modes
@@ -77,8 +77,7 @@ class ToeplitzFactorization:
 
     @property
     def numerical_rank(self) -> int:
-        s = self.singular_values
-        return int(np.sum(s > RANK_TOLERANCE * s[0])) if s.size and s[0] > 0 else 0
+        return numerical_rank(self.singular_values)
 
     def realize(self, order: int) -> SsiRealization:
         if order < 1 or order > self.numerical_rank:

@@ -20,6 +20,7 @@ if TYPE_CHECKING:
     from stillframe.bags.channels import Record
     from stillframe.identification.mkr import PhysicalModel
     from stillframe.identification.pipeline import Identification
+    from stillframe.identification.ssi_cov import OutputOnlyIdentification
 
 
 def _order(text: str) -> int | str:
@@ -129,6 +130,23 @@ def _physical(args: argparse.Namespace, ident: Identification
                       "R": physical.R.tolist(), "rayleigh_alpha": alpha, "rayleigh_beta": beta}
 
 
+def _report_progress(ident: Identification | OutputOnlyIdentification, args: argparse.Namespace,
+                     record: Record, progress: Progress) -> None:
+    """Order and modes on the progress line, each warning on stderr, the figures with --plots."""
+    from stillframe.identification.plots import identification_plots, output_only_plots
+    from stillframe.identification.ssi_cov import OutputOnlyIdentification
+
+    progress(f"order {ident.order}, {len(ident.modes)} modes")
+    for warning in ident.warnings:
+        print(f"stillframe identify: warning: {warning}", file=sys.stderr)
+    if args.plots:
+        progress(f"writing plots to {args.plots}")
+        if isinstance(ident, OutputOnlyIdentification):
+            output_only_plots(ident, record, args.plots)
+        else:
+            identification_plots(ident, record, args.plots)
+
+
 def run_output_only(args: argparse.Namespace, record: Record, progress: Progress) -> int:
     """``--method ssi-cov``: SSI-COV on the outputs (:mod:`stillframe.identification.ssi_cov`)."""
     from stillframe.identification.report import modes_table, output_only_document
@@ -140,14 +158,7 @@ def run_output_only(args: argparse.Namespace, record: Record, progress: Progress
             raise InputError(f"{option} needs an input-output model: not with --method ssi-cov")
     ident = identify_output_only(record.y, record.dt, args.order, max_order=args.max_order,
                                  output_names=[str(c) for c in record.outputs])
-    progress(f"order {ident.order}, {len(ident.modes)} modes")
-    for warning in ident.warnings:
-        print(f"stillframe identify: warning: {warning}", file=sys.stderr)
-    if args.plots:
-        from stillframe.identification.plots import output_only_plots
-
-        progress(f"writing plots to {args.plots}")
-        output_only_plots(ident, record, args.plots)
+    _report_progress(ident, args, record, progress)
     if args.json:
         emit_json(output_only_document(ident, args.order == "auto"))
         return 0
@@ -186,14 +197,7 @@ def run(args: argparse.Namespace) -> int:
                      combined=args.combined, refine=False if args.fast else None,
                      input_names=[str(c) for c in record.inputs],
                      output_names=[str(c) for c in record.outputs])
-    progress(f"order {ident.order}, {len(ident.modes)} modes")
-    for warning in ident.warnings:
-        print(f"stillframe identify: warning: {warning}", file=sys.stderr)
-    if args.plots:
-        from stillframe.identification.plots import identification_plots
-
-        progress(f"writing plots to {args.plots}")
-        identification_plots(ident, record, args.plots)
+    _report_progress(ident, args, record, progress)
     physical, physical_doc = _physical(args, ident)
     if physical is not None:
         from stillframe.identification.structure_model import unresolved_pulse
