@@ -240,8 +240,10 @@ def _pyoma2_ssi_cov(record: Record, order: int) -> Identified:
     import os
 
     os.environ.setdefault("TQDM_DISABLE", "1")  # pyOMA2's progress bars
-    logging.getLogger("pyoma2").setLevel(logging.WARNING)  # and its per-call INFO lines
     from pyoma2.functions.ssi import SSI, build_hank
+
+    logging.getLogger("pyoma2").setLevel(logging.WARNING)  # and its per-call INFO lines (after
+    # the import, which sets them up)
 
     block_rows = min(PYOMA2_BLOCK_ROWS, record.y.shape[0] // 8)
     hankel, _ = build_hank(record.y.T, record.y.T, block_rows, "cov")
