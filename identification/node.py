@@ -6,7 +6,8 @@ A thin shell around :class:`stillframe.identification.tracker.ModalTracker`. Par
 - ``inputs``, ``outputs``: channels ``TOPIC[:FIELD]`` as for ``stillframe identify`` (no inputs:
   output-only SSI-COV); the message type of each topic comes from the topic contract;
 - ``rate_hz`` (32.0): the sample rate of the channels; ``window_s`` (60.0): the window;
-  ``update_period_s`` (5.0): how often the window is identified; ``order`` ("auto").
+  ``update_period_s`` (5.0): how often the window is identified; ``order`` ("auto");
+  ``record_file`` (""): append each update as a JSON line there (``launch --track``).
 
 Samples are aligned by header stamp. The identification runs on a worker thread of this
 process, so the callbacks keep taking samples while it runs; an update still running when the
@@ -18,8 +19,10 @@ updates, skipped updates, last error).
 
 from __future__ import annotations
 
+import json
 import sys
 from concurrent.futures import Future, ThreadPoolExecutor
+from pathlib import Path
 
 from stillframe.bags.channels import Channel, field_reader, stamp_ns
 from stillframe.contract import messages, topics
@@ -50,6 +53,8 @@ class ModalTrackerNode:
         window = float(node.declare_parameter("window_s", 60.0).value)
         period = float(node.declare_parameter("update_period_s", 5.0).value)
         order = node.declare_parameter("order", "auto").value
+        record = node.declare_parameter("record_file", "").value
+        self.record_file = Path(record) if record else None
         if not (rate > 0 and window > 0 and period > 0):
             raise InputError("modal_tracker: rate_hz, window_s and update_period_s must be > 0")
         self.tracker = ModalTracker(1.0 / rate, window, order if order == "auto" else int(order))
@@ -80,7 +85,7 @@ class ModalTrackerNode:
         if all(v is not None for v in row):
             del self.pending[stamp]
             self.start_ns = stamp if self.start_ns is None else self.start_ns
-            self.tracker.add((stamp - self.start_ns) * 1e-9, row[: self.n_inputs],
+            self.tracker.add(stamp * 1e-9, row[: self.n_inputs],
                              row[self.n_inputs:])
             for old in [s for s in self.pending if s < stamp]:
                 del self.pending[old]
@@ -102,6 +107,9 @@ class ModalTrackerNode:
                                        size=size, stride=stride) for label, size, stride in dims]
         msg.data = data
         self.modes_pub.publish(msg)
+        if self.record_file is not None:
+            with self.record_file.open("a") as stream:
+                stream.write(json.dumps(tracked.record()) + "\n")
         values = {"modes": len(tracked.frequency_hz), "window_samples": self.tracker.samples,
                   "updates": self.updates, "skipped_updates": self.skipped}
         for i, row in enumerate(tracked.rows()):

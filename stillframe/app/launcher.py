@@ -27,6 +27,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from stillframe.app.tracking import TRACKER, read_tracked, tracker_command
 from stillframe.config.scene import Scene, load_scene
 from stillframe.contract.topics import STATUS_KEYS
 from stillframe.errors import InputError
@@ -270,6 +271,8 @@ class LaunchResult:
     result_file: Path
     history_file: Path
     diagnostics: dict[str, dict[str, str]] = field(default_factory=dict)
+    #: the modal tracker's updates with ``track`` (:mod:`stillframe.app.tracking`)
+    tracked_modes: list[dict[str, Any]] = field(default_factory=list)
 
 
 @dataclass
@@ -296,6 +299,12 @@ class LaunchOptions:
     #: :mod:`stillframe.app.netns_lab`; the container on the estimator's); a node not named
     #: runs here
     hosts: dict[str, list[str]] = field(default_factory=dict)
+    #: run the modal tracker beside the nodes (:mod:`stillframe.app.tracking`)
+    track: bool = False
+
+    @property
+    def tracked_file(self) -> Path:
+        return self.result_file.with_name("tracked_modes.jsonl")
 
 
 class Launcher:
@@ -344,6 +353,10 @@ class Launcher:
             children.append(("monitor", [sys.executable, "-m", "stillframe", "monitor",
                                          "--dashboard", "--use-sim-time", "--scene", str(scene),
                                          *sets, *o.monitor_args]))
+        if o.track:
+            o.tracked_file.unlink(missing_ok=True)
+            children.append((TRACKER, tracker_command(load_scene(scene, o.overrides),
+                                                      o.tracked_file)))
         nodes = self.nodes()
         # the pair's container takes no real-time parameters (it composes two nodes' loops);
         # with the simulator in it, the simulator's practices are the process's
@@ -440,7 +453,8 @@ class Launcher:
             evaluation = json.loads(path.read_text())
         except (OSError, ValueError) as exc:
             raise InputError(f"sim_node's result file {path}: cannot read it ({exc})") from None
-        return LaunchResult(evaluation, path, path.with_suffix(".npz"), dict(self.statuses))
+        return LaunchResult(evaluation, path, path.with_suffix(".npz"), dict(self.statuses),
+                            read_tracked(self.options.tracked_file) if self.options.track else [])
 
 
 def run_scene(scene: Path, overrides: Sequence[str], out: Path, mode: str = "lockstep",
@@ -449,7 +463,7 @@ def run_scene(scene: Path, overrides: Sequence[str], out: Path, mode: str = "loc
               record_topics: Sequence[str] = (), backends: Sequence[str] = (),
               monitor_args: Sequence[str] | None = None, compose: str = "",
               rt: str = "", rt_cpus: Sequence[int] = (),
-              hosts: dict[str, list[str]] | None = None) -> LaunchResult:
+              hosts: dict[str, list[str]] | None = None, track: bool = False) -> LaunchResult:
     """Launch ``scene`` through the three nodes to its end; sim_node's results go to ``out``
     (``result.json``, ``result.npz``); ``record`` records ``record_topics`` (default all) into
     a bag; ``backends`` are ``--backend`` values (:func:`parse_backends`); ``monitor_args``
@@ -457,14 +471,14 @@ def run_scene(scene: Path, overrides: Sequence[str], out: Path, mode: str = "loc
     process (``container_node``: "pair" the estimator and controller, "all" every node);
     ``rt`` and ``rt_cpus`` are the loop nodes' real-time practices and CPUs
     (:mod:`stillframe.loop.realtime`); ``hosts``
-    runs nodes on other hosts (:attr:`LaunchOptions.hosts`).
+    runs nodes on other hosts (:attr:`LaunchOptions.hosts`); ``track`` adds the modal tracker.
     ``prepare(node)`` may subscribe the launcher's hidden node to more topics before the
     children start."""
     out.mkdir(parents=True, exist_ok=True)
     launcher = Launcher(LaunchOptions(scene, list(overrides), mode, out / "result.json", record,
                                       lockstep_timeout_s, list(record_topics), list(backends),
                                       None if monitor_args is None else list(monitor_args),
-                                      compose, rt, list(rt_cpus), dict(hosts or {})))
+                                      compose, rt, list(rt_cpus), dict(hosts or {}), track))
     if prepare is not None:
         prepare(launcher.node)
     return launcher.run()

@@ -52,6 +52,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "show their status, stop cleanly on Ctrl-C, print the evaluation.")
     add_scene_arguments(parser)
     add_launch_arguments(parser)
+    parser.add_argument("--track", action="store_true",
+                        help="run the modal tracker beside the nodes (identification's "
+                        "modal_tracker); --json then has tracked_modes")
     parser.add_argument("--record", type=Path, default=None, metavar="DIR",
                         help="also record every topic into this rosbag2 directory (MCAP)")
     parser.add_argument("--record-topic", dest="record_topics", action="append", default=[],
@@ -200,14 +203,16 @@ def run(args: argparse.Namespace) -> int:
                                    args.mode, args.record, args.lockstep_timeout,
                                    record_topics=args.record_topics, backends=args.backends,
                                    monitor_args=monitor_args(args) if args.monitor else None,
-                                   compose=args.compose, rt=rt, rt_cpus=rt_cpus, hosts=hosts)
+                                   compose=args.compose, rt=rt, rt_cpus=rt_cpus, hosts=hosts,
+                                   track=args.track)
         except NodeDiedError as exc:
             return report_death("launch", exc)
         except KeyboardInterrupt:
             print("stillframe launch: interrupted; every node stopped", file=sys.stderr)
             return 130
     if args.json:
-        emit_json({"scene": scene.name, **result.evaluation, "diagnostics": result.diagnostics})
+        emit_json({"scene": scene.name, **result.evaluation, "diagnostics": result.diagnostics,
+                   **({"tracked_modes": result.tracked_modes} if args.track else {})})
     elif "reduction_pct" in result.evaluation:
         print_evaluation(result.evaluation, scene)
     else:
