@@ -9,9 +9,12 @@ A thin shell around :class:`stillframe.identification.tracker.ModalTracker`. Par
   ``update_period_s`` (5.0): how often the window is identified; ``order`` ("auto");
   ``record_file`` (""): append each update as a JSON line there (``launch --track``).
 
-Samples are aligned by header stamp. The identification runs on a worker thread of this
-process, so the callbacks keep taking samples while it runs; an update still running when the
-next is due is skipped (counted). This process is not in the loop's path: it only subscribes.
+Samples are aligned by header stamp, and an update is due every ``update_period_s`` of sample
+time (the stamps: sim time in lock-step, which runs faster than the wall clock). Each due window
+is copied and identified on a worker thread of this process, in order, so the callbacks keep
+taking samples; more than :data:`MAX_PENDING` windows waiting are skipped (counted), and on
+shutdown the waiting ones are finished first. This process is not in the loop's path: it only
+subscribes.
 Each update publishes ``identification/modes`` (``std_msgs/msg/Float64MultiArray``, layout in
 :mod:`stillframe.identification.tracker`) and a status on ``/diagnostics`` (modes, window,
 updates, skipped updates, last error).
@@ -24,14 +27,23 @@ import sys
 from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
 
+import numpy as np
+
 from stillframe.bags.channels import Channel, field_reader, stamp_ns
 from stillframe.contract import messages, topics
 from stillframe.errors import InputError
-from stillframe.identification.tracker import ModalTracker, TrackedModes, modes_array
+from stillframe.identification.tracker import (
+    ModalTracker,
+    TrackedModes,
+    identify_window,
+    modes_array,
+)
 from stillframe.loop.node_support import OK, WARN, Diagnostics
 from stillframe.middleware import api
 
 MODES_TOPIC = "identification/modes"
+MAX_PENDING = 4
+"""Windows waiting for the worker beyond which a due update is skipped."""
 
 
 def contract_type(topic: str) -> str:
@@ -72,9 +84,10 @@ class ModalTrackerNode:
         self.modes_pub = node.create_publisher("std_msgs/msg/Float64MultiArray", MODES_TOPIC, 10)
         self.diagnostics = Diagnostics(node, period)
         self.pool = ThreadPoolExecutor(max_workers=1)
-        self.future: Future | None = None
+        self.pending_updates: list[Future] = []
+        self.period = period
+        self.next_update: float | None = None
         self.updates = self.skipped = 0
-        node.create_timer(period, self.on_timer)
 
     def on_sample(self, k: int, msg: object, read) -> None:
         stamp = stamp_ns(msg)
@@ -89,27 +102,34 @@ class ModalTrackerNode:
                              row[self.n_inputs:])
             for old in [s for s in self.pending if s < stamp]:
                 del self.pending[old]
+            self.maybe_update(stamp * 1e-9)
 
-    def on_timer(self) -> None:
-        if self.future is not None and not self.future.done():
+    def maybe_update(self, t: float) -> None:
+        """Submit the window when an update is due (sample time) and the window half full."""
+        if self.next_update is None:
+            self.next_update = t + self.period
+        if t < self.next_update or self.tracker.samples < 0.5 * self.tracker.capacity:
+            return
+        self.next_update = t + self.period
+        self.pending_updates = [f for f in self.pending_updates if not f.done()]
+        if len(self.pending_updates) >= MAX_PENDING:
             self.skipped += 1
             return
-        if self.tracker.samples < 0.5 * self.tracker.capacity:
-            return
-        self.future = self.pool.submit(self.tracker.update)
-        self.future.add_done_callback(lambda f: self.publish(f.result()))
+        future = self.pool.submit(identify_window, self.tracker.window())
+        future.add_done_callback(lambda f: self.publish(f.result()))
+        self.pending_updates.append(future)
 
     def publish(self, tracked: TrackedModes) -> None:
         self.updates += 1
+        if self.record_file is not None:
+            with self.record_file.open("a") as stream:
+                stream.write(json.dumps(tracked.record()) + "\n")
         dims, data = modes_array(tracked)
         msg = messages.new("std_msgs/msg/Float64MultiArray")
         msg.layout.dim = [messages.new("std_msgs/msg/MultiArrayDimension", label=label,
                                        size=size, stride=stride) for label, size, stride in dims]
-        msg.data = data
+        msg.data = np.asarray(data, dtype=float)
         self.modes_pub.publish(msg)
-        if self.record_file is not None:
-            with self.record_file.open("a") as stream:
-                stream.write(json.dumps(tracked.record()) + "\n")
         values = {"modes": len(tracked.frequency_hz), "window_samples": self.tracker.samples,
                   "updates": self.updates, "skipped_updates": self.skipped}
         for i, row in enumerate(tracked.rows()):
@@ -129,7 +149,7 @@ def main() -> int:
         api.spin(node)
     finally:
         if tracker is not None:
-            tracker.pool.shutdown(wait=False, cancel_futures=True)
+            tracker.pool.shutdown(wait=True)  # the windows already due are finished
         node.destroy_node()
     return 0
 

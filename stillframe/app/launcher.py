@@ -42,7 +42,7 @@ COMPOSE = ("", "pair", "all")
 #: the loop's node processes that take real-time parameters besides the simulator's
 LOOP = ("estimator_node", "controller_node")
 #: the children whose middleware backend ``--backend NAME=BACKEND`` can choose
-BACKEND_TARGETS: tuple[str, ...] = (*NODES, "recorder", "monitor")
+BACKEND_TARGETS: tuple[str, ...] = (*NODES, "recorder", "monitor", TRACKER)
 MODES: tuple[str, ...] = ("lockstep", "realtime")
 #: seconds a child gets to exit after SIGINT, then after SIGTERM, before SIGKILL
 STOP_GRACE_S = 10.0

@@ -97,23 +97,43 @@ class ModalTracker:
     def samples(self) -> int:
         return len(self._t)
 
+    def window(self) -> Window:
+        """A copy of the current window (identify it with :func:`identify_window`, on another
+        thread if need be, while samples keep coming)."""
+        return Window(float(self._t[-1]) if self._t else 0.0, np.array(self._u),
+                      np.array(self._y), self.dt, self.order)
+
     def update(self) -> TrackedModes:
         """Identify the current window; a refusal is returned as ``error``, not raised."""
-        t = float(self._t[-1]) if self._t else 0.0
-        empty = np.empty(0)
-        try:
-            y = np.array(self._y)
-            u = np.array(self._u)
-            if u.size:
-                ident = identify(u.reshape(len(u), -1), y, self.dt, order=self.order)
-                ref = ident.refinement
-                if ref is None:
-                    raise StillframeError("the window's model is not refined: no intervals")
-                return TrackedModes(t, ident.modes.frequency_hz, ident.modes.damping_ratio,
-                                    ref.frequency_ci_hz, ref.damping_ci, ident.warnings)
-            out = identify_output_only(y, self.dt, self.order)
-            return TrackedModes(t, out.modes.frequency_hz, out.modes.damping_ratio,
-                                out.frequency_ci_hz, out.damping_ci, out.warnings)
-        except (StillframeError, np.linalg.LinAlgError, ValueError) as exc:
-            return TrackedModes(t, empty, empty, np.empty((0, 2)), np.empty((0, 2)),
-                                error=str(exc))
+        return identify_window(self.window())
+
+
+@dataclass(frozen=True)
+class Window:
+    """The samples of one window: last sample time, inputs, outputs, period, order."""
+
+    t: float
+    u: Array
+    y: Array
+    dt: float
+    order: int | str
+
+
+def identify_window(window: Window) -> TrackedModes:
+    """The window's modes (module docstring); a refusal is returned as ``error``, not raised."""
+    t, u, y = window.t, window.u, window.y
+    empty = np.empty(0)
+    try:
+        if u.size:
+            ident = identify(u.reshape(len(u), -1), y, window.dt, order=window.order)
+            ref = ident.refinement
+            if ref is None:
+                raise StillframeError("the window's model is not refined: no intervals")
+            return TrackedModes(t, ident.modes.frequency_hz, ident.modes.damping_ratio,
+                                ref.frequency_ci_hz, ref.damping_ci, ident.warnings)
+        out = identify_output_only(y, window.dt, window.order)
+        return TrackedModes(t, out.modes.frequency_hz, out.modes.damping_ratio,
+                            out.frequency_ci_hz, out.damping_ci, out.warnings)
+    except (StillframeError, np.linalg.LinAlgError, ValueError) as exc:
+        return TrackedModes(t, empty, empty, np.empty((0, 2)), np.empty((0, 2)),
+                            error=str(exc))
