@@ -1,0 +1,122 @@
+"""Other writers and tools on the graph (issue 26, item 3), with real rclpy peer processes.
+
+- A peer that only creates a publisher on ``pendulum/torque_cmd`` and never writes (what ``ros2
+  topic pub`` before its first message, a Foxglove publish panel or a teleop tool do) changes
+  nothing: the lock-step run equals the one-process loop to the last bit on both backends
+  (rclpy's message info has no writer GID: the simulator decides from the sequence numbers of
+  what arrives), and a real-time run on rclpy refuses no command.
+- A peer that starts writing during the run, at its own pace (``ros2 topic pub -r 5``), is
+  refused, counted and named, on rclpy too, and the lock-step run is still the one-process
+  loop's to the last bit.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from stillframe.loop.closed_loop import run_closed_loop
+from stillframe.loop.writer_gate import REASONS
+from tests.support.nodes import SHORT_LQG, run_loop_beside
+from tests.support.scenes import thesis_scene
+
+BACKENDS = ("rclpy", "dds") if importlib.util.find_spec("rclpy") else ("dds",)
+
+#: a real rclpy peer with a publisher on the command topic that never writes
+IDLE_PEER = """
+import signal
+import rclpy
+from geometry_msgs.msg import WrenchStamped
+rclpy.init()
+node = rclpy.create_node("idle_teleop", namespace="/frame")
+pub = node.create_publisher(WrenchStamped, "pendulum/torque_cmd", 10)
+stop = []
+signal.signal(signal.SIGTERM, lambda *a: stop.append(1))
+print("ready", flush=True)
+while not stop:
+    rclpy.spin_once(node, timeout_sec=0.05)
+print("sent", 0, flush=True)
+"""
+
+#: ``ros2 topic pub -r 5 /frame/pendulum/torque_cmd``, started during the run (once the loop's
+#: ``/clock`` passed 0.5 s): a fixed 5 N m at 5 Hz, stamped 0
+PUB_PEER = """
+import signal, time
+import rclpy
+from geometry_msgs.msg import WrenchStamped
+from rosgraph_msgs.msg import Clock
+rclpy.init()
+node = rclpy.create_node("topic_pub", namespace="/frame")
+clock = [0]
+node.create_subscription(Clock, "/clock", lambda m: clock.__setitem__(0, m.clock.sec * 10**9
+                         + m.clock.nanosec), rclpy.qos.qos_profile_sensor_data)
+pub = node.create_publisher(WrenchStamped, "pendulum/torque_cmd", 10)
+cmd = WrenchStamped()
+cmd.wrench.torque.z = 5.0
+stop = []
+signal.signal(signal.SIGTERM, lambda *a: stop.append(1))
+print("ready", flush=True)
+sent, due = 0, time.monotonic()
+while not stop:
+    rclpy.spin_once(node, timeout_sec=0.05)
+    if clock[0] >= 5 * 10**8 and pub.get_subscription_count() and time.monotonic() >= due:
+        pub.publish(cmd)
+        sent, due = sent + 1, due + 0.2
+print("sent", sent, flush=True)
+"""
+
+
+def writer_refusals(gate: dict) -> int:
+    return sum(gate[f"rejected_{r}"] for r in REASONS)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_an_idle_publisher_on_the_command_topic_changes_nothing(
+        ros_domain: int, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, backend: str) -> None:
+    monkeypatch.setenv("STILLFRAME_RMW", backend)
+    result, hist, _ = run_loop_beside(tmp_path, IDLE_PEER, "thesis_lqg", SHORT_LQG,
+                                      command_writer="controller_node")
+    reference = run_closed_loop(thesis_scene("thesis_lqg", SHORT_LQG))
+    np.testing.assert_array_equal(hist["command"], reference.command)
+    np.testing.assert_array_equal(hist["truth"], reference.truth)
+    gate = result["command_gates"]["pendulum/torque_cmd"]
+    assert writer_refusals(gate) == 0 and gate["ignored_writers"] == ""
+    assert result["lockstep_timeouts"] == 0
+
+
+@pytest.mark.slow
+@pytest.mark.skipif("rclpy" not in BACKENDS, reason="rclpy not installed")
+def test_an_idle_publisher_changes_nothing_in_real_time_on_rclpy(
+        ros_domain: int, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The issue's run: every command refused as ``ambiguous_writer`` before. Now none is,
+    the controller's commands are applied, and the reductions are the controller's."""
+    monkeypatch.setenv("STILLFRAME_RMW", "rclpy")
+    result, _, _ = run_loop_beside(tmp_path, IDLE_PEER, "thesis_lqg", SHORT_LQG,
+                                   command_writer="controller_node", mode="realtime")
+    gate = result["command_gates"]["pendulum/torque_cmd"]
+    assert writer_refusals(gate) == 0 and result["rejected_commands"] == 0
+    reference = run_closed_loop(thesis_scene("thesis_lqg", SHORT_LQG)).evaluation
+    # held commands under load shift the figures a little; refused ones made them negative
+    for got, want in zip(result["reduction_pct"]["displacement"],
+                         reference["reduction_pct"]["displacement"], strict=True):
+        assert got > want / 2, (result["reduction_pct"], reference["reduction_pct"])
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_a_writing_peer_is_refused_counted_and_named(
+        ros_domain: int, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, backend: str) -> None:
+    monkeypatch.setenv("STILLFRAME_RMW", backend)
+    result, hist, sent = run_loop_beside(tmp_path, PUB_PEER, "thesis_lqg", SHORT_LQG,
+                                         command_writer="controller_node")
+    gate = result["command_gates"]["pendulum/torque_cmd"]
+    assert 0 < writer_refusals(gate) <= sent, (gate, sent)
+    assert gate["writer"] == "/frame/controller_node"
+    assert gate["ignored_writers"] == "/frame/topic_pub" or (
+        backend == "dds" and gate["ignored_writers"].startswith("010f")), gate
+    reference = run_closed_loop(thesis_scene("thesis_lqg", SHORT_LQG))
+    np.testing.assert_array_equal(hist["command"], reference.command)
