@@ -27,6 +27,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from stillframe.app import running_graph
 from stillframe.config.scene import Scene, load_scene
 from stillframe.contract.topics import STATUS_KEYS
 from stillframe.errors import InputError
@@ -313,7 +314,8 @@ class Launcher:
         self.options = options
         self.status = StatusLine()
         self.processes = ProcessSet(self.status.echo)
-        self.node = api.create_node(f"_stillframe_launch_{os.getpid()}", argv=["stillframe"])
+        self.node = api.create_node(running_graph.launcher_name(), argv=["stillframe"])
+        self.created = time.monotonic()
         self.statuses: dict[str, dict[str, str]] = {}
         self.node.create_subscription("diagnostic_msgs/msg/DiagnosticArray", "/diagnostics",
                                       self._on_diagnostics, "default")
@@ -382,6 +384,7 @@ class Launcher:
 
         self.options.result_file.unlink(missing_ok=True)
         try:
+            running_graph.refuse_if_running(self.node, self.created, (*NODES, CONTAINER))
             commands = self.commands()
             self.status.echo(f"discovery range {self.discovery}; backends " + ", ".join(
                 f"{name} {self.backend(name)}" for name, _ in commands))
@@ -394,8 +397,12 @@ class Launcher:
                     self._wait_for_line(child, "middleware backend")
             simulator = self.simulator()
             sim = next(c for c in self.processes.children if c.name == simulator)
+            watch = time.monotonic()
             while api.ok():
                 self.node.spin_once(0.1)
+                if time.monotonic() >= watch + running_graph.WATCH_S:
+                    running_graph.check(self.node)
+                    watch = time.monotonic()
                 if self.statuses:
                     self.status.update(status_text(self.statuses, self.status.width()))
                 if sim.proc.poll() == 0 and self.options.result_file.exists():

@@ -13,14 +13,19 @@
 from __future__ import annotations
 
 import importlib.util
+import json
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from stillframe.locations import REPO_ROOT
 from stillframe.loop.closed_loop import run_closed_loop
 from stillframe.loop.writer_gate import REASONS
-from tests.support.nodes import SHORT_LQG, run_loop_beside
+from tests.support.middleware import child_env
+from tests.support.nodes import SCENES, SHORT_LQG, run_loop_beside
 from tests.support.scenes import thesis_scene
 
 BACKENDS = ("rclpy", "dds") if importlib.util.find_spec("rclpy") else ("dds",)
@@ -120,3 +125,35 @@ def test_a_writing_peer_is_refused_counted_and_named(
         backend == "dds" and gate["ignored_writers"].startswith("010f")), gate
     reference = run_closed_loop(thesis_scene("thesis_lqg", SHORT_LQG))
     np.testing.assert_array_equal(hist["command"], reference.command)
+
+
+def launch(*args: str) -> subprocess.Popen:
+    return subprocess.Popen(
+        [sys.executable, "-m", "stillframe", "launch", str(SCENES / "thesis_lqg.yaml"),
+         *[a for o in SHORT_LQG for a in ("--set", o)], "--backend", "dds", *args],
+        env=child_env(), cwd=REPO_ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+        text=True)
+
+
+@pytest.mark.slow
+def test_two_launches_on_one_domain_never_both_stall(ros_domain: int) -> None:
+    """Started in the same instant: the later launcher refuses with one line naming the earlier
+    one (exit 2), before starting any node when discovery shows it within ``LOOK_S``, at once
+    when it shows it later (a loaded machine); the earlier one runs to its end, undisturbed in
+    the first case. A third one, started while the first runs, refuses too."""
+    first, second = launch("--json"), launch("--json")
+    _out, err = second.communicate(timeout=120)
+    if second.returncode == 0:          # the other one started later: swap
+        first, second = second, first
+        _out, err = second.communicate(timeout=120)
+    assert second.returncode == 2, err[-2000:]
+    lines = [line for line in err.splitlines() if line.startswith("stillframe launch")]
+    assert len(lines) == 1 and "another stillframe loop is running on ROS_DOMAIN_ID=" \
+        f"{ros_domain}: /_stillframe_launch_{first.pid}_" in lines[0], err
+    third = launch()
+    err3 = third.communicate(timeout=120)[1]
+    result = json.loads(first.communicate(timeout=300)[0])
+    assert first.returncode == 0
+    if "started sim_node" not in err:   # refused before its nodes ran
+        assert result["lockstep_timeouts"] == 0
+    assert third.returncode == 2 and f"/_stillframe_launch_{first.pid}_" in err3, err3
