@@ -12,19 +12,25 @@
 
 from __future__ import annotations
 
+import asyncio
 import importlib.util
 import json
+import signal
 import subprocess
 import sys
+import threading
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from stillframe.bags.storage import bag_summary
+from stillframe.contract import messages
 from stillframe.locations import REPO_ROOT
 from stillframe.loop.closed_loop import run_closed_loop
 from stillframe.loop.writer_gate import REASONS
-from tests.support.middleware import child_env
+from stillframe.monitor.foxglove_client import Capture, capture
+from tests.support.middleware import child_env, finish, start_python
 from tests.support.nodes import SCENES, SHORT_LQG, run_loop_beside
 from tests.support.scenes import thesis_scene
 
@@ -157,3 +163,80 @@ def test_two_launches_on_one_domain_never_both_stall(ros_domain: int) -> None:
     if "started sim_node" not in err:   # refused before its nodes ran
         assert result["lockstep_timeouts"] == 0
     assert third.returncode == 2 and f"/_stillframe_launch_{first.pid}_" in err3, err3
+
+
+#: ``ros2 topic pub -r 10 /chatter std_msgs/msg/String``: a peer on a topic of its own
+CHATTER = """
+import signal, time
+import rclpy
+from std_msgs.msg import String
+rclpy.init()
+node = rclpy.create_node("talker")
+pub = node.create_publisher(String, "/chatter", 10)
+stop = []
+signal.signal(signal.SIGTERM, lambda *a: stop.append(1))
+print("ready", flush=True)
+sent = 0
+while not stop:
+    pub.publish(String(data=f"hello {sent}"))
+    sent += 1
+    time.sleep(0.1)
+print("sent", sent, flush=True)
+"""
+
+
+def stillframe_cli(*args: str) -> subprocess.Popen:
+    return subprocess.Popen([sys.executable, "-m", "stillframe", *args], env=child_env(),
+                            cwd=REPO_ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True)
+
+
+@pytest.mark.slow
+@pytest.mark.skipif("rclpy" not in BACKENDS, reason="rclpy not installed")
+def test_the_loop_keeps_controlling_beside_tools(ros_domain: int, tmp_path: Path) -> None:
+    """Beside a lock-step launch with its recorder: ``stillframe topic echo`` and ``topic hz``,
+    a second recorder of every topic, ``stillframe monitor`` with a Foxglove client subscribed
+    to every topic, and a real rclpy talker on ``/chatter``. The run is the one-process loop's
+    to the last bit, and every tool got what it asked for."""
+    monitor = stillframe_cli("monitor", "--port", "0", "--max-rate", "0")
+    ready = ""
+    while "Monitor ready" not in ready:
+        ready = monitor.stderr.readline()
+        assert ready or monitor.poll() is None, "monitor did not start"
+    url = ready.split("foxglove ", 1)[1].split(",")[0].strip()
+    done, seen = asyncio.Event(), Capture()
+    client = threading.Thread(target=asyncio.run, args=(capture(url, None, done, seen),),
+                              daemon=True)
+    client.start()
+    tools = [stillframe_cli("topic", "echo", "/frame/floor1/imu", "--field", "header.stamp.sec"),
+             stillframe_cli("topic", "hz", "/frame/state_estimate"),
+             stillframe_cli("record", "-o", str(tmp_path / "second"), "--all"),
+             start_python(CHATTER)]
+    assert tools[-1].stdout.readline().strip() == "ready"
+    try:
+        done_launch = subprocess.run(
+            [sys.executable, "-m", "stillframe", "launch", str(SCENES / "thesis_lqg.yaml"),
+             *[a for o in SHORT_LQG for a in ("--set", o)], "--record", str(tmp_path / "bag"),
+             "--out", str(tmp_path / "out"), "--json"],
+            env=child_env(), cwd=REPO_ROOT, capture_output=True, text=True, timeout=300)
+    finally:
+        for proc in (*tools, monitor):
+            proc.send_signal(signal.SIGINT if proc is not tools[-1] else signal.SIGTERM)
+        outputs = [finish(proc, timeout=30) for proc in (*tools, monitor)]
+        client.join(10)
+    assert done_launch.returncode == 0, done_launch.stderr[-3000:]
+    result = json.loads(done_launch.stdout)
+    reference = run_closed_loop(thesis_scene("thesis_lqg", SHORT_LQG))
+    with np.load(tmp_path / "out" / "result.npz") as data:
+        np.testing.assert_array_equal(data["command"], reference.command)
+        np.testing.assert_array_equal(data["truth"], reference.truth)
+    assert result["lockstep_timeouts"] == 0
+    echo, hz, _, chatter, _ = outputs
+    assert echo[0].split().count("0") >= 5             # stamps of the first second echoed
+    assert "average rate" in hz[0], hz
+    steps = result["steps"]
+    for bag in ("bag", "second"):
+        counts = {t.name: t.count for t in bag_summary(tmp_path / bag, messages.TYPESTORE).topics}
+        assert counts["/frame/floor1/imu"] == steps, (bag, counts)
+    assert int(chatter[0].split()[-1]) > 0
+    assert len(seen.messages.get("/frame/floor1/imu", [])) > 0, "the Foxglove client got none"
