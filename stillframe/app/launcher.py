@@ -101,12 +101,11 @@ def parse_backends(specs: Sequence[str]) -> dict[str, str]:
     return chosen
 
 
-def single_host_discovery() -> str:
-    """The discovery range of the launch: ``ROS_AUTOMATIC_DISCOVERY_RANGE`` if set (checked),
-    else ``LOCALHOST``, set in this process's environment so the children inherit it: a launch
-    runs every node on this host, and nothing beyond it needs to find them unless asked."""
-
-    os.environ.setdefault(discovery.RANGE_ENV, discovery.DiscoveryRange.LOCALHOST.value)
+def launch_discovery() -> str:
+    """The discovery range of the launch, as the environment says (checked): ``SUBNET`` when
+    ``ROS_AUTOMATIC_DISCOVERY_RANGE`` is unset, as ``ros2 launch`` leaves it, so that a default
+    Jazzy terminal on the same host (``ros2 topic list``) sees the run. The environment is not
+    changed; the children inherit it as it is."""
     return discovery.discovery_range().value
 
 
@@ -310,7 +309,7 @@ class Launcher:
         if options.record_dir is not None and options.record_dir.exists():
             raise InputError(f"--record {options.record_dir}: already exists")
         self.backends = parse_backends(options.backends)
-        self.discovery = single_host_discovery()
+        self.discovery = launch_discovery()
         self.options = options
         self.status = StatusLine()
         self.processes = ProcessSet(self.status.echo)
