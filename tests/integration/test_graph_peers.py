@@ -240,3 +240,27 @@ def test_the_loop_keeps_controlling_beside_tools(ros_domain: int, tmp_path: Path
         assert counts["/frame/floor1/imu"] == steps, (bag, counts)
     assert int(chatter[0].split()[-1]) > 0
     assert len(seen.messages.get("/frame/floor1/imu", [])) > 0, "the Foxglove client got none"
+
+
+@pytest.mark.slow
+def test_a_degraded_real_time_run_says_so_and_strict_fails(ros_domain: int) -> None:
+    """A real-time launch beside a peer writing commands (forced: every one it writes is
+    refused): the JSON says ``"degraded": true`` with the refused commands among the reasons,
+    and ``--strict`` ends it with exit code 6 and one line giving them."""
+    peer = start_python(PUB_PEER)
+    assert peer.stdout.readline().strip() == "ready"
+    try:
+        run = launch("--mode", "realtime", "--strict", "--json")
+        out, err = run.communicate(timeout=300)
+    finally:
+        peer.send_signal(signal.SIGTERM)
+        sent = int(finish(peer, timeout=20)[0].split()[-1])
+    result = json.loads(out)
+    gate = result["command_gates"]["pendulum/torque_cmd"]
+    assert sent > 0 and gate["rejected_second_writer"] > 0, gate
+    assert result["degraded"] is True
+    assert f"{result['rejected_commands']} refused commands" in result["degraded_reasons"]
+    lines = [line for line in err.splitlines() if line.startswith("stillframe launch")]
+    assert run.returncode == 6
+    assert lines == ["stillframe launch: error: degraded real-time run, its figures are not the "
+                     f"controller's: {'; '.join(result['degraded_reasons'])}"], err[-2000:]
