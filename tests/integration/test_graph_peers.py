@@ -245,8 +245,9 @@ def test_the_loop_keeps_controlling_beside_tools(ros_domain: int, tmp_path: Path
 @pytest.mark.slow
 def test_a_degraded_real_time_run_says_so_and_strict_fails(ros_domain: int) -> None:
     """A real-time launch beside a peer writing commands (forced: every one it writes is
-    refused): the JSON says ``"degraded": true`` with the refused commands among the reasons,
-    and ``--strict`` ends it with exit code 6 and one line giving them."""
+    refused): the simulator's log and ``/diagnostics`` name the peer, the JSON says
+    ``"degraded": true`` with the refused commands among the reasons, and ``--strict`` ends it
+    with exit code 6 and one line giving them."""
     peer = start_python(PUB_PEER)
     assert peer.stdout.readline().strip() == "ready"
     try:
@@ -260,6 +261,14 @@ def test_a_degraded_real_time_run_says_so_and_strict_fails(ros_domain: int) -> N
     assert sent > 0 and gate["rejected_second_writer"] > 0, gate
     assert result["degraded"] is True
     assert f"{result['rejected_commands']} refused commands" in result["degraded_reasons"]
+    # the simulator's log and /diagnostics name the peer (by its GID until the graph has its
+    # name: the only eProsima, vendor 01.0f, writer)
+    named = [line for line in err.splitlines()
+             if "[sim_node]" in line and "pendulum/torque_cmd: refusing the samples of another "
+             "writer: " in line]
+    assert named and ("/frame/topic_pub" in named[-1] or ": 010f" in named[-1]), err[-3000:]
+    sim = next(v for k, v in result["diagnostics"].items() if k.endswith("sim_node"))
+    assert sim["pendulum_torque_cmd_ignored_writers"] == gate["ignored_writers"] != ""
     lines = [line for line in err.splitlines() if line.startswith("stillframe launch")]
     assert run.returncode == 6
     assert lines == ["stillframe launch: error: degraded real-time run, its figures are not the "
