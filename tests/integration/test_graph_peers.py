@@ -13,6 +13,7 @@
 from __future__ import annotations
 
 import asyncio
+import functools
 import importlib.util
 import json
 import signal
@@ -20,6 +21,7 @@ import subprocess
 import sys
 import threading
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -84,17 +86,30 @@ def writer_refusals(gate: dict) -> int:
     return sum(gate[f"rejected_{r}"] for r in REASONS)
 
 
+@functools.cache
+def reference() -> Any:
+    """The one-process loop of the scene the tests launch."""
+    return run_closed_loop(thesis_scene("thesis_lqg", SHORT_LQG))
+
+
+def loop_beside(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, backend: str, peer: str,
+                **params: Any) -> tuple[dict, dict[str, np.ndarray], int, dict]:
+    """The three nodes on ``backend`` (sim_node pinned to controller_node, as a launch pins it)
+    beside the ``peer`` script: the result, the histories, what the peer sent, and the torque
+    command's gate report."""
+    monkeypatch.setenv("STILLFRAME_RMW", backend)
+    result, hist, sent = run_loop_beside(tmp_path, peer, "thesis_lqg", SHORT_LQG,
+                                         command_writer="controller_node", **params)
+    return result, hist, sent, result["command_gates"]["pendulum/torque_cmd"]
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("backend", BACKENDS)
 def test_an_idle_publisher_on_the_command_topic_changes_nothing(
         ros_domain: int, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, backend: str) -> None:
-    monkeypatch.setenv("STILLFRAME_RMW", backend)
-    result, hist, _ = run_loop_beside(tmp_path, IDLE_PEER, "thesis_lqg", SHORT_LQG,
-                                      command_writer="controller_node")
-    reference = run_closed_loop(thesis_scene("thesis_lqg", SHORT_LQG))
-    np.testing.assert_array_equal(hist["command"], reference.command)
-    np.testing.assert_array_equal(hist["truth"], reference.truth)
-    gate = result["command_gates"]["pendulum/torque_cmd"]
+    result, hist, _, gate = loop_beside(tmp_path, monkeypatch, backend, IDLE_PEER)
+    np.testing.assert_array_equal(hist["command"], reference().command)
+    np.testing.assert_array_equal(hist["truth"], reference().truth)
     assert writer_refusals(gate) == 0 and gate["ignored_writers"] == ""
     assert result["lockstep_timeouts"] == 0
 
@@ -105,32 +120,25 @@ def test_an_idle_publisher_changes_nothing_in_real_time_on_rclpy(
         ros_domain: int, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """The issue's run: every command refused as ``ambiguous_writer`` before. Now none is,
     the controller's commands are applied, and the reductions are the controller's."""
-    monkeypatch.setenv("STILLFRAME_RMW", "rclpy")
-    result, _, _ = run_loop_beside(tmp_path, IDLE_PEER, "thesis_lqg", SHORT_LQG,
-                                   command_writer="controller_node", mode="realtime")
-    gate = result["command_gates"]["pendulum/torque_cmd"]
+    result, _, _, gate = loop_beside(tmp_path, monkeypatch, "rclpy", IDLE_PEER, mode="realtime")
     assert writer_refusals(gate) == 0 and result["rejected_commands"] == 0
-    reference = run_closed_loop(thesis_scene("thesis_lqg", SHORT_LQG)).evaluation
+    want = reference().evaluation["reduction_pct"]
     # held commands under load shift the figures a little; refused ones made them negative
-    for got, want in zip(result["reduction_pct"]["displacement"],
-                         reference["reduction_pct"]["displacement"], strict=True):
-        assert got > want / 2, (result["reduction_pct"], reference["reduction_pct"])
+    for got, ref in zip(result["reduction_pct"]["displacement"], want["displacement"],
+                        strict=True):
+        assert got > ref / 2, (result["reduction_pct"], want)
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("backend", BACKENDS)
 def test_a_writing_peer_is_refused_counted_and_named(
         ros_domain: int, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, backend: str) -> None:
-    monkeypatch.setenv("STILLFRAME_RMW", backend)
-    result, hist, sent = run_loop_beside(tmp_path, PUB_PEER, "thesis_lqg", SHORT_LQG,
-                                         command_writer="controller_node")
-    gate = result["command_gates"]["pendulum/torque_cmd"]
+    _, hist, sent, gate = loop_beside(tmp_path, monkeypatch, backend, PUB_PEER)
     assert 0 < writer_refusals(gate) <= sent, (gate, sent)
     assert gate["writer"] == "/frame/controller_node"
     assert gate["ignored_writers"] == "/frame/topic_pub" or (
         backend == "dds" and gate["ignored_writers"].startswith("010f")), gate
-    reference = run_closed_loop(thesis_scene("thesis_lqg", SHORT_LQG))
-    np.testing.assert_array_equal(hist["command"], reference.command)
+    np.testing.assert_array_equal(hist["command"], reference().command)
 
 
 def launch(*args: str) -> subprocess.Popen:
@@ -226,10 +234,9 @@ def test_the_loop_keeps_controlling_beside_tools(ros_domain: int, tmp_path: Path
         client.join(10)
     assert done_launch.returncode == 0, done_launch.stderr[-3000:]
     result = json.loads(done_launch.stdout)
-    reference = run_closed_loop(thesis_scene("thesis_lqg", SHORT_LQG))
     with np.load(tmp_path / "out" / "result.npz") as data:
-        np.testing.assert_array_equal(data["command"], reference.command)
-        np.testing.assert_array_equal(data["truth"], reference.truth)
+        np.testing.assert_array_equal(data["command"], reference().command)
+        np.testing.assert_array_equal(data["truth"], reference().truth)
     assert result["lockstep_timeouts"] == 0
     echo, hz, _, chatter, _ = outputs
     assert echo[0].split().count("0") >= 5             # stamps of the first second echoed
