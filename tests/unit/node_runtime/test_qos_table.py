@@ -5,7 +5,7 @@ said different things). The table's lock-step sensor rows against the rule state
 from __future__ import annotations
 
 from stillframe.locations import REPO_ROOT
-from stillframe.loop.qos_table import BEGIN, END, rows, table
+from stillframe.node_runtime.qos_table import BEGIN, END, rows, table
 
 NODES_MD = REPO_ROOT / "docs" / "nodes.md"
 
@@ -14,7 +14,8 @@ def test_the_page_holds_the_generated_table() -> None:
     page = NODES_MD.read_text()
     assert page.count(BEGIN) == 1 and page.count(END) == 1
     start, end = page.index(BEGIN), page.index(END) + len(END)
-    assert page[start:end] == table(), "run: python -m stillframe.loop.qos_table docs/nodes.md"
+    assert page[start:end] == table(), \
+        "run: python -m stillframe.node_runtime.qos_table docs/nodes.md"
 
 
 def test_lockstep_sensors_are_reliable_and_the_realtime_control_path_is_read_best_effort(
