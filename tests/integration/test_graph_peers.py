@@ -115,12 +115,12 @@ def test_an_idle_publisher_on_the_command_topic_changes_nothing(
 
 
 @pytest.mark.slow
-@pytest.mark.skipif("rclpy" not in BACKENDS, reason="rclpy not installed")
-def test_an_idle_publisher_changes_nothing_in_real_time_on_rclpy(
-        ros_domain: int, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    """The issue's run: every command refused as ``ambiguous_writer`` before. Now none is,
-    the controller's commands are applied, and the reductions are the controller's."""
-    result, _, _, gate = loop_beside(tmp_path, monkeypatch, "rclpy", IDLE_PEER, mode="realtime")
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_an_idle_publisher_changes_nothing_in_real_time(
+        ros_domain: int, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, backend: str) -> None:
+    """The issue's run (rclpy): every command refused as ``ambiguous_writer`` before. Now none
+    is, the controller's commands are applied, and the reductions are the controller's."""
+    result, _, _, gate = loop_beside(tmp_path, monkeypatch, backend, IDLE_PEER, mode="realtime")
     assert writer_refusals(gate) == 0 and result["rejected_commands"] == 0
     want = reference().evaluation["reduction_pct"]
     # held commands under load shift the figures a little; refused ones made them negative
