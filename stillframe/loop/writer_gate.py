@@ -135,6 +135,8 @@ class WriterGate:
     blind_until: int = -1
     streams: SequenceStreams | None = None      # samples without a GID, by sequence number
     owner_gids: set[bytes] = field(default_factory=set)     # the taken node's, for streams
+    #: a refused stream -> when to ask the graph again (a restart it shows late)
+    stream_recheck: dict[bytes, int] = field(default_factory=dict)
     #: refusals not yet announced (:meth:`InputGates.announce`)
     news: bool = False
 
@@ -149,7 +151,9 @@ class WriterGate:
                 return self._refuse("ambiguous_writer")
         if gid in self.taken:
             return True
-        reason = "second_writer" if gid in self.intruders else self._decide(gid)
+        refused = gid in self.intruders and not (
+            gid.startswith(STREAM_KEY) and self.clock() >= self.stream_recheck[gid])
+        reason = "second_writer" if refused else self._decide(gid)
         return True if reason is None else self._refuse(reason)
 
     def _refuse(self, reason: str) -> bool:
@@ -194,7 +198,8 @@ class WriterGate:
     def _decide_stream(self, key: bytes) -> str | None:
         """A stream not taken yet: the first one, a restart of the taken node (a new writer of it
         in the graph), or, while the graph shows only the taken node's writers, a stream of that
-        node (its numbers jumped); any other is another writer."""
+        node (its numbers jumped); any other is another writer, asked about again after
+        :data:`RECHECK_NS` (the graph may show a restart after its first samples)."""
         listed = self.writers()
         wanted = self.pinned or self.owner
         if not wanted and not self.taken:   # the one node writing the topic, if one
@@ -205,7 +210,9 @@ class WriterGate:
         alone = bool(wanted) and all(g in own for g, _ in listed)
         if self.taken and not alone and not own - self.owner_gids:
             self.intruders.add(key)
+            self.stream_recheck[key] = self.clock() + RECHECK_NS
             return "second_writer"
+        self.intruders.discard(key)
         self.taken = {key}
         self.owner = wanted if wanted.startswith("/") else next(
             (name for g, name in listed if g in own), self.owner)

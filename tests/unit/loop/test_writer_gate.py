@@ -217,3 +217,16 @@ def test_without_writer_ids_a_jump_is_taken_while_the_graph_shows_only_the_taken
     assert gate.admits(b"", 2 + 10 * 256)   # a long outage: a new stream, but nobody else
     assert gate.admits(b"", 3 + 10 * 256) and not gate.rejected
     assert gate.report()["writer"] == "/frame/sim_node"
+
+
+def test_without_writer_ids_a_restart_the_graph_shows_late_is_taken_after_a_recheck() -> None:
+    graph = Graph((SIM, "/frame/sim_node"), (STRAY, "/frame/teleop"))
+    gate = graph.gate("sim_node")
+    assert all(gate.admits(b"", n) for n in range(1, 101))
+    assert not gate.admits(b"", 1)          # the restarted writer, not in the graph yet
+    graph.writers = [(SIM2, "/frame/sim_node"), (STRAY, "/frame/teleop")]
+    asked = graph.asked
+    assert not gate.admits(b"", 2) and graph.asked == asked     # refused without asking
+    graph.now += RECHECK_NS
+    assert gate.admits(b"", 3) and gate.admits(b"", 4)         # asked again: a restart
+    assert dict(gate.rejected) == {"second_writer": 2}
