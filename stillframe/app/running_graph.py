@@ -35,23 +35,26 @@ def launcher_name(started_ns: int | None = None) -> str:
     return f"{LAUNCHER_PREFIX}{os.getpid()}_{started_ns or time.time_ns()}"
 
 
-def _started(name: str) -> int:
+def _pid_started(name: str) -> tuple[int, int]:
+    """The pid and start time in a launcher's node name ((0, 0) if it has none)."""
     try:
-        return int(name.rsplit("_", 1)[1])
-    except (IndexError, ValueError):
-        return 0
+        pid, started = name.removeprefix(LAUNCHER_PREFIX).split("_")
+        return int(pid), int(started)
+    except ValueError:
+        return 0, 0
 
 
 def others(node: api.Node, loop_nodes: tuple[str, ...]) -> list[str]:
-    """The running loop's nodes (``loop_nodes`` in ``/frame``) and the launchers started before
-    this one, as the graph shows them now (``/namespace/name``)."""
-    mine = node.get_name()
+    """The running loop's nodes (``loop_nodes`` in ``/frame``) and the launchers of other
+    processes started before this one, as the graph shows them now (``/namespace/name``; an
+    earlier launch of this process, as in ``reproduce``, is over)."""
+    mine = _pid_started(node.get_name())
     return sorted(
         f"{namespace.rstrip('/')}/{name}"
         for name, namespace in node.get_node_names_and_namespaces()
         if (name in loop_nodes and namespace.rstrip("/") == topics.DEFAULT_NAMESPACE)
-        or (name.startswith(LAUNCHER_PREFIX) and name != mine
-            and (_started(name), name) < (_started(mine), mine)))
+        or (name.startswith(LAUNCHER_PREFIX) and _pid_started(name)[0] != mine[0]
+            and _pid_started(name)[::-1] < mine[::-1]))
 
 
 def refuse_if_running(node: api.Node, since: float, loop_nodes: tuple[str, ...]) -> None:
