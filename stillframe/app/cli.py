@@ -2,15 +2,19 @@
 
 Each listed module exposes ``register(subparsers)``, which adds its parser and sets
 ``func=run`` on it; ``run(args)`` returns the process exit code. Modules are imported only
-when listed here, so the core never imports the tools built on top of it at import time.
+when listed here, so the core never imports the tools built on top of it at import time; and
+a command line naming a command imports only that command's module (``stillframe topic list``
+does not load the simulator), the others when asked for help.
 """
 
 from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
 
+from stillframe.app.ros_tools import VERBOSE_ENV
 from stillframe.errors import StillframeError
 
 COMMANDS: tuple[str, ...] = (
@@ -33,24 +37,39 @@ COMMANDS: tuple[str, ...] = (
     "stillframe.app.commands.ph",
     "stillframe.app.commands.montecarlo",
     "stillframe.app.commands.netns",
+    "stillframe.app.commands.daemon",
 )
 
 
-def build_parser() -> argparse.ArgumentParser:
+def _module_of(argv: list[str]) -> str | None:
+    """The module of the command ``argv`` names (its first word that is not an option), if any
+    listed module has that name (``closed-loop`` is ``closed_loop``)."""
+    word = next((a for a in argv if not a.startswith("-")), "")
+    wanted = f"stillframe.app.commands.{word.replace('-', '_')}"
+    return wanted if wanted in COMMANDS else None
+
+
+def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
+    """The parser of every command, or only of the one ``argv`` names."""
     parser = argparse.ArgumentParser(
         prog="stillframe",
         description="Simulate, identify and control a flexible frame with an active mass damper.",
     )
+    parser.add_argument("--verbose", action="store_true",
+                        help="log the tools' own nodes (their middleware backend) too")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
-    for name in COMMANDS:
+    only = _module_of(argv) if argv is not None else None
+    for name in (only,) if only else COMMANDS:
         importlib.import_module(name).register(sub)
     return parser
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = build_parser()
-    args = parser.parse_args(argv)
+    argv = sys.argv[1:] if argv is None else argv
+    args = build_parser(argv).parse_args(argv)
+    if args.verbose:
+        os.environ[VERBOSE_ENV] = "1"  # read by the tools' own nodes
     try:
         return int(args.func(args) or 0)
     except StillframeError as exc:

@@ -326,6 +326,18 @@ class Context:
         self._endpoints[kind] = ((reads, owners), result)
         return result
 
+    def services(self, kind: str) -> list[tuple[str, str, str, str]]:
+        """(node namespace, node name, service, type) of every alive request reader
+        (``kind='subscription'``: a service server) or request writer (a client)."""
+        owners = {gid: (namespace, name) for nodes in self.node_names().values()
+                  for namespace, name, gids in nodes for gid in gids}
+        found = []
+        for ep in self._alive(kind)[1]:
+            service, rtype = dds_types.ros_service(ep.topic_name), dds_types.ros_type(ep.type_name)
+            if service is not None and rtype is not None and ep.key.bytes in owners:
+                found.append((*owners[ep.key.bytes], service, rtype))
+        return found
+
 
 def _read_all(reader: BuiltinDataReader, condition: ReadCondition) -> list[Any]:
     """Every sample ``condition`` selects, read :data:`GRAPH_BATCH` at a time (cyclonedds
@@ -675,6 +687,17 @@ class DdsNode:
             for nodes in self.context.node_names().values()
             for namespace, name, _ in nodes
         )
+
+    def get_service_names_and_types_by_node(
+        self, node_name: str, node_namespace: str, server: bool = True
+    ) -> list[tuple[str, list[str]]]:
+        """A node's service servers (``server``) or clients, from their request endpoints."""
+        found: dict[str, set[str]] = {}
+        for namespace, name, service, rtype in self.context.services(
+                "subscription" if server else "publication"):
+            if (name, namespace) == (node_name, node_namespace):
+                found.setdefault(service, set()).add(rtype)
+        return [(service, sorted(types)) for service, types in sorted(found.items())]
 
     # -- execution ---------------------------------------------------------------------------
     def attach(self, condition: Any, handler: Callable[[], Any]) -> None:

@@ -3,7 +3,6 @@ receive-rate statistics (what ``stillframe topic`` shows, shaped like ``ros2 top
 
 from __future__ import annotations
 
-import os
 import statistics
 import sys
 from collections import deque
@@ -15,11 +14,6 @@ from stillframe.contract import messages
 from stillframe.errors import InputError
 from stillframe.middleware import api, names
 from stillframe.middleware.qos import DEFAULT, Durability, QoSProfile, Reliability
-
-
-def cli_node() -> api.Node:
-    """A hidden node (name starting with '_') for a command-line tool."""
-    return api.create_node(f"_stillframe_topic_{os.getpid()}", argv=["stillframe"])
 
 
 def wait_for_publisher(
