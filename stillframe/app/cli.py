@@ -37,6 +37,8 @@ COMMANDS: tuple[str, ...] = (
     "stillframe.app.commands.ph",
     "stillframe.app.commands.montecarlo",
     "stillframe.app.commands.netns",
+    "stillframe.app.commands.node",
+    "stillframe.app.commands.interface",
     "stillframe.app.commands.daemon",
 )
 

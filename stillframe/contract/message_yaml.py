@@ -78,8 +78,8 @@ def from_yaml(name: str, values: Any, where: str = "", stampers: list[Stamper] |
                          f"got {values!r}")
     defs = dict(messages.fielddefs(canonical))
     if unknown := sorted(set(values) - set(defs)):
-        raise InputError(f"{where}: {canonical} has no field {unknown[0]!r} "
-                         f"(fields: {', '.join(defs)})")
+        raise InputError(f"{where}: no field {unknown[0]!r} (fields of {canonical}: "
+                         f"{', '.join(defs)})")
     fields = {field: _value(defs[field], value, f"{where}.{field}", stampers)
               for field, value in values.items()}
     return messages.new(canonical, **fields)

@@ -245,10 +245,10 @@ def run_pub(args: argparse.Namespace) -> int:
     wanted = (args.wait_matching_subscriptions if args.wait_matching_subscriptions is not None
               else int(times != 0))
     topic = names.resolve_topic(args.topic)
-    type_name = messages.type_name(args.type)
-    if type_name not in messages.TYPESTORE.fielddefs:
-        known = sorted(messages.TYPESTORE.fielddefs)
-        raise InputError(f"unknown message type {args.type}{did_you_mean(type_name, known)}")
+    known = sorted(t for t in messages.TYPESTORE.fielddefs if "/msg/" in t)
+    if args.type not in known:
+        raise InputError(f"unknown message type {args.type}{did_you_mean(args.type, known)}")
+    type_name = args.type
     try:
         values = load_yaml(args.values)
     except yaml.YAMLError as exc:
