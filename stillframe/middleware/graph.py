@@ -40,10 +40,10 @@ VENDORS = {b"\x01\x0f": "Fast DDS", b"\x01\x10": "Cyclone DDS"}
 
 
 @dataclass(frozen=True)
-class Endpoint:
-    """One publisher or subscription (rclpy's ``TopicEndpointInfo``, plain data)."""
+class TopicEndpointInfo:
+    """One publisher or subscription of a topic, as discovered (like rclpy's); the backends
+    return these (:mod:`stillframe.middleware.interface` re-exports it)."""
 
-    kind: str                 # "PUBLISHER" or "SUBSCRIPTION", rmw's endpoint type names
     topic_name: str
     topic_type: str
     topic_type_hash: str
@@ -51,6 +51,13 @@ class Endpoint:
     qos_profile: QoSProfile
     node_name: str = ""
     node_namespace: str = ""
+
+
+@dataclass(frozen=True)
+class Endpoint(TopicEndpointInfo):
+    """An endpoint in a graph snapshot: the info and whether it publishes or subscribes."""
+
+    kind: str = "PUBLISHER"   # or "SUBSCRIPTION", rmw's endpoint type names
 
     @property
     def node(self) -> str:
@@ -178,9 +185,9 @@ def snapshot(node: Any) -> Graph:
     for topic, _ in topics:
         for kind, infos in (("PUBLISHER", node.get_publishers_info_by_topic(topic)),
                             ("SUBSCRIPTION", node.get_subscriptions_info_by_topic(topic))):
-            endpoints += [Endpoint(kind, topic, i.topic_type, i.topic_type_hash,
-                                   bytes(i.endpoint_gid), i.qos_profile, i.node_name,
-                                   i.node_namespace) for i in infos]
+            endpoints += [Endpoint(topic, i.topic_type, i.topic_type_hash, bytes(i.endpoint_gid),
+                                   i.qos_profile, i.node_name, i.node_namespace, kind=kind)
+                          for i in infos]
     nodes = node.get_node_names_and_namespaces()
     services = [
         Service(fqn(ns, name), service, tuple(types), server)

@@ -13,11 +13,11 @@ import signal
 import threading
 from collections import Counter
 from collections.abc import Callable
-from dataclasses import dataclass
 from typing import Any, NamedTuple, Protocol
 
 from stillframe.contract import messages
 from stillframe.middleware.clock import Clock
+from stillframe.middleware.graph import TopicEndpointInfo
 from stillframe.middleware.logger import Logger
 from stillframe.middleware.params import Parameter, SetCallback
 from stillframe.middleware.qos import QoSProfile
@@ -33,19 +33,6 @@ class MessageInfo(NamedTuple):
     source_timestamp: int
     received_timestamp: int
     publisher_gid: bytes = b""
-
-
-@dataclass(frozen=True)
-class TopicEndpointInfo:
-    """One publisher or subscription of a topic, as discovered (like rclpy's)."""
-
-    topic_name: str
-    topic_type: str
-    topic_type_hash: str
-    endpoint_gid: bytes
-    qos_profile: QoSProfile
-    node_name: str = ""
-    node_namespace: str = ""
 
 
 class Publisher(Protocol):

@@ -75,8 +75,8 @@ def test_an_endpoint_of_an_unknown_node_is_not_settled() -> None:
 def test_the_snapshot_survives_json() -> None:
     graph = Graph(
         nodes=[("talker", "/ns")], topics=[("/ns/chatter", ["std_msgs/msg/String"])],
-        endpoints=[Endpoint("PUBLISHER", "/ns/chatter", "std_msgs/msg/String", "RIHS01_ab",
-                            bytes(range(16)), SENSOR_DATA, "talker", "/ns")],
+        endpoints=[Endpoint("/ns/chatter", "std_msgs/msg/String", "RIHS01_ab",
+                            bytes(range(16)), SENSOR_DATA, "talker", "/ns", kind="PUBLISHER")],
         services=[Service("/ns/talker", "/ns/talker/get_parameters",
                           ("rcl_interfaces/srv/GetParameters",), True)],
         settle_s=3.4, settled=True)
