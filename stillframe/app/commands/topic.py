@@ -119,17 +119,16 @@ def run_info(args: argparse.Namespace) -> int:
     return 0
 
 
-def check_published_or_new(topic: str) -> None:
-    """A name that matches no topic while close names exist is a misspelling: one line naming
-    them (exit 2) instead of waiting for a publisher that will never come. A name with no close
-    one may be a topic still to come: the caller waits for it, as ``ros2 topic echo`` does."""
+def check_published_or_new(full: str) -> None:
+    """A name that no publisher has (asked when none appeared at once) and that matches no topic
+    of the settled graph while close names exist is a misspelling: one line naming them (exit 2)
+    instead of waiting for a publisher that will never come. A name with no close one may be a
+    topic still to come: the caller waits for it, as ``ros2 topic echo`` does."""
     from stillframe.app import graph_daemon
-    from stillframe.middleware import names
 
     graph = graph_daemon.graph()
     if graph is None:
         return
-    full = names.resolve_topic(topic)
     known = graph.topic_names(include_hidden=True)
     if full not in known and (hint := did_you_mean(full, known)):
         raise InputError(f"topic {full} does not exist{hint}")
@@ -139,10 +138,10 @@ def run_echo(args: argparse.Namespace) -> int:
     from stillframe.middleware import api, names
     from stillframe.middleware.monitor import select_field, to_yaml, wait_for_publisher
 
-    check_published_or_new(args.topic)
     node = tool_node("topic")
     try:
-        type_name, qos = wait_for_publisher(node, args.topic, args.timeout)
+        type_name, qos = wait_for_publisher(node, args.topic, args.timeout,
+                                            on_missing=check_published_or_new)
         if not type_name:
             return 0
         done: list[bool] = []
@@ -177,10 +176,10 @@ def run_hz(args: argparse.Namespace) -> int:
     from stillframe.middleware import api, names
     from stillframe.middleware.monitor import wait_for_publisher
 
-    check_published_or_new(args.topic)
     node = tool_node("topic")
     try:
-        type_name, qos = wait_for_publisher(node, args.topic, args.timeout)
+        type_name, qos = wait_for_publisher(node, args.topic, args.timeout,
+                                            on_missing=check_published_or_new)
         if not type_name:
             return 0
         stamps: deque[int] = deque(maxlen=args.window + 1)
