@@ -87,14 +87,15 @@ def start(*, wait: bool = True) -> bool:
         if is_running():
             return True
         log = open(path.with_suffix(".log"), "w")  # noqa: SIM115 (the daemon's stderr)
-        subprocess.Popen([sys.executable, "-m", "stillframe.app.graph_daemon", str(path)],
-                         stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=log,
-                         start_new_session=True, close_fds=True)
+        daemon = subprocess.Popen(
+            [sys.executable, "-m", "stillframe.app.graph_daemon", str(path)],
+            stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=log,
+            start_new_session=True, close_fds=True)
         log.close()
         if not wait:
             return True
         deadline = time.monotonic() + START_TIMEOUT_S
-        while time.monotonic() < deadline:
+        while time.monotonic() < deadline and daemon.poll() is None:  # it may fail at once
             if is_running():
                 return True
             time.sleep(0.05)
@@ -118,11 +119,12 @@ def serve(path: Path, idle_s: float) -> None:
     """The daemon: a hidden node, discovery settled, then graph questions answered on ``path``
     until ``stop``, SIGTERM or ``idle_s`` seconds without one."""
     from stillframe.middleware import api
-    from stillframe.middleware.graph import settle, snapshot
+    from stillframe.middleware.graph import ANNOUNCE_S, settle, snapshot
 
     node = api.create_node(f"{NODE_PREFIX}_{os.getpid()}",
                            argv=["stillframe", "--ros-args", "--log-level", "warn"])
     settle_s, settled = settle(node)
+    ready = time.monotonic()
     with contextlib.suppress(FileNotFoundError):
         path.unlink()
     server = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
@@ -144,7 +146,9 @@ def serve(path: Path, idle_s: float) -> None:
                     continue
                 if op == "graph":
                     answer = snapshot(node)
-                    answer.settle_s, answer.settled = settle_s, settled
+                    # a graph still changing at start-up has had time to settle since
+                    answer.settle_s = settle_s
+                    answer.settled = settled or time.monotonic() - ready >= ANNOUNCE_S
                     reply: dict[str, Any] = answer.to_json()
                 else:
                     reply = {"pid": os.getpid(), "backend": node.backend, "started": started,

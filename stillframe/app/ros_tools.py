@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import sys
 from typing import Any
 
 from stillframe.contract.topics import DEFAULT_NAMESPACE
@@ -27,10 +28,21 @@ def add_strategy_arguments(parser: argparse.ArgumentParser) -> None:
                              f"(default {SETTLE_LIMIT_S:g}; it usually settles well before)")
 
 
+def check_environment() -> None:
+    """``ROS_DOMAIN_ID`` and the discovery range as the tools read them: one line, exit 2, before
+    any middleware (rcl only warns of an unknown range and assumes LOCALHOST; we refuse to
+    guess, docs/middleware.md)."""
+    from stillframe.middleware.discovery import discovery_range, domain_id
+
+    domain_id()
+    discovery_range()
+
+
 def tool_node(kind: str, verbose: bool | None = None) -> Any:
     """A hidden node for a command-line tool; it logs its backend only with ``--verbose``."""
     from stillframe.middleware import api
 
+    check_environment()
     verbose = os.environ.get(VERBOSE_ENV) == "1" if verbose is None else verbose
     quiet = [] if verbose else ["--ros-args", "--log-level", "warn"]
     return api.create_node(f"_stillframe_{kind}_{os.getpid()}", argv=["stillframe", *quiet])
@@ -55,13 +67,18 @@ def direct_graph(spin_time: float) -> Graph:
 def graph_of(args: argparse.Namespace) -> Graph:
     """The graph for a verb: the daemon's (started on demand) unless ``--no-daemon``; a node of
     this process if the daemon cannot be reached."""
+    check_environment()
+    found = None
     if not getattr(args, "no_daemon", False):
         from stillframe.app import graph_daemon
 
         found = graph_daemon.graph()
-        if found is not None:
-            return found
-    return direct_graph(getattr(args, "spin_time", SETTLE_LIMIT_S))
+    if found is None:
+        found = direct_graph(getattr(args, "spin_time", SETTLE_LIMIT_S))
+    if not found.settled:
+        print(f"WARNING: discovery had not settled after {found.settle_s:.1f} s: the graph was "
+              "still changing, so this answer may be incomplete", file=sys.stderr)
+    return found
 
 
 def existing_topic(graph: Graph, topic: str) -> str:

@@ -16,7 +16,6 @@ the process. ``ROS_DOMAIN_ID`` selects the domain; ``ROS_AUTOMATIC_DISCOVERY_RAN
 from __future__ import annotations
 
 import itertools
-import os
 import time
 from collections.abc import Callable
 from typing import Any, ClassVar
@@ -83,14 +82,6 @@ _NEW_ALIVE = SampleState.NotRead | ViewState.Any | InstanceState.Alive
 _NEW_GONE = (SampleState.NotRead | ViewState.Any | InstanceState.NotAliveDisposed
              | InstanceState.NotAliveNoWriters)
 _RELIABLE_BLOCKING_NS = 100_000_000  # rmw_cyclonedds' max_blocking_time
-
-
-def domain_id() -> int:
-    """``ROS_DOMAIN_ID`` (default 0); InputError unless an integer 0..232."""
-    text = os.environ.get("ROS_DOMAIN_ID", "").strip() or "0"
-    if not text.isdigit() or int(text) > 232:
-        raise InputError(f"ROS_DOMAIN_ID={text!r}: expected an integer 0..232")
-    return int(text)
 
 
 def dds_qos(profile: QoSProfile, user_data: bytes | None = None, writer: bool = True) -> Qos:
@@ -175,7 +166,7 @@ class Context:
 
     @classmethod
     def get(cls) -> Context:
-        domain = domain_id()
+        domain = discovery.domain_id()
         if domain not in cls._instances:
             cls._instances[domain] = cls(domain)
         return cls._instances[domain]

@@ -244,3 +244,19 @@ def test_the_warm_path_loads_no_middleware(ros_domain: int) -> None:
         assert result.stdout.splitlines()[-1] == "[]"
     finally:
         run_stillframe("daemon", "stop")
+
+
+@pytest.mark.parametrize(("env", "value", "message"), [
+    ("ROS_DOMAIN_ID", "lab", "ROS_DOMAIN_ID='lab': expected an integer 0..232"),
+    ("ROS_AUTOMATIC_DISCOVERY_RANGE", "NOPE", "ROS_AUTOMATIC_DISCOVERY_RANGE='NOPE': expected"),
+])
+@pytest.mark.parametrize("verb", [["topic", "list"], ["node", "list", "--no-daemon"],
+                                  ["topic", "echo", "/x"], ["param", "dump", "/x"]])
+def test_a_bad_environment_is_one_line_on_either_backend(
+        ros_domain: int, monkeypatch: pytest.MonkeyPatch, env: str, value: str, message: str,
+        verb: list[str]) -> None:
+    """Checked before any middleware or daemon starts (rcl would raise a traceback for the
+    domain and only warn for the range)."""
+    monkeypatch.setenv("STILLFRAME_RMW", "rclpy")
+    monkeypatch.setenv(env, value)
+    assert message in bad(*verb)
