@@ -223,6 +223,12 @@ def test_param_verbs_on_an_rclpy_peer(peer: tuple, tools: str, tmp_path: os.Path
 def test_param_verbs_on_a_dds_peer(ros_domain: int, tools: str, tmp_path: os.PathLike) -> None:
     proc, _ = start_peer(DDS_PEER)
     try:
+        # a dds node's services, found from its request endpoints as rmw_cyclonedds names them
+        info = ok("node", "info", "/cli_peer/talker")
+        assert section(info, "Service Servers") == [
+            f"/cli_peer/talker/{verb}_parameters: rcl_interfaces/srv/{kind}Parameters"
+            for verb, kind in (("describe", "Describe"), ("get", "Get"), ("list", "List"),
+                               ("set", "Set"))]
         check_param_verbs(proc, tmp_path)
     finally:
         proc.terminate()
@@ -260,3 +266,11 @@ def test_a_bad_environment_is_one_line_on_either_backend(
     monkeypatch.setenv("STILLFRAME_RMW", "rclpy")
     monkeypatch.setenv(env, value)
     assert message in bad(*verb)
+
+
+def test_the_backend_banner_only_with_verbose(ros_domain: int) -> None:
+    quiet = run_stillframe("topic", "list", "--no-daemon", "--spin-time", "0.5")
+    loud = run_stillframe("--verbose", "topic", "list", "--no-daemon", "--spin-time", "0.5")
+    assert quiet.returncode == loud.returncode == 0, (quiet.stderr, loud.stderr)
+    assert "middleware backend" not in quiet.stderr
+    assert "middleware backend: dds" in loud.stderr
