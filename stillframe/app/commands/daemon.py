@@ -5,6 +5,7 @@ after two hours without a question (``STILLFRAME_DAEMON_IDLE_S``) or when told t
 from __future__ import annotations
 
 import argparse
+import sys
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -28,8 +29,8 @@ def run(args: argparse.Namespace) -> int:
             return 0
         if not graph_daemon.start():
             log = graph_daemon.socket_path().with_suffix(".log")
-            print(f"stillframe daemon: the daemon did not answer within "
-                  f"{graph_daemon.START_TIMEOUT_S:g} s (see {log})")
+            print(f"stillframe daemon: the daemon did not start (its log: {log})",
+                  file=sys.stderr)
             return 1
         print("The daemon has been started")
     elif args.verb == "stop":
