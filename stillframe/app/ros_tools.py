@@ -52,8 +52,6 @@ def direct_graph(spin_time: float) -> Graph:
     """The graph seen by a node of this process, once discovery has settled."""
     from stillframe.middleware.graph import settle, snapshot
 
-    if spin_time <= 0:
-        raise InputError(f"--spin-time must be > 0, got {spin_time:g}")
     node = tool_node("graph")
     try:
         settle_s, settled = settle(node, limit_s=spin_time)
@@ -68,13 +66,16 @@ def graph_of(args: argparse.Namespace) -> Graph:
     """The graph for a verb: the daemon's (started on demand) unless ``--no-daemon``; a node of
     this process if the daemon cannot be reached."""
     check_environment()
+    spin_time = getattr(args, "spin_time", SETTLE_LIMIT_S)
+    if not spin_time > 0:
+        raise InputError(f"--spin-time must be > 0, got {spin_time:g}")
     found = None
     if not getattr(args, "no_daemon", False):
         from stillframe.app import graph_daemon
 
         found = graph_daemon.graph()
     if found is None:
-        found = direct_graph(getattr(args, "spin_time", SETTLE_LIMIT_S))
+        found = direct_graph(spin_time)
     if not found.settled:
         print(f"WARNING: discovery had not settled after {found.settle_s:.1f} s: the graph was "
               "still changing, so this answer may be incomplete", file=sys.stderr)
