@@ -4,15 +4,20 @@ Each listed module exposes ``register(subparsers)``, which adds its parser and s
 ``func=run`` on it; ``run(args)`` returns the process exit code. Modules are imported only
 when listed here, so the core never imports the tools built on top of it at import time; and
 a command line naming a command imports only that command's module (``stillframe topic list``
-does not load the simulator), the others when asked for help.
+does not load the simulator). The list of commands (``stillframe --help``) reads each module's
+summary from its docstring without importing it.
 """
 
 from __future__ import annotations
 
 import argparse
+import ast
 import importlib
+import importlib.util
 import os
+import re
 import sys
+from pathlib import Path
 
 from stillframe.app.ros_tools import VERBOSE_ENV
 from stillframe.errors import StillframeError
@@ -51,8 +56,24 @@ def _module_of(argv: list[str]) -> str | None:
     return wanted if wanted in COMMANDS else None
 
 
+def command_name(module: str) -> str:
+    """``closed-loop`` of ``stillframe.app.commands.closed_loop``."""
+    return module.rsplit(".", 1)[1].replace("_", "-")
+
+
+def synopsis(module: str) -> str:
+    """What a command does, for the list of commands: the first clause of its module's
+    docstring after the usage (``stillframe modes SCENE``: ...), markup removed, read without
+    importing the module."""
+    source = Path(importlib.util.find_spec(module).origin).read_text()
+    text = " ".join((ast.get_docstring(ast.parse(source)) or "").split("\n\n")[0].split())
+    text = re.sub(r":\w+:`([^`]+)`", r"\1", text.split("``: ", 1)[-1]).replace("``", "")
+    return re.split(r"\. | \(|: ", text, maxsplit=1)[0].rstrip(".")
+
+
 def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
-    """The parser of every command, or only of the one ``argv`` names."""
+    """The parser of every command (``argv`` None), or of the one ``argv`` names; when it names
+    none (``--help``, a typo), the list of commands with their synopses, importing none."""
     parser = argparse.ArgumentParser(
         prog="stillframe",
         description="Simulate, identify and control a flexible frame with an active mass damper.",
@@ -62,6 +83,10 @@ def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
     only = _module_of(argv) if argv is not None else None
+    if argv is not None and only is None:
+        for name in COMMANDS:
+            sub.add_parser(command_name(name), help=synopsis(name))
+        return parser
     for name in (only,) if only else COMMANDS:
         importlib.import_module(name).register(sub)
     return parser
