@@ -38,8 +38,8 @@ from stillframe.identification.tracker import (
     identify_window,
     modes_array,
 )
-from stillframe.loop.node_support import OK, WARN, Diagnostics
 from stillframe.middleware import api
+from stillframe.node_runtime.support import OK, WARN, Diagnostics
 
 MODES_TOPIC = "identification/modes"
 MAX_PENDING = 4
