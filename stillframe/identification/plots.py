@@ -45,8 +45,8 @@ def hankel_singular_values(singular_values: np.ndarray, order: int, path: Path,
     ax.semilogy(np.arange(1, s.size + 1), s, "o-", ms=3)
     ax.xaxis.set_major_locator(MaxNLocator(integer=True))
     ax.axvline(order + 0.5, color="C3", ls="--", label=f"order {order}")
-    ax.set_xlabel("index")
-    ax.set_ylabel(r"$\sigma_i / \sigma_1$")
+    ax.set_xlabel("index [-]")
+    ax.set_ylabel(r"$\sigma_i / \sigma_1$ [-]")
     ax.set_title(title)
     ax.grid(True, which="both", alpha=0.3)
     ax.legend()
@@ -76,7 +76,7 @@ def stabilization_diagram(orders: Sequence[int], frequencies_hz: Sequence[np.nda
     if nyquist_hz:
         ax.set_xlim(0, nyquist_hz)
     ax.set_xlabel("frequency [Hz]")
-    ax.set_ylabel("model order")
+    ax.set_ylabel("model order [-]")
     ax.set_title("Stabilization diagram")
     ax.grid(True, alpha=0.3)
     ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.12), ncols=3, fontsize=8)
@@ -125,12 +125,13 @@ def frf(freq_hz: np.ndarray, h1: np.ndarray, coherence: np.ndarray | None, model
             mag.set_title(f"y{i + 1} / u{j + 1}", fontsize=9)
             mag.set_ylabel(f"|H| [{magnitude_unit(output_units[i], input_units[j])}]",
                            fontsize=8)
+            ph.set_ylabel("phase [deg]", fontsize=8)
+            coh.set_ylabel(f"coherence, {segments} seg. [-]" if show_coherence
+                           else "coherence [-]", fontsize=8)
             coh.set_ylim(0, 1.05)
             coh.set_xlabel("frequency [Hz]")
             for ax in (mag, ph, coh):
                 ax.grid(True, alpha=0.3)
-    axes[1, 0].set_ylabel("phase [deg]")
-    axes[2, 0].set_ylabel(f"coherence ({segments} seg.)" if show_coherence else "coherence")
     axes[0, 0].legend(fontsize=8)
     _channel_key(fig, [*(f"u{j + 1} = {n}" for j, n in enumerate(input_names)),
                        *(f"y{i + 1} = {n}" for i, n in enumerate(output_names))])
@@ -151,11 +152,12 @@ def mode_shapes(frequency_hz: np.ndarray, damping_ratio: np.ndarray, shapes: np.
         mag.set_title(f"{frequency_hz[k]:.4g} Hz, ζ {damping_ratio[k]:.3g}", fontsize=9)
         ph.set_ylim(-185, 185)
         ph.set_xticks(x, [f"y{i + 1}" for i in x])
+        ph.set_xlabel("sensor [-]")
+        mag.set_ylabel("magnitude [normalised]")
+        ph.set_ylabel("phase [deg]")
         mag.set_xticks(x, [])
         for ax in (mag, ph):
             ax.grid(True, alpha=0.3)
-    axes[0, 0].set_ylabel("magnitude (normalised)")
-    axes[1, 0].set_ylabel("phase [deg]")
     _channel_key(fig, [f"y{i + 1} = {n}" for i, n in enumerate(output_names)])
     return _save(fig, path)
 
@@ -220,8 +222,10 @@ def mac_matrix(frequency_hz: np.ndarray, values: np.ndarray, path: Path,
             ax.text(j, i, f"{values[i, j]:.2f}", ha="center", va="center", color="w", fontsize=8)
     ax.set_xticks(range(len(labels)), labels, rotation=45, fontsize=8)
     ax.set_yticks(range(len(labels)), labels, fontsize=8)
+    ax.set_xlabel("mode [Hz]")
+    ax.set_ylabel("mode [Hz]")
     ax.set_title(title, fontsize=9)
-    fig.colorbar(image, ax=ax, label="MAC")
+    fig.colorbar(image, ax=ax, label="MAC [-]")
     fig.tight_layout()
     return _save(fig, path)
 

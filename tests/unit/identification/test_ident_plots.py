@@ -52,7 +52,7 @@ def test_frf_magnitude_has_its_unit_and_coherence_its_segments(captured: list) -
               "frf.png", input_units=["N"], output_units=["m/s²"], segments=measured.segments)
     mag, _, coh = captured[0].axes[:3]
     assert mag.get_ylabel() == "|H| [(m/s²)/N]"
-    assert coh.get_ylabel() == f"coherence ({measured.segments} seg.)"
+    assert coh.get_ylabel() == f"coherence, {measured.segments} seg. [-]"
     shown = coh.lines[0].get_ydata()
     assert shown.min() < 0.9  # the noise shows: not flat at 1
 
@@ -78,3 +78,30 @@ def test_order_axes_have_integer_ticks(captured: list) -> None:
     captured[1].canvas.draw()
     for ticks in (stab.get_yticks(), hankel.get_xticks()):
         assert np.all(ticks == np.round(ticks)), ticks
+
+
+def test_every_identification_figure_has_units(monkeypatch: pytest.MonkeyPatch,
+                                               tmp_path) -> None:
+    """The checker of tests/unit/app/test_plot_units.py on identify's and ssi-cov's figures."""
+    import matplotlib.figure
+
+    from stillframe.bags.channels import Record
+    from stillframe.identification.pipeline import identify
+    from stillframe.identification.ssi_cov import identify_output_only
+    from stillframe.identification.sweep import shear_building, simulate
+    from tests.unit.app.test_plot_units import unit_problems
+
+    saved: dict = {}
+    monkeypatch.setattr(matplotlib.figure.Figure, "savefig",
+                        lambda fig, path, **_: saved.__setitem__(str(path), fig))
+    rec = simulate(shear_building(6), 1024, 40.0, 6)
+    record = Record(bag="b", inputs=(Channel("/frame/excitation/wrench", "wrench.force.x"),),
+                    outputs=tuple(Channel(f"/frame/floor{i}/imu", "linear_acceleration.x")
+                                  for i in (1, 2, 3)),
+                    t=np.arange(1024) * rec.dt, u=rec.u, y=rec.y, dt=rec.dt, start_ns=0)
+    plots.identification_plots(identify(rec.u, rec.y, rec.dt, refine=False), record,
+                               tmp_path)
+    plots.output_only_plots(identify_output_only(rec.y, rec.dt, 6), record, tmp_path / "o")
+    assert len(saved) == 8
+    problems = {name: unit_problems(fig) for name, fig in saved.items()}
+    assert not any(problems.values()), problems
