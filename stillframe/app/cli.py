@@ -19,6 +19,7 @@ COMMANDS: tuple[str, ...] = (
     "stillframe.app.commands.bench",
     "stillframe.app.commands.topic",
     "stillframe.app.commands.param",
+    "stillframe.app.commands.lifecycle",
     "stillframe.app.commands.bag",
     "stillframe.app.commands.record",
     "stillframe.app.commands.play",

@@ -27,11 +27,16 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import yaml
+
 from stillframe.config.scene import Scene, load_scene
-from stillframe.contract.topics import STATUS_KEYS
+from stillframe.contract import messages
+from stillframe.contract.topics import DEFAULT_NAMESPACE, STATUS_KEYS
 from stillframe.errors import InputError
+from stillframe.fidelity.auto_model import resolve_model
 from stillframe.locations import REPO_ROOT
 from stillframe.middleware import api, discovery, names
+from stillframe.node_runtime.declarations import MODES, NODE_PARAMETERS, ManagedParameterValues
 
 NODES: tuple[str, ...] = ("sim_node", "estimator_node", "controller_node")
 #: the process that hosts the estimator and the controller with ``--compose``
@@ -42,7 +47,14 @@ COMPOSE = ("", "pair", "all")
 LOOP = ("estimator_node", "controller_node")
 #: the children whose middleware backend ``--backend NAME=BACKEND`` can choose
 BACKEND_TARGETS: tuple[str, ...] = (*NODES, "recorder", "monitor")
-MODES: tuple[str, ...] = ("lockstep", "realtime")
+#: the node processes that are managed (lifecycle) nodes: the launch configures and activates
+#: them (the container brings its nodes up itself)
+MANAGED: tuple[str, ...] = tuple(n for n, declared in NODE_PARAMETERS.items()
+                                 if ManagedParameterValues in declared)
+#: how long a managed node may take to answer ``configure`` (its imports and the scene) [s]
+LIFECYCLE_TIMEOUT_S = 60.0
+#: the resolved scene the launch hands every node, beside the result file
+RESOLVED_SCENE = "scene.resolved.yaml"
 #: seconds a child gets to exit after SIGINT, then after SIGTERM, before SIGKILL
 STOP_GRACE_S = 10.0
 #: the log line by which a helper child says it is ready (the nodes start after it)
@@ -67,7 +79,7 @@ class NodeDiedError(RuntimeError):
         return cls(child.name, how, child.tail)
 
 
-def node_command(package: str, scene: Path, overrides: Sequence[str], mode: str,
+def node_command(package: str, scene: Path, overrides: Sequence[str], mode: str, *,
                  params: dict[str, Any] | None = None, args: Sequence[str] = ()) -> list[str]:
     """``python -m PACKAGE.node ARGS --ros-args -p scene:=... -p overrides:=[...] -p mode:=...``.
 
@@ -278,6 +290,9 @@ class LaunchOptions:
 
     scene: Path
     overrides: list[str] = field(default_factory=list)
+    #: the scene already loaded with its overrides and resolved (``model: auto`` chosen); None:
+    #: the launcher does it, once, and hands the nodes the result (:data:`RESOLVED_SCENE`)
+    resolved: Scene | None = None
     mode: str = "lockstep"
     result_file: Path = Path("result.json")
     record_dir: Path | None = None
@@ -311,10 +326,13 @@ class Launcher:
         self.backends = parse_backends(options.backends)
         self.discovery = single_host_discovery()
         self.options = options
+        self.scene = options.resolved or resolve_model(
+            load_scene(options.scene.resolve(), options.overrides))[0]
         self.status = StatusLine()
         self.processes = ProcessSet(self.status.echo)
         self.node = api.create_node(f"_stillframe_launch_{os.getpid()}", argv=["stillframe"])
         self.statuses: dict[str, dict[str, str]] = {}
+        self.callers: dict[str, api.Node] = {}
         self.node.create_subscription("diagnostic_msgs/msg/DiagnosticArray", "/diagnostics",
                                       self._on_diagnostics, "default")
 
@@ -333,36 +351,44 @@ class Launcher:
         # every loop node: the estimator's and controller's lock-step waits are parts of it
         shared = ({} if o.lockstep_timeout_s is None
                   else {"lockstep_timeout_s": float(o.lockstep_timeout_s)})
-        scene = o.scene.resolve()
+        scene = self.write_scene()
         children = []
         if o.record_dir is not None:
             children.append(("recorder", [sys.executable, "-m", "stillframe", "record", "-o",
                                           str(o.record_dir), "--use-sim-time",
                                           *(o.record_topics or ["--all"])]))
         if o.monitor_args is not None:
-            sets = [arg for override in o.overrides for arg in ("--set", override)]
             children.append(("monitor", [sys.executable, "-m", "stillframe", "monitor",
                                          "--dashboard", "--use-sim-time", "--scene", str(scene),
-                                         *sets, *o.monitor_args]))
+                                         *o.monitor_args]))
         nodes = self.nodes()
         # the pair's container takes no real-time parameters (it composes two nodes' loops);
         # with the simulator in it, the simulator's practices are the process's
         rt = {"rt": o.rt, **({"rt_cpus": o.rt_cpus} if o.rt_cpus else {})} if o.rt else {}
         sim = self.simulator()
         children += [(name, [*o.hosts.get("estimator_node" if name == CONTAINER else name, []),
-                             *node_command(name, scene, o.overrides, o.mode, {
+                             *node_command(name, scene, [], o.mode, params={
                                  **shared, **(rt if name in (sim, *LOOP) else {}),
-                                 **(sim_params if name == sim else {})},
-                                 ["all"] if name == sim == CONTAINER else [])])
+                                 **(sim_params if name == sim else {}),
+                                 **({"autostart": False} if name in MANAGED else {})},
+                                 args=["all"] if name == sim == CONTAINER else [])])
                      for name in reversed(nodes)]
         return children
+
+    def write_scene(self) -> Path:
+        """The resolved scene as YAML beside the result file, for every node to read (floats
+        as ``repr`` writes them: the same numbers)."""
+        path = self.options.result_file.resolve().with_name(RESOLVED_SCENE)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(yaml.safe_dump(self.scene.to_dict(), sort_keys=False))
+        return path
 
     def nodes(self) -> list[str]:
         """The node processes of the scene, a container in place of those it composes."""
         o = self.options
         if o.compose not in COMPOSE:
             raise InputError(f"--compose {o.compose}: expected one of {', '.join(COMPOSE[1:])}")
-        nodes = nodes_for(load_scene(o.scene.resolve(), o.overrides))
+        nodes = nodes_for(self.scene)
         if o.compose and {"estimator_node", "controller_node"} <= set(nodes):
             return [CONTAINER] if o.compose == "all" else ["sim_node", CONTAINER]
         return nodes
@@ -392,6 +418,9 @@ class Launcher:
                     self._wait_for_line(child, READY_LINES[name])
                 elif mixed:
                     self._wait_for_line(child, "middleware backend")
+            for name, _ in commands:
+                if name in MANAGED:
+                    self.bring_up(name)
             simulator = self.simulator()
             sim = next(c for c in self.processes.children if c.name == simulator)
             while api.ok():
@@ -413,8 +442,47 @@ class Launcher:
         finally:
             self.processes.stop_all()
             self.status.close()
+            for caller in self.callers.values():
+                caller.destroy_node()
             self.node.destroy_node()
         return self._result()
+
+    def bring_up(self, name: str) -> None:
+        """``configure``, then ``activate`` the managed node ``name`` through its
+        ``change_state`` service, as a lifecycle-aware ``ros2 launch`` emits the transitions;
+        NodeDiedError when it dies, refuses or does not answer in :data:`LIFECYCLE_TIMEOUT_S`.
+        The call goes through a node of the target's backend (services do not cross DDS
+        vendors)."""
+        child = next(c for c in self.processes.children if c.name == name)
+        caller = self._caller(self.backend(name))
+        service = f"{DEFAULT_NAMESPACE}/{name}/change_state"
+        deadline = time.monotonic() + LIFECYCLE_TIMEOUT_S
+        for transition in ("configure", "activate"):
+            request = messages.new("lifecycle_msgs/srv/ChangeState_Request",
+                                   transition=messages.new("lifecycle_msgs/msg/Transition",
+                                                           label=transition))
+            while (response := caller.call_service("lifecycle_msgs/srv/ChangeState", service,
+                                                   request, 1.0)) is None:
+                if child.proc.poll() is not None:
+                    raise NodeDiedError.exited(child)
+                if not api.ok():
+                    raise KeyboardInterrupt
+                if time.monotonic() > deadline:
+                    raise NodeDiedError(name, f"no answer to {transition} after "
+                                              f"{LIFECYCLE_TIMEOUT_S:g} s", child.tail)
+            if not response.success:
+                raise NodeDiedError(name, f"{transition} failed", child.tail)
+        self.status.echo(f"{name}: configured and active")
+
+    def _caller(self, backend: str) -> api.Node:
+        """The launcher's node on ``backend`` (made on first use)."""
+        if self.node.backend == backend:
+            return self.node
+        if backend not in self.callers:
+            self.callers[backend] = api.create_node(
+                f"_stillframe_launch_{backend}_{os.getpid()}", argv=["stillframe"],
+                backend=backend)
+        return self.callers[backend]
 
     def _wait_for_line(self, child: Child, text: str, timeout_s: float = 20.0) -> None:
         """Wait for ``child`` to log ``text`` before starting the next: nodes start once the
@@ -443,28 +511,33 @@ class Launcher:
         return LaunchResult(evaluation, path, path.with_suffix(".npz"), dict(self.statuses))
 
 
-def run_scene(scene: Path, overrides: Sequence[str], out: Path, mode: str = "lockstep",
-              record: Path | None = None, lockstep_timeout_s: float | None = None,
+def run_scene(scene: Path, overrides: Sequence[str] = (), *, out: Path,
+              mode: str = "lockstep", record: Path | None = None,
+              lockstep_timeout_s: float | None = None,
               prepare: Callable[[Any], None] | None = None,
               record_topics: Sequence[str] = (), backends: Sequence[str] = (),
               monitor_args: Sequence[str] | None = None, compose: str = "",
               rt: str = "", rt_cpus: Sequence[int] = (),
-              hosts: dict[str, list[str]] | None = None) -> LaunchResult:
-    """Launch ``scene`` through the three nodes to its end; sim_node's results go to ``out``
-    (``result.json``, ``result.npz``); ``record`` records ``record_topics`` (default all) into
-    a bag; ``backends`` are ``--backend`` values (:func:`parse_backends`); ``monitor_args``
-    (e.g. ports) start ``stillframe monitor`` beside the nodes; ``compose`` runs nodes in one
-    process (``container_node``: "pair" the estimator and controller, "all" every node);
-    ``rt`` and ``rt_cpus`` are the loop nodes' real-time practices and CPUs
-    (:mod:`stillframe.node_runtime.realtime`); ``hosts``
-    runs nodes on other hosts (:attr:`LaunchOptions.hosts`).
-    ``prepare(node)`` may subscribe the launcher's hidden node to more topics before the
-    children start."""
+              hosts: dict[str, list[str]] | None = None,
+              resolved: Scene | None = None) -> LaunchResult:
+    """Launch ``scene`` with ``overrides`` through the three nodes to its end; sim_node's
+    results go to ``out`` (``result.json``, ``result.npz``, beside the resolved scene the nodes
+    read); ``record`` records ``record_topics`` (default all) into a bag; ``backends`` are
+    ``--backend`` values (:func:`parse_backends`); ``monitor_args`` (e.g. ports) start
+    ``stillframe monitor`` beside the nodes; ``compose`` runs nodes in one process
+    (``container_node``: "pair" the estimator and controller, "all" every node); ``rt`` and
+    ``rt_cpus`` are the loop nodes' real-time practices and CPUs
+    (:mod:`stillframe.node_runtime.realtime`); ``hosts`` runs nodes on other hosts
+    (:attr:`LaunchOptions.hosts`); ``resolved``: the scene already loaded and resolved (else it
+    is done here, once). ``prepare(node)`` may subscribe the launcher's hidden node to more
+    topics before the children start."""
     out.mkdir(parents=True, exist_ok=True)
-    launcher = Launcher(LaunchOptions(scene, list(overrides), mode, out / "result.json", record,
-                                      lockstep_timeout_s, list(record_topics), list(backends),
-                                      None if monitor_args is None else list(monitor_args),
-                                      compose, rt, list(rt_cpus), dict(hosts or {})))
+    launcher = Launcher(LaunchOptions(
+        scene, list(overrides), resolved, mode=mode, result_file=out / "result.json",
+        record_dir=record, lockstep_timeout_s=lockstep_timeout_s,
+        record_topics=list(record_topics), backends=list(backends),
+        monitor_args=None if monitor_args is None else list(monitor_args), compose=compose,
+        rt=rt, rt_cpus=list(rt_cpus), hosts=dict(hosts or {})))
     if prepare is not None:
         prepare(launcher.node)
     return launcher.run()

@@ -27,7 +27,6 @@ from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
-from stillframe.errors import InputError
 from stillframe.middleware import api
 
 #: why a sample is refused for its writer
@@ -146,21 +145,16 @@ class WriterGate:
 
 
 class InputGates:
-    """The :class:`WriterGate` of each input topic of a node, reported together; ``parameters``
-    are the node's read-only string parameters that name the node a gate takes ("": the first
-    writer seen), declared here."""
+    """The :class:`WriterGate` of each input topic of a node, reported together; ``pins`` maps
+    the node's parameters that name the node a gate takes to their values ("": the first writer
+    seen; declared by the node runtime, :mod:`stillframe.node_runtime.declarations`)."""
 
-    def __init__(self, node: api.Node, *parameters: str) -> None:
+    def __init__(self, node: api.Node, pins: dict[str, str]) -> None:
         self.node = node
         self.gates: dict[str, WriterGate] = {}
-        self.pins: dict[str, str] = {}
+        self.pins = dict(pins)
         self.samples_seen = False       # a gate has seen samples (:meth:`keep_graph_read`)
         self.next_graph_read = 0
-        for name in parameters:
-            pinned = node.declare_parameter(name, "", read_only=True).value
-            if not isinstance(pinned, str):
-                raise InputError(f"parameter '{name}': must be a node name, got {pinned!r}")
-            self.pins[name] = pinned
 
     def add(self, topic: str, parameter: str) -> WriterGate:
         """The gate of ``topic``, taking the writers of the node ``parameter`` names."""

@@ -114,7 +114,7 @@ def test_node_command_passes_overrides_through_the_ros_parameter_parser() -> Non
     overrides = ["duration=4", "plant.process_noise_std=[0, 0, 0, 0, 0, 0, 0, 0]",
                  "description=a b: c"]
     argv = node_command("sim_node", Path("/s/scene.yaml"), overrides, "lockstep",
-                        {"result_file": "/tmp/r.json", "lockstep_timeout_s": 2.0})
+                        params={"result_file": "/tmp/r.json", "lockstep_timeout_s": 2.0})
     assert argv[1:3] == ["-m", "sim_node.node"]
     params = node_overrides(parse_ros_args(argv[3:]), "/sim_node")
     assert params == {"scene": "/s/scene.yaml", "mode": "lockstep", "overrides": overrides,

@@ -163,7 +163,7 @@ def realtime(rate_hz: float, duration: float, out: Path, backend: str,
     log = LatencyLog(round(1e9 / rate_hz))
     with (observer_backend(backend), observer_realtime(rt[0]),
           stall_probe() if probe else contextlib.nullcontext() as stalls):
-        result = run_scene(SCENE, realtime_overrides(rate_hz, duration), out, "realtime",
+        result = run_scene(SCENE, realtime_overrides(rate_hz, duration), out=out, mode="realtime",
                            prepare=observe(log), backends=[backend], rt=rt[0], rt_cpus=rt[1],
                            monitor_args=monitor_args, compose=compose)
     e = result.evaluation
@@ -234,12 +234,12 @@ def lockstep(out: Path, backend: str, one: dict[str, Any], compose: str,
     composed in one process."""
     scene = load_scene(SCENE)
     started = time.perf_counter()
-    nodes = run_scene(SCENE, [], out, "lockstep", backends=[backend], rt=rt[0],
+    nodes = run_scene(SCENE, out=out, mode="lockstep", backends=[backend], rt=rt[0],
                       rt_cpus=rt[1]).evaluation
     launch_wall = time.perf_counter() - started
     composed = {}
     if compose:
-        c = run_scene(SCENE, [], out / "composed", "lockstep", backends=[backend],
+        c = run_scene(SCENE, out=out / "composed", mode="lockstep", backends=[backend],
                       compose=compose, rt=rt[0], rt_cpus=rt[1]).evaluation
         composed = {"compose": compose, "composed_steps_per_s": c["steps"] / c["wall_s"],
                     "composed_over_one_process": one["loop_s"] / c["wall_s"],

@@ -146,7 +146,7 @@ def one_run(out: Path, mode: str, watched: str | None, rate_hz: float, duration:
             figures = realtime(rate_hz, duration, out, backend, monitor_args=monitor_args)
         else:
             with observer_backend(backend):
-                evaluation = run_scene(SCENE, [], out, mode, backends=[backend],
+                evaluation = run_scene(SCENE, out=out, mode=mode, backends=[backend],
                                        monitor_args=monitor_args).evaluation
             figures = {"steps": evaluation["steps"],
                        "steps_per_s": evaluation["steps"] / evaluation["wall_s"]}

@@ -98,7 +98,7 @@ def through_nodes(sets: list[str], out: Path, backend: str) -> dict[str, Any]:
     lock-step timeouts (a sample the simulator stopped waiting for)."""
     from stillframe.app.launcher import run_scene
 
-    result = run_scene(SCENE, sets, out, "lockstep", backends=[backend]).evaluation
+    result = run_scene(SCENE, sets, out=out, mode="lockstep", backends=[backend]).evaluation
     return {"nodes_us": 1e6 * result["wall_s"] / result["steps"],
             "lockstep_timeouts": result.get("lockstep_timeouts")}
 

@@ -89,8 +89,8 @@ def run(args: argparse.Namespace) -> int:
     print(f"demo: {scene.name} through sim_node, estimator_node and controller_node "
           f"({args.mode}), recording to {out / 'bag'}", file=sys.stderr)
     try:
-        result = run_scene(DEMO_SCENE, args.overrides, out, args.mode, out / "bag",
-                           args.lockstep_timeout, backends=args.backends)
+        result = run_scene(DEMO_SCENE, args.overrides, out=out, mode=args.mode, record=out / "bag",
+                           lockstep_timeout_s=args.lockstep_timeout, backends=args.backends)
     except NodeDiedError as exc:
         return report_death("demo", exc)
     except KeyboardInterrupt:

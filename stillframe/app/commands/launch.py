@@ -196,8 +196,9 @@ def run(args: argparse.Namespace) -> int:
     with tempfile.TemporaryDirectory(prefix="stillframe-launch-") as tmp:
         try:
             with hosts_if(args.netns, args.netns_prefix, args.fault) as hosts:
-                result = run_scene(Path(args.scene), args.overrides, args.out or Path(tmp),
-                                   args.mode, args.record, args.lockstep_timeout,
+                result = run_scene(Path(args.scene), args.overrides, out=args.out or Path(tmp),
+                                   mode=args.mode, record=args.record,
+                                   lockstep_timeout_s=args.lockstep_timeout, resolved=scene,
                                    record_topics=args.record_topics, backends=args.backends,
                                    monitor_args=monitor_args(args) if args.monitor else None,
                                    compose=args.compose, rt=rt, rt_cpus=rt_cpus, hosts=hosts)

@@ -100,7 +100,7 @@ class Parameters:
 
 
 def test_the_graph_is_kept_read_until_a_first_writer_is_taken_then_left_alone() -> None:
-    gates = InputGates(Parameters(), "sensor_writer")  # type: ignore[arg-type]
+    gates = InputGates(Parameters(), {"sensor_writer": ""})  # type: ignore[arg-type]
     graphs = {topic: Graph((SIM, "/frame/sim_node")) for topic in ("/a", "/b")}
     for topic, graph in graphs.items():
         gates.gates[topic] = graph.gate()
@@ -139,7 +139,7 @@ def test_without_writer_ids_the_writers_are_counted_not_listed_and_the_graph_lef
     writers (a C call there), never for the endpoint list (44 µs), and a sample without a GID
     ends the graph reads before the first sample as a taken writer does."""
     node = CountingNode()
-    gates = InputGates(node, "sensor_writer")  # type: ignore[arg-type]
+    gates = InputGates(node, {"sensor_writer": ""})  # type: ignore[arg-type]
     gate = gates.add("/a", "sensor_writer")
     clock = iter(range(0, 10 * RECHECK_NS, RECHECK_NS))
     with unittest.mock.patch("time.monotonic_ns", lambda: next(clock)):
