@@ -7,10 +7,12 @@ from __future__ import annotations
 
 import os
 import sys
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
 
+from stillframe.errors import InputError
 from stillframe.node_runtime.parameters import (
     FromScene,
     NodeParameters,
@@ -22,25 +24,22 @@ from stillframe.node_runtime.parameters import (
     positive,
     reference,
 )
-from stillframe.node_runtime.realtime import NO_PINNING, PRACTICES, parse_practices
+from stillframe.node_runtime.realtime import NO_PINNING, PRACTICES, parse_cpus, parse_practices
 
 #: the modes of the loop, one constant for every process (launch, nodes, benchmarks)
 MODES = ("lockstep", "realtime")
 
 
-def _practices(value: str) -> str | None:
-    try:
-        parse_practices(value)
-    except Exception as exc:    # InputError: its text is the problem
-        return str(exc).removeprefix("parameter 'rt': ")
-    return None
-
-
-def _cpus(value: list[int]) -> str | None:
-    available = os.sched_getaffinity(0)
-    if value == [NO_PINNING] or (value and set(value) <= available):
+def _refusal(parse: Callable[[Any], object], name: str) -> Callable[[Any], str | None]:
+    """A check from a parser that raises InputError (its text, without the parameter's name)."""
+    def check(value: Any) -> str | None:
+        try:
+            parse(value)
+        except InputError as exc:
+            return str(exc).removeprefix(f"parameter '{name}': ")
         return None
-    return f"expected CPUs of {sorted(available)} (or [-1]: no pinning)"
+
+    return check
 
 
 def _scene_file(value: str) -> str | None:
@@ -73,12 +72,13 @@ class LoopParameterValues(NodeParameters):
 class RealtimeParameterValues(NodeParameters):
     """Every loop node: the real-time practices (:mod:`.realtime`)."""
 
-    rt: str = param("", limited(_practices, "`all` or a comma list of " + ", ".join(
-        f"`{p}`" for p in PRACTICES)), doc=(
+    rt: str = param("", limited(_refusal(parse_practices, "rt"), "`all` or a comma list of "
+                                + ", ".join(f"`{p}`" for p in PRACTICES)), doc=(
         "real-time practices (realtime.md); a practice the OS refuses is skipped with a "
         "warning; empty: none"))
     rt_priority: int = param(80, between(*_FIFO), doc="the `SCHED_FIFO` priority of `fifo`")
-    rt_cpus: list[int] = param([NO_PINNING], limited(_cpus, "CPUs of this process, or [-1]"),
+    rt_cpus: list[int] = param([NO_PINNING], limited(_refusal(parse_cpus, "rt_cpus"),
+                                                     "CPUs of this process, or [-1]"),
                                doc="the CPUs of `affinity`; `[-1]`: no pinning")
     spin_margin_us: float = param(200.0, between(0, 10_000), unit="us", doc=(
         "with `spin`, sim_node polls instead of sleeping for this long before a due time"))

@@ -139,7 +139,9 @@ class ParamSpec(NamedTuple):
         if self.choices and value not in self.choices:
             return f"expected one of {', '.join(self.choices)}, got {value!r}"
         problem = self.field.check(value) if self.field.check else None
-        return f"{problem} (got {value!r})" if problem else None
+        if problem and ", got " not in problem:
+            problem += f" (got {value!r})"
+        return problem
 
 
 def _is(value: Any, kind: type) -> bool:
