@@ -51,8 +51,11 @@ BACKEND_TARGETS: tuple[str, ...] = (*NODES, "recorder", "monitor")
 #: them (the container brings its nodes up itself)
 MANAGED: tuple[str, ...] = tuple(n for n, declared in NODE_PARAMETERS.items()
                                  if ManagedParameterValues in declared)
-#: how long a managed node may take to answer ``configure`` (its imports and the scene) [s]
+#: how long a managed node may take to serve its lifecycle services (its imports and the scene),
+#: and to answer a transition [s]
 LIFECYCLE_TIMEOUT_S = 60.0
+#: how long one look for a managed node's ``get_state`` waits [s]
+PROBE_S = 1.0
 #: the resolved scene the launch hands every node, beside the result file
 RESOLVED_SCENE = "scene.resolved.yaml"
 #: seconds a child gets to exit after SIGINT, then after SIGTERM, before SIGKILL
@@ -418,13 +421,13 @@ class Launcher:
                     self._wait_for_line(child, READY_LINES[name])
                 elif mixed:
                     self._wait_for_line(child, "middleware backend")
-            for name, _ in commands:
-                if name in MANAGED:
-                    self.bring_up(name)
+            managed = [name for name, _ in commands if name in MANAGED]
+            deadline = time.monotonic() + LIFECYCLE_TIMEOUT_S
             simulator = self.simulator()
             sim = next(c for c in self.processes.children if c.name == simulator)
             while api.ok():
                 self.node.spin_once(0.1)
+                managed = [name for name in managed if not self.bring_up(name, deadline)]
                 if self.statuses:
                     self.status.update(status_text(self.statuses, self.status.width()))
                 if sim.proc.poll() == 0 and self.options.result_file.exists():
@@ -447,32 +450,35 @@ class Launcher:
             self.node.destroy_node()
         return self._result()
 
-    def bring_up(self, name: str) -> None:
+    def bring_up(self, name: str, deadline: float) -> bool:
         """``configure``, then ``activate`` the managed node ``name`` through its
-        ``change_state`` service, as a lifecycle-aware ``ros2 launch`` emits the transitions;
-        NodeDiedError when it dies, refuses or does not answer in :data:`LIFECYCLE_TIMEOUT_S`.
-        The call goes through a node of the target's backend (services do not cross DDS
-        vendors)."""
+        ``change_state`` service once its ``get_state`` answers, as a lifecycle-aware ``ros2
+        launch`` emits the transitions; False while it does not answer yet (the launch goes on
+        meanwhile), NodeDiedError when it refuses, or answers nothing by ``deadline``
+        (monotonic). The calls go through a node of the target's backend (services do not cross
+        DDS vendors)."""
         child = next(c for c in self.processes.children if c.name == name)
         caller = self._caller(self.backend(name))
-        service = f"{DEFAULT_NAMESPACE}/{name}/change_state"
-        deadline = time.monotonic() + LIFECYCLE_TIMEOUT_S
+        prefix = f"{DEFAULT_NAMESPACE}/{name}"
+        if caller.call_service("lifecycle_msgs/srv/GetState", f"{prefix}/get_state",
+                               messages.new("lifecycle_msgs/srv/GetState_Request"),
+                               PROBE_S) is None:
+            if time.monotonic() > deadline:
+                raise NodeDiedError(name, f"no lifecycle services after "
+                                          f"{LIFECYCLE_TIMEOUT_S:g} s", child.tail)
+            return False
         for transition in ("configure", "activate"):
             request = messages.new("lifecycle_msgs/srv/ChangeState_Request",
                                    transition=messages.new("lifecycle_msgs/msg/Transition",
                                                            label=transition))
-            while (response := caller.call_service("lifecycle_msgs/srv/ChangeState", service,
-                                                   request, 1.0)) is None:
-                if child.proc.poll() is not None:
-                    raise NodeDiedError.exited(child)
-                if not api.ok():
-                    raise KeyboardInterrupt
-                if time.monotonic() > deadline:
-                    raise NodeDiedError(name, f"no answer to {transition} after "
-                                              f"{LIFECYCLE_TIMEOUT_S:g} s", child.tail)
-            if not response.success:
-                raise NodeDiedError(name, f"{transition} failed", child.tail)
+            response = caller.call_service("lifecycle_msgs/srv/ChangeState",
+                                           f"{prefix}/change_state", request,
+                                           LIFECYCLE_TIMEOUT_S)
+            if response is None or not response.success:
+                raise NodeDiedError(name, f"{transition} " + (
+                    "failed" if response else "not answered"), child.tail)
         self.status.echo(f"{name}: configured and active")
+        return True
 
     def _caller(self, backend: str) -> api.Node:
         """The launcher's node on ``backend`` (made on first use)."""

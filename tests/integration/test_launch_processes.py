@@ -148,7 +148,9 @@ def test_launch_passes_sim_nodes_result_through_and_stops_the_others(
     err = "".join(lines) + err
     sim_argv = json.loads(next(line for line in err.splitlines() if "sim argv" in line)
                           .split("sim argv ", 1)[1])
-    assert "mode:=realtime" in sim_argv and 'overrides:=["duration=60"]' in sim_argv
+    # the resolved scene (duration 60 in it), no overrides to apply again
+    assert "mode:=realtime" in sim_argv and not any("overrides:=" in a for a in sim_argv)
+    assert any(a.startswith("scene:=") and a.endswith("/scene.resolved.yaml") for a in sim_argv)
     assert not any(alive(pid) for pid in pids.values())
 
 
