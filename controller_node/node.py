@@ -103,10 +103,9 @@ class ControllerNode(base.LoopNode):
         self.input_at: float | None = None   # when the last load-cell reading arrived
         self.compute = Durations()
         self.rate = RateMeter()
-        settings = self.values.get(ControllerParameterValues)
-        self.enabled = settings.enabled if settings else True
-        if settings:
-            self.controller.limit = settings.command_limit or None
+        settings = self.setting(ControllerParameterValues)
+        self.enabled = settings.enabled
+        self.controller.limit = settings.command_limit or None
 
     def apply(self, parameters: list[Parameter]) -> SetParametersResult:
         """``enabled`` and ``command_limit`` (checked by their declarations) in effect from the

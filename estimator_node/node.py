@@ -118,8 +118,7 @@ class EstimatorNode(base.LoopNode):
         self.estimator = make_estimator(scene, design_model(scene))
         self.inputs = estimator_inputs(scene)
         self.active = actuator_of(scene)
-        settings = self.values.get(EstimatorParameterValues)
-        partial_after_s = settings.partial_after_s if settings else 0.5 * params.period
+        partial_after_s = self.setting(EstimatorParameterValues).partial_after_s
         wait_s = params.lockstep_timeout_s / 2 if params.lockstep else partial_after_s
         self.assembly = SampleAssembly(self.inputs, self.active, SampleGrid(params.period),
                                        round(wait_s * 1e9), params.lockstep,
@@ -137,7 +136,8 @@ class EstimatorNode(base.LoopNode):
         self.compute = Durations()
         self.rate = RateMeter()
         self.input_at: float | None = None   # when the last sample input arrived
-        noise = self.values.get(NoiseParameterValues)
+        noise = (self.setting(NoiseParameterValues) if NoiseParameterValues
+                 in self.declarations(scene) else None)
         self.noise = {} if noise is None else {
             "process_noise_std": noise.process_noise_std,
             "measurement_noise_std": noise.measurement_noise_std}

@@ -102,7 +102,7 @@ class SimNode(base.LoopNode):
     def __init__(self, node: api.Node, params: LoopParameters,
                  values: dict[type, NodeParameters] | None = None) -> None:
         super().__init__(node, params, values)
-        settings = self.values.get(SimParameterValues) or SimParameterValues()
+        settings = self.setting(SimParameterValues)
         self.command_timeout_periods = settings.command_timeout_periods
         self.await_recorder = [t for t in settings.await_recorder if t]
         self.discovery_timeout_s = settings.discovery_timeout_s

@@ -38,7 +38,7 @@ from stillframe.locations import REPO_ROOT
 from stillframe.middleware import api, discovery, names
 from stillframe.node_runtime.declarations import MODES, NODE_PARAMETERS, ManagedParameterValues
 
-NODES: tuple[str, ...] = ("sim_node", "estimator_node", "controller_node")
+NODES: tuple[str, ...] = tuple(NODE_PARAMETERS)
 #: the process that hosts the estimator and the controller with ``--compose``
 CONTAINER = "container_node"
 #: what ``--compose`` may put in the container: nothing, the estimator and controller, all

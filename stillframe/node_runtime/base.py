@@ -27,7 +27,13 @@ from stillframe.node_runtime.declarations import (
     ManagedParameterValues,
     RealtimeParameterValues,
 )
-from stillframe.node_runtime.parameters import NodeParameters, current, declare, set_check
+from stillframe.node_runtime.parameters import (
+    NodeParameters,
+    current,
+    declare,
+    defaults,
+    set_check,
+)
 from stillframe.node_runtime.realtime import (
     NO_PINNING,
     Realtime,
@@ -137,8 +143,10 @@ class LoopNode(Cycle):
         node.add_on_set_parameters_callback(loop.on_set_parameters)
         return loop
 
-    def value(self, cls: type[P]) -> P:
-        return self.values[cls]     # type: ignore[return-value]
+    def setting(self, cls: type[P]) -> P:
+        """The node's values of the declarations ``cls`` (their defaults for the scene when the
+        node was made without them, as a test makes it)."""
+        return self.values.get(cls) or defaults(cls, self.params.scene)  # type: ignore[return-value]
 
     def on_set_parameters(self, parameters: list[Parameter]) -> SetParametersResult:
         """The declarations' check (read-only and undeclared refused, values checked), then
@@ -152,9 +160,8 @@ class LoopNode(Cycle):
 
     def enter_realtime(self) -> None:
         """Apply the real-time practices the parameters ask for, and log what took effect."""
-        if RealtimeParameterValues in self.values:
-            self.rt = start_realtime(self.node, realtime_options(
-                self.value(RealtimeParameterValues)))
+        self.rt = start_realtime(self.node, realtime_options(
+            self.setting(RealtimeParameterValues)))
 
     # -- lifecycle -----------------------------------------------------------------------
     def activate(self) -> None:

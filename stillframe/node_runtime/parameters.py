@@ -198,6 +198,11 @@ def declare(node: Any, cls: type[P], scene: Any = None) -> P:
     return cls(**values)
 
 
+def defaults(cls: type[P], scene: Any = None) -> P:
+    """The defaults of ``cls``'s parameters (those from the scene for ``scene``)."""
+    return cls(**{s.name: s.default_for(scene) for s in cls.specs()})
+
+
 def current(node: Any, cls: type[P]) -> P:
     """The values of ``cls``'s parameters as ``node`` holds them now (after sets)."""
     return cls(**{s.name: node.get_parameter(s.name).value for s in cls.specs()})
