@@ -42,6 +42,10 @@ def test_launch_equals_one_process_run(scene: str, ros_domain: int) -> None:
     for key in ("peak_command", "lockstep_timeouts", "steps", "wall_s"):
         assert isinstance(nodes[key], int | float), key
     assert nodes["lockstep_timeouts"] == 0
+    # the managed nodes brought up by the launch (lifecycle), and active to the end
+    for name in ("estimator_node", "controller_node"):
+        assert f"{name}: configured and active" in done.stderr
+        assert nodes["diagnostics"][f"/frame/{name}"]["lifecycle"] == "active"
     reference = one_process(scene, *SHORT)
     assert nodes["steps"] == reference["steps"] == 6 * 32
     # on a mismatch, show what the nodes counted (lost samples, partial updates, timeouts)

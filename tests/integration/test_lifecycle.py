@@ -9,6 +9,7 @@ controller commands exactly 0 (the supervisor's disabled output) and the LQG law
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 from typing import Any
 
@@ -16,6 +17,7 @@ import pytest
 
 from stillframe.app import cli
 from stillframe.middleware import lifecycle
+from tests.support.middleware import run_stillframe
 from tests.support.nodes import params_file, start_node, stop
 from tests.support.rclpy_client import RclpyClient, rclpy_client
 
@@ -137,6 +139,12 @@ def test_rclpy_client_drives_the_managed_rclpy_nodes(
             assert deactivated - IN_FLIGHT <= start <= deactivated + IN_FLIGHT
             assert deactivated + 40 <= end <= activated + IN_FLIGHT
             assert min(map(abs, torques[end + 1:])) > 0 and len(torques) - end > 40
+            # ``stillframe lifecycle`` on the rclpy backend (STILLFRAME_RMW=rclpy here)
+            done = run_stillframe("lifecycle", "set", "controller_node", "configure")
+            assert done.returncode == 1 and ("no transition configure from state active "
+                                             "(available: deactivate, shutdown)") in done.stderr
+            done = run_stillframe("lifecycle", "get", "estimator_node", "--json")
+            assert done.returncode == 0 and json.loads(done.stdout)["state"] == "active"
     finally:
         for proc in reversed(procs):
             stop(proc)
