@@ -29,6 +29,7 @@ from typing import Any
 
 import yaml
 
+from stillframe.app import running_graph
 from stillframe.config.scene import Scene, load_scene
 from stillframe.contract import messages
 from stillframe.contract.topics import DEFAULT_NAMESPACE, STATUS_KEYS
@@ -115,12 +116,11 @@ def parse_backends(specs: Sequence[str]) -> dict[str, str]:
     return chosen
 
 
-def single_host_discovery() -> str:
-    """The discovery range of the launch: ``ROS_AUTOMATIC_DISCOVERY_RANGE`` if set (checked),
-    else ``LOCALHOST``, set in this process's environment so the children inherit it: a launch
-    runs every node on this host, and nothing beyond it needs to find them unless asked."""
-
-    os.environ.setdefault(discovery.RANGE_ENV, discovery.DiscoveryRange.LOCALHOST.value)
+def launch_discovery() -> str:
+    """The discovery range of the launch, as the environment says (checked): ``SUBNET`` when
+    ``ROS_AUTOMATIC_DISCOVERY_RANGE`` is unset, as ``ros2 launch`` leaves it, so that a default
+    Jazzy terminal on the same host (``ros2 topic list``) sees the run. The environment is not
+    changed; the children inherit it as it is."""
     return discovery.discovery_range().value
 
 
@@ -327,13 +327,14 @@ class Launcher:
         if options.record_dir is not None and options.record_dir.exists():
             raise InputError(f"--record {options.record_dir}: already exists")
         self.backends = parse_backends(options.backends)
-        self.discovery = single_host_discovery()
+        self.discovery = launch_discovery()
         self.options = options
         self.scene = options.resolved or resolve_model(
             load_scene(options.scene.resolve(), options.overrides))[0]
         self.status = StatusLine()
         self.processes = ProcessSet(self.status.echo)
-        self.node = api.create_node(f"_stillframe_launch_{os.getpid()}", argv=["stillframe"])
+        self.node = api.create_node(running_graph.launcher_name(), argv=["stillframe"])
+        self.created = time.monotonic()
         self.statuses: dict[str, dict[str, str]] = {}
         self.callers: dict[str, api.Node] = {}
         self.node.create_subscription("diagnostic_msgs/msg/DiagnosticArray", "/diagnostics",
@@ -354,7 +355,7 @@ class Launcher:
         # every loop node: the estimator's and controller's lock-step waits are parts of it
         shared = ({} if o.lockstep_timeout_s is None
                   else {"lockstep_timeout_s": float(o.lockstep_timeout_s)})
-        scene = self.write_scene()
+        scene = self.scene_file()
         children = []
         if o.record_dir is not None:
             children.append(("recorder", [sys.executable, "-m", "stillframe", "record", "-o",
@@ -378,10 +379,14 @@ class Launcher:
                      for name in reversed(nodes)]
         return children
 
+    def scene_file(self) -> Path:
+        """Where the resolved scene goes: beside the result file."""
+        return self.options.result_file.resolve().with_name(RESOLVED_SCENE)
+
     def write_scene(self) -> Path:
-        """The resolved scene as YAML beside the result file, for every node to read (floats
-        as ``repr`` writes them: the same numbers)."""
-        path = self.options.result_file.resolve().with_name(RESOLVED_SCENE)
+        """The resolved scene as YAML (:meth:`scene_file`), for every node to read (floats as
+        ``repr`` writes them: the same numbers)."""
+        path = self.scene_file()
         path.parent.mkdir(parents=True, exist_ok=True)
         path.write_text(yaml.safe_dump(self.scene.to_dict(), sort_keys=False))
         return path
@@ -411,6 +416,8 @@ class Launcher:
 
         self.options.result_file.unlink(missing_ok=True)
         try:
+            running_graph.refuse_if_running(self.node, self.created, (*NODES, CONTAINER))
+            self.write_scene()
             commands = self.commands()
             self.status.echo(f"discovery range {self.discovery}; backends " + ", ".join(
                 f"{name} {self.backend(name)}" for name, _ in commands))
@@ -425,9 +432,13 @@ class Launcher:
             deadline = time.monotonic() + LIFECYCLE_TIMEOUT_S
             simulator = self.simulator()
             sim = next(c for c in self.processes.children if c.name == simulator)
+            watch = time.monotonic()
             while api.ok():
                 self.node.spin_once(0.1)
                 managed = [name for name in managed if not self.bring_up(name, deadline)]
+                if time.monotonic() >= watch + running_graph.WATCH_S:
+                    running_graph.check(self.node)
+                    watch = time.monotonic()
                 if self.statuses:
                     self.status.update(status_text(self.statuses, self.status.width()))
                 if sim.proc.poll() == 0 and self.options.result_file.exists():
@@ -486,7 +497,7 @@ class Launcher:
             return self.node
         if backend not in self.callers:
             self.callers[backend] = api.create_node(
-                f"_stillframe_launch_{backend}_{os.getpid()}", argv=["stillframe"],
+                f"_stillframe_lifecycle_{backend}_{os.getpid()}", argv=["stillframe"],
                 backend=backend)
         return self.callers[backend]
 

@@ -183,7 +183,7 @@ class LoopNode(Cycle):
     def housekeeping(self) -> bool:
         self.gates.keep_graph_read()
         self.check()
-        if not self.diagnostics.due():
+        if not (self.gates.announce(self.node.get_logger()) or self.diagnostics.due()):
             return False
         self.publish_status()
         return True

@@ -33,6 +33,7 @@ def test_nodes_get_the_resolved_scene(ros_domain: int, tmp_path: Path,
     run = launcher.Launcher(launcher.LaunchOptions(
         scene_file, OVERRIDES, result_file=tmp_path / "result.json"))
     try:
+        run.write_scene()
         commands = dict(run.commands())
         run.nodes()
     finally:
@@ -58,7 +59,7 @@ def test_a_given_resolved_scene_is_not_loaded_again(ros_domain: int, tmp_path: P
         Path("unused.yaml"), resolved=scene, result_file=tmp_path / "result.json"))
     try:
         assert launcher.nodes_for(run.scene) == list(launcher.NODES)
-        run.commands()
+        run.write_scene()
     finally:
         run.node.destroy_node()
     assert load_scene(tmp_path / launcher.RESOLVED_SCENE) == scene
