@@ -7,7 +7,8 @@ on.
 - :mod:`.declarations`: every node's parameters, declared once (``NODE_PARAMETERS``, ``MODES``);
 - :mod:`.parameters`: how a parameter is declared (``param``), checked and documented;
 - :mod:`.support`: the scene parameters, ``/diagnostics``, timing statistics, waiting for peers;
-- :mod:`.realtime`: the real-time practices.
+- :mod:`.realtime`: the real-time practices;
+- :mod:`.qos_table`: the QoS each topic uses, the docs' table generated from the contract.
 """
 
-__all__ = ["base", "declarations", "parameters", "realtime", "support"]
+__all__ = ["base", "declarations", "parameters", "qos_table", "realtime", "support"]
