@@ -322,6 +322,14 @@ class RclpyNode:
     def get_node_names_and_namespaces(self) -> list[tuple[str, str]]:
         return sorted(self._node.get_node_names_and_namespaces())
 
+    def get_service_names_and_types_by_node(
+        self, node_name: str, node_namespace: str, server: bool = True
+    ) -> list[tuple[str, list[str]]]:
+        """A node's service servers (``server``) or clients, as rclpy gives them."""
+        query = (self._node.get_service_names_and_types_by_node if server
+                 else self._node.get_client_names_and_types_by_node)
+        return sorted((name, list(types)) for name, types in query(node_name, node_namespace))
+
     def spin_once(self, timeout_sec: float | None = None) -> None:
         if interface.ok():
             interface.freeze_setup_objects()
