@@ -7,7 +7,9 @@ a non-finite law output also gives zero (flagged ``singular``); otherwise the la
 clipped to ±``limit`` and to ±``actuator_limit`` (the scene's actuator saturation: a command the
 actuator cannot apply is never sent). A law output more than :data:`RUNAWAY_FACTOR` times the
 tighter of the two limits is flagged ``runaway`` (counted, and ``/diagnostics`` warns): the sign of
-an estimate or a design that no longer matches the plant.
+an estimate or a design that no longer matches the plant. A law that can fall back to a safe
+command (MPC: a solve that did not finish) keeps its count in ``fallbacks``; ``fallback`` here
+follows it (``/diagnostics`` warns).
 """
 
 from __future__ import annotations
@@ -33,6 +35,7 @@ class ControllerCounters:
     singular: int = 0
     watchdog: int = 0
     runaway: int = 0
+    fallback: int = 0
 
 
 class Controller:
@@ -84,6 +87,7 @@ class Controller:
         out.enabled = True
         z = latest.z if self.predictor is None else self.predictor.ahead(latest.t, latest.z)
         value, out.singular = self.law(z, force)
+        c.fallback = getattr(self.law, "fallbacks", 0)   # laws with a safe fallback count it
         if not np.isfinite(value):
             value, out.singular = 0.0, True
         bounds = [b for b in (self.limit, self.actuator_limit) if b]
