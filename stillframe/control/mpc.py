@@ -43,9 +43,9 @@ from stillframe.control.limits import CommandLimits
 from stillframe.control.lqg import ConditionedLQGLaw, LQRDesign
 from stillframe.errors import InputError
 
-SOLVED = osqp.constant("OSQP_SOLVED")
+SOLVED = osqp.SolverStatus.OSQP_SOLVED
 #: OSQP settings: tolerances fine enough for the KKT check of the tests, polished solutions
-SETTINGS = {"eps_abs": 1e-7, "eps_rel": 1e-7, "polish": True, "verbose": False,
+SETTINGS = {"eps_abs": 1e-7, "eps_rel": 1e-7, "polishing": True, "verbose": False,
             "warm_starting": True}
 
 
@@ -113,6 +113,8 @@ class MPCLaw:
             self._l[:N], self._u[:N] = -limits.torque, limits.torque
         if limits.step is not None:
             self._l[N:2 * N], self._u[N:2 * N] = -limits.step, limits.step
+        #: the QP ½ xᵀ P x + qᵀ x, l ≤ A x ≤ u as given to OSQP (q, l, u: :meth:`bounds`)
+        self.qp_hessian, self.qp_matrix = P, A
         self.solver = osqp.OSQP()
         self.solver.setup(sp.csc_matrix(np.triu(P)), self._q, sp.csc_matrix(A), self._l,
                           self._u, max_iter=max_iter, **SETTINGS)
@@ -121,6 +123,7 @@ class MPCLaw:
         self.solve_s: list[float] = []
         self.iterations: list[int] = []
         self.last: np.ndarray | None = None                     # the last solution (N + 1)
+        self.dual: np.ndarray | None = None                     # … and its multipliers
 
     def inputs(self, z: np.ndarray, solution: np.ndarray) -> np.ndarray:
         """The planned commands u_0 … u_{N−1} of a QP solution [V, s] at the estimate z."""
@@ -151,16 +154,17 @@ class MPCLaw:
         if self.last is not None:
             shifted = np.concatenate([self.last[1:self.horizon], [0.0, self.last[-1]]])
             self.solver.warm_start(x=shifted)
-        result = self.solver.solve()
+        result = self.solver.solve(raise_error=False)
         self.solve_s.append(result.info.solve_time)
         self.iterations.append(result.info.iter)
-        if result.info.status_val != SOLVED:
+        if result.info.status_val != SOLVED.value:
             self.fallbacks += 1
             self.last = None
             self.fallback_law.previous = self.previous
             u, _ = self.fallback_law(z, force)
         else:
             self.last = np.asarray(result.x, dtype=float)
+            self.dual = np.asarray(result.y, dtype=float)
             lo, hi = self.limits.actuator_interval(self.previous)
             u = min(max(float(self.inputs(z, self.last)[0]), lo), hi)  # the solver's tolerance
         self.previous = u
