@@ -123,10 +123,12 @@ class Controller(Section):
     rate_weight: float = key(0.0, non_negative, doc="MPC: weight of the torque step (Δu)^2")
     angle_penalty: float = key(1e6, positive, doc=(
         "MPC: weight of the squared excess of |phi| over controller.angle_limit (and 1e-3 of "
-        "it on the excess itself)"))
-    max_iter: int = key(200, positive, doc=(
-        "MPC: OSQP iteration limit per sample; a solve that does not finish falls back to the "
-        "anti-windup LQG command (counted, in /diagnostics)"))
+        "it on the excess itself), relative to the weight R + B'PB of the torque's deviation "
+        "from the LQR's plan"))
+    max_iter: int | None = key(None, positive, doc=(
+        "MPC: OSQP iteration limit per sample (null: one per 5 us of the period, 50 to 4000: "
+        "200 at 1 kHz); a solve that does not finish falls back to the anti-windup LQG "
+        "command (counted, in /diagnostics)"))
     hold_stiffness: float = key(0.0, non_negative, doc=(
         "EUK: kp [1/s^2] of the virtual constraint x3'' = -kd x3' - kp x3 (0: eq. 5.240)"))
     hold_damping: float = key(0.0, non_negative, doc="EUK: kd [1/s]")

@@ -39,12 +39,12 @@ def make_controller(scene: Scene, design: FrameModel) -> Controller:
         lqr = design_lqr(design, period, c.state_weights, c.input_weight, TORQUE_INPUT, floor)
         limits = CommandLimits.of(scene)
         if c.type == "mpc":
-            from stillframe.control.mpc import MPCLaw  # OSQP only where MPC runs
+            from stillframe.control.mpc import MPCLaw, iteration_limit  # OSQP where MPC runs
 
             law = MPCLaw(lqr, c.input_weight,
                          limits=limits, horizon=c.horizon, angle_index=design.phi_index,
                          rate_weight=c.rate_weight, angle_penalty=c.angle_penalty,
-                         max_iter=c.max_iter)
+                         max_iter=iteration_limit(c.max_iter, period))
         elif c.anti_windup:
             law = ConditionedLQGLaw(lqr, c.feedforward, limits, design.phi_index)
         else:

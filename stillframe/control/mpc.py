@@ -45,7 +45,20 @@ from stillframe.errors import InputError
 
 SOLVED = osqp.SolverStatus.OSQP_SOLVED
 #: OSQP settings: tolerances fine enough for the KKT check of the tests, polished solutions
-SETTINGS = {"eps_abs": 1e-7, "eps_rel": 1e-7, "polishing": True, "verbose": False,
+#: iterations per second of period when ``controller.max_iter`` is null (about 1.3 us each here
+#: for N = 20: a quarter of the period at most), and the bounds of that default
+ITERATIONS_PER_S, MIN_ITER, MAX_ITER = 2e5, 50, 4000
+
+
+def iteration_limit(max_iter: int | None, period: float) -> int:
+    """``controller.max_iter``, or the default derived from the period (deterministic: the same
+    in every process, which the lock-step equality needs; a wall-clock limit would not be)."""
+    if max_iter is not None:
+        return max_iter
+    return int(min(MAX_ITER, max(MIN_ITER, round(period * ITERATIONS_PER_S))))
+
+
+SETTINGS = {"eps_abs": 1e-5, "eps_rel": 1e-5, "polishing": True, "verbose": False,
             "warm_starting": True}
 
 

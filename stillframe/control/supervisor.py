@@ -14,6 +14,7 @@ follows it (``/diagnostics`` warns).
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -56,6 +57,21 @@ class Controller:
         self.enabled = True
         self.latest: Estimate | None = None
         self.counters = ControllerCounters()
+        self.law_s: list[float] = []       # wall time of every law evaluation (compute_stats)
+        self.law_cpu_s: list[float] = []   # … and this thread's CPU time for it
+
+    def compute_stats(self) -> dict[str, float]:
+        """p50, p99 and max of the law's wall time per sample [s], ``cpu_…`` of its CPU time
+        (what preemption by other processes does not inflate), ``solve_…`` of the solver's own
+        wall time for a law that keeps it (MPC); empty before the first command."""
+        stats: dict[str, float] = {}
+        for name, times in (("", self.law_s), ("cpu_", self.law_cpu_s),
+                            ("solve_", getattr(self.law, "solve_s", []))):
+            if len(times):
+                p50, p99 = np.percentile(times, [50, 99])
+                stats.update({f"{name}p50": float(p50), f"{name}p99": float(p99),
+                              f"{name}max": float(np.max(times))})
+        return stats
 
     def stale(self, t: float) -> bool:
         """True when at time t the newest estimate is ``watchdog_periods`` periods old or more
@@ -86,7 +102,10 @@ class Controller:
             return out
         out.enabled = True
         z = latest.z if self.predictor is None else self.predictor.ahead(latest.t, latest.z)
+        started, started_cpu = time.perf_counter(), time.thread_time()
         value, out.singular = self.law(z, force)
+        self.law_s.append(time.perf_counter() - started)
+        self.law_cpu_s.append(time.thread_time() - started_cpu)
         c.fallback = getattr(self.law, "fallbacks", 0)   # laws with a safe fallback count it
         if not np.isfinite(value):
             value, out.singular = 0.0, True

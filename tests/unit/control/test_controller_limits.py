@@ -1,6 +1,7 @@
 """Controllers that respect the actuator (issue 30): the anti-windup LQG and the MPC on the
 issue's torque-limited case, the MPC against independent peers (python-control's dlqr without
-active limits, the QP's KKT conditions and scipy's trust-constr with them), its fallback, bad input."""
+active limits, the QP's KKT conditions and scipy's trust-constr with them), its fallback, bad
+input."""
 
 from __future__ import annotations
 
