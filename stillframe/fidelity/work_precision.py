@@ -18,6 +18,7 @@ import numpy as np
 
 from stillframe.config.scene import Scene, scene_from_dict
 from stillframe.dynamics.excitation import floor_load
+from stillframe.dynamics.integrators import NO_SUBDIVISION
 from stillframe.dynamics.kernels import CompiledFrame
 from stillframe.dynamics.models import FrameModel, build_model
 from stillframe.dynamics.simulation import initial_state
@@ -129,7 +130,7 @@ def model_points(job: tuple[str, str, float, tuple[float, ...], np.ndarray]) -> 
     scene, name, duration, steps, ref_outputs = job
     s = scene_for(scene, name, duration)
     model = build_model(s)
-    frame = CompiledFrame(model)
+    frame = CompiledFrame(model, NO_SUBDIVISION)  # each method at its own step, never halved
     limit = rk4_stable_step(model)
     points = []
     for method in METHODS:
