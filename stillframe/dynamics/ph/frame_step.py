@@ -240,6 +240,8 @@ class CompiledFramePH:
     Reduced state ``z = [η, ζ, θ, v'_x, v'_y, ω]`` (pendulum frame angle, body-frame velocities).
     """
 
+    name = "midpoint (AVF, pHDAE, compiled)"
+
     def __init__(self, system: PHSystem, q_rest: np.ndarray, h: float,
                  structural_damping: np.ndarray | None = None) -> None:
         if h <= 0:
@@ -335,6 +337,29 @@ class CompiledFramePH:
                 + 0.5 * (d[:, :n] * m_[:, :n]) @ self.omega2
                 + 0.5 * np.einsum("ki,ij,kj->k", d[:, -3:], self._pendulum_mass(), m_[:, -3:])
                 + g * S * 2.0 * np.cos(0.5 * m_[:, 2 * n]) * np.sin(0.5 * d[:, 2 * n]))
+
+    def floor_accelerations(self, z: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """The floors' horizontal accelerations of the index-1 form at state z under the port
+        efforts u = [f1, f2, f3, torque] (ζ̇, ν̇_p and the joint force from one linear solve)."""
+        red, n = self.reduction, self.reduction.n
+        eta, zeta, theta, nu = z[:n], z[n:2 * n], z[2 * n], z[-3:]
+        m, S, _, g, r4 = self.pend
+        c, s = np.cos(theta), np.sin(theta)
+        rot = np.array([[c, -s], [s, c]])
+        b = red.floor_rows[2]
+        pi0, pi1 = m * nu[0], m * nu[1] + S * nu[2]
+        f_p = np.array([-s * g * m + pi1 * nu[2], -c * g * m - pi0 * nu[2],
+                        -g * S * c - pi1 * nu[0] + pi0 * nu[1] - r4 * nu[2] + u[3]])
+        K = np.zeros((n + 5, n + 5))
+        K[:n, :n] = np.eye(n)
+        K[:n, n + 3] = -b
+        K[n:n + 3, n:n + 3] = self._pendulum_mass()
+        K[n:n + 2, n + 3:] = rot.T
+        K[n + 3:, n:n + 2] = rot
+        K[n + 3, :n] = -b
+        rhs = np.concatenate([-self.omega2 * eta - self.R @ zeta + red.floor_rows.T @ u[:3],
+                              f_p, -nu[2] * rot @ np.array([-nu[1], nu[0]])])
+        return red.floor_rows @ np.linalg.solve(K, rhs)[:n]
 
     def energy(self, z: np.ndarray) -> float:
         return float(self.energies(z)[0])
