@@ -316,15 +316,15 @@ class CompiledFramePH:
         return np.array([[m, 0.0, 0.0], [0.0, m, S], [0.0, S, IP]])
 
     def energies(self, states: np.ndarray) -> np.ndarray:
-        """H above rest of reduced states (rows): ½|ζ|² + ½ηᵀΩ²η + ½ν_pᵀM_pν_p + g s (sin θ + 1)
-        (θ = −π/2 hanging)."""
+        """H above rest of reduced states (rows): ½|ζ|² + ½ηᵀΩ²η + ½ν_pᵀM_pν_p + g s (1 − cos φ),
+        φ = θ + π/2 (the last as 2 g s sin²(φ/2): no cancellation near rest)."""
         n = self.reduction.n
         z = np.atleast_2d(states)
         eta, zeta, theta, nu_p = z[:, :n], z[:, n:2 * n], z[:, 2 * n], z[:, -3:]
         g, S = self.pend[3], self.pend[1]
         return (0.5 * np.sum(zeta**2, axis=1) + 0.5 * (eta**2) @ self.omega2
                 + 0.5 * np.einsum("ki,ij,kj->k", nu_p, self._pendulum_mass(), nu_p)
-                + g * S * (np.sin(theta) + 1.0))
+                + 2.0 * g * S * np.sin(0.5 * (theta + 0.5 * np.pi)) ** 2)
 
     def energy_changes(self, states: np.ndarray) -> np.ndarray:
         """H(z_{k+1}) − H(z_k) between successive rows, in difference form (½Δxᵀ A (x₁ + x₀)
