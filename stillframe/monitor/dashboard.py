@@ -2,7 +2,8 @@
 
 One page (``stillframe/data/dashboard.html``) of Plotly charts: per floor the true and
 estimated displacement (``state_truth``, ``state_estimate``) with the measured acceleration
-(``floorN/imu``); the pendulum angle; the command with its limits; and each node's counters from
+(``floorN/imu``); the pendulum angle; the command with its limits; on the pH plant its energy
+balance (``energy_balance``: H and the port and dissipated powers); and each node's counters from
 ``/diagnostics``, red when an error counter is non-zero. The page polls ``/data`` twice a
 second. Decimation happens before any work is done on a sample: the loop's topics are read
 from their monitor taps (:mod:`stillframe.middleware.taps`, thinned by the loop's writers) when
@@ -31,6 +32,7 @@ from plotly.offline import get_plotlyjs
 from stillframe.contract import messages
 from stillframe.contract.topics import (
     DIAGNOSTICS,
+    ENERGY_BALANCE,
     FLOOR_IMU,
     FORCE_CMD,
     PENDULUM_JOINT_STATES,
@@ -66,7 +68,14 @@ SERIES: dict[str, tuple[TopicSpec, Callable[[Any], list[float]]]] = {
     "encoder": (PENDULUM_JOINT_STATES, lambda m: [float(m.position[0])]),
     "torque_cmd": (TORQUE_CMD, lambda m: [float(m.wrench.torque.z)]),
     "force_cmd": (FORCE_CMD, lambda m: [float(m.wrench.force.x)]),
+    "energy": (ENERGY_BALANCE, lambda m: [float(v) for v in m.data[1:]]),
 }
+#: a series' sample time where its message has no header (default: ``header.stamp``)
+STAMPS: dict[str, Callable[[Any], float]] = {"energy": lambda m: float(m.data[0])}
+
+
+def _header_stamp(msg: Any) -> float:
+    return messages.stamp_ns(msg.header.stamp) * 1e-9
 
 
 class Series:
@@ -122,13 +131,13 @@ class Dashboard(TopicFollower):
 
     def on_new_topic(self, topic: str, msgtype: str, offers: list[QoSProfile]) -> RawCallback:
         name, values = self._by_topic[topic]
+        stamp = STAMPS.get(name, _header_stamp)
 
         def keep(data: bytes, _: Any) -> None:
             """Keep the newest sample of the topic (one per poll: the reader keeps one)."""
             msg = messages.deserialize(data, msgtype)
             with self._lock:
-                self.series[name].keep((messages.stamp_ns(msg.header.stamp) * 1e-9,
-                                        values(msg)))
+                self.series[name].keep((stamp(msg), values(msg)))
 
         return keep
 

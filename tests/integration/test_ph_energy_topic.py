@@ -6,7 +6,13 @@ a violation when an actuation delay makes the sampled law supply energy."""
 
 from __future__ import annotations
 
+import asyncio
 import json
+import re
+import subprocess
+import sys
+import threading
+import urllib.request
 from pathlib import Path
 
 import numpy as np
@@ -15,7 +21,9 @@ from mcap.reader import make_reader
 
 from stillframe.contract import topics
 from stillframe.contract.messages import TYPESTORE
-from tests.support.middleware import run_stillframe
+from stillframe.locations import REPO_ROOT
+from stillframe.monitor.foxglove_client import Capture, capture
+from tests.support.middleware import child_env, run_stillframe
 
 SHORT = ["duration=3", "controller.start=1", "evaluation.window=1"]
 WARN = 1
@@ -86,3 +94,61 @@ def test_diagnostics_report_a_controller_supplying_energy(ros_domain: int,
     assert int(values["passivity_violations"]) == violations
     assert float(values["controller_energy_J"]) == pytest.approx(energy, rel=1e-5)
     assert level == WARN and message.startswith("passivity: the controller supplied")
+
+
+MONITOR_READY = re.compile(r"Monitor ready: foxglove (ws://\S+?), dashboard (http://\S+)$")
+
+
+@pytest.mark.slow
+def test_energy_balance_reaches_foxglove_and_the_dashboard(ros_domain: int) -> None:
+    """A real-time launch with the monitor: a foxglove.websocket client decodes
+    ``energy_balance`` with the advertised ros2msg schema (the layout label included), and the
+    dashboard's ``/data`` serves its series (H and four powers against t_k)."""
+    topic = "/frame/" + topics.ENERGY_BALANCE.name
+    sets = [a for o in ["duration=6", "controller.start=2", "evaluation.window=2"]
+            for a in ("--set", o)]
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "stillframe", "launch", "scenes/ph_passivity.yaml", *sets,
+         "--mode", "realtime", "--monitor", "--monitor-port", "0", "--dashboard-port", "0",
+         "--no-monitor-idle", "--json"],
+        env=child_env(), cwd=REPO_ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+        text=True)
+    urls = None
+    for line in proc.stderr:
+        if (found := MONITOR_READY.search(line.rstrip())) is not None:
+            urls = found[1], found[2]
+            break
+    assert urls is not None
+    threading.Thread(target=proc.stderr.read, daemon=True).start()
+
+    async def watch() -> tuple[Capture, dict]:
+        done, seen = asyncio.Event(), Capture()
+        task = asyncio.create_task(capture(urls[0], [topic], done, seen))
+        data: dict = {}
+        while proc.poll() is None:
+            await asyncio.sleep(0.5)
+            try:
+                with urllib.request.urlopen(urls[1] + "data", timeout=5) as response:
+                    data = json.loads(response.read())["series"]["energy"]
+            except OSError:    # the monitor stops with the launch: keep the last answer
+                break
+        done.set()
+        await task
+        return seen, data
+
+    try:
+        seen, series = asyncio.run(watch())
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        proc.communicate(timeout=60)
+    channel = seen.channels[topic]
+    assert (channel["schemaName"], channel["encoding"]) == ("std_msgs/msg/Float64MultiArray",
+                                                            "cdr")
+    got = seen.messages.get(topic, [])
+    assert len(got) >= 10
+    assert got[0].layout.dim[0].label == ",".join(topics.ENERGY_FIELDS)
+    t = [float(m.data[0]) for m in got]
+    assert all(abs(k * 32 - round(k * 32)) < 1e-9 for k in t)     # sample times k / 32
+    assert len(series["y"]) == len(topics.ENERGY_FIELDS) - 1 and len(series["t"]) >= 5
+    assert all(abs(x * 32 - round(x * 32)) < 1e-9 for x in series["t"])
