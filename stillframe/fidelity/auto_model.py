@@ -178,6 +178,9 @@ def choose(scene_data: dict, band: list[float], tolerance: float,
                if energy_tolerance is not None else ""))
     cost, error, mismatch, run = min(qualified, key=lambda q: q[0])
     cheaper = sorted((r for r in rejected if r[0] < cost), key=lambda r: r[0])[:1]
+    # with energy consistency asked, also the cheapest run that would have met the rest
+    cheaper += sorted((r for r in rejected if r[0] < cost and "energy" in r[2]
+                       and r not in cheaper), key=lambda r: r[0])[:1]
     why_not = "".join(f"; cheaper {r[1]['model']} {r[1]['method']} dt={r[1]['dt']:g} rejected: "
                       f"{r[2]}" for r in cheaper)
     reason = (f"{run['model']} ({run['dofs']} DOFs) {run['method']} dt={run['dt']:g} s: cheapest "
