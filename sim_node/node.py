@@ -63,7 +63,21 @@ from stillframe.errors import InputError
 from stillframe.loop.closed_loop import LoopHistory, evaluate
 from stillframe.loop.command_gate import CommandGate
 from stillframe.loop.energy_balance import EnergyTopic
-from stillframe.loop.node_support import (
+from stillframe.loop.pacing import Pacer, wait_until
+from stillframe.loop.watchdog import MissRateGuard, command_expired
+from stillframe.loop.wiring import command_topic, estimator_inputs
+from stillframe.loop.writer_gate import InputGates
+from stillframe.middleware import api
+from stillframe.middleware.clock import ClockPublisher
+from stillframe.middleware.names import is_hidden
+from stillframe.middleware.taps import TappedPublisher
+from stillframe.node_runtime.realtime import (
+    Realtime,
+    RealtimeOptions,
+    declare_realtime,
+    start_realtime,
+)
+from stillframe.node_runtime.support import (
     ERROR,
     OK,
     RECORDER_NODE,
@@ -77,15 +91,6 @@ from stillframe.loop.node_support import (
     reaches_peer,
     wait_for_peers,
 )
-from stillframe.loop.pacing import Pacer, wait_until
-from stillframe.loop.realtime import Realtime, RealtimeOptions, declare_realtime, start_realtime
-from stillframe.loop.watchdog import MissRateGuard, command_expired
-from stillframe.loop.wiring import command_topic, estimator_inputs
-from stillframe.loop.writer_gate import InputGates
-from stillframe.middleware import api
-from stillframe.middleware.clock import ClockPublisher
-from stillframe.middleware.names import is_hidden
-from stillframe.middleware.taps import TappedPublisher
 from stillframe.plant.actuation_delay import ActuationDelay
 from stillframe.plant.frame_plant import make_plant
 
@@ -151,7 +156,7 @@ class SimNode:
     def on_command(self, actuator: int, cdr: bytes, info: api.MessageInfo) -> None:
         """Take a command its topic's gate lets through (module docstring); count the others."""
         gate = self.gates[actuator]
-        if not gate.admits(info.publisher_gid):
+        if not gate.admits(info.publisher_gid, info.publication_sequence):
             self.counts["rejected_commands"] += 1
             return
         read = self.readers[actuator].read(cdr)
@@ -318,7 +323,7 @@ class SimNode:
             self.counts["degraded_samples"] += 1
         plant.advance(control)
         self.rt.idle()
-        if self.diagnostics.due():
+        if self.inputs.announce(self.node.get_logger()) or self.diagnostics.due():
             self.publish_status()
         return np.concatenate([[sample.t], sample.truth, control, [sample.force]])
 

@@ -43,7 +43,7 @@ sys.exit({code!r})
 #: a controller that reports once, as it stops (a real node's last status counts the whole run)
 STATUS_AT_STOP = """\
 from stillframe.contract import topics
-from stillframe.loop.node_support import Diagnostics
+from stillframe.node_runtime.support import Diagnostics
 from stillframe.middleware import api
 node = api.create_node("controller_node", namespace=topics.DEFAULT_NAMESPACE)
 diagnostics = Diagnostics(node, 3600.0)
@@ -144,7 +144,8 @@ def test_launch_passes_sim_nodes_result_through_and_stops_the_others(
     pids, lines = wait_for_children(proc)
     out, err = proc.communicate(timeout=60)
     assert proc.returncode == 0, err
-    assert json.loads(out) == {"scene": "thesis_lqg", **RESULT, "diagnostics": {}}
+    assert json.loads(out) == {"scene": "thesis_lqg", **RESULT, "degraded": False,
+                               "degraded_reasons": [], "diagnostics": {}}
     err = "".join(lines) + err
     sim_argv = json.loads(next(line for line in err.splitlines() if "sim argv" in line)
                           .split("sim argv ", 1)[1])

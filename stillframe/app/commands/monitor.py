@@ -63,11 +63,11 @@ def _check_port(name: str, port: int) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from stillframe.config.scene import load_scene
-    from stillframe.loop.realtime import run_idle
     from stillframe.middleware.api import create_node, spin
     from stillframe.middleware.names import resolve_topic
     from stillframe.monitor.dashboard import Dashboard, Limits, serve
     from stillframe.monitor.foxglove_bridge import FoxgloveBridge
+    from stillframe.node_runtime.realtime import run_idle
 
     _check_port("--port", args.port)
     _check_port("--dashboard-port", args.dashboard_port)
@@ -83,7 +83,7 @@ def run(args: argparse.Namespace) -> int:
     if args.scene is not None:
         scene = load_scene(args.scene, args.overrides)
         limits = Limits(scene.controller.limit, scene.actuators.torque_limit,
-                        scene.actuators.force_limit)
+                        scene.actuators.force_limit, scene.controller.start)
     node = create_node("stillframe_monitor", argv=sys.argv[:1])
     try:
         try:
