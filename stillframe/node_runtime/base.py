@@ -259,6 +259,9 @@ class Managed(Cycle):
         except InputError as exc:
             log.error(f"{name}: {exc}")
             return lifecycle.FAILURE
+        except Exception as exc:    # anything else is rcl_lifecycle's error: errorprocessing
+            log.error(f"{name}: {type(exc).__name__}: {exc}")
+            return lifecycle.ERROR
         log.info(f"lifecycle: {name} done")
         return lifecycle.SUCCESS
 
