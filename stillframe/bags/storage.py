@@ -16,7 +16,7 @@ has no footer and reads as truncated.
 from __future__ import annotations
 
 import time
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -123,6 +123,16 @@ class BagWriter:
     def write(self, topic: str, stamp_ns: int, data: bytes | memoryview) -> None:
         """Append one message (CDR bytes) received at ``stamp_ns``."""
         self._writer.write(self._connections[topic], stamp_ns, data)
+
+    def writer_of(self, topic: str) -> Callable[[int, bytes | memoryview], None]:
+        """:meth:`write` for one topic, its connection looked up once: ``write(stamp_ns,
+        data)`` (the recorder's per-message call)."""
+        connection, write = self._connections[topic], self._writer.write
+
+        def write_one(stamp_ns: int, data: bytes | memoryview) -> None:
+            write(connection, stamp_ns, data)
+
+        return write_one
 
     def count(self, topic: str) -> int:
         return self._writer.counts[self._connections[topic].id]
