@@ -29,6 +29,7 @@ from rosbags.rosbag2 import Reader, ReaderError, StoragePlugin, Writer, WriterEr
 from rosbags.rosbag2.metadata import dump_qos_v9
 from rosbags.typesys.store import Typestore
 
+from stillframe.bags.full_disk import DiskLedger
 from stillframe.errors import BagError, InputError
 
 METADATA_VERSION = 9
@@ -106,6 +107,7 @@ class BagWriter:
             self._writer.open()
         except (OSError, WriterError) as exc:
             raise BagError(f"{self.path}: cannot create bag: {exc}") from None
+        self._ledger = DiskLedger(self._writer, self.path)
         self._connections: dict[str, Connection] = {}
 
     def add_topic(self, topic: str, msgtype: str, offered_qos: Sequence[Qos] = ()) -> None:
@@ -138,9 +140,30 @@ class BagWriter:
         return self._writer.counts[self._connections[topic].id]
 
     def close(self) -> None:
-        """Write index, footer and ``metadata.yaml``; safe to call twice."""
-        if self._writer.storage is not None:
-            self._writer.close()
+        """Write index, footer and ``metadata.yaml``; safe to call twice. After a write that
+        failed (a full disk) the bag is closed with the chunks that reached the file
+        (:mod:`stillframe.bags.full_disk`) and :class:`BagError` says what it holds."""
+        if self._writer.storage is None:
+            return
+        ledger = self._ledger
+        failure = ledger.failure
+        if failure is None:
+            ledger.release_reserve()
+            try:
+                self._writer.close()
+                return
+            except (OSError, BagError) as exc:
+                failure = ledger.failure or exc
+        reason = failure.strerror if isinstance(failure, OSError) and failure.strerror else (
+            str(failure))
+        if ledger.close_after_failure():
+            kept = sum(self._writer.counts.values())
+            raise BagError(f"{self.path}: {reason}: recording stopped; the bag is closed with "
+                           f"the {kept} messages written before")
+        raise BagError(f"{self.path}: {reason}: recording stopped; "
+                       f"{self._ledger.storage.path.name} keeps {ledger.written} messages in "
+                       f"complete chunks but no index: free some space, then run "
+                       f"`stillframe bag reindex {self.path}`")
 
     def __enter__(self) -> BagWriter:
         return self
