@@ -37,8 +37,9 @@ RESERVE_BYTES = 512 * 1024
 RESERVE_NAME = ".reserve"
 #: the chunk that failed is written again in chunks this small, as far as they fit [bytes]
 SALVAGE_CHUNK_BYTES = 64 * 1024
-#: room left for the summary, the footer and ``metadata.yaml`` when salvaging [bytes]
-SUMMARY_ROOM = RESERVE_BYTES // 2
+#: room left for the summary, the footer and ``metadata.yaml`` when salvaging [bytes] (the
+#: salvaged chunks are taken back one by one if that was too little)
+SUMMARY_ROOM = 96 * 1024
 MESSAGE_OPCODE = 0x05
 _NO_TIME = 2**63 - 1
 
@@ -88,26 +89,30 @@ class DiskLedger:
         """Messages in complete chunks in the file."""
         return sum(self.counts.values())
 
+    def pending(self) -> int:
+        """Messages in the chunk not yet in the file."""
+        return sum(len(msgs) for msgs in self.storage.chunk.msgs.values())
+
     def release_reserve(self) -> None:
         self.reserve.unlink(missing_ok=True)
 
     def close_after_failure(self) -> bool:
         """Cut the file back to its complete chunks, write what fits of the chunk that failed
-        as smaller chunks (:meth:`_salvage`), and close the bag; without the salvaged part if
-        the summary then does not fit. True if the bag is closed (summary, footer,
+        as smaller chunks (:meth:`_salvage`), and close the bag, taking salvaged chunks back
+        one by one while the summary does not fit. True if the bag is closed (summary, footer,
         ``metadata.yaml``); False if the file was left as its complete chunks."""
         self.release_reserve()
         failed = self.storage.chunk
         self._cut()
-        before = self.durable_end, dict(self.counts), self.start, self.end
-        self._salvage(failed)
-        if self._try_close():
-            return True
-        self.durable_end, counts, self.start, self.end = before
-        self.counts = defaultdict(int, counts)
-        self._cut()
-        if self._try_close():
-            return True
+        states = self._salvage(failed)
+        while True:
+            if self._try_close():
+                return True
+            if not states:
+                break
+            self.durable_end, counts, self.start, self.end = states.pop()
+            self.counts = defaultdict(int, counts)
+            self._cut()
         self._cut()
         self.writer.storage = None
         with contextlib.suppress(OSError):
@@ -122,13 +127,15 @@ class DiskLedger:
             return False
         return True
 
-    def _salvage(self, failed: Any) -> None:
+    def _salvage(self, failed: Any) -> list[tuple[int, dict[int, int], int, int]]:
         """The records of the chunk that failed, written again as chunks of
         :data:`SALVAGE_CHUNK_BYTES` while the filesystem has room for one more and
         :data:`SUMMARY_ROOM` beside it (the messages of a 1 MiB chunk are not all lost because
-        the disk had room for half of them)."""
+        the disk had room for half of them). The ledger's state before each chunk written, to
+        take them back if the summary does not fit."""
         data, at = failed.bio.getvalue(), 0
         chunk = self.storage.chunk
+        states = []
         while at < len(data):
             length = int.from_bytes(data[at + 1:at + 9], "little")
             record, opcode = data[at:at + 9 + length], data[at]
@@ -143,12 +150,15 @@ class DiskLedger:
             if chunk.bio.tell() >= SALVAGE_CHUNK_BYTES or at >= len(data):
                 if self._room() < chunk.bio.tell() + SUMMARY_ROOM:
                     break
+                states.append((self.durable_end, dict(self.counts), self.start, self.end))
                 try:
                     self._close_chunk()
                 except BagError:
+                    states.pop()
                     break
                 chunk = self.storage.chunk
         self._cut()
+        return states
 
     def _room(self) -> int:
         """Bytes the filesystem of the bag still takes."""

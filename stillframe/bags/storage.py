@@ -156,14 +156,15 @@ class BagWriter:
                 failure = ledger.failure or exc
         reason = failure.strerror if isinstance(failure, OSError) and failure.strerror else (
             str(failure))
+        received = ledger.written + ledger.pending()
         if ledger.close_after_failure():
             kept = sum(self._writer.counts.values())
             raise BagError(f"{self.path}: {reason}: recording stopped; the bag is closed with "
-                           f"the {kept} messages written before")
+                           f"{kept} of the {received} messages received (the rest did not fit)")
         raise BagError(f"{self.path}: {reason}: recording stopped; "
-                       f"{self._ledger.storage.path.name} keeps {ledger.written} messages in "
-                       f"complete chunks but no index: free some space, then run "
-                       f"`stillframe bag reindex {self.path}`")
+                       f"{ledger.storage.path.name} keeps {ledger.written} of the {received} "
+                       f"messages received in complete chunks but no index: free some space, "
+                       f"then run `stillframe bag reindex {self.path}`")
 
     def __enter__(self) -> BagWriter:
         return self

@@ -21,6 +21,7 @@ from stillframe.bench.recorder_load import PER_STEP
 from stillframe.locations import REPO_ROOT
 from stillframe.middleware import api
 from tests.support.middleware import child_env, run_stillframe, wait_for_line
+from tests.support.tmpfs import small_tmpfs
 
 pytestmark = pytest.mark.slow
 
@@ -108,3 +109,29 @@ def test_separate_record_all_beside_a_realtime_1khz_run_misses_no_sample(
         clock = [t for conn, t, _ in reader.messages() if conn.topic == "/clock"]
     # received on /clock (sim time, from 0), not on the system clock
     assert 0 <= log_times[0] <= log_times[-1] <= max(clock) + PERIOD_NS
+
+
+def test_launch_record_onto_a_full_disk_ends_in_one_line_with_the_bag_closed(
+        tmp_path: Path, ros_domain: int) -> None:
+    """10 s at 1 kHz (about 26 MB of bag) recorded onto an 8 MiB tmpfs: the launch stops with
+    the recorder's one line and exit 3; the bag opens in rosbags with what it says it kept,
+    at least 90 % of the messages the recorder received, each loop topic's samples from the
+    first on without a hole."""
+    with small_tmpfs(tmp_path / "fs", size_mib=8) as fs:
+        bag = fs / "bag"
+        done = run_stillframe("launch", str(SCENE), "--set", f"sensors.rate_hz={RATE_HZ}",
+                              "--set", "duration=10", "--set", "controller.start=4", "--set",
+                              "evaluation.window=4", "--record", str(bag), timeout=600)
+        assert done.returncode == 3, done.stderr[-3000:]
+        last = done.stderr.strip().splitlines()[-1]
+        assert last.startswith("stillframe launch: error: recorder: ") and \
+            "No space left on device" in last, last
+        kept, received = (int(w) for w in last.split("closed with ")[1].split()[0:4:3])
+        assert kept >= 0.9 * received
+        with AnyReader([bag]) as reader:
+            assert reader.message_count == kept
+        stamps = stamps_by_topic(bag)
+        for topic in PER_STEP:
+            indices = sample_indices(stamps[topic])
+            assert indices[:2] in ([0, 1], [1, 2]), topic
+            assert indices == list(range(indices[0], indices[0] + len(indices))), topic
