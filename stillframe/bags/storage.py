@@ -15,6 +15,7 @@ has no footer and reads as truncated.
 
 from __future__ import annotations
 
+import functools
 import time
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
@@ -129,12 +130,7 @@ class BagWriter:
     def writer_of(self, topic: str) -> Callable[[int, bytes | memoryview], None]:
         """:meth:`write` for one topic, its connection looked up once: ``write(stamp_ns,
         data)`` (the recorder's per-message call)."""
-        connection, write = self._connections[topic], self._writer.write
-
-        def write_one(stamp_ns: int, data: bytes | memoryview) -> None:
-            write(connection, stamp_ns, data)
-
-        return write_one
+        return functools.partial(self._writer.write, self._connections[topic])
 
     def count(self, topic: str) -> int:
         return self._writer.counts[self._connections[topic].id]
