@@ -16,6 +16,7 @@ import contextlib
 import math
 import os
 import signal
+import struct
 import subprocess
 import sys
 import tempfile
@@ -48,6 +49,7 @@ PER_STEP = tuple(spec.name if spec.name.startswith("/") else f"{DEFAULT_NAMESPAC
                  for spec in (CLOCK, *FLOOR_IMU, PENDULUM_JOINT_STATES, EXCITATION_WRENCH,
                               FLOOR3_LOAD_CELL, STATE_TRUTH))
 READY_LINE = "Recording to"
+_STAMP = struct.Struct("<iI")   # the header stamp (/clock: its time), first after the CDR header
 READY_TIMEOUT_S = 20.0
 STOP_TIMEOUT_S = 20.0
 
@@ -114,13 +116,22 @@ def _stop(run: RecorderRun) -> None:
     run.cpu_s = usage.ru_utime + usage.ru_stime
 
 
-def completeness(bag: Path, steps: int) -> dict[str, Any]:
-    """The bag's count of each per-step topic, the fewest of them, and the messages in all."""
+def completeness(bag: Path, steps: int, rate_hz: float) -> dict[str, Any]:
+    """The bag's count of each per-step topic, the fewest of them, the messages in all, and the
+    sample times missing between each topic's first and last sample in the bag (read from the
+    header stamps: samples lost while recording, as against samples sent before the recorder
+    subscribed)."""
     summary = bag_summary(bag, messages.TYPESTORE)
     counts = {t.name: t.count for t in summary.topics}
     per_step = {topic: counts.get(topic, 0) for topic in PER_STEP}
+    held: dict[str, set[int]] = {topic: set() for topic in PER_STEP if per_step[topic]}
+    for m in read_bag(bag, messages.TYPESTORE, topics=list(held)):
+        sec, nanosec = _STAMP.unpack_from(m.data, 4)
+        held[m.topic].add(round((sec + nanosec * 1e-9) * rate_hz))
+    holes = sum(max(h) - min(h) + 1 - len(h) for h in held.values())
     return {"bag_messages": summary.message_count, "steps": steps,
             "per_step_counts": per_step, "per_step_min": min(per_step.values()),
+            "per_step_holes": holes,
             "complete": all(n == steps for n in per_step.values())}
 
 

@@ -181,7 +181,7 @@ def realtime(rate_hz: float, duration: float, out: Path, backend: str,
                            prepare=observe(log), backends=[backend], rt=rt[0], rt_cpus=rt[1],
                            monitor_args=monitor_args, compose=compose)
     e = result.evaluation
-    recorded = recorder_figures(recorder, e["steps"]) if recorder else {}
+    recorded = recorder_figures(recorder, e["steps"], rate_hz) if recorder else {}
     summary = log.summary()
     zeros = watchdog_zeros(result.diagnostics)
     return {"backend": backend, "compose": compose, "rate_hz": rate_hz, "rt": rt[0],
@@ -193,10 +193,10 @@ def realtime(rate_hz: float, duration: float, out: Path, backend: str,
             **(stalls.summary if stalls else {})}
 
 
-def recorder_figures(recorder: RecorderRun, steps: int) -> dict[str, Any]:
+def recorder_figures(recorder: RecorderRun, steps: int, rate_hz: float) -> dict[str, Any]:
     """The recorder's CPU time per message, the messages it took per second, the per-step topics
     it holds against ``steps``, and its write path against a bare mcap writer."""
-    counts = completeness(recorder.bag, steps)
+    counts = completeness(recorder.bag, steps, rate_hz)
     n = counts["bag_messages"]
     return {**counts, "recorder_cpu_s": recorder.cpu_s,
             "recorder_cpu_us_per_msg": 1e6 * recorder.cpu_s / n if n else float("nan"),
@@ -293,12 +293,13 @@ def recorder_table(rows: list[dict[str, Any]]) -> str:
     return format_table(
         ["backend", "rate [Hz]", "recorder", "sim deadline misses", "degraded", "p50 [us]",
          "p99 [us]", "recorder CPU [us/msg]", "recorded [msg/s]", "per-step in bag / steps",
-         "write path [msg/CPU s]", "bare mcap [msg/CPU s]"],
+         "holes", "write path [msg/CPU s]", "bare mcap [msg/CPU s]"],
         [[r["backend"], f"{r['rate_hz']:g}", "yes" if r["record"] else "no",
           r["sim_deadline_misses"], "-" if r["degraded_samples"] is None else r["degraded_samples"],
           f"{r['p50_us']:.0f}", f"{r['p99_us']:.0f}",
           recorded(r, "recorder_cpu_us_per_msg", ".1f"), recorded(r, "recorder_msgs_per_s", ".0f"),
           f"{r['per_step_min']} / {r['steps']}" if r["record"] else "-",
+          r["per_step_holes"] if r["record"] else "-",
           recorded(r, "write_path_msgs_per_s", ".0f"), recorded(r, "mcap_msgs_per_s", ".0f")]
          for r in rows])
 
