@@ -33,7 +33,7 @@ from typing import Any
 from stillframe.bags.qos import to_bag
 from stillframe.bags.storage import BagWriter
 from stillframe.middleware.api import MessageInfo
-from stillframe.middleware.qos import QoSProfile
+from stillframe.middleware.qos import CLOCK, QoSProfile, recorder_request
 from stillframe.middleware.topic_follower import RawCallback, TopicFollower
 
 #: how often the recorder takes what its readers hold [s]: 50 wake-ups a second whatever the
@@ -78,7 +78,9 @@ class Recorder(TopicFollower):
         self.bag = bag
         self.total = 0
         self._sim = SimStamps() if sim_time else None
-        self._clock = (node.create_polled_subscription(CLOCK_TYPE, CLOCK_TOPIC, "clock")
+        # every /clock sample of a poll, not only the newest (the clock profile keeps one)
+        self._clock = (node.create_polled_subscription(CLOCK_TYPE, CLOCK_TOPIC,
+                                                       recorder_request([CLOCK]))
                        if sim_time else None)
         super().__init__(node, topics, poll_period_s=poll_period_s)
 
