@@ -59,7 +59,8 @@ class DiskLedger:
             self.storage.bio.flush()
             self.reserve.write_bytes(bytes(RESERVE_BYTES))
         except OSError as exc:
-            raise BagError(f"{bag}: cannot create bag: {exc.strerror or exc}") from None
+            raise BagError(f"{bag}: cannot create bag: {exc.strerror or exc} (the bag keeps "
+                           f"{RESERVE_BYTES // 1024} KiB free for its index)") from None
         self.durable_end = self.storage.bio.tell()
         # every chunk goes through the ledger (an instance attribute shadows the method)
         self.storage.close_chunk = self._close_chunk

@@ -16,6 +16,7 @@ has no footer and reads as truncated.
 from __future__ import annotations
 
 import functools
+import shutil
 import time
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
@@ -108,7 +109,12 @@ class BagWriter:
             self._writer.open()
         except (OSError, WriterError) as exc:
             raise BagError(f"{self.path}: cannot create bag: {exc}") from None
-        self._ledger = DiskLedger(self._writer, self.path)
+        try:
+            self._ledger = DiskLedger(self._writer, self.path)
+        except BagError:
+            self._writer.abort()
+            shutil.rmtree(self.path, ignore_errors=True)    # nothing recorded: leave nothing
+            raise
         self._connections: dict[str, Connection] = {}
 
     def add_topic(self, topic: str, msgtype: str, offered_qos: Sequence[Qos] = ()) -> None:

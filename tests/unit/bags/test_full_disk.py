@@ -61,3 +61,15 @@ def test_a_full_tmpfs_ends_the_bag_with_what_reached_the_disk(tmp_path: Path) ->
             records = list(StreamReader(stream, validate_crcs=True).records)
         assert sum(type(r).__name__ == "Message" for r in records) == kept
         assert type(records[-1]).__name__ == "Footer"
+
+
+def test_a_disk_without_room_for_the_bag_refuses_it_in_one_line(tmp_path: Path) -> None:
+    """Less room than the reserve: BagError before anything is recorded, nothing left behind
+    (the record command then exits 3 before subscribing)."""
+    with small_tmpfs(tmp_path / "fs", size_mib=1) as fs:
+        (fs / "filler").write_bytes(bytes(768 * 1024))
+        with pytest.raises(BagError) as refused:
+            BagWriter(fs / "bag", messages.TYPESTORE)
+        assert "\n" not in str(refused.value)
+        assert "cannot create bag: No space left on device" in str(refused.value)
+        assert not (fs / "bag").exists()
