@@ -61,9 +61,8 @@ class RecorderRun:
     bag: Path
     proc: subprocess.Popen
     lines: deque[str] = field(default_factory=lambda: deque(maxlen=50))
-    #: CPU time and wall time from ready (subscribed to discovery) to exit (the bag closed)
+    #: CPU time from ready (subscribed to discovery) to exit (the bag closed)
     cpu_s: float = math.nan
-    wall_s: float = math.nan
 
 
 @contextlib.contextmanager
@@ -85,12 +84,11 @@ def recorder_process(bag: Path, backend: str) -> Iterator[RecorderRun]:
                 raise BagError(f"{bag}: the recorder did not start: "
                                        f"{' | '.join(list(run.lines)[-3:])}")
             time.sleep(0.05)
-        ready, ready_cpu_s = time.monotonic(), cpu_time_s(proc.pid)
+        ready_cpu_s = cpu_time_s(proc.pid)
         yield run
     finally:
         _stop(run)
     run.cpu_s -= ready_cpu_s
-    run.wall_s = time.monotonic() - ready
 
 
 def cpu_time_s(pid: int) -> float:

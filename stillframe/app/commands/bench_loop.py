@@ -194,13 +194,15 @@ def realtime(rate_hz: float, duration: float, out: Path, backend: str,
 
 
 def recorder_figures(recorder: RecorderRun, steps: int, rate_hz: float) -> dict[str, Any]:
-    """The recorder's CPU time per message, the messages it took per second, the per-step topics
+    """The recorder's CPU time per message (from its ready line to its exit, discovery and
+    closing the bag included), the messages it wrote per second of the run, the per-step topics
     it holds against ``steps``, and its write path against a bare mcap writer."""
     counts = completeness(recorder.bag, steps, rate_hz)
     n = counts["bag_messages"]
     return {**counts, "recorder_cpu_s": recorder.cpu_s,
             "recorder_cpu_us_per_msg": 1e6 * recorder.cpu_s / n if n else float("nan"),
-            "recorder_msgs_per_s": n / recorder.wall_s, **write_limit(recorder.bag)}
+            "recorder_msgs_per_s": n * rate_hz / steps if steps else float("nan"),
+            **write_limit(recorder.bag)}
 
 
 def watchdog_zeros(statuses: dict[str, dict[str, str]]) -> int | None:
