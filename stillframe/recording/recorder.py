@@ -109,4 +109,3 @@ class Recorder(TopicFollower):
     def counts(self) -> dict[str, int]:
         """Messages written per topic."""
         return {topic: self.bag.count(topic) for topic in sorted(self._subscriptions)}
-
