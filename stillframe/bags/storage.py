@@ -15,7 +15,6 @@ has no footer and reads as truncated.
 
 from __future__ import annotations
 
-import functools
 import shutil
 import time
 from collections.abc import Callable, Iterator, Sequence
@@ -134,9 +133,9 @@ class BagWriter:
         self._writer.write(self._connections[topic], stamp_ns, data)
 
     def writer_of(self, topic: str) -> Callable[[int, bytes | memoryview], None]:
-        """:meth:`write` for one topic, its connection looked up once: ``write(stamp_ns,
-        data)`` (the recorder's per-message call)."""
-        return functools.partial(self._writer.write, self._connections[topic])
+        """:meth:`write` for one topic, as short as it goes: ``write(stamp_ns, data)``, the
+        recorder's per-message call (:meth:`.full_disk.DiskLedger.message_writer`)."""
+        return self._ledger.message_writer(self._connections[topic].id)
 
     def count(self, topic: str) -> int:
         return self._writer.counts[self._connections[topic].id]
@@ -151,6 +150,7 @@ class BagWriter:
         failure = ledger.failure
         if failure is None:
             ledger.release_reserve()
+            ledger.fold_times()
             try:
                 self._writer.close()
                 return
