@@ -15,6 +15,7 @@ has no footer and reads as truncated.
 
 from __future__ import annotations
 
+import re
 import shutil
 import time
 from collections.abc import Callable, Iterator, Sequence
@@ -34,6 +35,9 @@ from stillframe.bags.full_disk import DiskLedger
 from stillframe.errors import BagError, InputError
 
 METADATA_VERSION = 9
+#: the ROS distribution a bag's metadata names, as ``ros2 bag record`` on Jazzy writes it (rosbags
+#: writes its own name there)
+ROS_DISTRO = "jazzy"
 #: What reading a damaged bag can raise (rosbags lets KeyError/TypeError through for
 #: incomplete QoS records).
 _BAG_ERRORS = (AnyReaderError, ReaderError, OSError, yaml.YAMLError, KeyError, TypeError,
@@ -89,6 +93,12 @@ class BagSummary:
         return {**asdict(self), "end_ns": self.end_ns, "topics": topics}
 
 
+def _name_distro(metadata: str) -> str:
+    """rosbags's metadata text with :data:`ROS_DISTRO` as its ``ros_distro``."""
+    return re.sub(r"^(\s*ros_distro:) rosbags$", rf"\1 {ROS_DISTRO}", metadata, count=1,
+                  flags=re.MULTILINE)
+
+
 class BagWriter:
     """Write a rosbag2 bag (metadata v9, MCAP) from CDR bytes.
 
@@ -114,6 +124,10 @@ class BagWriter:
             self._writer.abort()
             shutil.rmtree(self.path, ignore_errors=True)    # nothing recorded: leave nothing
             raise
+        # the metadata record in the MCAP file, then metadata.yaml, name the distro
+        storage = self._writer.storage
+        close_storage = storage.close
+        storage.close = lambda version, text: close_storage(version, _name_distro(text))
         self._connections: dict[str, Connection] = {}
 
     def add_topic(self, topic: str, msgtype: str, offered_qos: Sequence[Qos] = ()) -> None:
@@ -153,6 +167,7 @@ class BagWriter:
             ledger.fold_times()
             try:
                 self._writer.close()
+                self._name_metadata_distro()
                 return
             except (OSError, BagError) as exc:
                 failure = ledger.failure or exc
@@ -160,6 +175,7 @@ class BagWriter:
             str(failure))
         received = ledger.written + ledger.pending()
         if ledger.close_after_failure():
+            self._name_metadata_distro()
             kept = sum(self._writer.counts.values())
             raise BagError(f"{self.path}: {reason}: recording stopped; the bag is closed with "
                            f"{kept} of the {received} messages received (the rest did not fit)")
@@ -167,6 +183,18 @@ class BagWriter:
                        f"{ledger.storage.path.name} keeps {ledger.written} of the {received} "
                        f"messages received in complete chunks but no index: free some space, "
                        f"then run `stillframe bag reindex {self.path}`")
+
+    def _name_metadata_distro(self) -> None:
+        """``metadata.yaml`` with :data:`ROS_DISTRO` (the MCAP metadata record has it already:
+        the storage's ``close`` is wrapped); written beside and moved, so that a full disk
+        leaves rosbags' own file in place."""
+        meta = self.path / "metadata.yaml"
+        fresh = meta.with_suffix(".yaml.distro")
+        try:
+            fresh.write_text(_name_distro(meta.read_text()))
+            fresh.replace(meta)
+        except OSError:
+            fresh.unlink(missing_ok=True)
 
     def __enter__(self) -> BagWriter:
         return self

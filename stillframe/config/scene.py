@@ -125,7 +125,7 @@ class Integrator(Section):
     """integrator: the time integration of the model."""
 
     method: Literal["rk4", "midpoint", "dop853", "radau"] = key("rk4")
-    dt: float = key(1e-3, positive, doc="fixed step, or output step of adaptive methods")
+    dt: float = key(1e-3, positive, doc="fixed step, or output step of adaptive methods [s]")
     rtol: float = key(1e-10, positive)
     atol: float = key(1e-12, positive)
 
