@@ -52,11 +52,14 @@ BACKEND_TARGETS: tuple[str, ...] = (*NODES, "recorder", "monitor")
 #: them (the container brings its nodes up itself)
 MANAGED: tuple[str, ...] = tuple(n for n, declared in NODE_PARAMETERS.items()
                                  if ManagedParameterValues in declared)
-#: how long a managed node may take to serve its lifecycle services (its imports and the scene),
-#: and to answer a transition [s]
+#: how long a managed node may take to serve its lifecycle services (its imports and the scene)
+#: [s]
 LIFECYCLE_TIMEOUT_S = 60.0
 #: how long one look for a managed node's ``get_state`` waits [s]
 PROBE_S = 1.0
+#: how long a managed node may take to answer one transition (configure builds its estimator
+#: or controller: well under a second here) [s]
+TRANSITION_TIMEOUT_S = 20.0
 #: the resolved scene the launch hands every node, beside the result file
 RESOLVED_SCENE = "scene.resolved.yaml"
 #: seconds a child gets to exit after SIGINT, then after SIGTERM, before SIGKILL
@@ -484,8 +487,10 @@ class Launcher:
                                                            label=transition))
             response = caller.call_service("lifecycle_msgs/srv/ChangeState",
                                            f"{prefix}/change_state", request,
-                                           LIFECYCLE_TIMEOUT_S)
+                                           TRANSITION_TIMEOUT_S)
             if response is None or not response.success:
+                if child.proc.poll() is not None:   # died meanwhile: say how
+                    raise NodeDiedError.exited(child)
                 raise NodeDiedError(name, f"{transition} " + (
                     "failed" if response else "not answered"), child.tail)
         self.status.echo(f"{name}: configured and active")
