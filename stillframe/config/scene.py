@@ -131,6 +131,13 @@ class Integrator(Section):
     dt: float = key(1e-3, positive, doc="fixed step, or output step of adaptive methods [s]")
     rtol: float = key(1e-10, positive)
     atol: float = key(1e-12, positive)
+    max_halvings: int = key(12, in_range(0, 40), doc=(
+        "fixed steps: a step whose Newton iteration fails, whose result is not finite or whose "
+        "RK4 error estimate is too large is halved again and again down to dt / 2^max_halvings "
+        "(0: such a step is an error at once)"))
+    error_limit: float | None = key(1e-5, positive, doc=(
+        "RK4: largest embedded local error estimate per step, relative to 1 + |x| "
+        "(null: no estimate)"))
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -24,6 +24,7 @@ import numpy as np
 
 from stillframe.config.scene import Scene, scene_from_dict
 from stillframe.dynamics.excitation import floor_load
+from stillframe.dynamics.integrators import NO_SUBDIVISION
 from stillframe.dynamics.kernels import CompiledFrame
 from stillframe.dynamics.models import FrameModel, build_model
 from stillframe.dynamics.ph import scene_model as ph_scene
@@ -187,7 +188,7 @@ def model_points(job: tuple[str, str, float, tuple[float, ...], np.ndarray]) -> 
                                 "pHDAE, AVF midpoint", balance))
         return points
     model = build_model(s)
-    frame = CompiledFrame(model)
+    frame = CompiledFrame(model, NO_SUBDIVISION)  # each method at its own step, never halved
     limit = rk4_stable_step(model)
     points = []
     for method in METHODS:
