@@ -60,7 +60,7 @@ from stillframe.contract.codecs import (
 )
 from stillframe.contract.signals import Sample, actuator_of
 from stillframe.errors import InputError
-from stillframe.loop.closed_loop import LoopHistory, evaluate
+from stillframe.loop.closed_loop import LoopHistory, evaluate, plant_report
 from stillframe.loop.command_gate import CommandGate
 from stillframe.loop.pacing import Pacer, wait_until
 from stillframe.loop.watchdog import MissRateGuard, command_expired
@@ -352,8 +352,7 @@ class SimNode:
             "command_gates": {spec.name: gate.report()
                               for gate, spec in zip(self.gates, COMMAND_TOPICS, strict=True)},
             "max_lateness_ms": 1e-6 * self.pacer.max_lateness_ns,
-            "plant": {"model": plant.model.name, "integrator": plant.integrator.name,
-                      "dt": plant.h, "actuator_limited": plant.actuators.limited},
+            "plant": plant_report(plant),
         })
         return history
 
