@@ -118,6 +118,9 @@ class Model(Section):
                                        doc="auto: frequency band the scene must reproduce [Hz]")
     tolerance: float = key(0.01, in_range(1e-12, 1.0),
                            doc="auto: relative error allowed in the band")
+    energy_tolerance: float | None = key(None, in_range(1e-16, 1.0), doc=(
+        "auto: energy consistency asked for: the largest discrete energy-balance error per step "
+        "allowed, relative to the stored energy (only runs that measure one qualify: ph)"))
 
 
 @dataclass(frozen=True, kw_only=True)

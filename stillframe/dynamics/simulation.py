@@ -142,6 +142,6 @@ def _ph_history(scene: Scene, duration: float, progress: Progress | None) -> His
     start = time.perf_counter()
     run = ph_scene.simulate(scene, duration, progress)
     wall = time.perf_counter() - start
-    meta = {**run.pop("meta"), "compiled": False, "wall_s": wall}
+    meta = {**run.pop("meta"), "compiled": True, "wall_s": wall}
     meta["steps_per_s"] = meta["steps"] / wall
     return History(**run, meta=meta)
