@@ -364,6 +364,8 @@ class SimNode:
             "max_lateness_ms": 1e-6 * self.pacer.max_lateness_ns,
             "plant": plant_report(plant),
         })
+        if self.energy is not None:     # pH plant: the last balance and the passivity check
+            history.evaluation["energy_balance"] = self.energy.values()
         return history
 
 
