@@ -26,6 +26,7 @@ from mcap.stream_reader import StreamReader
 from rosbags.rosbag2.metadata import parse_qos
 from rosbags.typesys.store import Typestore
 
+from stillframe.bags.full_disk import RESERVE_NAME
 from stillframe.bags.storage import BagWriter
 from stillframe.errors import BagError
 
@@ -77,6 +78,7 @@ def reindex(bag: str | Path, typestore: Typestore) -> Recovered:
     """Rewrite the bag at ``bag`` from its complete chunks (module docstring)."""
     bag = Path(bag)
     source = _mcap_file(bag)
+    (bag / RESERVE_NAME).unlink(missing_ok=True)    # a killed recorder's reserve: room to work
     schemas, channels, found, truncated = read_complete_chunks(source)
     names = {s.id: s.name for s in schemas}
     with tempfile.TemporaryDirectory(dir=bag.parent) as tmp:
