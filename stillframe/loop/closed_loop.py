@@ -121,7 +121,7 @@ def run_closed_loop(scene: Scene, progress: Progress | None = None) -> LoopHisto
     looping, looping_cpu = time.perf_counter(), time.process_time()
     for k in range(n):
         sample = plant.sample()
-        if ledger is not None:
+        if ledger is not None and sample.truth is not None:   # the pH plant reports its truth
             ledger.update(float(sample.truth[3]))
         estimate = estimator.step(sample, control) if estimator else None
         command = (controller.command(sample.t, estimate, sample.force) if controller
