@@ -26,8 +26,14 @@ from tests.support.middleware import run_stillframe
 SCENE = REPO_ROOT / "scenes" / "thesis_lqg.yaml"
 
 SIM = """\
-import json, sys, time
+import json, signal, sys, time
 args = dict(a.split(":=", 1) for a in sys.argv if ":=" in a)
+def stop(*_):
+    # as the real sim_node: interrupted, it writes the samples it ran, marked incomplete
+    with open(args["result_file"], "w") as f:
+        json.dump({{"complete": False, "steps": 7, "steps_planned": 1600}}, f)
+    sys.exit(0)
+signal.signal(signal.SIGINT, stop)
 print("sim argv", json.dumps(sys.argv[1:]), flush=True)
 time.sleep(float({sim_seconds!r}))
 with open(args["result_file"], "w") as f:
@@ -180,16 +186,25 @@ def test_ctrl_c_stops_every_child(tmp_path: Path, ros_domain: int) -> None:
 @pytest.mark.parametrize("how", ["killed", "exit"])
 def test_a_dead_node_is_named_and_the_rest_stopped(
         tmp_path: Path, ros_domain: int, how: str) -> None:
+    """The others are stopped cleanly (SIGINT, exit 0), and what the run has is kept: the
+    simulator's partial result, marked incomplete, with the dead node and how, on stdout
+    (``--json``) and under ``--out``; exit 1."""
     write_stand_ins(tmp_path, sim_seconds=3600, life=3600 if how == "killed" else 1, code=3)
-    proc = start_launch(tmp_path)
+    proc = start_launch(tmp_path, "--json", "--out", "out")
     pids, _ = wait_for_children(proc)
     if how == "killed":
         os.kill(pids["controller_node"], signal.SIGKILL)
-    _out, err = proc.communicate(timeout=60)
+    out, err = proc.communicate(timeout=60)
     assert proc.returncode == 1, err
     expected = "killed by SIGKILL" if how == "killed" else "exit code 3"
     assert f"stillframe launch: error: controller_node died ({expected})" in err
     assert not any(alive(pid) for pid in pids.values())
+    partial = {"complete": False, "steps": 7, "steps_planned": 1600,
+               "died": {"node": "controller_node", "how": expected},
+               "stopped": {"sim_node": "exit code 0", "estimator_node": "exit code 0"},
+               "diagnostics": {}}
+    assert json.loads(out) == {"scene": "thesis_lqg", **partial}
+    assert json.loads((tmp_path / "out" / "result.json").read_text()) == partial
 
 
 def test_killed_launcher_leaves_no_orphans(tmp_path: Path, ros_domain: int) -> None:

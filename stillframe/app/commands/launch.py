@@ -5,7 +5,10 @@ evaluation sim_node wrote: steady-state peaks per floor with and without control
 reductions (thesis eq. 5.233, 5.287); ``--json`` prints it as one document
 ``{"reduction_pct": {"displacement": [...], "velocity": [...]}, "peak_command": ...,
 "lockstep_timeouts": ..., "steps": ..., "wall_s": ..., ...}``. Exit code 1 names a node that
-died, 130 follows Ctrl-C (every child stopped and reaped).
+died (how: its exit code or signal) after the others were stopped cleanly; what the run still
+has (the samples the simulator ran, the statuses, the closed bag) is printed and written under
+``--out`` as a partial result marked ``"complete": false``. 130 follows Ctrl-C (every child
+stopped and reaped).
 """
 
 from __future__ import annotations
@@ -177,6 +180,23 @@ def report_death(command: str, exc: Exception) -> int:
     return 1
 
 
+def print_partial(evaluation: dict[str, Any], scene: Scene, args: argparse.Namespace) -> None:
+    """What a run whose node died still has (``"complete": false``): the JSON document with
+    ``--json``, else one line on what was kept; the file under ``--out`` in both cases."""
+    if args.json:
+        emit_json({"scene": scene.name, **evaluation})
+        return
+    steps = evaluation.get("steps")
+    planned = evaluation.get("steps_planned")
+    kept = [f"{steps} of {planned} steps" if steps is not None else "no samples"]
+    if (bag := evaluation.get("bag")) is not None:
+        kept.append(f"bag {bag['path']} ({bag['messages']} messages)" if bag["closed"]
+                    else bag["note"])
+    if args.out is not None:
+        kept.append(f"written to {args.out / 'result.json'}")
+    print(f"scene {scene.name}: partial result (complete: false): {'; '.join(kept)}")
+
+
 def monitor_args(args: argparse.Namespace) -> list[str]:
     """``stillframe monitor``'s arguments from launch's ``--monitor-*`` options."""
     rate = [] if args.monitor_max_rate is None else ["--max-rate", f"{args.monitor_max_rate:g}"]
@@ -202,7 +222,10 @@ def run(args: argparse.Namespace) -> int:
                                    monitor_args=monitor_args(args) if args.monitor else None,
                                    compose=args.compose, rt=rt, rt_cpus=rt_cpus, hosts=hosts)
         except NodeDiedError as exc:
-            return report_death("launch", exc)
+            code = report_death("launch", exc)
+            if exc.partial is not None:
+                print_partial(exc.partial.evaluation, scene, args)
+            return code
         except KeyboardInterrupt:
             print("stillframe launch: interrupted; every node stopped", file=sys.stderr)
             return 130
