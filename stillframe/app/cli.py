@@ -8,10 +8,14 @@ when listed here, so the core never imports the tools built on top of it at impo
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
+import os
+import signal
 import sys
+from typing import NoReturn
 
-from stillframe.errors import StillframeError
+from stillframe.errors import InputError, StillframeError
 
 COMMANDS: tuple[str, ...] = (
     "stillframe.app.commands.modes",
@@ -36,8 +40,16 @@ COMMANDS: tuple[str, ...] = (
 )
 
 
+class _Parser(argparse.ArgumentParser):
+    """A usage error is one line naming the argument, and where to read more (exit 2), as
+    every other bad input; ``-h`` still prints the usage."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} -h)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="stillframe",
         description="Simulate, identify and control a flexible frame with an active mass damper.",
     )
@@ -48,16 +60,40 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+#: the exit code of a command whose reader went away (``| head``): a shell's for SIGPIPE
+BROKEN_PIPE = 128 + signal.SIGPIPE
+
+
+def _quiet_stdout() -> None:
+    """After a broken pipe: nothing more goes to stdout, and the interpreter's last flush does
+    not complain (Python's documented recipe, docs.python.org/3/library/signal.html)."""
+    with contextlib.suppress(OSError, ValueError):
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
-        return int(args.func(args) or 0)
+        code = int(args.func(args) or 0)
+        sys.stdout.flush()
+        return code
     except StillframeError as exc:
         print(f"stillframe {args.command}: error: {exc}", file=sys.stderr)
         return exc.exit_code
+    except BrokenPipeError:
+        _quiet_stdout()
+        return BROKEN_PIPE
     except KeyboardInterrupt:
         return 130
+    except OSError as exc:
+        # a file named on the command line (or under a directory named there) that cannot be
+        # written or read: read-only, a full disk (no file name then), a parent that is a file
+        where = f"{exc.filename}: " if exc.filename is not None else ""
+        print(f"stillframe {args.command}: error: {where}{exc.strerror or exc}",
+              file=sys.stderr)
+        return InputError.exit_code
 
 
 if __name__ == "__main__":

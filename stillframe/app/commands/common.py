@@ -4,11 +4,17 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
+from pathlib import Path
 from typing import Any
 
 from stillframe.config.scene import Scene, load_scene
+from stillframe.errors import InputError
 from stillframe.fidelity.auto_model import Choice, resolve_model
+
+#: the longest duration a command takes (the scene key ``duration``'s bound)
+MAX_SECONDS = 1e6
 
 
 def add_scene_arguments(parser: argparse.ArgumentParser) -> None:
@@ -19,6 +25,32 @@ def add_scene_arguments(parser: argparse.ArgumentParser) -> None:
         help="override a scene value, e.g. --set model.type=fe (repeatable; YAML values)",
     )
     add_json_argument(parser)
+
+
+def seconds(text: str) -> float:
+    """An argparse ``type`` for a duration: a finite number of seconds in (0, 1e6] (the scene's
+    ``duration`` bound); anything else is a usage error naming the value (exit 2)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number of seconds") from None
+    if not 0 < value <= MAX_SECONDS:
+        raise argparse.ArgumentTypeError(f"{text!r}: seconds must lie in (0, {MAX_SECONDS:g}]")
+    return value
+
+
+def check_output(option: str, path: str | Path | None) -> None:
+    """Before any work: InputError when ``path`` (a file or directory to write) cannot be made:
+    an ancestor that is a file, or a directory that cannot be written (read-only)."""
+    if path is None:
+        return
+    target = Path(path)
+    existing = next(p for p in (target, *target.parents) if p.exists() or p == Path(p.anchor))
+    if existing != target and not existing.is_dir():
+        raise InputError(f"{option} {target}: {existing} is a file, not a directory")
+    folder = existing if existing.is_dir() else existing.parent
+    if not os.access(folder, os.W_OK):
+        raise InputError(f"{option} {target}: {folder} is not writable")
 
 
 def add_json_argument(parser: argparse.ArgumentParser) -> None:

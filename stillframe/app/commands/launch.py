@@ -22,6 +22,7 @@ from typing import Any
 
 from stillframe.app.commands.common import (
     add_scene_arguments,
+    check_output,
     emit_json,
     scene_from_args,
 )
@@ -208,6 +209,9 @@ def monitor_args(args: argparse.Namespace) -> list[str]:
 def run(args: argparse.Namespace) -> int:
     from stillframe.app.launcher import NodeDiedError, run_scene
     from stillframe.app.net_faults import hosts_if
+
+    check_output("--out", args.out)
+    check_output("--record", args.record)
 
     scene = scene_from_args(args)
     rt, rt_cpus = realtime_arguments(args)

@@ -17,7 +17,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from stillframe.app.commands.common import add_scene_arguments, emit_json
+from stillframe.app.commands.common import add_scene_arguments, check_output, emit_json
 from stillframe.errors import InputError
 from stillframe.text_table import format_table
 
@@ -89,6 +89,8 @@ def run(args: argparse.Namespace) -> int:
     from stillframe.studies.executor import run_tasks
     from stillframe.studies.montecarlo import plan, row, run_one
     from stillframe.studies.vary import parse_vary
+
+    check_output("--out", args.out)
 
     variations = [parse_vary(item) for item in args.vary]
     scene = load_scene(args.scene, args.overrides)
