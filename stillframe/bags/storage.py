@@ -150,7 +150,7 @@ def _culprit(bag: Path) -> Path:
     own, else ``metadata.yaml``."""
     try:
         files = _storage_files(bag)
-    except (OSError, yaml.YAMLError, KeyError, TypeError):
+    except (OSError, yaml.YAMLError, KeyError, TypeError, ValueError):   # ValueError: not UTF-8
         return bag / "metadata.yaml"
     for path in files:
         if not path.is_file():

@@ -52,11 +52,11 @@ MAX_STEPS = 10_000_000
 class Columns(Section):
     """rig.columns: the steel blades of each story (§5.2)."""
 
-    lengths: Floats3 = key((0.23, 0.28, 0.23), up_to(100.0), doc="L1..L3 [m]")
-    width: float = key(0.035, up_to(10.0), doc="b [m]")
-    thickness: float = key(0.001, up_to(1.0), doc="h [m]")
+    lengths: Floats3 = key((0.23, 0.28, 0.23), in_range(1e-4, 100.0), doc="L1..L3 [m]")
+    width: float = key(0.035, in_range(1e-6, 10.0), doc="b [m]")
+    thickness: float = key(0.001, in_range(1e-6, 1.0), doc="h [m]")
     density: float = key(7860.0, in_range(0.0, 1e5), doc="rho [kg/m^3]")
-    youngs_modulus: float = key(207e9, up_to(1e13), doc="E [Pa]")
+    youngs_modulus: float = key(207e9, in_range(1e3, 1e13), doc="E [Pa]")
     per_story: int = key(2, up_to(100), doc="blades per story")
 
 
@@ -64,9 +64,10 @@ class Columns(Section):
 class Pendulum(Section):
     """rig.pendulum: the pendulum of the damper, hinged on floor 3."""
 
-    half_length: float = key(0.0825, up_to(100.0), doc="L4 [m]")
-    mass: float = key(0.083, up_to(1e6), doc="m4 [kg]")
-    inertia: float = key(8.32e-4, up_to(1e9), doc="Izz,4 about the centre of mass [kg m^2]")
+    half_length: float = key(0.0825, in_range(1e-4, 100.0), doc="L4 [m]")
+    mass: float = key(0.083, in_range(1e-6, 1e6), doc="m4 [kg]")
+    inertia: float = key(8.32e-4, in_range(1e-12, 1e9),
+                         doc="Izz,4 about the centre of mass [kg m^2]")
     hinge_damping: float = key(2.432e-3, in_range(0.0, 1e9), doc="r4 [N m s/rad]")
 
 
@@ -74,7 +75,7 @@ class Pendulum(Section):
 class Rig(Section):
     """rig: the test rig; defaults are the thesis's (§5.2)."""
 
-    floor_masses: Floats3 = key((1.281, 0.814, 1.380), up_to(1e7), doc="m1..m3 [kg]")
+    floor_masses: Floats3 = key((1.281, 0.814, 1.380), in_range(1e-6, 1e7), doc="m1..m3 [kg]")
     columns: Columns = section(Columns)
     pendulum: Pendulum = section(Pendulum)
     gravity: float = key(9.81, in_range(0.0, 100.0), doc="g [m/s^2]")
@@ -133,9 +134,9 @@ class Integrator(Section):
     """integrator: the time integration of the model."""
 
     method: Literal["rk4", "midpoint", "dop853", "radau"] = key("rk4")
-    dt: float = key(1e-3, up_to(1.0), doc="fixed step, or output step of adaptive methods")
-    rtol: float = key(1e-10, up_to(1.0))
-    atol: float = key(1e-12, up_to(1.0))
+    dt: float = key(1e-3, in_range(1e-9, 1.0), doc="fixed step, or output step of adaptive methods")
+    rtol: float = key(1e-10, in_range(1e-15, 1.0))
+    atol: float = key(1e-12, in_range(1e-300, 1.0))
 
 
 @dataclass(frozen=True, kw_only=True)
