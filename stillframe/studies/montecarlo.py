@@ -30,7 +30,7 @@ from typing import Any
 import numpy as np
 
 from stillframe.config.scene import scene_from_dict
-from stillframe.config.schema import Section
+from stillframe.config.schema import Section, set_dotted, show
 from stillframe.errors import InputError
 from stillframe.studies.executor import Outcome
 from stillframe.studies.vary import (
@@ -100,6 +100,13 @@ def plan(scene: Section, set_overrides: list[str], variations: list[Variation], 
     data = scene.to_dict()
     for v in variations:
         check_nominal(v, lookup(data, v.key))
+        for value in v.values:      # every listed value must make a valid scene, before a run
+            trial = copy.deepcopy(data)
+            set_dotted(trial, v.key, value)
+            try:
+                scene_from_dict(trial)
+            except InputError as exc:
+                raise InputError(f"--vary {v.key}: the value {show(value)}: {exc}") from None
     fixed = {item.partition("=")[0].strip() for item in set_overrides}
     return Study(data, variations, seed, what, fixed)
 

@@ -136,6 +136,11 @@ def run(args: argparse.Namespace) -> int:
         print(f"stillframe montecarlo: interrupted; kept the {len(rows)} runs that finished",
               file=sys.stderr)
         return 130
+    if rows and document["failed"] == len(rows):
+        first = min(document["errors"])
+        print(f"stillframe montecarlo: error: every run failed (run {first}: "
+              f"{document['errors'][first]})", file=sys.stderr)
+        return 1
     return 0
 
 
