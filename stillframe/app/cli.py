@@ -10,10 +10,11 @@ from __future__ import annotations
 import argparse
 import contextlib
 import importlib
+import math
 import os
 import signal
 import sys
-from typing import NoReturn
+from typing import Any, NoReturn
 
 from stillframe.errors import InputError, StillframeError
 
@@ -40,9 +41,24 @@ COMMANDS: tuple[str, ...] = (
 )
 
 
+def _finite(text: str) -> float:
+    """``float`` for argparse without nan and ±inf (no option means them)."""
+    value = float(text)
+    if not math.isfinite(value):
+        raise ValueError(text)
+    return value
+
+
+_finite.__name__ = "float"      # argparse's message: "invalid float value: 'nan'"
+
+
 class _Parser(argparse.ArgumentParser):
     """A usage error is one line naming the argument, and where to read more (exit 2), as
     every other bad input; ``-h`` still prints the usage."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self.register("type", float, _finite)     # every type=float option: no nan, no inf
 
     def error(self, message: str) -> NoReturn:
         self.exit(2, f"{self.prog}: error: {message} (see {self.prog} -h)\n")

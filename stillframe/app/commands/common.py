@@ -39,6 +39,23 @@ def seconds(text: str) -> float:
     return value
 
 
+def whole(low: int, high: int) -> Any:
+    """An argparse ``type`` for a count with physical bounds (runs, workers, mesh elements,
+    ports): a whole number in [low, high], else a usage error naming it (exit 2)."""
+
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text[:40]!r} is not a whole number") from None
+        if not low <= value <= high:
+            raise argparse.ArgumentTypeError(f"{value}: must lie in [{low}, {high}]")
+        return value
+
+    parse.__name__ = "whole number"
+    return parse
+
+
 def check_output(option: str, path: str | Path | None) -> None:
     """Before any work: InputError when ``path`` (a file or directory to write) cannot be made:
     an ancestor that is a file, or a directory that cannot be written (read-only)."""

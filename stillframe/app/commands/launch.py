@@ -25,6 +25,7 @@ from stillframe.app.commands.common import (
     check_output,
     emit_json,
     scene_from_args,
+    whole,
 )
 from stillframe.app.launcher import MODES
 from stillframe.app.net_faults import FAULTS
@@ -64,9 +65,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     parser.add_argument("--monitor", action="store_true",
                         help="also run `stillframe monitor --dashboard` (Foxglove bridge and "
                              "live dashboard on 127.0.0.1)")
-    parser.add_argument("--monitor-port", type=int, default=8765, metavar="P",
+    parser.add_argument("--monitor-port", type=whole(0, 65535), default=8765, metavar="P",
                         help="with --monitor: Foxglove WebSocket port (default 8765; 0: any)")
-    parser.add_argument("--dashboard-port", type=int, default=8080, metavar="P",
+    parser.add_argument("--dashboard-port", type=whole(0, 65535), default=8080, metavar="P",
                         help="with --monitor: dashboard port (default 8080; 0: any)")
     parser.add_argument("--monitor-max-rate", type=float, default=None, metavar="HZ",
                         help="with --monitor: samples forwarded per second and topic at most "
