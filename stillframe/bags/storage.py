@@ -35,7 +35,7 @@ METADATA_VERSION = 9
 #: What reading a damaged bag can raise (rosbags lets KeyError/TypeError through for
 #: incomplete QoS records).
 _BAG_ERRORS = (AnyReaderError, ReaderError, OSError, yaml.YAMLError, KeyError, TypeError,
-               ValueError)
+               ValueError, RecursionError)
 SERVICE_EVENT_SUFFIX = "/_service_event"
 
 
@@ -150,7 +150,7 @@ def _culprit(bag: Path) -> Path:
     own, else ``metadata.yaml``."""
     try:
         files = _storage_files(bag)
-    except (OSError, yaml.YAMLError, KeyError, TypeError, ValueError):   # ValueError: not UTF-8
+    except (OSError, yaml.YAMLError, KeyError, TypeError, ValueError, RecursionError):
         return bag / "metadata.yaml"
     for path in files:
         if not path.is_file():

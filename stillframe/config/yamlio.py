@@ -66,9 +66,28 @@ _Loader.add_implicit_resolver(
 )
 
 
+_QUOTED = re.compile(rb""""(?:[^"\\\n]|\\.)*"|'[^'\n]*'""")
+_BRACKETS = re.compile(rb"[\[\]{}]")
+
+
+def _flow_depth(raw: bytes) -> int:
+    """The most ``[``/``{`` open at once outside quoted strings. PyYAML's scanner keeps a
+    possible simple key per open flow level and walks them all on every token, so deep flow
+    nesting costs it quadratic time (0.6 s at 3000 levels; a 1 MiB line would hang it): it is
+    refused before parsing."""
+    depth = deepest = 0
+    for match in _BRACKETS.finditer(_QUOTED.sub(b"", raw)):
+        depth = depth + 1 if match.group() in b"[{" else max(0, depth - 1)
+        deepest = max(deepest, depth)
+    return deepest
+
+
 def load_yaml(text: str | bytes) -> Any:
     """Parse YAML text (or bytes: UTF-8, UTF-16 with a byte-order mark) with scientific notation
     read as floats; :class:`yaml.YAMLError` on anything that is not strict YAML."""
+    raw = text.encode("utf-8", "surrogateescape") if isinstance(text, str) else text
+    if _flow_depth(raw.replace(b"\0", b"")) > MAX_DEPTH:
+        raise yaml.YAMLError(f"nested more than {MAX_DEPTH} levels deep")
     try:
         return yaml.load(text, Loader=_Loader)
     except RecursionError:
