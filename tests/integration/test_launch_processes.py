@@ -26,7 +26,7 @@ from tests.support.middleware import run_stillframe
 SCENE = REPO_ROOT / "scenes" / "thesis_lqg.yaml"
 
 SIM = """\
-import json, signal, sys, time
+import json, os, signal, sys, time
 args = dict(a.split(":=", 1) for a in sys.argv if ":=" in a)
 def stop(*_):
     # as the real sim_node: interrupted, it writes the samples it ran, marked incomplete
@@ -35,6 +35,9 @@ def stop(*_):
     sys.exit(0)
 signal.signal(signal.SIGINT, stop)
 print("sim argv", json.dumps(sys.argv[1:]), flush=True)
+deadline = time.monotonic() + 60    # a condition to wait for, forced rather than timed
+while {wait_for!r} and not os.path.exists({wait_for!r}) and time.monotonic() < deadline:
+    time.sleep(0.05)
 time.sleep(float({sim_seconds!r}))
 with open(args["result_file"], "w") as f:
     json.dump({result!r}, f)
@@ -53,7 +56,8 @@ from stillframe.loop.node_support import Diagnostics
 from stillframe.middleware import api
 node = api.create_node("controller_node", namespace=topics.DEFAULT_NAMESPACE)
 diagnostics = Diagnostics(node, 3600.0)
-api.spin_until(node, lambda: diagnostics.pub.get_subscription_count() > 0, 30)
+api.spin_until(node, lambda: diagnostics.pub.get_subscription_count() > 0, 60)
+open("controller_matched", "w").close()     # the stand-in simulator ends only after this
 print("waiting", flush=True)
 while api.ok():
     node.spin_once(0.1)
@@ -65,7 +69,7 @@ RESULT = {"reduction_pct": {"displacement": [71.0, 75.0, 57.0], "velocity": [73.
 
 
 def write_stand_ins(root: Path, sim_seconds: float = 1.0, life: float = 3600,
-                    code: int = 0) -> None:
+                    code: int = 0, wait_for: str = "") -> None:
     """Packages sim_node/estimator_node/controller_node with a ``node`` module each: the sim
     writes RESULT after ``sim_seconds``; the others wait for SIGINT (exit 0) or exit with
     ``code`` after ``life`` seconds."""
@@ -73,7 +77,7 @@ def write_stand_ins(root: Path, sim_seconds: float = 1.0, life: float = 3600,
         (root / name).mkdir()
         (root / name / "__init__.py").write_text("")
     (root / "sim_node" / "node.py").write_text(
-        SIM.format(sim_seconds=sim_seconds, result=RESULT))
+        SIM.format(sim_seconds=sim_seconds, result=RESULT, wait_for=wait_for))
     (root / "estimator_node" / "node.py").write_text(WAITER.format(life=3600, code=0))
     (root / "controller_node" / "node.py").write_text(WAITER.format(life=life, code=code))
 
@@ -161,9 +165,11 @@ def test_launch_passes_sim_nodes_result_through_and_stops_the_others(
 def test_the_nodes_last_statuses_written_as_they_stop_are_in_the_result(
         tmp_path: Path, ros_domain: int) -> None:
     """The controller reports only after the launcher stopped it (forced: its status period is
-    an hour): the launcher still takes that status before it returns. The simulator's 3 s
-    leave the controller time to match the launcher's reader."""
-    write_stand_ins(tmp_path, sim_seconds=3.0)
+    an hour): the launcher still takes that status before it returns. The stand-in simulator
+    ends only once the controller's status writer matched the launcher's reader (forced: it
+    waits for the file the controller writes then, not for a time that a loaded machine may
+    not keep)."""
+    write_stand_ins(tmp_path, sim_seconds=0.2, wait_for="controller_matched")
     (tmp_path / "controller_node" / "node.py").write_text(STATUS_AT_STOP.format())
     proc = start_launch(tmp_path, "--json", "--mode", "realtime")
     out, err = proc.communicate(timeout=120)
