@@ -428,6 +428,10 @@ def test_unwritable_outputs_are_one_line(tmp_path: Path) -> None:
     cases = [(["simulate", str(SCENE), "--duration", "0.1", "--out", str(blocker / "h.npz")],
               f"{blocker} is a file"),
              (["montecarlo", str(SCENE), *SHORT, "--runs", "1", "--out", str(blocker / "mc")],
+              f"{blocker} is a file"),
+             (["identify", str(HAMMER), *IDENTIFY, "--save-model", str(blocker / "m.json")],
+              f"{blocker} is a file"),
+             (["identify", str(HAMMER), *IDENTIFY, "--plots", str(blocker / "plots")],
               f"{blocker} is a file")]
     if os.geteuid() != 0:     # root writes into read-only directories
         cases.append((["simulate", str(SCENE), "--duration", "0.1", "--out",

@@ -47,7 +47,7 @@ def register(benches: argparse._SubParsersAction) -> None:
                         help="part of the run before the growth is measured (default 0.1)")
     parser.add_argument("--every", type=float, default=2.0, metavar="S",
                         help="wall seconds between RSS samples (default 2)")
-    parser.add_argument("--lockstep-timeout", type=float, default=LOCKSTEP_TIMEOUT_S, metavar="S",
+    parser.add_argument("--lockstep-timeout", type=seconds, default=LOCKSTEP_TIMEOUT_S, metavar="S",
                         help=f"sim_node's wait for a command (default {LOCKSTEP_TIMEOUT_S:g} s: "
                              "a timeout is then a lost sample, not a busy machine)")
     add_json_argument(parser)

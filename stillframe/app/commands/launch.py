@@ -25,6 +25,7 @@ from stillframe.app.commands.common import (
     check_output,
     emit_json,
     scene_from_args,
+    seconds,
     whole,
 )
 from stillframe.app.launcher import MODES
@@ -39,7 +40,7 @@ def add_launch_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--mode", choices=MODES, default="lockstep",
                         help="lockstep: deterministic, as fast as the nodes go (default); "
                              "realtime: paced by the wall clock")
-    parser.add_argument("--lockstep-timeout", type=float, default=None, metavar="S",
+    parser.add_argument("--lockstep-timeout", type=seconds, default=None, metavar="S",
                         help="sim_node's wait for a command before it holds the previous one "
                              "(given to every loop node: the estimator waits half, the "
                              "controller a quarter)")
