@@ -21,8 +21,8 @@ from controller_node.node import ControllerNode
 from estimator_node.node import EstimatorNode, build
 from sim_node import node as sim_node
 from stillframe.contract import topics
-from stillframe.loop.node_support import declare_loop_parameters, wait_for_peers
 from stillframe.middleware import api, intra_process
+from stillframe.node_runtime.support import declare_loop_parameters, wait_for_peers
 
 #: longest wait of one spin of the estimator's node [s]: the controller's messages (the load
 #: cell it matches) are taken at least this often

@@ -57,7 +57,19 @@ from stillframe.design.coordinates import design_map
 from stillframe.errors import InputError
 from stillframe.loop import fast_inputs
 from stillframe.loop.matching import ForceMatching
-from stillframe.loop.node_support import (
+from stillframe.loop.watchdog import EstimateWatchdog
+from stillframe.loop.wiring import design_model
+from stillframe.loop.writer_gate import InputGates
+from stillframe.middleware import api
+from stillframe.middleware.params import Parameter, SetParametersResult, finite_floats
+from stillframe.middleware.taps import TappedPublisher
+from stillframe.node_runtime.realtime import (
+    Realtime,
+    RealtimeOptions,
+    declare_realtime,
+    start_realtime,
+)
+from stillframe.node_runtime.support import (
     ERROR,
     OK,
     WARN,
@@ -70,13 +82,6 @@ from stillframe.loop.node_support import (
     reaches_peer,
     wait_for_peers,
 )
-from stillframe.loop.realtime import Realtime, RealtimeOptions, declare_realtime, start_realtime
-from stillframe.loop.watchdog import EstimateWatchdog
-from stillframe.loop.wiring import design_model
-from stillframe.loop.writer_gate import InputGates
-from stillframe.middleware import api
-from stillframe.middleware.params import Parameter, SetParametersResult, finite_floats
-from stillframe.middleware.taps import TappedPublisher
 
 RUN_TIME_PARAMETERS = frozenset({"enabled", "command_limit"})
 

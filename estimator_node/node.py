@@ -79,7 +79,18 @@ from stillframe.estimation.factory import make_estimator
 from stillframe.estimation.kalman import LinearFilter
 from stillframe.loop import fast_inputs
 from stillframe.loop.assembly import Ready, SampleAssembly
-from stillframe.loop.node_support import (
+from stillframe.loop.wiring import command_topic, design_model, estimator_inputs
+from stillframe.loop.writer_gate import InputGates
+from stillframe.middleware import api
+from stillframe.middleware.params import Parameter, SetParametersResult, finite_floats
+from stillframe.middleware.taps import TappedPublisher
+from stillframe.node_runtime.realtime import (
+    Realtime,
+    RealtimeOptions,
+    declare_realtime,
+    start_realtime,
+)
+from stillframe.node_runtime.support import (
     ERROR,
     OK,
     WARN,
@@ -93,12 +104,6 @@ from stillframe.loop.node_support import (
     reaches_peer,
     wait_for_peers,
 )
-from stillframe.loop.realtime import Realtime, RealtimeOptions, declare_realtime, start_realtime
-from stillframe.loop.wiring import command_topic, design_model, estimator_inputs
-from stillframe.loop.writer_gate import InputGates
-from stillframe.middleware import api
-from stillframe.middleware.params import Parameter, SetParametersResult, finite_floats
-from stillframe.middleware.taps import TappedPublisher
 
 
 class EstimatorNode:

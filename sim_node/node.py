@@ -62,7 +62,21 @@ from stillframe.contract.signals import Sample, actuator_of
 from stillframe.errors import InputError
 from stillframe.loop.closed_loop import LoopHistory, evaluate
 from stillframe.loop.command_gate import CommandGate
-from stillframe.loop.node_support import (
+from stillframe.loop.pacing import Pacer, wait_until
+from stillframe.loop.watchdog import MissRateGuard, command_expired
+from stillframe.loop.wiring import command_topic, estimator_inputs
+from stillframe.loop.writer_gate import InputGates
+from stillframe.middleware import api
+from stillframe.middleware.clock import ClockPublisher
+from stillframe.middleware.names import is_hidden
+from stillframe.middleware.taps import TappedPublisher
+from stillframe.node_runtime.realtime import (
+    Realtime,
+    RealtimeOptions,
+    declare_realtime,
+    start_realtime,
+)
+from stillframe.node_runtime.support import (
     ERROR,
     OK,
     RECORDER_NODE,
@@ -76,15 +90,6 @@ from stillframe.loop.node_support import (
     reaches_peer,
     wait_for_peers,
 )
-from stillframe.loop.pacing import Pacer, wait_until
-from stillframe.loop.realtime import Realtime, RealtimeOptions, declare_realtime, start_realtime
-from stillframe.loop.watchdog import MissRateGuard, command_expired
-from stillframe.loop.wiring import command_topic, estimator_inputs
-from stillframe.loop.writer_gate import InputGates
-from stillframe.middleware import api
-from stillframe.middleware.clock import ClockPublisher
-from stillframe.middleware.names import is_hidden
-from stillframe.middleware.taps import TappedPublisher
 from stillframe.plant.actuation_delay import ActuationDelay
 from stillframe.plant.frame_plant import make_plant
 

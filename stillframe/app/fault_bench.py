@@ -26,11 +26,11 @@ from stillframe.app.commands.bench_loop import realtime_overrides
 from stillframe.app.launcher import run_scene
 from stillframe.app.net_faults import Fault, applied
 from stillframe.app.netns_lab import Lab, host_prefixes
+from stillframe.bench.estimate_error import EstimateLog
 from stillframe.config.scene import load_scene
 from stillframe.contract.topics import DEFAULT_NAMESPACE, STATE_ESTIMATE
 from stillframe.locations import SCENES_DIR
 from stillframe.loop.closed_loop import LoopHistory, run_closed_loop
-from stillframe.loop.estimate_error import EstimateLog
 
 SCENE = SCENES_DIR / "thesis_lqg.yaml"
 RATE_HZ = 100.0

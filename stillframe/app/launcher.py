@@ -295,7 +295,7 @@ class LaunchOptions:
     #: nodes in one process (``container_node``, intra-process handover): "" none, "pair"
     #: the estimator and the controller, "all" the simulator too
     compose: str = ""
-    #: the loop nodes' real-time practices and CPUs (stillframe.loop.realtime; "": none)
+    #: the loop nodes' real-time practices and CPUs (stillframe.node_runtime.realtime; "": none)
     rt: str = ""
     rt_cpus: list[int] = field(default_factory=list)
     #: a command prefix per node that runs it on another host (``ip netns exec``,
@@ -505,7 +505,7 @@ def run_scene(scene: Path, overrides: Sequence[str], out: Path, mode: str = "loc
     (e.g. ports) start ``stillframe monitor`` beside the nodes; ``compose`` runs nodes in one
     process (``container_node``: "pair" the estimator and controller, "all" every node);
     ``rt`` and ``rt_cpus`` are the loop nodes' real-time practices and CPUs
-    (:mod:`stillframe.loop.realtime`); ``hosts``
+    (:mod:`stillframe.node_runtime.realtime`); ``hosts``
     runs nodes on other hosts (:attr:`LaunchOptions.hosts`).
     ``prepare(node)`` may subscribe the launcher's hidden node to more topics before the
     children start."""

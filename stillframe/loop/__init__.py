@@ -1,1 +1,2 @@
-"""The closed loop: lock-step in one process, its evaluation, and what the loop nodes share."""
+"""The closed loop in one process, its evaluation, and what every process of the loop agrees
+on (sample assembly, force matching, pacing, watchdogs, writer and command gates, wiring)."""

@@ -15,10 +15,10 @@ from stillframe.app.commands.bench_loop import (
     watchdog_zeros,
     within_period_pct,
 )
+from stillframe.bench.latency import LatencyLog
 from stillframe.config.scene import load_scene
 from stillframe.contract import messages
 from stillframe.locations import REPO_ROOT
-from stillframe.loop.latency import LatencyLog
 from tests.support.middleware import run_stillframe
 
 MS = 1_000_000

@@ -52,7 +52,7 @@ sys.exit({code!r})
 #: a controller that reports once, as it stops (a real node's last status counts the whole run)
 STATUS_AT_STOP = """\
 from stillframe.contract import topics
-from stillframe.loop.node_support import Diagnostics
+from stillframe.node_runtime.support import Diagnostics
 from stillframe.middleware import api
 node = api.create_node("controller_node", namespace=topics.DEFAULT_NAMESPACE)
 diagnostics = Diagnostics(node, 3600.0)

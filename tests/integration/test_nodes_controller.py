@@ -15,10 +15,10 @@ from stillframe.contract.codecs import EstimateMessages
 from stillframe.contract.signals import Estimate
 from stillframe.control.factory import make_controller
 from stillframe.design.coordinates import to_design
-from stillframe.loop.node_support import LoopParameters, diagnostic_values
 from stillframe.loop.wiring import design_model
 from stillframe.middleware.api import create_node, spin_until
 from stillframe.middleware.clock import ClockPublisher
+from stillframe.node_runtime.support import LoopParameters, diagnostic_values
 from tests.support.nodes import params_file, start_node, stop
 from tests.support.scenes import thesis_scene
 

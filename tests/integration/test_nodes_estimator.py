@@ -17,9 +17,9 @@ from stillframe.contract import messages, topics
 from stillframe.contract.codecs import SensorMessages
 from stillframe.contract.signals import Sample
 from stillframe.estimation.factory import make_estimator
-from stillframe.loop.node_support import LoopParameters, diagnostic_values
 from stillframe.loop.wiring import design_model
 from stillframe.middleware.api import create_node, spin_until
+from stillframe.node_runtime.support import LoopParameters, diagnostic_values
 from stillframe.plant.frame_plant import Plant
 from tests.support.nodes import SHORT_LQG, params_file, start_node, stop
 from tests.support.scenes import thesis_scene

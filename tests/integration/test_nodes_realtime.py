@@ -17,8 +17,8 @@ from sim_node.node import SimNode
 from stillframe.contract import topics
 from stillframe.locations import REPO_ROOT
 from stillframe.loop.closed_loop import run_closed_loop
-from stillframe.loop.node_support import LoopParameters
 from stillframe.middleware.api import create_node
+from stillframe.node_runtime.support import LoopParameters
 from stillframe.plant.frame_plant import Plant
 from tests.support.middleware import child_env, finish, start_python, wait_for_line
 from tests.support.nodes import params_file, run_loop, start_node, stop, wait_for_log

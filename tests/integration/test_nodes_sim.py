@@ -10,8 +10,8 @@ from pathlib import Path
 import numpy as np
 
 from stillframe.contract import messages, topics
-from stillframe.loop.node_support import diagnostic_values
 from stillframe.middleware.api import create_node, spin_until
+from stillframe.node_runtime.support import diagnostic_values
 from stillframe.plant.frame_plant import Plant
 from tests.support.middleware import finish
 from tests.support.nodes import params_file, start_node
@@ -139,8 +139,8 @@ def test_missing_command_times_out_held_then_safe_state(ros_domain: int,
 
 def test_sensor_topics_are_reliable_in_lockstep_only() -> None:
     """A lost best-effort sample would break lock-step's promise of identical numbers."""
-    from stillframe.loop.node_support import LoopParameters
     from stillframe.middleware.qos import PROFILES, Reliability
+    from stillframe.node_runtime.support import LoopParameters
 
     scene = thesis_scene("thesis_lqg")
     lockstep = LoopParameters(scene, "lockstep", 1.0, 1.0)

@@ -6,9 +6,9 @@ from __future__ import annotations
 
 import pytest
 
-from stillframe.loop.node_support import RECORDER_NODE, hears_peer, reaches_peer
 from stillframe.middleware import api
 from stillframe.middleware.qos import DEFAULT
+from stillframe.node_runtime.support import RECORDER_NODE, hears_peer, reaches_peer
 
 BACKENDS = ["dds", pytest.param("rclpy", marks=pytest.mark.skipif(
     not api.has_rclpy(), reason="rclpy is not importable here"))]

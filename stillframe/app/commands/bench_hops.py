@@ -31,8 +31,8 @@ def register(benches: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     if args.number < 1:
         raise InputError("bench hops: --number must be >= 1")
+    from stillframe.bench.hops import compute_hops, dds_hops
     from stillframe.config.scene import load_scene
-    from stillframe.loop.hops import compute_hops, dds_hops
     from stillframe.middleware import api
 
     scene = load_scene(SCENE, ["sensors.rate_hz=1000", "integrator.dt=0.001",

@@ -2,7 +2,7 @@
 
 1. Real-time mode at 100 Hz and 1 kHz (the LQG scene with ``sensors.rate_hz`` and a matching
    ``integrator.dt``): sensor-stamp-to-command latency p50 / p99 / max and deadline misses, seen
-   by an observer in this process (:mod:`stillframe.loop.latency`), beside sim_node's overruns.
+   by an observer in this process (:mod:`stillframe.bench.latency`), beside sim_node's overruns.
 2. Lock-step: the full LQG scene through the three nodes, steps per second and the ratio of
    simulated to wall time, against the same scene in one process (``closed-loop``, the best of
    :data:`ONE_PROCESS_RUNS` in this run: the baseline is the loop's cost, not the machine's
@@ -38,16 +38,16 @@ from stillframe.app.commands.launch import (
     realtime_arguments,
 )
 from stillframe.app.launcher import run_scene
+from stillframe.bench.latency import LatencyLog
 from stillframe.bench.stall_probe import stall_probe
 from stillframe.config.scene import load_scene
 from stillframe.contract.topics import DEFAULT_NAMESPACE, FLOOR_IMU, FORCE_CMD, TORQUE_CMD
 from stillframe.errors import InputError
 from stillframe.locations import SCENES_DIR
 from stillframe.loop.closed_loop import run_closed_loop
-from stillframe.loop.latency import LatencyLog
-from stillframe.loop.realtime import Realtime, RealtimeOptions, parse_practices
 from stillframe.loop.writer_gate import same_node
 from stillframe.middleware import api
+from stillframe.node_runtime.realtime import Realtime, RealtimeOptions, parse_practices
 from stillframe.text_table import format_table
 
 SCENE = SCENES_DIR / "thesis_lqg.yaml"
@@ -98,7 +98,7 @@ def stamp_ns(cdr: bytes) -> int:
 def observe(log: LatencyLog) -> Any:
     """A ``prepare`` hook for :func:`stillframe.app.launcher.run_scene`: the launcher's node logs
     floor-1 samples and both command topics with their source timestamps
-    (:mod:`stillframe.loop.latency`), reading only the stamps from the raw bytes (the observer
+    (:mod:`stillframe.bench.latency`), reading only the stamps from the raw bytes (the observer
     must keep up with 1 kHz on a loaded machine)."""
 
     def prepare(node: Any) -> None:

@@ -162,7 +162,7 @@ def add_realtime_arguments(parser: argparse.ArgumentParser) -> None:
 
 def realtime_arguments(args: argparse.Namespace) -> tuple[str, list[int]]:
     """The checked ``--rt`` practices and ``--rt-cpus`` CPUs."""
-    from stillframe.loop.realtime import parse_cpus, parse_practices
+    from stillframe.node_runtime.realtime import parse_cpus, parse_practices
 
     practices = parse_practices(args.rt)
     try:

@@ -63,11 +63,11 @@ def _check_port(name: str, port: int) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from stillframe.config.scene import load_scene
-    from stillframe.loop.realtime import run_idle
     from stillframe.middleware.api import create_node, spin
     from stillframe.middleware.names import resolve_topic
     from stillframe.monitor.dashboard import Dashboard, Limits, serve
     from stillframe.monitor.foxglove_bridge import FoxgloveBridge
+    from stillframe.node_runtime.realtime import run_idle
 
     _check_port("--port", args.port)
     _check_port("--dashboard-port", args.dashboard_port)

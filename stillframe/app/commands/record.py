@@ -25,9 +25,9 @@ def run(args: argparse.Namespace) -> int:
     from stillframe.bags.storage import BagWriter
     from stillframe.contract import messages
     from stillframe.errors import InputError
-    from stillframe.loop.node_support import RECORDER_NODE
     from stillframe.middleware.api import create_node, spin
     from stillframe.middleware.names import resolve_topic
+    from stillframe.node_runtime.support import RECORDER_NODE
     from stillframe.recording.recorder import Recorder
 
     check_output("-o", args.output)

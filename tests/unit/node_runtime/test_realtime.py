@@ -1,4 +1,4 @@
-"""The real-time practices (stillframe.loop.realtime) and the sleep/spin pacing: what the OS
+"""The real-time practices (stillframe.node_runtime.realtime) and the sleep/spin pacing: what the OS
 reports after each practice, the refusal messages of an unprivileged process, the collector's
 work between periods, and the waits of ``wait_until`` on a scripted clock."""
 
@@ -16,7 +16,7 @@ import pytest
 from stillframe.errors import InputError
 from stillframe.locations import REPO_ROOT
 from stillframe.loop.pacing import wait_until
-from stillframe.loop.realtime import (
+from stillframe.node_runtime.realtime import (
     CPU_LATENCY_DEVICE,
     GC_YOUNG,
     PRACTICES,
@@ -55,7 +55,7 @@ import ctypes, json, os, threading, time
 os.environ["OPENBLAS_NUM_THREADS"] = "2"     # numpy's and scipy's BLAS: two threads each
 import numpy, scipy.linalg
 from threadpoolctl import threadpool_info
-from stillframe.loop.realtime import Realtime, RealtimeOptions
+from stillframe.node_runtime.realtime import Realtime, RealtimeOptions
 
 def blas_threads():
     return sorted(i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas")

@@ -6,8 +6,8 @@ from types import SimpleNamespace
 
 import numpy as np
 
+from stillframe.bench.estimate_error import EstimateLog
 from stillframe.contract.codecs import STATE_NAMES
-from stillframe.loop.estimate_error import EstimateLog
 
 PERIOD_NS = 10_000_000
 
