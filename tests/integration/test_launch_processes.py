@@ -213,6 +213,24 @@ def test_a_dead_node_is_named_and_the_rest_stopped(
     assert json.loads((tmp_path / "out" / "result.json").read_text()) == partial
 
 
+def test_a_killed_simulator_still_leaves_the_statuses_and_who_died(
+        tmp_path: Path, ros_domain: int) -> None:
+    """The simulator itself SIGKILLed: no samples to keep, and the partial result says so (no
+    ``steps``), with who died and how the others stopped; exit 1."""
+    write_stand_ins(tmp_path, sim_seconds=3600)
+    proc = start_launch(tmp_path, "--out", "out")
+    pids, _ = wait_for_children(proc)
+    os.kill(pids["sim_node"], signal.SIGKILL)
+    out, err = proc.communicate(timeout=60)
+    assert proc.returncode == 1, err
+    assert "stillframe launch: error: sim_node died (killed by SIGKILL)" in err
+    assert "partial result (complete: false): no samples; written to out/result.json" in out
+    assert json.loads((tmp_path / "out" / "result.json").read_text()) == {
+        "complete": False, "died": {"node": "sim_node", "how": "killed by SIGKILL"},
+        "stopped": {"estimator_node": "exit code 0", "controller_node": "exit code 0"},
+        "diagnostics": {}}
+
+
 def test_killed_launcher_leaves_no_orphans(tmp_path: Path, ros_domain: int) -> None:
     """SIGKILL cannot be forwarded: the children's parent-death signal (prctl) ends them."""
     write_stand_ins(tmp_path, sim_seconds=3600)

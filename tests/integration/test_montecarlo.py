@@ -135,7 +135,9 @@ def test_a_failing_run_is_recorded_and_the_others_finish(tmp_path, capsys):
 
 def test_bad_study_input_is_one_line_exit_2(capsys):
     assert main(["montecarlo", SCENE, "--vary", "rig.floor_masses=±ten%"]) == 2
-    assert main(["montecarlo", SCENE, "--runs", "0"]) == 2
+    with pytest.raises(SystemExit) as usage:     # a usage error: argparse exits 2
+        main(["montecarlo", SCENE, "--runs", "0"])
+    assert usage.value.code == 2
     assert main(["montecarlo", SCENE, "--scheduler", "localhost:1"]) == 2
     assert main(["montecarlo", SCENE, "--runs", "3", "--only", "3"]) == 2
     assert main(["montecarlo", SCENE, "--target", "displacement>50"]) == 2
