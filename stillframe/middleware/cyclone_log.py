@@ -60,7 +60,9 @@ def count_deserialization_failures() -> None:
     _tapped.append(thread)
 
     def restore() -> None:
-        os.dup2(real, 2)        # the pipe's last writer gone: the thread reads to its end
-        thread.join(1.0)
+        # the pipe's last writer gone, the thread passes on what is left and ends; the wait
+        # is that long only if a child process still holds the pipe (then its output is lost)
+        os.dup2(real, 2)
+        thread.join(10.0)
 
     atexit.register(restore)

@@ -307,7 +307,10 @@ def test_cyclones_deserialisation_failures_are_counted_and_passed_on() -> None:
         "              ('floor1/imu', 'sensor_msgs::msg::dds_::Imu_')] * 3:\n"
         f"    os.write(2, {line!r}.format(topic=t, type=ty).encode())\n"
         "os.write(2, b'other output\\n')\n"
-        "import time; time.sleep(0.5)\n"
+        "import time\n"
+        "deadline = time.monotonic() + 60    # the tap's thread has counted them all\n"
+        "while sum(api.MALFORMED.values()) < 6 and time.monotonic() < deadline:\n"
+        "    time.sleep(0.01)\n"
         "print(dict(api.MALFORMED), flush=True)\n")
     done = subprocess.run([sys.executable, "-c", script], env=child_env(), cwd=REPO_ROOT,
                           capture_output=True, text=True, timeout=60)
