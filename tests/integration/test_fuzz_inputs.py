@@ -419,7 +419,8 @@ def test_real_stderr_of_a_binary_scene_and_non_utf8_arguments(tmp_path: Path) ->
 
 
 def test_unwritable_outputs_are_one_line(tmp_path: Path) -> None:
-    """--out under a file, in a read-only directory, on a full disk (/dev/full)."""
+    """--out under a file, in a directory that cannot be written, on a full disk
+    (/dev/full)."""
     blocker = tmp_path / "file"
     blocker.write_text("")
     readonly = tmp_path / "ro"
@@ -433,6 +434,13 @@ def test_unwritable_outputs_are_one_line(tmp_path: Path) -> None:
               f"{blocker} is a file"),
              (["identify", str(HAMMER), *IDENTIFY, "--plots", str(blocker / "plots")],
               f"{blocker} is a file")]
+    lumped = str(REPO_ROOT / "scenes" / "thesis_lumped.yaml")
+    # where even root cannot write: a process's /proc directory (refused before the work),
+    # sysfs (the write itself fails)
+    cases += [(["simulate", lumped, "--duration", "0.1", "--out", "/proc/1/h.npz"],
+               "/proc/1 is not writable"),
+              (["simulate", lumped, "--duration", "0.1", "--out", "/sys/stillframe/h.npz"],
+               "/sys/stillframe: ")]
     if os.geteuid() != 0:     # root writes into read-only directories
         cases.append((["simulate", str(SCENE), "--duration", "0.1", "--out",
                        str(readonly / "h.npz")], f"{readonly} is not writable"))
