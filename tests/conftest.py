@@ -16,6 +16,8 @@ from pathlib import Path
 os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
 os.environ.pop("ROS_STATIC_PEERS", None)
 os.environ.pop("ROS_LOCALHOST_ONLY", None)
+# a graph daemon a test's `stillframe topic|node` call starts leaves a minute after its last use
+os.environ["STILLFRAME_DAEMON_IDLE_S"] = "60"
 
 
 import pytest

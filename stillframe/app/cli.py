@@ -2,20 +2,28 @@
 
 Each listed module exposes ``register(subparsers)``, which adds its parser and sets
 ``func=run`` on it; ``run(args)`` returns the process exit code. Modules are imported only
-when listed here, so the core never imports the tools built on top of it at import time.
+when listed here, so the core never imports the tools built on top of it at import time; and
+a command line naming a command imports only that command's module (``stillframe topic list``
+does not load the simulator). The list of commands (``stillframe --help``) reads each module's
+summary from its docstring without importing it.
 """
 
 from __future__ import annotations
 
 import argparse
+import ast
 import contextlib
 import importlib
+import importlib.util
 import math
 import os
+import re
 import signal
 import sys
+from pathlib import Path
 from typing import Any, NoReturn
 
+from stillframe.app.ros_tools import VERBOSE_ENV
 from stillframe.errors import InputError, StillframeError
 
 COMMANDS: tuple[str, ...] = (
@@ -38,6 +46,9 @@ COMMANDS: tuple[str, ...] = (
     "stillframe.app.commands.ph",
     "stillframe.app.commands.montecarlo",
     "stillframe.app.commands.netns",
+    "stillframe.app.commands.node",
+    "stillframe.app.commands.interface",
+    "stillframe.app.commands.daemon",
 )
 
 
@@ -64,14 +75,46 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {message} (see {self.prog} -h)\n")
 
 
-def build_parser() -> argparse.ArgumentParser:
+def _module_of(argv: list[str]) -> str | None:
+    """The module of the command ``argv`` names (its first word that is not an option), if any
+    listed module has that name (``closed-loop`` is ``closed_loop``)."""
+    word = next((a for a in argv if not a.startswith("-")), "")
+    wanted = f"stillframe.app.commands.{word.replace('-', '_')}"
+    return wanted if wanted in COMMANDS else None
+
+
+def command_name(module: str) -> str:
+    """``closed-loop`` of ``stillframe.app.commands.closed_loop``."""
+    return module.rsplit(".", 1)[1].replace("_", "-")
+
+
+def synopsis(module: str) -> str:
+    """What a command does, for the list of commands: the first clause of its module's
+    docstring after the usage (``stillframe modes SCENE``: ...), markup removed, read without
+    importing the module."""
+    source = Path(importlib.util.find_spec(module).origin).read_text()
+    text = " ".join((ast.get_docstring(ast.parse(source)) or "").split("\n\n")[0].split())
+    text = re.sub(r":\w+:`([^`]+)`", r"\1", text.split("``: ", 1)[-1]).replace("``", "")
+    return re.split(r"\. | \(|: ", text, maxsplit=1)[0].rstrip(".")
+
+
+def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
+    """The parser of every command (``argv`` None), or of the one ``argv`` names; when it names
+    none (``--help``, a typo), the list of commands with their synopses, importing none."""
     parser = _Parser(
         prog="stillframe",
         description="Simulate, identify and control a flexible frame with an active mass damper.",
     )
+    parser.add_argument("--verbose", action="store_true",
+                        help="log the tools' own nodes (their middleware backend) too")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
-    for name in COMMANDS:
+    only = _module_of(argv) if argv is not None else None
+    if argv is not None and only is None:
+        for name in COMMANDS:
+            sub.add_parser(command_name(name), help=synopsis(name))
+        return parser
+    for name in (only,) if only else COMMANDS:
         importlib.import_module(name).register(sub)
     return parser
 
@@ -89,8 +132,10 @@ def _quiet_stdout() -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = build_parser()
-    args = parser.parse_args(argv)
+    argv = sys.argv[1:] if argv is None else argv
+    args = build_parser(argv).parse_args(argv)
+    if args.verbose:
+        os.environ[VERBOSE_ENV] = "1"  # read by the tools' own nodes
     try:
         code = int(args.func(args) or 0)
         sys.stdout.flush()

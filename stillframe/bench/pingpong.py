@@ -69,7 +69,7 @@ class CycloneEnd:
     """Plain cyclonedds: a participant, a writer on ``out``, a reader on ``inp``, a waitset."""
 
     def __init__(self, out: str, inp: str, own_domain: bool) -> None:
-        domain = dds_backend.domain_id()
+        domain = discovery.domain_id()
         config = discovery.cyclone_config()
         self.domain = Domain(domain, config) if own_domain and config else None
         self.participant = DomainParticipant(domain)

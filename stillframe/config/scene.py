@@ -134,7 +134,8 @@ class Integrator(Section):
     """integrator: the time integration of the model."""
 
     method: Literal["rk4", "midpoint", "dop853", "radau"] = key("rk4")
-    dt: float = key(1e-3, in_range(1e-9, 1.0), doc="fixed step, or output step of adaptive methods")
+    dt: float = key(1e-3, in_range(1e-9, 1.0),
+                    doc="fixed step, or output step of adaptive methods [s]")
     rtol: float = key(1e-10, in_range(1e-15, 1.0))
     atol: float = key(1e-12, in_range(1e-300, 1.0))
 

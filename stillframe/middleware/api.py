@@ -21,13 +21,18 @@ otherwise; the environment variable ``STILLFRAME_RMW=dds|rclpy`` overrides the c
 from __future__ import annotations
 
 import functools
-import importlib.util
-import os
 import sys
 from collections.abc import Callable
 from pathlib import Path
 
-from stillframe.errors import InputError, StillframeError
+from stillframe.errors import StillframeError
+from stillframe.middleware.backend_choice import (
+    BACKEND_ENV,
+    BACKENDS,
+    backend_name,
+    check_backend,
+    has_rclpy,
+)
 from stillframe.middleware.clock import Clock, Time
 from stillframe.middleware.cyclone_log import count_deserialization_failures
 from stillframe.middleware.interface import (
@@ -51,33 +56,6 @@ __all__ = ["BACKENDS", "BACKEND_ENV", "MALFORMED", "MessageInfo", "Node", "Param
            "check_backend", "create_node", "deliver", "freeze_setup_objects", "has_rclpy",
            "install_signal_handlers", "node_main", "ok", "shutdown", "spin", "spin_once",
            "spin_until"]
-
-BACKEND_ENV = "STILLFRAME_RMW"
-BACKENDS = ("dds", "rclpy")
-
-
-def has_rclpy() -> bool:
-    """Whether real rclpy is importable (installed from PyPI by ``stillframe[ros]``)."""
-    return importlib.util.find_spec("rclpy") is not None
-
-
-def check_backend(backend: str, what: str) -> str:
-    """``backend`` if it is one of :data:`BACKENDS` and usable here; InputError naming ``what``."""
-    if backend not in BACKENDS:
-        raise InputError(f"{what}: unknown backend {backend!r} (expected one of "
-                         f"{', '.join(BACKENDS)})")
-    if backend == "rclpy" and not has_rclpy():
-        raise InputError(f"{what}: rclpy cannot be imported here (pip install 'stillframe[ros]', "
-                         "or source a ROS 2 Jazzy install)")
-    return backend
-
-
-def backend_name() -> str:
-    """``STILLFRAME_RMW`` if set, else ``rclpy`` when importable, else ``dds``."""
-    chosen = os.environ.get(BACKEND_ENV, "").strip()
-    if not chosen:
-        return "rclpy" if has_rclpy() else "dds"
-    return check_backend(chosen, f"{BACKEND_ENV}={chosen}")
 
 
 def create_node(name: str, namespace: str | None = None, argv: list[str] | None = None,

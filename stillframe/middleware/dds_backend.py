@@ -16,7 +16,6 @@ the process. ``ROS_DOMAIN_ID`` selects the domain; ``ROS_AUTOMATIC_DISCOVERY_RAN
 from __future__ import annotations
 
 import itertools
-import os
 import time
 from collections.abc import Callable
 from typing import Any, ClassVar
@@ -83,14 +82,6 @@ _NEW_ALIVE = SampleState.NotRead | ViewState.Any | InstanceState.Alive
 _NEW_GONE = (SampleState.NotRead | ViewState.Any | InstanceState.NotAliveDisposed
              | InstanceState.NotAliveNoWriters)
 _RELIABLE_BLOCKING_NS = 100_000_000  # rmw_cyclonedds' max_blocking_time
-
-
-def domain_id() -> int:
-    """``ROS_DOMAIN_ID`` (default 0); InputError unless an integer 0..232."""
-    text = os.environ.get("ROS_DOMAIN_ID", "").strip() or "0"
-    if not text.isdigit() or int(text) > 232:
-        raise InputError(f"ROS_DOMAIN_ID={text!r}: expected an integer 0..232")
-    return int(text)
 
 
 def dds_qos(profile: QoSProfile, user_data: bytes | None = None, writer: bool = True) -> Qos:
@@ -175,7 +166,7 @@ class Context:
 
     @classmethod
     def get(cls) -> Context:
-        domain = domain_id()
+        domain = discovery.domain_id()
         if domain not in cls._instances:
             cls._instances[domain] = cls(domain)
         return cls._instances[domain]
@@ -325,6 +316,18 @@ class Context:
             ))
         self._endpoints[kind] = ((reads, owners), result)
         return result
+
+    def services(self, kind: str) -> list[tuple[str, str, str, str]]:
+        """(node namespace, node name, service, type) of every alive request reader
+        (``kind='subscription'``: a service server) or request writer (a client)."""
+        owners = {gid: (namespace, name) for nodes in self.node_names().values()
+                  for namespace, name, gids in nodes for gid in gids}
+        found = []
+        for ep in self._alive(kind)[1]:
+            service, rtype = dds_types.ros_service(ep.topic_name), dds_types.ros_type(ep.type_name)
+            if service is not None and rtype is not None and ep.key.bytes in owners:
+                found.append((*owners[ep.key.bytes], service, rtype))
+        return found
 
 
 def _read_all(reader: BuiltinDataReader, condition: ReadCondition) -> list[Any]:
@@ -675,6 +678,17 @@ class DdsNode:
             for nodes in self.context.node_names().values()
             for namespace, name, _ in nodes
         )
+
+    def get_service_names_and_types_by_node(
+        self, node_name: str, node_namespace: str, server: bool = True
+    ) -> list[tuple[str, list[str]]]:
+        """A node's service servers (``server``) or clients, from their request endpoints."""
+        found: dict[str, set[str]] = {}
+        for namespace, name, service, rtype in self.context.services(
+                "subscription" if server else "publication"):
+            if (name, namespace) == (node_name, node_namespace):
+                found.setdefault(service, set()).add(rtype)
+        return [(service, sorted(types)) for service, types in sorted(found.items())]
 
     # -- execution ---------------------------------------------------------------------------
     def attach(self, condition: Any, handler: Callable[[], Any]) -> None:

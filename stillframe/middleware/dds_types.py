@@ -39,6 +39,14 @@ def ros_topic(dds_topic_name: str) -> str | None:
     return dds_topic_name[len(TOPIC_PREFIX):] if dds_topic_name.startswith(prefix) else None
 
 
+def ros_service(dds_topic_name: str) -> str | None:
+    """``rq/a/bRequest`` -> ``/a/b`` (the request topic names the service); None otherwise."""
+    prefix, suffix = "rq/", "Request"
+    if not (dds_topic_name.startswith(prefix) and dds_topic_name.endswith(suffix)):
+        return None
+    return dds_topic_name[len(prefix) - 1:-len(suffix)]
+
+
 def dds_type(ros_type: str) -> str:
     """``pkg/msg/Type`` -> ``pkg::msg::dds_::Type_``."""
     pkg, sub, name = messages.type_name(ros_type).split("/")
@@ -50,7 +58,10 @@ def ros_type(dds_type_name: str) -> str | None:
     parts = dds_type_name.split("::")
     if len(parts) != 4 or parts[2] != "dds_" or not parts[3].endswith("_"):
         return None
-    return f"{parts[0]}/{parts[1]}/{parts[3][:-1]}"
+    name = parts[3][:-1]
+    if parts[1] == "srv":  # a request or reply type names its service type
+        name = name.removesuffix("_Request").removesuffix("_Response")
+    return f"{parts[0]}/{parts[1]}/{name}"
 
 
 def _member(desc: tuple[Nodetype, Any]) -> Any:

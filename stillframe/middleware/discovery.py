@@ -52,6 +52,14 @@ def discovery_range() -> DiscoveryRange:
         raise InputError(f"{RANGE_ENV}={text!r}: expected one of {choices}") from None
 
 
+def domain_id() -> int:
+    """``ROS_DOMAIN_ID`` (default 0); InputError unless an integer 0..232."""
+    text = os.environ.get("ROS_DOMAIN_ID", "").strip() or "0"
+    if not text.isdigit() or int(text) > 232:
+        raise InputError(f"ROS_DOMAIN_ID={text!r}: expected an integer 0..232")
+    return int(text)
+
+
 def static_peers() -> list[str]:
     """``ROS_STATIC_PEERS`` as a list of hosts."""
     return [p.strip() for p in os.environ.get(PEERS_ENV, "").split(";") if p.strip()]

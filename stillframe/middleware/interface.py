@@ -13,11 +13,11 @@ import signal
 import threading
 from collections import Counter
 from collections.abc import Callable
-from dataclasses import dataclass
 from typing import Any, NamedTuple, Protocol
 
 from stillframe.contract import messages
 from stillframe.middleware.clock import Clock
+from stillframe.middleware.graph import TopicEndpointInfo
 from stillframe.middleware.logger import Logger
 from stillframe.middleware.params import Parameter, SetCallback
 from stillframe.middleware.qos import QoSProfile
@@ -27,25 +27,16 @@ class MessageInfo(NamedTuple):
     """What a raw subscription learns about a sample besides its bytes (ns since the epoch;
     ``received_timestamp`` on the node's clock, i.e. sim time with ``use_sim_time``).
     ``publisher_gid``: the writer's GID (its DDS GUID, as ``endpoint_gid`` in the graph), empty
-    where the backend does not expose it (rclpy Jazzy's message info carries none). A tuple: one
-    is made per sample on the loop's path (a frozen dataclass cost three times as much)."""
+    where the backend does not expose it (rclpy Jazzy's message info carries none).
+    ``publication_sequence``: the writer's sequence number of the sample (1, 2, … per writer; 0
+    where the backend does not give it), what tells writers apart without GIDs
+    (:mod:`stillframe.loop.writer_gate`). A tuple: one is made per sample on the loop's path (a
+    frozen dataclass cost three times as much)."""
 
     source_timestamp: int
     received_timestamp: int
     publisher_gid: bytes = b""
-
-
-@dataclass(frozen=True)
-class TopicEndpointInfo:
-    """One publisher or subscription of a topic, as discovered (like rclpy's)."""
-
-    topic_name: str
-    topic_type: str
-    topic_type_hash: str
-    endpoint_gid: bytes
-    qos_profile: QoSProfile
-    node_name: str = ""
-    node_namespace: str = ""
+    publication_sequence: int = 0
 
 
 class Publisher(Protocol):
@@ -120,6 +111,9 @@ class Node(Protocol):
     def count_publishers(self, topic: str) -> int: ...
     def get_subscriptions_info_by_topic(self, topic: str) -> list[TopicEndpointInfo]: ...
     def get_node_names_and_namespaces(self) -> list[tuple[str, str]]: ...
+    def get_service_names_and_types_by_node(
+        self, node_name: str, node_namespace: str, server: bool = True
+    ) -> list[tuple[str, list[str]]]: ...
     def spin_once(self, timeout_sec: float | None = None) -> None: ...
     def destroy_node(self) -> None: ...
 

@@ -3,10 +3,10 @@ receive-rate statistics (what ``stillframe topic`` shows, shaped like ``ros2 top
 
 from __future__ import annotations
 
-import os
 import statistics
 import sys
 from collections import deque
+from collections.abc import Callable
 from typing import Any
 
 import yaml
@@ -17,16 +17,13 @@ from stillframe.middleware import api, names
 from stillframe.middleware.qos import DEFAULT, Durability, QoSProfile, Reliability
 
 
-def cli_node() -> api.Node:
-    """A hidden node (name starting with '_') for a command-line tool."""
-    return api.create_node(f"_stillframe_topic_{os.getpid()}", argv=["stillframe"])
-
-
 def wait_for_publisher(
-    node: api.Node, topic: str, timeout: float | None
+    node: api.Node, topic: str, timeout: float | None,
+    on_missing: Callable[[str], None] | None = None,
 ) -> tuple[str, QoSProfile]:
     """The type of ``topic`` and a QoS compatible with all its publishers (like ``ros2 topic``:
-    reliable/transient-local only if every publisher offers it)."""
+    reliable/transient-local only if every publisher offers it). ``on_missing(full_name)`` is
+    called once if no publisher was found in the first half second (it may raise)."""
     full = names.resolve_topic(topic)
     found: list[api.TopicEndpointInfo] = []
 
@@ -35,6 +32,8 @@ def wait_for_publisher(
         return bool(found)
 
     if not api.spin_until(node, discovered, 0.5 if timeout is None else min(timeout, 0.5)):
+        if on_missing is not None:
+            on_missing(full)
         print(f"WARNING: topic [{full}] does not appear to be published yet", file=sys.stderr)
         remaining = 1e9 if timeout is None else max(timeout - 0.5, 0.0)
         if not api.spin_until(node, discovered, remaining):

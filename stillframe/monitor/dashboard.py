@@ -2,9 +2,10 @@
 
 One page (``stillframe/data/dashboard.html``) of Plotly charts: per floor the true and
 estimated displacement (``state_truth``, ``state_estimate``) with the measured acceleration
-(``floorN/imu``); the pendulum angle; the command with its limits; and each node's counters from
-``/diagnostics``, red when an error counter is non-zero. The page polls ``/data`` twice a
-second. Decimation happens before any work is done on a sample: the loop's topics are read
+(``floorN/imu``); the pendulum angle; the command (torque in N·m on the left axis, force in N on
+the right) with its limits; the controller's start marked on every chart; and each node's
+counters from ``/diagnostics``, red when an error counter is non-zero. The page polls ``/data``
+twice a second. Decimation happens before any work is done on a sample: the loop's topics are read
 from their monitor taps (:mod:`stillframe.middleware.taps`, thinned by the loop's writers) when
 published, else from the topics, by polled subscriptions (KEEP_LAST 1), and every ``1 / rate_hz``
 s of wall time the newest sample of each is taken, decoded and kept; each series keeps its last
@@ -69,6 +70,15 @@ SERIES: dict[str, tuple[TopicSpec, Callable[[Any], list[float]]]] = {
 }
 
 
+#: each chart of the page: (title, left axis, right axis or None), every axis with its unit
+CHARTS: dict[str, tuple[str, str, str | None]] = {
+    **{f"floor{n}": (f"floor {n}", "x [m]", "a [m/s²]") for n in (1, 2, 3)},
+    "pendulum": ("pendulum angle", "φ [rad]", None),
+    "command": ("command and limits", "torque [N·m]", "force [N]"),
+}
+TIME_AXIS = "t [s]"
+
+
 class Series:
     """The last ``points`` samples kept, ``(stamp [s], values)``."""
 
@@ -91,11 +101,13 @@ class Series:
 
 @dataclass
 class Limits:
-    """The command limits drawn on the command plot (None: not set in the scene)."""
+    """The command limits drawn on the command plot (None: not set in the scene), and when the
+    controller starts (``controller.start`` [s], marked on every chart; None: not known)."""
 
     command: float | None = None
     torque: float | None = None
     force: float | None = None
+    controller_start: float | None = None
 
 
 class Dashboard(TopicFollower):
@@ -145,7 +157,9 @@ class Dashboard(TopicFollower):
                     "diagnostics": {k: dict(v) for k, v in self.diagnostics.items()},
                     "error_keys": list(ERROR_KEYS),
                     "limits": {"command": self.limits.command, "torque": self.limits.torque,
-                               "force": self.limits.force}}
+                               "force": self.limits.force},
+                    "controller_start": self.limits.controller_start,
+                    "charts": CHARTS, "time_axis": TIME_AXIS}
 
 
 def _asset(package: str, name: str) -> bytes:

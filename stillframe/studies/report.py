@@ -5,7 +5,9 @@ from __future__ import annotations
 
 import csv
 import math
+import re
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -69,45 +71,97 @@ def fractions(rows: Sequence[dict[str, Any]],
     }
 
 
-def plot(rows: Sequence[dict[str, Any]], what: str, varied: Sequence[str],
-         directory: Path) -> list[Path]:
-    """Histograms of the headline figures; each headline figure against each varied column."""
+#: the figures of a run as the table names them (``reduction_pct.displacement.1``): a label
+#: with its unit, from the column's pattern (the numbers are 1-based floors or modes)
+FIGURE_LABELS: tuple[tuple[re.Pattern[str], str], ...] = tuple(
+    (re.compile(pattern), label) for pattern, label in (
+        (r"reduction_pct\.(\w+)\.(\d)", "{0} reduction, floor {1} [%]"),
+        (r"peak_displacement_m\.(\d)", "peak displacement, floor {0} [m]"),
+        (r"peak_acceleration_m_s2\.(\d)", "peak acceleration, floor {0} [m/s²]"),
+        (r"(frequency|damping)_error", "worst relative {0} error [-]"),
+    ))
+
+
+def figure_label(column: str) -> str:
+    """``displacement reduction, floor 1 [%]`` for ``reduction_pct.displacement.1``."""
+    for pattern, label in FIGURE_LABELS:
+        if match := pattern.fullmatch(column):
+            return label.format(*match.groups())
+    return column
+
+
+@dataclass(frozen=True)
+class PlotContext:
+    """What the plots say besides the runs: the scene, the targets a figure must reach
+    (column -> value) and the nominal value of each varied key (column -> value)."""
+
+    scene: str
+    what: str
+    targets: dict[str, float] = field(default_factory=dict)
+    nominal: dict[str, float] = field(default_factory=dict)
+
+    def title(self, runs: int) -> str:
+        return f"{self.scene}: {runs} runs ({self.what})"
+
+
+def plot(rows: Sequence[dict[str, Any]], varied: Sequence[str], directory: Path,
+         context: PlotContext) -> list[Path]:
+    """Histograms of the headline figures with their targets; each headline figure against each
+    varied key with the nominal value marked. Axes are labelled from the scene schema
+    (:func:`stillframe.config.labels.key_label`) and :data:`FIGURE_LABELS`, with units."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    from stillframe.config.labels import key_label
+
     ok = [r for r in rows if r["status"] == "ok"]
-    columns = headline_columns(ok, what)
+    columns = headline_columns(ok, context.what)
     if not ok or not columns:
         return []
     directory.mkdir(parents=True, exist_ok=True)
     paths = []
     cols = min(3, len(columns))
     grid = (math.ceil(len(columns) / cols), cols)
+
+    def target(ax: Any, column: str, vertical: bool) -> None:
+        if column in context.targets:
+            line = ax.axvline if vertical else ax.axhline
+            line(context.targets[column], color="C3", ls="--", lw=1,
+                 label=f"target {context.targets[column]:g}")
+            ax.legend(fontsize=7)
+
+    def save(fig: Any, name: str) -> None:
+        fig.suptitle(context.title(len(ok)), fontsize=10)
+        fig.tight_layout()
+        paths.append(directory / name)
+        fig.savefig(paths[-1], dpi=100)
+        plt.close(fig)
+
     fig, axes = plt.subplots(*grid, figsize=(4 * cols, 3 * grid[0]), squeeze=False)
     for ax, column in zip(axes.flat, columns, strict=False):
         ax.hist([r[column] for r in ok], bins="auto", color="C0")
-        ax.set_title(column, fontsize=8)
-        ax.set_ylabel("runs")
+        ax.set_xlabel(figure_label(column), fontsize=8)
+        ax.set_ylabel("runs [-]", fontsize=8)
+        target(ax, column, vertical=True)
     for ax in list(axes.flat)[len(columns):]:
         ax.set_visible(False)
-    fig.tight_layout()
-    paths.append(directory / "histograms.png")
-    fig.savefig(paths[-1], dpi=100)
-    plt.close(fig)
+    save(fig, "histograms.png")
     for key in varied:
         if not all(isinstance(r.get(key), int | float) for r in ok):
             continue
         fig, axes = plt.subplots(*grid, figsize=(4 * cols, 3 * grid[0]), squeeze=False)
         for ax, column in zip(axes.flat, columns, strict=False):
             ax.plot([r[key] for r in ok], [r[column] for r in ok], ".", ms=3)
-            ax.set_xlabel(key, fontsize=8)
-            ax.set_ylabel(column, fontsize=8)
+            if key in context.nominal:
+                ax.axvline(context.nominal[key], color="k", ls=":", lw=1,
+                           label=f"nominal {context.nominal[key]:g}")
+                ax.legend(fontsize=7)
+            ax.set_xlabel(key_label(key), fontsize=8)
+            ax.set_ylabel(figure_label(column), fontsize=8)
+            target(ax, column, vertical=False)
         for ax in list(axes.flat)[len(columns):]:
             ax.set_visible(False)
-        fig.tight_layout()
-        paths.append(directory / f"vs_{key}.png")
-        fig.savefig(paths[-1], dpi=100)
-        plt.close(fig)
+        save(fig, f"vs_{key}.png")
     return paths

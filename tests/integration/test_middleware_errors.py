@@ -6,7 +6,7 @@ import pytest
 
 from stillframe.contract import messages
 from stillframe.errors import InputError
-from stillframe.middleware import api, names
+from stillframe.middleware import api, backend_choice, names
 from stillframe.middleware.api import create_node
 
 
@@ -82,7 +82,7 @@ def test_backend_choice(monkeypatch: pytest.MonkeyPatch) -> None:
         api.backend_name()
     monkeypatch.delenv(api.BACKEND_ENV)
     assert api.backend_name() == ("rclpy" if api.has_rclpy() else "dds")
-    monkeypatch.setattr(api, "has_rclpy", lambda: False)
+    monkeypatch.setattr(backend_choice, "has_rclpy", lambda: False)  # api re-exports its choice
     assert api.backend_name() == "dds"
     monkeypatch.setenv(api.BACKEND_ENV, "rclpy")
     with pytest.raises(InputError, match="rclpy cannot be imported"):

@@ -21,6 +21,7 @@ BENCHES: tuple[str, ...] = (
     "stillframe.app.commands.bench_montecarlo",
     "stillframe.app.commands.bench_faults",
     "stillframe.app.commands.bench_soak",
+    "stillframe.app.commands.bench_cli",
 )
 
 

@@ -63,7 +63,7 @@ def plot(result: dict, directory: Path) -> list[Path]:
         ref = result["reference"]
         ax.set_title(f"{scene}: error vs {ref['model']} {ref['method']} dt={ref['dt']:g} s")
         ax.set_xlabel("CPU time per simulated second [s]")
-        ax.set_ylabel("max relative error of x1..x3, phi")
+        ax.set_ylabel("max relative error of x1..x3, phi [-]")
         ax.grid(True, which="both", alpha=0.3)
         ax.legend(fontsize=7, ncol=2)
         path = directory / f"fidelity_{scene}.png"

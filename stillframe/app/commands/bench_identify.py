@@ -31,7 +31,7 @@ FIGURES: tuple[tuple[str, str, float], ...] = (
     ("frequency_error_p90", "90th-percentile worst-mode frequency error [%]", 100.0),
     ("damping_error_median", "median worst-mode damping error [%]", 100.0),
     ("damping_error_p90", "90th-percentile worst-mode damping error [%]", 100.0),
-    ("silently_wrong", "silently wrong runs", 1.0),
+    ("silently_wrong", "silently wrong runs [-]", 1.0),
 )
 LABELS = {"stillframe": "stillframe", "stillframe_okid": "OKID/ERA-DC only", "n4sid": "N4SID",
           "python_control": "python-control"}
@@ -96,7 +96,7 @@ def heat_maps(table: list[dict], directory: Path) -> list[Path]:
             ax.set_xlabel("record length [samples]")
             ax.set_ylabel("SNR [dB]")
             ax.set_title(f"{LABELS[method]}: {title}", fontsize=9)
-            fig.colorbar(image, ax=ax, label="log10" if scale != 1.0 else "runs")
+            fig.colorbar(image, ax=ax, label="error [log10 %]" if scale != 1.0 else "runs [-]")
             fig.tight_layout()
             path = directory / f"identify_sweep_{method}_{key}.png"
             fig.savefig(path, dpi=100)

@@ -16,7 +16,7 @@ import argparse
 import os
 import sys
 
-from stillframe.app.commands.common import add_json_argument, emit_json
+from stillframe.app.commands.common import add_json_argument, emit_json, scene_path
 from stillframe.errors import InputError
 from stillframe.locations import SCENES_DIR
 from stillframe.text_table import format_table
@@ -28,7 +28,7 @@ SHORT = ["duration=10", "controller.start=5", "evaluation.window=5"]
 def register(benches: argparse._SubParsersAction) -> None:
     parser = benches.add_parser("montecarlo", help="Monte Carlo scaling: 1, 2, all local "
                                                    "workers and an external 2-worker cluster")
-    parser.add_argument("--scene", default=str(DEFAULT_SCENE), help="scene (default "
+    parser.add_argument("--scene", default=DEFAULT_SCENE, type=scene_path, help="scene (default "
                         "lqg_mismatch)")
     parser.add_argument("--set", dest="overrides", action="append", default=None,
                         metavar="KEY=VALUE", help="scene overrides (default: "

@@ -83,7 +83,7 @@ def run(args: argparse.Namespace) -> int:
     if args.scene is not None:
         scene = load_scene(args.scene, args.overrides)
         limits = Limits(scene.controller.limit, scene.actuators.torque_limit,
-                        scene.actuators.force_limit)
+                        scene.actuators.force_limit, scene.controller.start)
     node = create_node("stillframe_monitor", argv=sys.argv[:1])
     try:
         try:

@@ -87,7 +87,7 @@ def run(args: argparse.Namespace) -> int:
     from stillframe.config.scene import load_scene
     from stillframe.studies import report
     from stillframe.studies.executor import run_tasks
-    from stillframe.studies.montecarlo import plan, row, run_one
+    from stillframe.studies.montecarlo import flatten, plan, row, run_one
     from stillframe.studies.vary import parse_vary
 
     check_output("--out", args.out)
@@ -114,7 +114,12 @@ def run(args: argparse.Namespace) -> int:
     rows = [row(study.spec(o.index), o) for o in execution.outcomes]
     table = report.write_table(rows, out / "runs.csv")
     varied = [k for k in rows[0] if k.startswith(tuple(v.key for v in variations))] if rows else []
-    plots = report.plot(rows, args.what, varied, out)
+    nominal = flatten(scene.to_dict())
+    context = report.PlotContext(
+        scene.name, args.what,
+        targets={f"reduction_pct.{q}.{f}": pct for q, floors, pct in targets for f in floors},
+        nominal={k: nominal[k] for k in varied if isinstance(nominal.get(k), int | float)})
+    plots = report.plot(rows, varied, out, context)
     document = {
         "scene": scene.name, "what": args.what, "seed": args.seed, "requested": n,
         "runs": len(rows), "failed": sum(r["status"] == "failed" for r in rows),

@@ -1,6 +1,12 @@
-"""``stillframe param list|get|set NODE [NAME [VALUE]]``: a running node's parameters through
-the standard parameter services (``rcl_interfaces/srv/ListParameters``, ``GetParameters``,
+"""``stillframe param list|get|set|dump|load``: a running node's parameters through the standard
+parameter services (``rcl_interfaces/srv/ListParameters``, ``GetParameters``,
 ``SetParameters``, ``DescribeParameters`` under ``NODE/``), like ``ros2 param``.
+
+``param list`` without NODE lists every node's parameter names as ``ros2 param list`` does
+(``/node:`` then the names); nodes on the other DDS vendor than this process's backend are named
+and skipped (parameter services do not cross vendors, docs/middleware.md). ``param dump NODE``
+prints the node's parameters as a ROS 2 parameter file; ``param load NODE FILE`` sets those a
+parameter file gives the node (its own key and the ``/**`` wildcard), one line per parameter.
 
 On the ``rclpy`` backend the calls go through rclpy's service clients, on ``dds`` through
 :mod:`stillframe.middleware.dds_services`. NODE is a fully qualified name (``/frame/sim_node``)
@@ -14,12 +20,16 @@ from __future__ import annotations
 import argparse
 import os
 import sys
+from pathlib import Path
 from typing import Any
 
+import yaml
+
 from stillframe.app.commands.common import add_json_argument, emit_json
-from stillframe.contract import messages, topics
+from stillframe.app.ros_tools import add_strategy_arguments, graph_of, node_name, tool_node
+from stillframe.contract import messages
 from stillframe.errors import InputError
-from stillframe.middleware import api, names
+from stillframe.middleware import api
 from stillframe.middleware.param_messages import (
     DOUBLE,
     DOUBLE_ARRAY,
@@ -28,7 +38,7 @@ from stillframe.middleware.param_messages import (
     value_msg,
     value_of,
 )
-from stillframe.middleware.params import parse_value
+from stillframe.middleware.params import load_param_file, parse_value
 from stillframe.text_table import format_table
 
 SERVICE_TYPES = {"list": "ListParameters", "get": "GetParameters", "set": "SetParameters",
@@ -40,27 +50,27 @@ def register(sub: argparse._SubParsersAction) -> None:
                             "(like ros2 param)")
     verbs = parser.add_subparsers(dest="verb", metavar="VERB")
     verbs.required = True
-    for verb, text in (("list", "every parameter with its type, value and read-only flag"),
-                       ("get", "one parameter's value"), ("set", "set one parameter")):
+    for verb, text in (("list", "every parameter with its type, value and read-only flag "
+                                "(without NODE: every node's parameter names)"),
+                       ("get", "one parameter's value"), ("set", "set one parameter"),
+                       ("dump", "the node's parameters as a ROS 2 parameter file (YAML)"),
+                       ("load", "set the parameters a ROS 2 parameter file gives the node")):
         command = verbs.add_parser(verb, help=text)
-        command.add_argument("node", metavar="NODE", help="e.g. /frame/controller_node")
-        if verb != "list":
+        command.add_argument("node", metavar="NODE", nargs="?" if verb == "list" else None,
+                             help="e.g. /frame/controller_node")
+        if verb in ("get", "set"):
             command.add_argument("name", metavar="NAME")
         if verb == "set":
             command.add_argument("value", metavar="VALUE", help="YAML, e.g. 0.5, false, [1, 2]")
+        if verb == "load":
+            command.add_argument("file", metavar="FILE", type=Path, help="parameter file")
         command.add_argument("--timeout", type=float, default=10.0, metavar="S",
                              help="wait at most S seconds for the node (default 10)")
-        add_json_argument(command)
-        command.set_defaults(func=run)
-
-
-def node_name(text: str) -> str:
-    """The fully qualified node name of NODE (bare names are in the loop's namespace)."""
-    full = text if text.startswith("/") else f"{topics.DEFAULT_NAMESPACE}/{text}"
-    namespace, _, name = full.rpartition("/")
-    names.validate_node_name(name)
-    names.validate_namespace(namespace or "/")
-    return full
+        if verb == "list":
+            add_strategy_arguments(command)
+        if verb in ("list", "get", "set"):
+            add_json_argument(command)
+        command.set_defaults(func={"dump": run_dump, "load": run_load}.get(verb, run))
 
 
 class ParameterCalls:
@@ -103,10 +113,12 @@ def value_for(current: Any, value: Any) -> Any:
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.verb == "list" and args.node is None:
+        return list_all(args)
     target = node_name(args.node)
     if args.verb == "set":
         value = parse_value(args.value, f"VALUE of {args.name}")
-    node = api.create_node(f"_stillframe_param_{os.getpid()}", argv=["stillframe"])
+    node = tool_node("param")
     try:
         calls = ParameterCalls(node, target, args.timeout)
         if args.verb == "list":
@@ -146,3 +158,87 @@ def show(args: argparse.Namespace, rows: list[dict[str, Any]]) -> int:
                            [[r["name"], r["type"], r["value"], "yes" if r["read_only"] else ""]
                             for r in rows]))
     return 0
+
+
+#: the DDS vendor of each backend's participants (endpoint GUIDs carry the vendor's id)
+BACKEND_VENDORS = {"rclpy": "Fast DDS", "dds": "Cyclone DDS"}
+
+
+def list_all(args: argparse.Namespace) -> int:
+    """``ros2 param list`` without a node: ``/node:`` and its parameter names, for every node
+    this process's vendor can reach."""
+    graph = graph_of(args)
+    node = tool_node("param")
+    ours = BACKEND_VENDORS[node.backend]
+    listed: dict[str, list[str]] = {}
+    try:
+        for target in graph.node_names():
+            vendors = {e.vendor for e in graph.endpoints if e.node == target} - {""}
+            if vendors and ours not in vendors:
+                print(f"{target}: on {', '.join(sorted(vendors))}, not reachable from "
+                      f"{ours} (STILLFRAME_RMW={'dds' if ours == 'Fast DDS' else 'rclpy'} "
+                      f"reaches it)", file=sys.stderr)
+                continue
+            try:
+                listed[target] = sorted(ParameterCalls(node, target, args.timeout)
+                                        .call("list").result.names)
+            except InputError as exc:
+                print(f"{target}: {exc}", file=sys.stderr)
+    finally:
+        node.destroy_node()
+    if args.json:
+        emit_json(listed)
+        return 0
+    for target, parameter_names in listed.items():
+        if parameter_names:
+            print(f"{target}:")
+            print(*(f"  {name}" for name in parameter_names), sep="\n")
+    return 0
+
+
+def nest(flat: dict[str, Any]) -> dict[str, Any]:
+    """``{"a.b": 1}`` -> ``{"a": {"b": 1}}``, as ``ros2 param dump`` writes dotted names."""
+    tree: dict[str, Any] = {}
+    for name, value in flat.items():
+        *parents, leaf = name.split(".")
+        branch = tree
+        for part in parents:
+            branch = branch.setdefault(part, {})
+        branch[leaf] = value
+    return tree
+
+
+def run_dump(args: argparse.Namespace) -> int:
+    target = node_name(args.node)
+    node = tool_node("param")
+    try:
+        calls = ParameterCalls(node, target, args.timeout)
+        parameter_names = sorted(calls.call("list").result.names)
+        values = calls.call("get", names=parameter_names).values
+    finally:
+        node.destroy_node()
+    flat = {n: value_of(v) for n, v in zip(parameter_names, values, strict=True)}
+    print(yaml.dump({target: {"ros__parameters": nest(flat)}}, default_flow_style=False))
+    return 0
+
+
+def run_load(args: argparse.Namespace) -> int:
+    target = node_name(args.node)
+    wanted = load_param_file(args.file, target)
+    node = tool_node("param")
+    try:
+        calls = ParameterCalls(node, target, args.timeout)
+        current = calls.call("get", names=list(wanted)).values
+        parameters = [messages.new("rcl_interfaces/msg/Parameter", name=name,
+                                   value=value_msg(value_for(now, value)))
+                      for (name, value), now in zip(wanted.items(), current, strict=True)]
+        results = calls.call("set", parameters=parameters).results if parameters else []
+    finally:
+        node.destroy_node()
+    failed = 0
+    for name, result in zip(wanted, results, strict=True):
+        line = f"Set parameter {name} {'successful' if result.successful else 'failed'}"
+        line += f": {result.reason}" if result.reason else ""
+        print(line, file=sys.stdout if result.successful else sys.stderr)
+        failed += not result.successful
+    return 1 if failed else 0

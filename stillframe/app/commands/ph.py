@@ -147,9 +147,9 @@ def _crank_plot(path: str, run_: crank_slider.CrankSliderRun) -> None:
 
     fig, axes = plt.subplots(1, 2, figsize=(9, 3.5))
     axes[0].plot(run_.crank_angle, run_.u_mid_over_l)
-    axes[0].set_ylabel("u_f^x(L/2) / L")
+    axes[0].set_ylabel("u_f^x(L/2) / L [-]")
     axes[1].plot(run_.crank_angle, run_.w_mid_over_l)
-    axes[1].set_ylabel("u_f^y(L/2) / L")
+    axes[1].set_ylabel("u_f^y(L/2) / L [-]")
     for ax in axes:
         ax.set_xlabel("crank angle [rad]")
         ax.grid(True, alpha=0.3)

@@ -15,7 +15,7 @@ import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
-from stillframe.app.commands.common import add_json_argument, emit_json
+from stillframe.app.commands.common import add_json_argument, emit_json, scene_path
 from stillframe.app.commands.launch import add_launch_arguments, print_evaluation, report_death
 from stillframe.config.scene import load_scene
 from stillframe.errors import InputError
@@ -56,8 +56,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     parser = sub.add_parser(
         "reproduce", help="the thesis's closed-loop tables, each scene through the three nodes",
         description=__doc__.split("\n\n", 1)[1])
-    parser.add_argument("scenes", nargs="*", metavar="SCENE",
-                        help="scene files (default: scenes/" + ", ".join(THESIS_SCENES) + ")")
+    parser.add_argument("scenes", nargs="*", metavar="SCENE", type=scene_path,
+                        help="scene files or shipped scene names (default: "
+                             + ", ".join(THESIS_SCENES) + ")")
     parser.add_argument("--set", dest="overrides", action="append", default=[],
                         metavar="KEY=VALUE", help="override a value in every scene (repeatable)")
     add_launch_arguments(parser)
@@ -68,7 +69,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from stillframe.app.launcher import NodeDiedError, run_scene
 
-    paths = [Path(p) for p in args.scenes] or [SCENES_DIR / f"{name}.yaml"
+    paths = args.scenes or [SCENES_DIR / f"{name}.yaml"
                                                for name in THESIS_SCENES]
     scenes = [load_scene(path, args.overrides) for path in paths]  # all checked before running
     for path, scene in zip(paths, scenes, strict=True):

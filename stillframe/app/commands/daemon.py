@@ -1,0 +1,41 @@
+"""``stillframe daemon start|stop|status``: the graph daemon the ``topic``/``node`` verbs ask, like
+``ros2 daemon`` (:mod:`stillframe.app.graph_daemon`). The verbs start it on demand; it stops
+after two hours without a question (``STILLFRAME_DAEMON_IDLE_S``) or when told to."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    parser = sub.add_parser("daemon", help="the graph cache the topic and node verbs ask "
+                                           "(like ros2 daemon)")
+    verbs = parser.add_subparsers(dest="verb", metavar="VERB")
+    verbs.required = True
+    for verb, text in (("start", "start the daemon if it is not running"),
+                       ("stop", "stop the daemon if it is running"),
+                       ("status", "whether the daemon is running")):
+        verbs.add_parser(verb, help=text).set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from stillframe.app import graph_daemon
+
+    running = graph_daemon.is_running()
+    if args.verb == "start":
+        if running:
+            print("The daemon is already running")
+            return 0
+        if not graph_daemon.start():
+            log = graph_daemon.socket_path().with_suffix(".log")
+            print(f"stillframe daemon: the daemon did not start (its log: {log})",
+                  file=sys.stderr)
+            return 1
+        print("The daemon has been started")
+    elif args.verb == "stop":
+        print("The daemon has been stopped" if running and graph_daemon.stop()
+              else "The daemon is not running")
+    else:
+        print("The daemon is running" if running else "The daemon is not running")
+    return 0

@@ -1,0 +1,85 @@
+"""The dashboard page's own JavaScript, run by Node.js on a snapshot of :class:`Dashboard` (a
+stand-in records what it hands Plotly): the command chart's axes in N·m and N with the limits
+drawn on them, the controller's start marked on every chart, the right axes ticked on round
+values (tickmode ``auto``: Plotly gives an overlaying axis ``sync`` ticks, the odd values of
+issue 28) and every axis title with its unit."""
+
+from __future__ import annotations
+
+import json
+import re
+import shutil
+import subprocess
+import threading
+from importlib import resources
+
+import pytest
+
+from stillframe.monitor.dashboard import CHARTS, SERIES, Dashboard, Limits, Series
+
+NODE = shutil.which("node")
+STUB = """
+const captured = {};
+globalThis.document = {getElementById: () => ({textContent: "", innerHTML: ""})};
+globalThis.Plotly = {react: (id, traces, layout) => { captured[id] = {traces, layout}; }};
+globalThis.fetch = async () => ({json: async () => SNAPSHOT});
+globalThis.setTimeout = () => {};
+"""
+
+
+def snapshot(limits: Limits, with_torque: bool) -> dict:
+    board = object.__new__(Dashboard)   # the page's data, without a node to follow topics
+    board.limits, board._lock, board.diagnostics = limits, threading.Lock(), {}
+    board.series = {name: Series(10) for name in SERIES}
+    for k in range(5):
+        t = 0.5 * k
+        for name in SERIES:
+            width = 4 if name in ("truth", "estimate") else 1
+            if name != "torque_cmd" or with_torque:
+                board.series[name].keep((t, [0.1 * k] * width))
+    return board.snapshot()
+
+
+def run_page(data: dict) -> dict:
+    html = resources.files("stillframe").joinpath("data/dashboard.html").read_text()
+    script = re.search(r"<script>\n(.*?)</script>", html, re.S)[1]
+    code = (f"const SNAPSHOT = {json.dumps(data)};\n{STUB}\n{script}\n"
+            "setImmediate(() => console.log(JSON.stringify(captured)));")
+    done = subprocess.run([NODE, "-e", code], capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0, done.stderr
+    return json.loads(done.stdout)
+
+
+@pytest.mark.skipif(NODE is None, reason="needs Node.js (apt-get install nodejs)")
+@pytest.mark.parametrize("with_torque", [True, False])
+def test_the_page_draws_units_limits_and_the_controller_start(with_torque: bool) -> None:
+    limits = Limits(command=0.5, torque=0.8, force=3.0, controller_start=1.5)
+    drawn = run_page(snapshot(limits, with_torque))
+    assert set(drawn) == set(CHARTS)
+    for name, (title, left, right) in CHARTS.items():
+        layout = drawn[name]["layout"]
+        assert layout["title"]["text"] == title
+        assert layout["xaxis"]["title"]["text"] == "t [s]"
+        assert layout["yaxis"]["title"]["text"] == left
+        if right:
+            assert layout["yaxis2"]["title"]["text"] == right
+            assert layout["yaxis2"]["tickmode"] == "auto"
+        assert [s["x0"] for s in layout["shapes"]] == [1.5]
+        assert layout["annotations"][0]["text"] == "controller on"
+    command = drawn["command"]
+    assert command["layout"]["yaxis"]["title"]["text"] == "torque [N·m]"
+    lines = {(t["name"], t.get("yaxis", "y")): sorted({abs(v) for v in t["y"]})
+             for t in command["traces"] if t["name"].endswith("limit") and t["y"]}
+    on = "y" if with_torque else "y2"   # the command limit on the axis of the active command
+    expected = {("force limit", "y2"): [3.0], ("command limit", on): [0.5]}
+    if with_torque:
+        expected[("torque limit", "y")] = [0.8]
+    assert lines == expected
+    force = next(t for t in command["traces"] if t["name"] == "force")
+    assert force["yaxis"] == "y2"
+
+
+@pytest.mark.skipif(NODE is None, reason="needs Node.js (apt-get install nodejs)")
+def test_no_start_marker_without_a_scene() -> None:
+    drawn = run_page(snapshot(Limits(), with_torque=True))
+    assert all(drawn[name]["layout"]["shapes"] == [] for name in CHARTS)
