@@ -23,7 +23,10 @@ def scene_path(text: str) -> Path:
     """SCENE as a path (an argparse ``type``): a file, or a shipped scene by name. A path that
     does not exist is kept (loading it names it in one line); a bare name matching no shipped
     scene is an argparse error listing them."""
-    found = find_scene(text)
+    try:
+        found = find_scene(text)
+    except OSError:     # a name the file system refuses (too long): loading it says so
+        return Path(text)
     if found is None and (Path(text).suffix or "/" in text):
         return Path(text)
     if found is None:
