@@ -127,6 +127,9 @@ class Model(Section):
                                        doc="auto: frequency band the scene must reproduce [Hz]")
     tolerance: float = key(0.01, in_range(1e-12, 1.0),
                            doc="auto: relative error allowed in the band")
+    energy_tolerance: float | None = key(None, in_range(1e-16, 1.0), doc=(
+        "auto: energy consistency asked for: the largest discrete energy-balance error per step "
+        "allowed, relative to the stored energy (only runs that measure one qualify: ph)"))
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -138,6 +141,13 @@ class Integrator(Section):
                     doc="fixed step, or output step of adaptive methods [s]")
     rtol: float = key(1e-10, in_range(1e-15, 1.0))
     atol: float = key(1e-12, in_range(1e-300, 1.0))
+    max_halvings: int = key(12, in_range(0, 40), doc=(
+        "fixed steps: a step whose Newton iteration fails, whose result is not finite or whose "
+        "RK4 error estimate is too large is halved again and again down to dt / 2^max_halvings "
+        "(0: such a step is an error at once)"))
+    error_limit: float | None = key(1e-5, up_to(1.0), doc=(
+        "RK4: largest embedded local error estimate per step, relative to 1 + |x| "
+        "(null: no estimate)"))
 
 
 @dataclass(frozen=True, kw_only=True)
