@@ -180,14 +180,16 @@ def test_utf16_with_a_byte_order_mark_is_a_scene(tmp_path: Path) -> None:
 
 
 def _numeric_keys() -> list[str]:
-    """Every numeric scene key (scalars and lists of numbers), found from the schema."""
+    """Every numeric scene key (scalars, lists of numbers, and the nullable ones, whose default
+    is null: the limits), found from the scene's own values."""
     keys = []
 
     def walk(node: object, prefix: str) -> None:
         if isinstance(node, dict):
             for k, v in node.items():
                 walk(v, f"{prefix}{k}.")
-        elif isinstance(node, int | float | list | tuple) and not isinstance(node, bool):
+        elif node is None or (isinstance(node, int | float | list | tuple)
+                              and not isinstance(node, bool)):
             keys.append(prefix.rstrip("."))
 
     walk(load_scene(SCENE).to_dict(), "")
@@ -222,7 +224,7 @@ def _values(data: dict, key: str) -> list[float]:
     node: object = data
     for part in key.split("."):
         node = node[part]  # type: ignore[index]
-    return [float(v) for v in (node if isinstance(node, list) else [node])]
+    return [float(v) for v in (node if isinstance(node, list) else [node]) if v is not None]
 
 
 def test_set_values_through_the_commands() -> None:
