@@ -44,7 +44,14 @@ from stillframe.studies.vary import (
 
 WHATS: tuple[str, ...] = ("closed-loop", "simulate", "identify")
 NOISE_SEEDS: tuple[str, ...] = ("plant.seed", "sensors.seed", "excitation.seed")
-TIMING: tuple[str, ...] = ("wall_s", "loop_s", "loop_cpu_s", "steps_per_s", "cpu_s")
+TIMING: tuple[str, ...] = ("wall_s", "loop_s", "loop_cpu_s", "steps_per_s", "cpu_s",
+                           "controller_compute_s")
+
+
+def is_timing(column: str) -> bool:
+    """A column measured on the clock (it differs from run to run of the same values): one of
+    :data:`TIMING` or a part of one (``controller_compute_s.p50``)."""
+    return column.split(".", 1)[0] in TIMING
 """Figures that measure the machine, not the run (left out of comparisons)."""
 
 
