@@ -373,6 +373,8 @@ class SimNode:
             "plant": {"model": plant.model.name, "integrator": plant.integrator.name,
                       "dt": plant.h, "actuator_limited": plant.actuators.limited},
         })
+        if self.energy is not None:     # pH plant: the last balance and the passivity check
+            history.evaluation["energy_balance"] = self.energy.values()
         return history
 
 

@@ -334,7 +334,7 @@ class Launcher:
         o = self.options
         sim_params: dict[str, Any] = {"result_file": str(o.result_file.resolve()),
                                       "command_writer": "controller_node"}
-        if o.record_dir is not None and o.mode == "lockstep":
+        if o.record_dir is not None:     # in real time too: the bag misses no first sample
             sim_params["await_recorder"] = [
                 names.resolve_topic(t) for t in o.record_topics] or ["*"]
         # every loop node: the estimator's and controller's lock-step waits are parts of it

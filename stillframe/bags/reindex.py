@@ -44,6 +44,7 @@ from rosbags.rosbag2.metadata import parse_qos
 from rosbags.typesys import get_types_from_msg
 from rosbags.typesys.store import Typestore
 
+from stillframe.bags.full_disk import RESERVE_NAME
 from stillframe.bags.storage import BagWriter
 from stillframe.errors import BagError
 
@@ -212,6 +213,7 @@ def reindex(bag: str | Path, typestore: Typestore) -> Recovered:
     Types the typestore lacks are learnt from the bag's schemas on a copy of it."""
     bag = Path(bag)
     source = _mcap_file(bag)
+    (bag / RESERVE_NAME).unlink(missing_ok=True)    # a killed recorder's reserve: room to work
     try:
         found = salvage(source)
     except OSError as exc:

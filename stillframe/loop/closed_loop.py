@@ -31,6 +31,7 @@ from stillframe.config.scene import Scene
 from stillframe.contract.signals import Command
 from stillframe.control.factory import make_controller
 from stillframe.estimation.factory import make_estimator
+from stillframe.loop.energy_balance import EnergyLedger
 from stillframe.loop.wiring import design_model
 from stillframe.plant.actuation_delay import ActuationDelay
 from stillframe.plant.frame_plant import make_plant
@@ -105,10 +106,13 @@ def run_closed_loop(scene: Scene, progress: Progress | None = None) -> LoopHisto
     rows = np.full((n, 20), np.nan)
     control = np.zeros(2)
     delay = ActuationDelay(scene.actuators.delay_periods)
+    ledger = EnergyLedger.of(plant, scene)      # pH plant: balance and passivity check
     every = max(1, n // 100)
     looping, looping_cpu = time.perf_counter(), time.process_time()
     for k in range(n):
         sample = plant.sample()
+        if ledger is not None:
+            ledger.update(float(sample.truth[3]))
         estimate = estimator.step(sample, control) if estimator else None
         command = (controller.command(sample.t, estimate, sample.force) if controller
                    else Command(sample.t))
@@ -140,4 +144,6 @@ def run_closed_loop(scene: Scene, progress: Progress | None = None) -> LoopHisto
         "controller": vars(controller.counters) if controller else None,
         "controller_compute_s": controller.compute_stats() if controller else None,
     })
+    if ledger is not None:
+        history.evaluation["energy_balance"] = ledger.values()
     return history

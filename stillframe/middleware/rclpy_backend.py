@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import array
 import importlib
+import time
 from collections.abc import Callable
 from typing import Any
 
@@ -176,11 +177,19 @@ class RclpyPolledSubscription:
         self._clock = clock
 
     def take(self) -> list[tuple[bytes, interface.MessageInfo]]:
+        """The samples waiting, each received at its arrival in rmw (``received_timestamp``,
+        system time) moved onto the node's clock: one clock read per take, not per sample,
+        and a sample taken late keeps the time it arrived."""
         taken = []
+        now = self._clock.now_ns()
+        offset = now - time.time_ns()
         with self.subscription.handle:
             while (got := self.subscription.handle.take_message(
                     self.subscription.msg_type, True)) is not None:
-                taken.append((got[0], message_info(got[1], self._clock)))
+                info = got[1]
+                arrived = info["received_timestamp"]
+                taken.append((got[0], interface.MessageInfo(
+                    info["source_timestamp"], min(arrived + offset, now) if arrived else now)))
         return taken
 
 

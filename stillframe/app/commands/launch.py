@@ -34,7 +34,7 @@ from stillframe.app.launcher import MODES
 from stillframe.app.net_faults import FAULTS
 from stillframe.app.run_verdict import verdict
 from stillframe.config.scene import Scene
-from stillframe.errors import DegradedRunError, InputError
+from stillframe.errors import BagError, DegradedRunError, InputError
 from stillframe.text_table import format_table
 
 
@@ -182,8 +182,18 @@ def realtime_arguments(args: argparse.Namespace) -> tuple[str, list[int]]:
     return ",".join(sorted(practices)), list(parse_cpus(cpus)) if cpus else []
 
 
+#: how ``stillframe record`` states a bag failure (a full disk), which ``launch`` passes on
+RECORDER_ERROR = "stillframe record: error: "
+
+
 def report_death(command: str, exc: Exception) -> int:
-    """One line naming the dead node, then the last lines it printed."""
+    """One line naming the dead node, then the last lines it printed; a recorder that ended on
+    a bag failure (a full disk: the bag closed with what fit) gives its own line and exit 3."""
+    if getattr(exc, "name", "") == "recorder" and (line := next(
+            (t for t in getattr(exc, "tail", []) if t.startswith(RECORDER_ERROR)), None)):
+        print(f"stillframe {command}: error: recorder: {line.removeprefix(RECORDER_ERROR)}",
+              file=sys.stderr)
+        return BagError.exit_code
     print(f"stillframe {command}: error: {exc}", file=sys.stderr)
     for line in getattr(exc, "tail", []):
         print(f"  {line}", file=sys.stderr)

@@ -35,11 +35,11 @@ def run(args: argparse.Namespace) -> int:
     if args.all == bool(args.topics):
         raise InputError("give either --all or one or more TOPICs")
     topics = [resolve_topic(t) for t in args.topics]
-    sim = ["--ros-args", "-p", "use_sim_time:=true"] if args.use_sim_time else []
-    node = create_node(RECORDER_NODE, argv=[*sys.argv[:1], *sim])
+    # the node stays on system time: the recorder stamps on /clock itself (recording.recorder)
+    node = create_node(RECORDER_NODE, argv=sys.argv[:1])
     try:
         with BagWriter(args.output, messages.TYPESTORE) as bag:
-            recorder = Recorder(node, bag, topics)
+            recorder = Recorder(node, bag, topics, sim_time=args.use_sim_time)
             node.get_logger().info(f"Recording to '{args.output}' "
                                    f"({'all topics' if args.all else ', '.join(topics)})")
             spin(node)
