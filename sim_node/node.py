@@ -60,7 +60,7 @@ from stillframe.contract.codecs import (
 )
 from stillframe.contract.signals import Sample, actuator_of
 from stillframe.errors import InputError
-from stillframe.loop.closed_loop import LoopHistory, evaluate
+from stillframe.loop.closed_loop import LoopHistory, evaluate, plant_report
 from stillframe.loop.command_gate import CommandGate
 from stillframe.loop.energy_balance import EnergyTopic
 from stillframe.loop.pacing import Pacer, wait_until
@@ -370,8 +370,7 @@ class SimNode:
             "command_gates": {spec.name: gate.report()
                               for gate, spec in zip(self.gates, COMMAND_TOPICS, strict=True)},
             "max_lateness_ms": 1e-6 * self.pacer.max_lateness_ns,
-            "plant": {"model": plant.model.name, "integrator": plant.integrator.name,
-                      "dt": plant.h, "actuator_limited": plant.actuators.limited},
+            "plant": plant_report(plant),
         })
         if self.energy is not None:     # pH plant: the last balance and the passivity check
             history.evaluation["energy_balance"] = self.energy.values()

@@ -247,9 +247,17 @@ class WriterGate:
     def report(self) -> dict[str, object]:
         """For ``/diagnostics``: the node taken, the writers ignored, refusals by reason."""
         if not self.owner and self.taken:   # the first writer was taken without its name
-            self.owner = next((name for g, name in self.writers()
-                               if g in self.taken and name.strip("/")), "")
-        taken = self.owner or ", ".join(sorted(self.name_of(g) for g in self.taken))
+            listed = [(g, name) for g, name in self.writers() if name.strip("/")]
+            self.owner = next((name for g, name in listed if g in self.taken or (
+                self.pinned and same_node(name, self.pinned))), "")
+        if self.owner or not self.taken:
+            taken = self.owner
+        elif self.pinned and any(g.startswith(STREAM_KEY) for g in self.taken):
+            taken = self.pinned                 # no GID: the pin, until the graph names it
+        elif any(g.startswith(STREAM_KEY) for g in self.taken):     # no GID, no pin, no name
+            taken = " or ".join(sorted({name for _, name in self.writers() if name.strip("/")}))
+        else:
+            taken = ", ".join(sorted(self.name_of(g) for g in self.taken))
         return {"writer": taken, "ignored_writers": ",".join(self.ignored()),
                 **{f"rejected_{r}": self.rejected[r] for r in REASONS}}
 

@@ -230,3 +230,15 @@ def test_without_writer_ids_a_restart_the_graph_shows_late_is_taken_after_a_rech
     graph.now += RECHECK_NS
     assert gate.admits(b"", 3) and gate.admits(b"", 4)         # asked again: a restart
     assert dict(gate.rejected) == {"second_writer": 2}
+
+
+def test_without_writer_ids_the_pinned_node_is_reported_once_the_graph_names_it() -> None:
+    """The first stream taken before the pinned node's writer is in the graph: reported by the
+    pin's name when the graph has it, never by another writer's (an idle one's) name."""
+    graph = Graph((STRAY, "/frame/idle_teleop"))
+    gate = graph.gate("sim_node")
+    assert gate.admits(b"", 1) and gate.admits(b"", 2)
+    assert gate.report()["writer"] == "sim_node"
+    graph.writers.append((SIM, "/frame/sim_node"))
+    assert gate.report()["writer"] == "/frame/sim_node"
+    assert gate.report()["ignored_writers"] == ""
