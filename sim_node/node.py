@@ -324,7 +324,9 @@ class SimNode(base.LoopNode):
         return np.concatenate([[sample.t], sample.truth, control, [sample.force]])
 
     def run(self) -> LoopHistory | None:
-        """The scene's duration, lock-step or real-time; None when interrupted."""
+        """The scene's duration, lock-step or real-time. Interrupted (SIGINT, SIGTERM: a launch
+        whose other node died), the samples run so far, ``"complete": false`` and no
+        evaluation; None when interrupted before the first sample."""
         p, plant = self.params, self.plant
         log = self.node.get_logger()
         log.info(f"{p.mode}: waiting for the estimator and controller")
@@ -338,20 +340,26 @@ class SimNode(base.LoopNode):
         self.inputs.read_graph()
         self.pacer.start(time.monotonic_ns())
         wall = time.perf_counter()
+        done = 0
         for k in range(n):
             row = self.step(k)
             if row is None:
-                return None
+                break
             rows[k] = row
-        self.k = n
-        self.publish_status()
+            done = k + 1
+        if done == 0:
+            return None
+        self.k, rows = done, rows[:done]
+        if done == n:
+            self.publish_status()
         fine_t, floors, velocities = plant.truth_history()
-        history = LoopHistory(rows[:, 0], rows[:, 1:9], np.full((n, 8), np.nan), rows[:, 9:11],
-                              rows[:, 11], fine_t, floors, velocities)
-        if self.active is not None:
+        history = LoopHistory(rows[:, 0], rows[:, 1:9], np.full((done, 8), np.nan),
+                              rows[:, 9:11], rows[:, 11], fine_t, floors, velocities)
+        if self.active is not None and done == n:
             history.evaluation = evaluate(history, p.scene)
         history.evaluation.update({
-            "mode": p.mode, "steps": n, "wall_s": time.perf_counter() - wall,
+            "complete": done == n, "steps_planned": n,
+            "mode": p.mode, "steps": done, "wall_s": time.perf_counter() - wall,
             "malformed_samples": sum(api.MALFORMED.values()),
             **self.pacer.counts, **self.counts, "latency_ms": self.latency.summary(),
             "commands_in_time": self.commands_in_time,
@@ -383,7 +391,8 @@ def build(node: api.Node) -> SimNode:
 
 
 def run(sim: SimNode) -> None:
-    """The scene, then its result in ``result_file`` (when given and not interrupted)."""
+    """The scene, then its result in ``result_file`` (when given; a partial one, marked
+    ``"complete": false``, when interrupted after the first sample)."""
     history = sim.run()
     if history is not None and sim.result_file:
         write_result(history, Path(sim.result_file))

@@ -6,7 +6,9 @@ the launcher, which forwards one SIGINT to each child) and, on Linux, with a par
 (SIGTERM) so that no child outlives a killed launcher. The launcher keeps a hidden node on the
 same ROS domain that listens to ``/diagnostics`` for the status line. The run ends when
 sim_node exits after writing its result file (the scene's duration has passed); a child that
-exits before that, or with a failure code, ends the run with :class:`NodeDiedError` naming it.
+exits before that, or with a failure code, ends the run with :class:`NodeDiedError` naming it,
+after the others were stopped (SIGINT first) and what they wrote was kept: the error carries a
+partial result marked ``"complete": false``, also written to the result file.
 """
 
 from __future__ import annotations
@@ -77,6 +79,8 @@ class NodeDiedError(RuntimeError):
     def __init__(self, name: str, how: str, tail: Sequence[str]) -> None:
         super().__init__(f"{name} died ({how})")
         self.name, self.how, self.tail = name, how, list(tail)
+        #: what the run still wrote (:meth:`Launcher.run` fills it in): ``"complete": false``
+        self.partial: LaunchResult | None = None
 
     @classmethod
     def exited(cls, child: Child) -> NodeDiedError:
@@ -456,6 +460,9 @@ class Launcher:
             self.node.spin_once(0.0)    # the nodes' last statuses, written as they stopped
             if (dead := self.processes.first_failure()) is not None:
                 raise NodeDiedError.exited(dead)
+        except NodeDiedError as exc:
+            exc.partial = self._partial(exc)
+            raise
         finally:
             self.processes.stop_all()
             self.status.close()
@@ -524,6 +531,29 @@ class Launcher:
                 raise NodeDiedError(child.name, f"no {text!r} after {timeout_s:g} s", child.tail)
             time.sleep(0.05)
 
+    def _partial(self, died: NodeDiedError) -> LaunchResult:
+        """After a node died: stop the others (SIGINT first: the simulator writes the samples
+        it ran, the recorder closes its bag), then write what there is to the result file,
+        marked ``"complete": false``, with the dead node, how each other child stopped, the
+        nodes' last statuses and the bag."""
+        self.processes.stop_all()
+        self.node.spin_once(0.0)     # the statuses the nodes wrote as they stopped
+        path = self.options.result_file
+        try:
+            written = json.loads(path.read_text())
+        except (OSError, ValueError):
+            written = {}        # the simulator died, or stopped before its first sample
+        stopped = {c.name: _how_stopped(c.proc.returncode) for c in self.processes.children
+                   if c.name != died.name}
+        evaluation = {**written, "complete": False, "died": {"node": died.name, "how": died.how},
+                      "stopped": stopped, "diagnostics": dict(self.statuses)}
+        if self.options.record_dir is not None:
+            evaluation["bag"] = _bag_state(self.options.record_dir)
+        with contextlib.suppress(OSError):
+            path.write_text(json.dumps(evaluation, indent=2) + "\n")
+        history = path.with_suffix(".npz")
+        return LaunchResult(evaluation, path, history, dict(self.statuses))
+
     def _result(self) -> LaunchResult:
         path = self.options.result_file
         try:
@@ -531,6 +561,23 @@ class Launcher:
         except (OSError, ValueError) as exc:
             raise InputError(f"sim_node's result file {path}: cannot read it ({exc})") from None
         return LaunchResult(evaluation, path, path.with_suffix(".npz"), dict(self.statuses))
+
+
+def _how_stopped(code: int | None) -> str:
+    if code is None:
+        return "still running"
+    return f"ended by {signal.Signals(-code).name}" if code < 0 else f"exit code {code}"
+
+
+def _bag_state(bag: Path) -> dict[str, Any]:
+    """Whether the recorder closed its bag (metadata written) and how many messages it holds."""
+    try:
+        meta = yaml.safe_load((bag / "metadata.yaml").read_text())
+        count = int(meta["rosbag2_bagfile_information"]["message_count"])
+    except (OSError, ValueError, KeyError, TypeError, yaml.YAMLError):
+        return {"path": str(bag), "closed": False,
+                "note": f"not closed: recover it with stillframe bag reindex {bag}"}
+    return {"path": str(bag), "closed": True, "messages": count}
 
 
 def run_scene(scene: Path, overrides: Sequence[str] = (), *, out: Path,

@@ -41,7 +41,7 @@ ROS_DISTRO = "jazzy"
 #: What reading a damaged bag can raise (rosbags lets KeyError/TypeError through for
 #: incomplete QoS records).
 _BAG_ERRORS = (AnyReaderError, ReaderError, OSError, yaml.YAMLError, KeyError, TypeError,
-               ValueError)
+               ValueError, RecursionError)
 SERVICE_EVENT_SUFFIX = "/_service_event"
 
 
@@ -214,7 +214,7 @@ def _culprit(bag: Path) -> Path:
     own, else ``metadata.yaml``."""
     try:
         files = _storage_files(bag)
-    except (OSError, yaml.YAMLError, KeyError, TypeError):
+    except (OSError, yaml.YAMLError, KeyError, TypeError, ValueError, RecursionError):
         return bag / "metadata.yaml"
     for path in files:
         if not path.is_file():

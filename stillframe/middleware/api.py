@@ -34,6 +34,7 @@ from stillframe.middleware.backend_choice import (
     has_rclpy,
 )
 from stillframe.middleware.clock import Clock, Time
+from stillframe.middleware.cyclone_log import count_deserialization_failures
 from stillframe.middleware.interface import (
     MALFORMED,
     ManagedNode,
@@ -89,6 +90,8 @@ def node_main(main: Callable[[], int | None]) -> Callable[[], int]:
 
     @functools.wraps(main)
     def wrapped() -> int:
+        if backend_name() == "dds":     # Cyclone's dropped samples counted (cyclone_log)
+            count_deserialization_failures()
         try:
             return int(main() or 0)
         except StillframeError as exc:

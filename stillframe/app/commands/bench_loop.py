@@ -31,7 +31,7 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
-from stillframe.app.commands.common import add_json_argument, emit_json
+from stillframe.app.commands.common import add_json_argument, emit_json, seconds
 from stillframe.app.commands.launch import (
     add_compose_arguments,
     add_realtime_arguments,
@@ -65,7 +65,7 @@ ONE_PROCESS_RUNS = 3
 def register(benches: argparse._SubParsersAction) -> None:
     parser = benches.add_parser("loop", help="closed-loop latency (real time) and lock-step speed",
                                 description=__doc__.split("\n\n", 1)[1])
-    parser.add_argument("--duration", type=float, default=10.0, metavar="S",
+    parser.add_argument("--duration", type=seconds, default=10.0, metavar="S",
                         help="seconds of each real-time run (default 10)")
     parser.add_argument("--rate", dest="rates", action="append", type=float, default=[],
                         metavar="HZ", help="real-time rate (repeatable; default 100 and 1000)")

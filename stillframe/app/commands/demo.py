@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
+from stillframe.app.commands.common import check_output
 from stillframe.app.commands.launch import add_launch_arguments, print_evaluation, report_death
 from stillframe.config.scene import Scene
 from stillframe.errors import InputError
@@ -82,6 +83,8 @@ def run(args: argparse.Namespace) -> int:
     from stillframe.app.launcher import NodeDiedError, run_scene
     from stillframe.config.scene import load_scene
     from stillframe.loop.closed_loop import open_loop_truth
+
+    check_output("--out", args.out)
 
     scene = load_scene(DEMO_SCENE, args.overrides)
     out: Path = args.out

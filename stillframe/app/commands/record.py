@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 import sys
 
+from stillframe.app.commands.common import check_output
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     parser = sub.add_parser(
@@ -27,6 +29,8 @@ def run(args: argparse.Namespace) -> int:
     from stillframe.middleware.names import resolve_topic
     from stillframe.node_runtime.support import RECORDER_NODE
     from stillframe.recording.recorder import Recorder
+
+    check_output("-o", args.output)
 
     if args.all == bool(args.topics):
         raise InputError("give either --all or one or more TOPICs")
