@@ -33,6 +33,7 @@ from stillframe.bags.channels import Channel, field_reader, stamp_ns
 from stillframe.contract import messages, topics
 from stillframe.errors import InputError
 from stillframe.identification.tracker import (
+    MODES_TOPIC,
     ModalTracker,
     TrackedModes,
     identify_window,
@@ -41,7 +42,6 @@ from stillframe.identification.tracker import (
 from stillframe.middleware import api
 from stillframe.node_runtime.support import OK, WARN, Diagnostics
 
-MODES_TOPIC = "identification/modes"
 MAX_PENDING = 4
 """Windows waiting for the worker beyond which a due update is skipped."""
 

@@ -15,12 +15,13 @@ from importlib import resources
 
 import pytest
 
+from stillframe.identification.tracker import mode_records
 from stillframe.monitor.dashboard import CHARTS, SERIES, Dashboard, Limits, Series
 
 NODE = shutil.which("node")
 STUB = """
-const captured = {};
-globalThis.document = {getElementById: () => ({textContent: "", innerHTML: ""})};
+const captured = {}, elements = {};
+globalThis.document = {getElementById: id => (elements[id] ??= {textContent: "", innerHTML: ""})};
 globalThis.Plotly = {react: (id, traces, layout) => { captured[id] = {traces, layout}; }};
 globalThis.fetch = async () => ({json: async () => SNAPSHOT});
 globalThis.setTimeout = () => {};
@@ -30,6 +31,7 @@ globalThis.setTimeout = () => {};
 def snapshot(limits: Limits, with_torque: bool) -> dict:
     board = object.__new__(Dashboard)   # the page's data, without a node to follow topics
     board.limits, board._lock, board.diagnostics = limits, threading.Lock(), {}
+    board.tracked_modes, board.tracked_updates = [], 0
     board.series = {name: Series(10) for name in SERIES}
     for k in range(5):
         t = 0.5 * k
@@ -40,11 +42,12 @@ def snapshot(limits: Limits, with_torque: bool) -> dict:
     return board.snapshot()
 
 
-def run_page(data: dict) -> dict:
+def run_page(data: dict, element: str = "") -> dict:
     html = resources.files("stillframe").joinpath("data/dashboard.html").read_text()
     script = re.search(r"<script>\n(.*?)</script>", html, re.S)[1]
     code = (f"const SNAPSHOT = {json.dumps(data)};\n{STUB}\n{script}\n"
-            "setImmediate(() => console.log(JSON.stringify(captured)));")
+            "setImmediate(() => console.log(JSON.stringify("
+            f"{'elements[' + json.dumps(element) + '].innerHTML' if element else 'captured'})));")
     done = subprocess.run([NODE, "-e", code], capture_output=True, text=True, timeout=60)
     assert done.returncode == 0, done.stderr
     return json.loads(done.stdout)
@@ -83,3 +86,18 @@ def test_the_page_draws_units_limits_and_the_controller_start(with_torque: bool)
 def test_no_start_marker_without_a_scene() -> None:
     drawn = run_page(snapshot(Limits(), with_torque=True))
     assert all(drawn[name]["layout"]["shapes"] == [] for name in CHARTS)
+
+
+@pytest.mark.skipif(NODE is None, reason="needs Node.js (apt-get install nodejs)")
+def test_the_tracked_modes_table_shows_each_mode_with_its_intervals() -> None:
+    """Two modes of an ``identification/modes`` message's data: one row each, frequency and
+    damping with their 95 % intervals; before the tracker's first update no table at all."""
+    data = snapshot(Limits(), with_torque=True)
+    assert run_page(data, "modes") == ""
+    data["tracked_modes"] = {"updates": 3, "modes": mode_records(
+        [1.6512, 0.0213, 1.6401, 1.6623, 0.0151, 0.0275,
+         5.0487, 0.0104, 5.0312, 5.0662, 0.0072, 0.0136])}
+    rows = re.findall(r'<tr data-mode="(\d)">(.*?)</tr>', run_page(data, "modes"))
+    cells = {n: re.findall(r"<td>(.*?)</td>", row) for n, row in rows}
+    assert cells == {"1": ["1.651", "1.640 – 1.662", "0.0213", "0.0151 – 0.0275"],
+                     "2": ["5.049", "5.031 – 5.066", "0.0104", "0.0072 – 0.0136"]}
