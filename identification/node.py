@@ -40,6 +40,7 @@ from stillframe.identification.tracker import (
     modes_array,
 )
 from stillframe.middleware import api
+from stillframe.node_runtime.realtime import run_idle
 from stillframe.node_runtime.support import OK, WARN, Diagnostics
 
 MAX_PENDING = 4
@@ -66,6 +67,8 @@ class ModalTrackerNode:
         period = float(node.declare_parameter("update_period_s", 5.0).value)
         order = node.declare_parameter("order", "auto").value
         record = node.declare_parameter("record_file", "").value
+        if node.declare_parameter("idle", False).value:
+            run_idle()  # SCHED_IDLE: only CPU time the loop leaves (the worker thread inherits)
         self.record_file = Path(record) if record else None
         if not (rate > 0 and window > 0 and period > 0):
             raise InputError("modal_tracker: rate_hz, window_s and update_period_s must be > 0")

@@ -5,7 +5,8 @@ and the three floor accelerometers, identifies its window every few seconds and 
 update, as one JSON line, to a file the launcher reads at the end: the launch JSON's
 ``tracked_modes``, a list of ``{"t": …, "modes": [{"frequency_hz", "damping_ratio",
 "frequency_ci", "damping_ci"}], "warnings": […], "error": …}`` with ``t`` the window's last sample
-time [s] (sim time). It only subscribes, in its own process: it cannot hold the loop up.
+time [s] (sim time). It only subscribes, in its own process: it cannot hold the loop up; and it
+runs at SCHED_IDLE (``idle``), so its identifications take only CPU time the nodes leave.
 """
 
 from __future__ import annotations
@@ -33,7 +34,7 @@ def tracker_command(scene: Scene, record_file: Path) -> list[str]:
     window = min(WINDOW_S, scene.duration / 2)
     params = {"inputs": inputs, "outputs": outputs, "rate_hz": float(scene.sensors.rate_hz),
               "window_s": window, "update_period_s": min(UPDATE_S, window / 2),
-              "record_file": str(record_file)}
+              "record_file": str(record_file), "idle": True}
     argv = [sys.executable, "-m", TRACKER_MODULE, "--ros-args"]
     for name, value in params.items():
         argv += ["-p", f"{name}:={value if isinstance(value, str) else json.dumps(value)}"]
