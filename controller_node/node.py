@@ -251,7 +251,7 @@ class ControllerNode:
         ``/diagnostics`` when due; whether a status was published."""
         self.check_watchdog()
         self.gates.keep_graph_read()
-        if not self.diagnostics.due():
+        if not (self.gates.announce(self.node.get_logger()) or self.diagnostics.due()):
             return False
         self.publish_status()
         return True

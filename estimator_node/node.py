@@ -294,7 +294,7 @@ class EstimatorNode:
         """Between samples: the graph read until the first one, ``/diagnostics`` when due;
         whether a status was published."""
         self.gates.keep_graph_read()
-        if not self.diagnostics.due():
+        if not (self.gates.announce(self.node.get_logger()) or self.diagnostics.due()):
             return False
         self.publish_status()
         return True

@@ -153,7 +153,7 @@ class SimNode:
     def on_command(self, actuator: int, cdr: bytes, info: api.MessageInfo) -> None:
         """Take a command its topic's gate lets through (module docstring); count the others."""
         gate = self.gates[actuator]
-        if not gate.admits(info.publisher_gid):
+        if not gate.admits(info.publisher_gid, info.publication_sequence):
             self.counts["rejected_commands"] += 1
             return
         read = self.readers[actuator].read(cdr)
@@ -313,7 +313,7 @@ class SimNode:
             self.counts["degraded_samples"] += 1
         plant.advance(control)
         self.rt.idle()
-        if self.diagnostics.due():
+        if self.inputs.announce(self.node.get_logger()) or self.diagnostics.due():
             self.publish_status()
         return np.concatenate([[sample.t], sample.truth, control, [sample.force]])
 

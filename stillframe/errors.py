@@ -6,7 +6,9 @@
 - :class:`IntegrationError` (4): a simulation that cannot go on (non-finite state, Newton
   failure);
 - :class:`IdentificationError` (5): data that cannot identify a model (too short, unusable,
-  rank-deficient).
+  rank-deficient);
+- :class:`DegradedRunError` (6): a real-time run whose control path was degraded, with
+  ``--strict`` (without it, a warning line).
 
 The message names what is wrong (the key, the file, the time) and is printed without a traceback
 by :func:`stillframe.app.cli.main` and by the node executables.
@@ -43,3 +45,10 @@ class IdentificationError(StillframeError):
     singular values, a realization that breaks a method's assumptions."""
 
     exit_code = 5
+
+
+class DegradedRunError(StillframeError):
+    """A real-time run whose result cannot be trusted (``launch --strict``); the message gives the
+    reasons (:mod:`stillframe.app.run_verdict`)."""
+
+    exit_code = 6

@@ -27,6 +27,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from stillframe.app import running_graph
 from stillframe.config.scene import Scene, load_scene
 from stillframe.contract.topics import STATUS_KEYS
 from stillframe.errors import InputError
@@ -100,12 +101,11 @@ def parse_backends(specs: Sequence[str]) -> dict[str, str]:
     return chosen
 
 
-def single_host_discovery() -> str:
-    """The discovery range of the launch: ``ROS_AUTOMATIC_DISCOVERY_RANGE`` if set (checked),
-    else ``LOCALHOST``, set in this process's environment so the children inherit it: a launch
-    runs every node on this host, and nothing beyond it needs to find them unless asked."""
-
-    os.environ.setdefault(discovery.RANGE_ENV, discovery.DiscoveryRange.LOCALHOST.value)
+def launch_discovery() -> str:
+    """The discovery range of the launch, as the environment says (checked): ``SUBNET`` when
+    ``ROS_AUTOMATIC_DISCOVERY_RANGE`` is unset, as ``ros2 launch`` leaves it, so that a default
+    Jazzy terminal on the same host (``ros2 topic list``) sees the run. The environment is not
+    changed; the children inherit it as it is."""
     return discovery.discovery_range().value
 
 
@@ -309,11 +309,12 @@ class Launcher:
         if options.record_dir is not None and options.record_dir.exists():
             raise InputError(f"--record {options.record_dir}: already exists")
         self.backends = parse_backends(options.backends)
-        self.discovery = single_host_discovery()
+        self.discovery = launch_discovery()
         self.options = options
         self.status = StatusLine()
         self.processes = ProcessSet(self.status.echo)
-        self.node = api.create_node(f"_stillframe_launch_{os.getpid()}", argv=["stillframe"])
+        self.node = api.create_node(running_graph.launcher_name(), argv=["stillframe"])
+        self.created = time.monotonic()
         self.statuses: dict[str, dict[str, str]] = {}
         self.node.create_subscription("diagnostic_msgs/msg/DiagnosticArray", "/diagnostics",
                                       self._on_diagnostics, "default")
@@ -382,6 +383,7 @@ class Launcher:
 
         self.options.result_file.unlink(missing_ok=True)
         try:
+            running_graph.refuse_if_running(self.node, self.created, (*NODES, CONTAINER))
             commands = self.commands()
             self.status.echo(f"discovery range {self.discovery}; backends " + ", ".join(
                 f"{name} {self.backend(name)}" for name, _ in commands))
@@ -394,8 +396,12 @@ class Launcher:
                     self._wait_for_line(child, "middleware backend")
             simulator = self.simulator()
             sim = next(c for c in self.processes.children if c.name == simulator)
+            watch = time.monotonic()
             while api.ok():
                 self.node.spin_once(0.1)
+                if time.monotonic() >= watch + running_graph.WATCH_S:
+                    running_graph.check(self.node)
+                    watch = time.monotonic()
                 if self.statuses:
                     self.status.update(status_text(self.statuses, self.status.width()))
                 if sim.proc.poll() == 0 and self.options.result_file.exists():

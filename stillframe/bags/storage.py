@@ -15,6 +15,7 @@ has no footer and reads as truncated.
 
 from __future__ import annotations
 
+import re
 import time
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
@@ -32,6 +33,9 @@ from rosbags.typesys.store import Typestore
 from stillframe.errors import BagError, InputError
 
 METADATA_VERSION = 9
+#: the ROS distribution a bag's metadata names, as ``ros2 bag record`` on Jazzy writes it (rosbags
+#: writes its own name there)
+ROS_DISTRO = "jazzy"
 #: What reading a damaged bag can raise (rosbags lets KeyError/TypeError through for
 #: incomplete QoS records).
 _BAG_ERRORS = (AnyReaderError, ReaderError, OSError, yaml.YAMLError, KeyError, TypeError,
@@ -87,6 +91,12 @@ class BagSummary:
         return {**asdict(self), "end_ns": self.end_ns, "topics": topics}
 
 
+def _name_distro(metadata: str) -> str:
+    """rosbags's metadata text with :data:`ROS_DISTRO` as its ``ros_distro``."""
+    return re.sub(r"^(\s*ros_distro:) rosbags$", rf"\1 {ROS_DISTRO}", metadata, count=1,
+                  flags=re.MULTILINE)
+
+
 class BagWriter:
     """Write a rosbag2 bag (metadata v9, MCAP) from CDR bytes.
 
@@ -130,7 +140,13 @@ class BagWriter:
     def close(self) -> None:
         """Write index, footer and ``metadata.yaml``; safe to call twice."""
         if self._writer.storage is not None:
+            storage = self._writer.storage
+            close_storage = storage.close
+            # the metadata record in the MCAP file, then metadata.yaml, name the distro
+            storage.close = lambda version, text: close_storage(version, _name_distro(text))
             self._writer.close()
+            meta = self.path / "metadata.yaml"
+            meta.write_text(_name_distro(meta.read_text()))
 
     def __enter__(self) -> BagWriter:
         return self

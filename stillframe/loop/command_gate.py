@@ -41,11 +41,12 @@ class CommandGate:
     active: bool = True
     rejected: Counter = field(default_factory=Counter)
 
-    def admits(self, gid: bytes) -> bool:
-        """Whether writer ``gid`` may command this actuator (checked before the sample is
-        decoded); counts the reason if not (the writer's reasons in the writer gate)."""
+    def admits(self, gid: bytes, sequence: int = 0) -> bool:
+        """Whether writer ``gid`` (or, without one, the writer that numbered the sample
+        ``sequence``) may command this actuator (checked before the sample is decoded); counts
+        the reason if not (the writer's reasons in the writer gate)."""
         if self.active:
-            return self.writer.admits(gid)
+            return self.writer.admits(gid, sequence)
         self.rejected["inactive_actuator"] += 1
         return False
 

@@ -25,7 +25,7 @@ def reading(topic: str, reader: TopicReader, handler: Callable[..., None],
     read, admits = reader.read, gate.admits
 
     def callback(cdr: bytes, info: api.MessageInfo) -> None:
-        if not admits(info.publisher_gid):
+        if not admits(info.publisher_gid, info.publication_sequence):
             return
         values = read(cdr)
         if values is None:

@@ -13,11 +13,22 @@ arrived).
 The hot path is a set lookup: a GID already taken or already refused is decided without the
 graph, and so is an unpinned gate's first writer (reading the graph costs about 9 ms in a running
 loop, which the first sample then paid in each node). The graph is asked only for a later GID not
-seen before, and at most every
-:data:`RECHECK_NS` for one it could not name yet (``unknown_writer``) or, where the middleware
-gives no GID (real rclpy Jazzy: its message info has none), for how many writers the topic has:
-while the graph shows more than one, every sample is refused (``ambiguous_writer``), since the
-gate cannot tell them apart.
+seen before, and at most every :data:`RECHECK_NS` for one it could not name yet
+(``unknown_writer``).
+
+Without GIDs (real rclpy Jazzy: its message info has none) the gate decides from what arrives,
+not from how many publishers the graph shows: a publisher that exists but never writes (``ros2
+topic pub`` before its first message, a Foxglove publish panel, a teleop tool) changes nothing.
+Each DDS writer numbers its samples 1, 2, 3 …, and rclpy hands that publication sequence number
+with each sample, so the samples fall into *streams* (:class:`SequenceStreams`): a sample
+continues the stream whose last number is the nearest below its own (at most :data:`MAX_GAP`
+below), or starts a new one. The first stream is taken; a later stream is another writer's and is
+refused (``second_writer``), unless the graph shows that only the taken node writes the topic, or
+shows a new writer of that node (a restart). Its node is named from the graph: the topic's
+writers that are not the taken node's. Two writers whose numbers run side by side cannot be told
+apart: a sample as near to two streams is refused (``ambiguous_writer``). Only where a backend
+gives neither GID nor sequence number is the count of writers asked for, every
+:data:`RECHECK_NS`, and every sample refused while it is above one.
 """
 
 from __future__ import annotations
@@ -26,6 +37,7 @@ import time
 from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Any
 
 from stillframe.errors import InputError
 from stillframe.middleware import api
@@ -36,6 +48,16 @@ REASONS = ("second_writer", "unknown_writer", "ambiguous_writer")
 #: how often [ns] the graph is asked again about a writer it could not name, or, without writer
 #: GIDs, how many writers a topic has
 RECHECK_NS = 50_000_000
+
+#: how far [samples] a writer's sequence number may jump over samples lost or not read, and still
+#: continue its stream; a larger jump starts a new stream
+MAX_GAP = 256
+
+#: wall time [ns] after which a stream not taken that wrote nothing is forgotten
+STREAM_IDLE_NS = 1_000_000_000
+
+#: the first byte of a stream's key, which stands in for a GID (real GIDs are 16 bytes of a GUID)
+STREAM_KEY = b"#"
 
 #: (writer GID, node namespace/name) of a topic's current writers, from the ROS graph
 GraphWriters = Callable[[], list[tuple[bytes, str]]]
@@ -49,6 +71,38 @@ def graph_writers(node: api.Node, topic: str) -> GraphWriters:
                 for ep in node.get_publishers_info_by_topic(topic)]
 
     return writers
+
+
+@dataclass
+class SequenceStreams:
+    """Samples without a writer GID told apart by their writers' publication sequence numbers
+    (module docstring): :meth:`key` gives the stream a sample continues, as a stand-in GID."""
+
+    clock: Callable[[], int]
+    heads: dict[bytes, int] = field(default_factory=dict)       # key -> last number
+    last_seen: dict[bytes, int] = field(default_factory=dict)   # key -> when
+    count: int = 0
+
+    def key(self, sequence: int, keep: set[bytes]) -> bytes | None:
+        """The stream sample ``sequence`` continues (a new one if none), or None when two
+        streams are as near (the sample is ambiguous); streams idle for :data:`STREAM_IDLE_NS`
+        are forgotten, except those in ``keep``."""
+        now = self.clock()
+        for old in [k for k, t in self.last_seen.items()
+                    if now - t > STREAM_IDLE_NS and k not in keep]:
+            del self.heads[old], self.last_seen[old]
+        below = [(head, k) for k, head in self.heads.items() if 0 < sequence - head <= MAX_GAP]
+        if below:
+            nearest = max(head for head, _ in below)
+            keys = [k for head, k in below if head == nearest]
+            if len(keys) > 1:
+                return None
+            key = keys[0]
+        else:
+            self.count += 1
+            key = STREAM_KEY + str(self.count).encode()
+        self.heads[key], self.last_seen[key] = sequence, now
+        return key
 
 
 def same_node(name: str, wanted: str) -> bool:
@@ -77,21 +131,40 @@ class WriterGate:
     intruders: set[bytes] = field(default_factory=set)
     unresolved: dict[bytes, int] = field(default_factory=dict)   # GID -> when last asked
     rejected: Counter = field(default_factory=Counter)
-    blind_writers: int = 0          # writers in the graph, for samples without a GID
+    blind_writers: int = 0          # writers in the graph, for samples without GID or number
     blind_until: int = -1
+    streams: SequenceStreams | None = None      # samples without a GID, by sequence number
+    owner_gids: set[bytes] = field(default_factory=set)     # the taken node's, for streams
+    #: a refused stream -> when to ask the graph again (a restart it shows late)
+    stream_recheck: dict[bytes, int] = field(default_factory=dict)
+    #: refusals not yet announced (:meth:`InputGates.announce`)
+    news: bool = False
 
-    def admits(self, gid: bytes) -> bool:
-        """Whether a sample from writer ``gid`` is taken; counts the reason if not."""
+    def admits(self, gid: bytes, sequence: int = 0) -> bool:
+        """Whether a sample from writer ``gid`` (or, without one, numbered ``sequence`` by its
+        writer) is taken; counts the reason if not."""
+        if not gid and sequence:
+            if self.streams is None:
+                self.streams = SequenceStreams(self.clock)
+            gid = self.streams.key(sequence, self.taken)
+            if gid is None:
+                return self._refuse("ambiguous_writer")
         if gid in self.taken:
             return True
-        reason = "second_writer" if gid in self.intruders else self._decide(gid)
-        if reason is None:
-            return True
+        refused = gid in self.intruders and not (
+            gid.startswith(STREAM_KEY) and self.clock() >= self.stream_recheck[gid])
+        reason = "second_writer" if refused else self._decide(gid)
+        return True if reason is None else self._refuse(reason)
+
+    def _refuse(self, reason: str) -> bool:
         self.rejected[reason] += 1
+        self.news = True
         return False
 
     def _decide(self, gid: bytes) -> str | None:
         now = self.clock()
+        if gid.startswith(STREAM_KEY):
+            return self._decide_stream(gid)
         if not gid:
             if now >= self.blind_until:
                 count = self.count_writers() if self.count_writers else len(self.writers())
@@ -122,18 +195,54 @@ class WriterGate:
         self.unresolved.pop(gid, None)
         return None
 
+    def _decide_stream(self, key: bytes) -> str | None:
+        """A stream not taken yet: the first one, a restart of the taken node (a new writer of it
+        in the graph), or, while the graph shows only the taken node's writers, a stream of that
+        node (its numbers jumped); any other is another writer, asked about again after
+        :data:`RECHECK_NS` (the graph may show a restart after its first samples)."""
+        listed = self.writers()
+        wanted = self.pinned or self.owner
+        if not wanted and not self.taken:   # the one node writing the topic, if one
+            nodes = {name for _, name in listed if name.strip("/")}
+            wanted = next(iter(nodes)) if len(nodes) == 1 else ""
+        own = {g for g, name in listed if wanted and same_node(name, wanted)}
+        self.owner_gids = self.owner_gids or own     # taken before the graph named its node
+        alone = bool(wanted) and all(g in own for g, _ in listed)
+        if self.taken and not alone and not own - self.owner_gids:
+            self.intruders.add(key)
+            self.stream_recheck[key] = self.clock() + RECHECK_NS
+            return "second_writer"
+        self.intruders.discard(key)
+        self.taken = {key}
+        self.owner = wanted if wanted.startswith("/") else next(
+            (name for g, name in listed if g in own), self.owner)
+        self.owner_gids = own
+        return None
+
+    def suspects(self) -> list[str]:
+        """Without GIDs: the nodes writing the topic other than the taken one."""
+        wanted = self.pinned or self.owner
+        return sorted({name for _, name in self.writers()
+                       if name.strip("/") and not (wanted and same_node(name, wanted))})
+
     def has_seen_samples(self) -> bool:
         """Whether samples came: from a writer taken, or without a GID (its writers counted)."""
         return bool(self.taken) or self.blind_until >= 0
 
     def name_of(self, gid: bytes) -> str:
-        """The node of writer ``gid`` in the graph, its GID in hex while the graph has none."""
+        """The node of writer ``gid`` in the graph, its GID in hex while the graph has none; a
+        stream's (no GID): the topic's other writers, or ``unnamed`` while the graph shows
+        none."""
+        if gid.startswith(STREAM_KEY):
+            return " or ".join(self.suspects()) or "unnamed"
         return next((name for g, name in self.writers() if g == gid and name.strip("/")),
                     gid.hex())
 
     def ignored(self) -> list[str]:
         """The other writers seen (refused, or not named yet), by node name or GID."""
-        return sorted({self.name_of(gid) for gid in (*self.intruders, *self.unresolved)})
+        ambiguous = " or ".join(self.suspects()) if self.rejected["ambiguous_writer"] else ""
+        return sorted({self.name_of(gid) for gid in (*self.intruders, *self.unresolved)}
+                      | ({ambiguous or "unnamed"} if self.rejected["ambiguous_writer"] else set()))
 
     def report(self) -> dict[str, object]:
         """For ``/diagnostics``: the node taken, the writers ignored, refusals by reason."""
@@ -156,6 +265,8 @@ class InputGates:
         self.pins: dict[str, str] = {}
         self.samples_seen = False       # a gate has seen samples (:meth:`keep_graph_read`)
         self.next_graph_read = 0
+        self.next_announce = 0
+        self.announced: dict[str, list[str]] = {}     # topic -> the writers last logged
         for name in parameters:
             pinned = node.declare_parameter(name, "", read_only=True).value
             if not isinstance(pinned, str):
@@ -195,6 +306,28 @@ class InputGates:
     def refused(self) -> int:
         """Samples refused for their writer, on every topic."""
         return sum(sum(gate.rejected.values()) for gate in self.gates.values())
+
+    def announce(self, log: Any) -> bool:
+        """Log the writers refused since the last call, as soon as they are (at most every
+        :data:`RECHECK_NS`), each once by the name the graph has for it; True when something new
+        was logged (the node then publishes its status at once)."""
+        if not any(gate.news for gate in self.gates.values()):
+            return False
+        now = time.monotonic_ns()
+        if now < self.next_announce:
+            return False
+        self.next_announce = now + RECHECK_NS
+        logged = False
+        for topic, gate in self.gates.items():
+            gate.news = False
+            names = gate.ignored()
+            if names and names != self.announced.get(topic):
+                self.announced[topic] = names
+                refused = sum(gate.rejected.values())
+                log.warning(f"{topic}: refusing the samples of another writer: "
+                            f"{', '.join(names)} ({refused} so far)")
+                logged = True
+        return logged
 
     def message(self) -> str:
         """Which second writers are being ignored, for the status message."""

@@ -27,12 +27,16 @@ class MessageInfo(NamedTuple):
     """What a raw subscription learns about a sample besides its bytes (ns since the epoch;
     ``received_timestamp`` on the node's clock, i.e. sim time with ``use_sim_time``).
     ``publisher_gid``: the writer's GID (its DDS GUID, as ``endpoint_gid`` in the graph), empty
-    where the backend does not expose it (rclpy Jazzy's message info carries none). A tuple: one
-    is made per sample on the loop's path (a frozen dataclass cost three times as much)."""
+    where the backend does not expose it (rclpy Jazzy's message info carries none).
+    ``publication_sequence``: the writer's sequence number of the sample (1, 2, … per writer; 0
+    where the backend does not give it), what tells writers apart without GIDs
+    (:mod:`stillframe.loop.writer_gate`). A tuple: one is made per sample on the loop's path (a
+    frozen dataclass cost three times as much)."""
 
     source_timestamp: int
     received_timestamp: int
     publisher_gid: bytes = b""
+    publication_sequence: int = 0
 
 
 class Publisher(Protocol):

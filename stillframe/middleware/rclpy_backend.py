@@ -5,7 +5,7 @@ serialized messages as they are) and subscriptions take CDR bytes (``raw=True`` 
 that ``rosbags`` decodes, so no message conversion code exists. rclpy parses ``--ros-args``
 itself; signals are left to :mod:`.api` (rclpy's own handlers are not installed).
 Raw subscriptions get the writer's source timestamp from the message info rcl takes with each
-sample (Jazzy's carries no publisher GID).
+sample (Jazzy's carries no publisher GID, but the writer's publication sequence number).
 """
 
 from __future__ import annotations
@@ -142,9 +142,11 @@ class RclpyClock(Clock):
 
 def message_info(info: dict, clock: Clock) -> interface.MessageInfo:
     """A sample's info from rcl's: the writer's source timestamp, received now on the node's
-    clock, the publisher's GID where rclpy gives it (Jazzy's does not)."""
+    clock, the publisher's GID where rclpy gives it (Jazzy's does not) and the writer's
+    publication sequence number (Jazzy's has it)."""
     return interface.MessageInfo(info["source_timestamp"], clock.now_ns(),
-                                 bytes(info.get("publisher_gid") or b""))
+                                 bytes(info.get("publisher_gid") or b""),
+                                 info.get("publication_sequence_number") or 0)
 
 
 class RclpyPublisher:

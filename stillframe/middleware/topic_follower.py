@@ -42,6 +42,10 @@ DISCOVERY_PERIOD_S = 0.1
 #: on shutdown, keep handing on what arrives until nothing came for this long [s]
 DRAIN_QUIET_S = 0.2
 DRAIN_POLL_S = 0.005
+#: the drain's end at the latest [s]: a peer that keeps publishing (``ros2 topic pub`` at 10 Hz
+#: beside a recorder of every topic) never leaves it quiet, and the launch that stops the
+#: recorder gives it 10 s before SIGTERM
+DRAIN_MAX_S = 2.0
 #: what a subclass returns for a new topic: the raw callback ``(cdr_bytes, MessageInfo)``
 RawCallback = Callable[[bytes, Any], None]
 
@@ -150,16 +154,18 @@ class TopicFollower:
     def drain(self) -> None:
         """After shutdown was requested (``spin`` no longer takes samples): hand on the samples
         the middleware has received, and those still arriving, until none came for
-        :data:`DRAIN_QUIET_S` (samples in flight when the signal came are kept). The ``dds``
-        backend's subscriptions can be asked for them directly; under rclpy, what rclpy
-        delivered before shutdown is all there is. A polled follower hands on what waits."""
+        :data:`DRAIN_QUIET_S` (samples in flight when the signal came are kept), at most
+        :data:`DRAIN_MAX_S`. The ``dds`` backend's subscriptions can be asked for them directly;
+        under rclpy, what rclpy delivered before shutdown is all there is. A polled follower
+        hands on what waits."""
         if self.polled:
             self.poll()
             return
         takers = [take for _, sub in self._subscriptions.values()
                   if (take := getattr(sub, "take_and_dispatch", None)) is not None]
         quiet_since = time.monotonic()
-        while takers and time.monotonic() - quiet_since < DRAIN_QUIET_S:
+        end = quiet_since + DRAIN_MAX_S
+        while takers and (now := time.monotonic()) - quiet_since < DRAIN_QUIET_S and now < end:
             if sum(take() for take in takers):
                 quiet_since = time.monotonic()
             else:

@@ -2,13 +2,17 @@
 
 Like ``ros2 bag play``: messages go out in time-stamp order, message k at wall time
 ``t0 + (stamp_k - stamp_0) / rate``; each topic's publisher offers the QoS its recorded publishers
-offered (:func:`stillframe.bags.qos.player_offer`); with a clock rate, ``/clock`` carries the bag
-time. Before exiting, reliable publishers wait until every subscriber acknowledged every message.
+offered (:func:`stillframe.bags.qos.player_offer`); ``topics`` plays only those, ``exclude``
+leaves those out (a name the bag lacks is bad input); with a clock rate, ``/clock`` carries the
+bag time, and a ``/clock`` recorded in the bag (``record --all`` beside a simulator) is not
+played, so that ``/clock`` has one time base (:attr:`Player.skipped` says why, for the note).
+Before exiting, reliable publishers wait until every subscriber acknowledged every message.
 """
 
 from __future__ import annotations
 
 import time
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -18,6 +22,7 @@ from stillframe.contract import messages
 from stillframe.errors import InputError
 from stillframe.middleware.api import ok
 from stillframe.middleware.clock import ClockPublisher
+from stillframe.middleware.names import resolve_topic
 
 #: How long the player waits at the end for subscribers to acknowledge (reliable topics).
 ACK_TIMEOUT_S = 5.0
@@ -27,7 +32,8 @@ class Player:
     """Republishes the bag at ``path`` through ``node``."""
 
     def __init__(self, node: Any, path: str | Path, rate: float = 1.0,
-                 clock_hz: float | None = None) -> None:
+                 clock_hz: float | None = None, *, topics: Sequence[str] = (),
+                 exclude: Sequence[str] = ()) -> None:
         if not rate > 0:
             raise InputError(f"--rate must be > 0, got {rate}")
         if clock_hz is not None and not clock_hz > 0:
@@ -36,18 +42,37 @@ class Player:
         self.path = Path(path)
         self.rate = rate
         self.summary = bag_summary(self.path, messages.TYPESTORE)
-        for topic in self.summary.topics:
+        #: topics of the bag not played although selected, and why (for a note)
+        self.skipped: dict[str, str] = {}
+        played = self._select(topics, exclude, clock=bool(clock_hz))
+        for topic in played:
             if topic.type not in messages.TYPESTORE.fielddefs:
                 raise InputError(f"{self.path}: topic {topic.name} has type {topic.type}, "
                                  "which the middleware cannot publish (not a Jazzy standard type)")
         self.publishers = {
             t.name: node.create_publisher(t.type, t.name, player_offer(t.offered_qos))
-            for t in self.summary.topics}
+            for t in played}
         self.published = 0
         self._wall0: int | None = None  # wall time (monotonic ns) of the pass's first message
         if clock_hz:
             clock = ClockPublisher(node)
             node.create_timer(1.0 / clock_hz, lambda: clock.publish(self.bag_time()))
+
+    def _select(self, topics: Sequence[str], exclude: Sequence[str], *, clock: bool) -> list[Any]:
+        """The bag's topics to play: ``topics`` (all if empty) less ``exclude``, less a recorded
+        ``/clock`` when the player publishes its own; InputError naming a topic the bag lacks."""
+        present = {t.name for t in self.summary.topics}
+        for option, names in (("--topics", topics), ("--exclude", exclude)):
+            if missing := sorted({resolve_topic(n) for n in names} - present):
+                raise InputError(f"play {option}: {', '.join(missing)} not in {self.path} "
+                                 f"(its topics: {', '.join(sorted(present))})")
+        wanted = ({resolve_topic(n) for n in topics} or present) - {resolve_topic(n)
+                                                                    for n in exclude}
+        if clock and ClockPublisher.TOPIC in wanted:
+            wanted.discard(ClockPublisher.TOPIC)
+            self.skipped[ClockPublisher.TOPIC] = (
+                "the bag's /clock is not played: --clock publishes the bag time on /clock")
+        return [t for t in self.summary.topics if t.name in wanted]
 
     def bag_time(self) -> int:
         """The bag time (ns) that playback has reached (the start time before playing)."""
@@ -68,7 +93,9 @@ class Player:
     def play_once(self) -> None:
         """One pass through the bag with the original timing divided by the rate."""
         self._wall0 = None
-        for m in read_bag(self.path, messages.TYPESTORE):
+        if not self.publishers:
+            return
+        for m in read_bag(self.path, messages.TYPESTORE, topics=list(self.publishers)):
             if self._wall0 is None:  # the bag is open: time starts with its first message
                 self._wall0 = time.monotonic_ns()
             self._sleep_until(self._wall0 + int((m.stamp - self.summary.start_ns) / self.rate))

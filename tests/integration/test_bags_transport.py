@@ -259,6 +259,57 @@ def test_play_clock_publishes_bag_time_and_sim_time_recording_follows_it(
     assert start <= stamps[0] and stamps[-1] <= end  # bag time of 2025, not today
 
 
+def add_sim_clock(path: Path, source: Path) -> None:
+    """A copy of ``source`` with a ``/clock`` recorded beside it, as ``record --all`` beside a
+    simulator has it: sim time from 0, one tick before each message."""
+    types = {IMU: ("sensor_msgs/msg/Imu", SENSOR), JS: ("sensor_msgs/msg/JointState", RELIABLE),
+             "/clock": ("rosgraph_msgs/msg/Clock", SENSOR._replace(depth=1))}
+    with Writer(path, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+        conns = {topic: writer.add_connection(topic, kind, typestore=TS,
+                                              offered_qos_profiles=[qos])
+                 for topic, (kind, qos) in types.items()}
+        for k, (topic, stamp, data) in enumerate(read_all(source)):
+            sim = TS.types["rosgraph_msgs/msg/Clock"](
+                TS.types["builtin_interfaces/msg/Time"](*divmod(k * 20_000_000, 10**9)))
+            writer.write(conns["/clock"], stamp,
+                         bytes(TS.serialize_cdr(sim, "rosgraph_msgs/msg/Clock")))
+            writer.write(conns[topic], stamp, data)
+
+
+@pytest.mark.slow
+def test_play_clock_skips_a_recorded_clock_and_topics_select(env: dict[str, str],
+                                                              tmp_path: Path) -> None:
+    """A bag with a recorded ``/clock`` (sim time from 0) played with ``--clock``: ``/clock``
+    carries only the bag time (2025), the note says why; ``--topics`` and ``--exclude`` play
+    what they name, as ``ros2 bag play`` does."""
+    write_source(tmp_path / "A", n_imu=20, n_js=10, period_ns=20_000_000)
+    add_sim_clock(tmp_path / "C", tmp_path / "A")
+    clock_rec = Proc(env, "record", "-o", str(tmp_path / "clock"), "--all")
+    clock_rec.wait_for("Recording to")
+    player = Proc(env, "play", str(tmp_path / "C"), "--delay", "2", "--clock", "100",
+                  "--exclude", IMU)
+    try:
+        assert player.finish() == 0, "\n".join(player.lines)
+        time.sleep(0.3)
+        assert clock_rec.finish(signal.SIGINT) == 0
+        only = Proc(env, "play", str(tmp_path / "C"), "--delay", "0", "--topics", IMU, "/clock")
+        assert only.finish() == 0, "\n".join(only.lines)
+    finally:
+        for proc in (player, clock_rec):
+            proc.stop()
+    assert any("the bag's /clock is not played: --clock publishes the bag time" in line
+               for line in player.lines), player.lines
+    got = read_all(tmp_path / "clock")
+    clock = [TS.deserialize_cdr(d, "rosgraph_msgs/msg/Clock").clock
+             for t, _, d in got if t == "/clock"]
+    assert len(clock) >= 10 and all(c.sec * 10**9 + c.nanosec >= T0 for c in clock)
+    assert [d for t, _, d in got if t == JS] == [d for t, _, d in read_all(tmp_path / "A")
+                                                 if t == JS]
+    assert not [t for t, _, _ in got if t == IMU]
+    # the 20 IMU messages and the 30 recorded ticks: without --clock, /clock is played
+    assert any("Published 50 messages" in line for line in only.lines), only.lines
+
+
 @pytest.mark.slow
 def test_play_loop_at_rate_repeats_the_bag_faster(env: dict[str, str], tmp_path: Path) -> None:
     """``--loop --rate 4``: the recording is the bag's messages over and over (at least twice
@@ -289,6 +340,8 @@ def test_play_loop_at_rate_repeats_the_bag_faster(env: dict[str, str], tmp_path:
     (["play", "{tmp}/nope"], "{tmp}/nope", BagError.exit_code),
     (["play", "{tmp}/A", "--rate", "0"], "--rate", 2),
     (["play", "{tmp}/A", "--clock", "-1"], "--clock", 2),
+    (["play", "{tmp}/A", "--topics", "/frame/floor9/imu"], "--topics: /frame/floor9/imu", 2),
+    (["play", "{tmp}/A", "--exclude", "nope"], "--exclude: /nope", 2),
     (["record", "-o", "{tmp}/new"], "--all", 2),
     (["record", "-o", "{tmp}/new", "--all", "/x"], "--all", 2),
     (["record", "-o", "{tmp}/A", "--all"], "{tmp}/A", 2),

@@ -144,7 +144,8 @@ def test_launch_passes_sim_nodes_result_through_and_stops_the_others(
     pids, lines = wait_for_children(proc)
     out, err = proc.communicate(timeout=60)
     assert proc.returncode == 0, err
-    assert json.loads(out) == {"scene": "thesis_lqg", **RESULT, "diagnostics": {}}
+    assert json.loads(out) == {"scene": "thesis_lqg", **RESULT, "degraded": False,
+                               "degraded_reasons": [], "diagnostics": {}}
     err = "".join(lines) + err
     sim_argv = json.loads(next(line for line in err.splitlines() if "sim argv" in line)
                           .split("sim argv ", 1)[1])

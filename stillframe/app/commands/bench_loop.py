@@ -38,6 +38,7 @@ from stillframe.app.commands.launch import (
     realtime_arguments,
 )
 from stillframe.app.launcher import run_scene
+from stillframe.app.run_verdict import watchdog_zeros
 from stillframe.bench.latency import LatencyLog
 from stillframe.bench.stall_probe import stall_probe
 from stillframe.config.scene import load_scene
@@ -45,7 +46,6 @@ from stillframe.contract.topics import DEFAULT_NAMESPACE, FLOOR_IMU, FORCE_CMD, 
 from stillframe.errors import InputError
 from stillframe.locations import SCENES_DIR
 from stillframe.loop.closed_loop import run_closed_loop
-from stillframe.loop.writer_gate import same_node
 from stillframe.middleware import api
 from stillframe.node_runtime.realtime import Realtime, RealtimeOptions, parse_practices
 from stillframe.text_table import format_table
@@ -175,13 +175,6 @@ def realtime(rate_hz: float, duration: float, out: Path, backend: str,
             "sim_overruns": e.get("overruns"), "sim_deadline_misses": e.get("deadline_misses"),
             "steps": e["steps"], "load_1min": os.getloadavg()[0],
             **(stalls.summary if stalls else {})}
-
-
-def watchdog_zeros(statuses: dict[str, dict[str, str]]) -> int | None:
-    """The zero commands controller_node's watchdog sent (its last ``/diagnostics``); None
-    without a status of it."""
-    return next((int(values["watchdog"]) for name, values in statuses.items()
-                 if same_node(name, "controller_node") and "watchdog" in values), None)
 
 
 def within_period_pct(summary: dict[str, Any], zeros: int) -> float:

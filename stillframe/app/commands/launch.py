@@ -4,8 +4,10 @@ Prints the live status from ``/diagnostics`` on stderr and, at the end of the sc
 evaluation sim_node wrote: steady-state peaks per floor with and without control and the
 reductions (thesis eq. 5.233, 5.287); ``--json`` prints it as one document
 ``{"reduction_pct": {"displacement": [...], "velocity": [...]}, "peak_command": ...,
-"lockstep_timeouts": ..., "steps": ..., "wall_s": ..., ...}``. Exit code 1 names a node that
-died, 130 follows Ctrl-C (every child stopped and reaped).
+"lockstep_timeouts": ..., "steps": ..., "wall_s": ..., "degraded": false, "degraded_reasons":
+[], ...}``. A degraded real-time run (:mod:`stillframe.app.run_verdict`) ends with a warning line
+giving the reasons, and with ``--strict`` with exit code 6. Exit code 1 names a node that died,
+130 follows Ctrl-C (every child stopped and reaped).
 """
 
 from __future__ import annotations
@@ -24,8 +26,9 @@ from stillframe.app.commands.common import (
 )
 from stillframe.app.launcher import MODES
 from stillframe.app.net_faults import FAULTS
+from stillframe.app.run_verdict import verdict
 from stillframe.config.scene import Scene
-from stillframe.errors import InputError
+from stillframe.errors import DegradedRunError, InputError
 from stillframe.text_table import format_table
 
 
@@ -73,6 +76,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                              "loop gives up samples, never loop time)")
     parser.add_argument("--out", type=Path, default=None, metavar="DIR",
                         help="keep sim_node's result.json and result.npz (histories) here")
+    parser.add_argument("--strict", action="store_true",
+                        help="a degraded real-time run (deadline misses, watchdog zeros, refused "
+                             "commands, no command in time, mostly zero actuation) exits with "
+                             "code 6 instead of only warning")
     add_compose_arguments(parser)
     add_realtime_arguments(parser)
     add_netns_arguments(parser)
@@ -206,10 +213,18 @@ def run(args: argparse.Namespace) -> int:
         except KeyboardInterrupt:
             print("stillframe launch: interrupted; every node stopped", file=sys.stderr)
             return 130
+    reasons = verdict(result.evaluation, result.diagnostics)
     if args.json:
-        emit_json({"scene": scene.name, **result.evaluation, "diagnostics": result.diagnostics})
+        emit_json({"scene": scene.name, **result.evaluation, "degraded": bool(reasons),
+                   "degraded_reasons": reasons, "diagnostics": result.diagnostics})
     elif "reduction_pct" in result.evaluation:
         print_evaluation(result.evaluation, scene)
     else:
         print(f"scene {scene.name}: {result.evaluation.get('steps')} steps, no controller")
+    if reasons:
+        degraded = DegradedRunError("degraded real-time run, its figures are not the "
+                                    f"controller's: {'; '.join(reasons)}")
+        if args.strict:
+            raise degraded
+        print(f"stillframe launch: warning: {degraded}", file=sys.stderr)
     return 0

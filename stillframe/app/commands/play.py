@@ -1,4 +1,5 @@
-"""``stillframe play DIR [--rate R] [--clock [HZ]] [--loop]``: republish a bag with its timing."""
+"""``stillframe play DIR [--rate R] [--clock [HZ]] [--loop] [--topics T …] [--exclude T …]``:
+republish a bag with its timing and recorded QoS, like ``ros2 bag play``."""
 
 from __future__ import annotations
 
@@ -13,8 +14,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     parser.add_argument("-r", "--rate", type=float, default=1.0,
                         help="playback speed factor (default 1.0)")
     parser.add_argument("--clock", type=float, nargs="?", const=40.0, default=None, metavar="HZ",
-                        help="publish the bag time on /clock at HZ (default 40 Hz)")
+                        help="publish the bag time on /clock at HZ (default 40 Hz); a /clock "
+                             "recorded in the bag is then not played")
     parser.add_argument("-l", "--loop", action="store_true", help="play again and again")
+    parser.add_argument("--topics", nargs="+", default=[], metavar="TOPIC",
+                        help="play only these topics (each must be in the bag)")
+    parser.add_argument("--exclude", "--exclude-topics", dest="exclude", nargs="+", default=[],
+                        metavar="TOPIC", help="play every topic but these")
     parser.add_argument("-d", "--delay", type=float, default=1.0, metavar="S",
                         help="seconds to wait after creating the publishers (discovery), "
                              "default 1.0")
@@ -30,7 +36,10 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(f"--delay must be >= 0 s, got {args.delay}")
     node = create_node("stillframe_player", argv=sys.argv[:1])
     try:
-        player = Player(node, args.bag, rate=args.rate, clock_hz=args.clock)
+        player = Player(node, args.bag, rate=args.rate, clock_hz=args.clock, topics=args.topics,
+                        exclude=args.exclude)
+        for note in player.skipped.values():
+            node.get_logger().info(note)
         player.wait(args.delay)
         while ok():
             player.play_once()

@@ -134,6 +134,17 @@ def test_mcap_file_read_by_the_mcap_package(our_bag: Path) -> None:
     assert got == sample_messages()
 
 
+def test_metadata_names_the_distro_jazzy(our_bag: Path) -> None:
+    """As ``ros2 bag record`` on Jazzy writes it: in ``metadata.yaml`` and in the MCAP file's
+    ``rosbag2`` metadata record (read by the ``mcap`` package)."""
+    meta = yaml.safe_load((our_bag / "metadata.yaml").read_text())
+    assert meta["rosbag2_bagfile_information"]["ros_distro"] == "jazzy"
+    with next(our_bag.glob("*.mcap")).open("rb") as f:
+        records = {m.name: m.metadata for m in make_reader(f).iter_metadata()}
+    embedded = yaml.safe_load(records["rosbag2"]["serialized_metadata"])
+    assert embedded["ros_distro"] == "jazzy"
+
+
 def test_read_back_bytes_stamps_order_and_decoded_values(our_bag: Path) -> None:
     got = list(read_bag(our_bag, TS, decode=True))
     assert [(m.topic, m.stamp, m.data) for m in got] == sample_messages()

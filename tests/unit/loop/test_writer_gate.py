@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import unittest.mock
 
-from stillframe.loop.writer_gate import RECHECK_NS, InputGates, WriterGate
+from stillframe.loop.writer_gate import RECHECK_NS, STREAM_IDLE_NS, InputGates, WriterGate
 
 SIM, SIM2, STRAY, STRAY2 = b"a" * 16, b"b" * 16, b"s" * 16, b"t" * 16
 
@@ -152,3 +152,81 @@ def test_without_writer_ids_the_writers_are_counted_not_listed_and_the_graph_lef
         for _ in range(5):
             gates.keep_graph_read()
     assert node.listed == ["/a"] and not gate.rejected
+
+
+def test_without_writer_ids_an_idle_publisher_changes_nothing() -> None:
+    """rclpy: no GIDs, but each writer's sequence numbers. A publisher that never writes (the
+    graph shows it) costs no sample, and the graph's writer count is never asked."""
+    graph = Graph((SIM, "/frame/sim_node"), (STRAY, "/frame/idle_teleop"))
+    gate = graph.gate("sim_node")
+    assert all(gate.admits(b"", n) for n in range(1, 1001))
+    assert all(gate.admits(b"", n) for n in range(1003, 1400, 3))   # samples lost: gaps
+    assert not gate.rejected and graph.asked == 1   # the first stream, named once
+    assert gate.report()["writer"] == "/frame/sim_node"
+    assert gate.report()["ignored_writers"] == ""
+
+
+class Log:
+    def __init__(self) -> None:
+        self.lines: list[str] = []
+
+    def warning(self, line: str) -> None:
+        self.lines.append(line)
+
+
+def test_without_writer_ids_a_writing_stranger_is_refused_counted_and_named_at_once() -> None:
+    graph = Graph((SIM, "/frame/sim_node"), (STRAY, "/frame/teleop"))
+    gates = InputGates(Parameters(), "command_writer")  # type: ignore[arg-type]
+    gate = gates.gates["/cmd"] = graph.gate("sim_node")
+    assert all(gate.admits(b"", n) for n in range(1, 301))
+    log = Log()
+    with unittest.mock.patch("time.monotonic_ns", lambda: 0):
+        assert not gates.announce(log)                  # nothing refused: nothing to say
+        for n in range(1, 51):                          # the stranger from its first sample
+            assert gate.admits(b"", 300 + n)            # the loop's writer goes on
+            assert not gate.admits(b"", n)
+        assert gates.announce(log) and not gates.announce(log)
+    assert log.lines == ["/cmd: refusing the samples of another writer: /frame/teleop (50 so far)"]
+    assert dict(gate.rejected) == {"second_writer": 50}
+    assert gate.report()["ignored_writers"] == "/frame/teleop"
+
+
+def test_without_writer_ids_a_restart_is_taken_and_numbers_side_by_side_refused() -> None:
+    graph = Graph((SIM, "/frame/sim_node"), (STRAY, "/frame/teleop"))
+    gate = graph.gate("sim_node")
+    assert all(gate.admits(b"", n) for n in range(1, 101))
+    graph.writers = [(SIM2, "/frame/sim_node"), (STRAY, "/frame/teleop")]
+    assert all(gate.admits(b"", n) for n in range(1, 11))   # a new writer of sim_node: taken
+    assert not gate.admits(b"", 101)        # continues the old stream: no longer taken
+    assert not gate.admits(b"", 5000)       # beyond MAX_GAP above any stream: a new one
+    assert gate.admits(b"", 11)             # the restarted writer still taken
+    graph.now += STREAM_IDLE_NS + 1         # the streams refused are idle: forgotten
+    assert gate.admits(b"", 12)
+    assert not any(gate.admits(b"", n) for n in range(6, 12))   # a stranger from 6 on
+    assert gate.admits(b"", 13)
+    assert not gate.admits(b"", 12) and not gate.admits(b"", 13)   # now as far as the loop's
+    assert not gate.admits(b"", 14) and not gate.admits(b"", 14)   # as near to both: refused
+    assert dict(gate.rejected) == {"second_writer": 10, "ambiguous_writer": 2}
+    assert gate.report()["ignored_writers"] == "/frame/teleop"
+
+
+def test_without_writer_ids_a_jump_is_taken_while_the_graph_shows_only_the_taken_node() -> None:
+    graph = Graph((SIM, "/frame/sim_node"))
+    gate = graph.gate()
+    assert gate.admits(b"", 1) and gate.admits(b"", 2)
+    assert gate.admits(b"", 2 + 10 * 256)   # a long outage: a new stream, but nobody else
+    assert gate.admits(b"", 3 + 10 * 256) and not gate.rejected
+    assert gate.report()["writer"] == "/frame/sim_node"
+
+
+def test_without_writer_ids_a_restart_the_graph_shows_late_is_taken_after_a_recheck() -> None:
+    graph = Graph((SIM, "/frame/sim_node"), (STRAY, "/frame/teleop"))
+    gate = graph.gate("sim_node")
+    assert all(gate.admits(b"", n) for n in range(1, 101))
+    assert not gate.admits(b"", 1)          # the restarted writer, not in the graph yet
+    graph.writers = [(SIM2, "/frame/sim_node"), (STRAY, "/frame/teleop")]
+    asked = graph.asked
+    assert not gate.admits(b"", 2) and graph.asked == asked     # refused without asking
+    graph.now += RECHECK_NS
+    assert gate.admits(b"", 3) and gate.admits(b"", 4)         # asked again: a restart
+    assert dict(gate.rejected) == {"second_writer": 2}

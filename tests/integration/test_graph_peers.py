@@ -1,0 +1,281 @@
+"""Other writers and tools on the graph (issue 26, item 3), with real rclpy peer processes.
+
+- A peer that only creates a publisher on ``pendulum/torque_cmd`` and never writes (what ``ros2
+  topic pub`` before its first message, a Foxglove publish panel or a teleop tool do) changes
+  nothing: the lock-step run equals the one-process loop to the last bit on both backends
+  (rclpy's message info has no writer GID: the simulator decides from the sequence numbers of
+  what arrives), and a real-time run on rclpy refuses no command.
+- A peer that starts writing during the run, at its own pace (``ros2 topic pub -r 5``), is
+  refused, counted and named, on rclpy too, and the lock-step run is still the one-process
+  loop's to the last bit.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import functools
+import importlib.util
+import json
+import signal
+import subprocess
+import sys
+import threading
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from stillframe.bags.storage import bag_summary
+from stillframe.contract import messages
+from stillframe.locations import REPO_ROOT
+from stillframe.loop.closed_loop import run_closed_loop
+from stillframe.loop.writer_gate import REASONS
+from stillframe.monitor.foxglove_client import Capture, capture
+from tests.support.middleware import child_env, finish, start_python
+from tests.support.nodes import SCENES, SHORT_LQG, run_loop_beside
+from tests.support.scenes import thesis_scene
+
+BACKENDS = ("rclpy", "dds") if importlib.util.find_spec("rclpy") else ("dds",)
+
+#: a real rclpy peer with a publisher on the command topic that never writes
+IDLE_PEER = """
+import signal
+import rclpy
+from geometry_msgs.msg import WrenchStamped
+rclpy.init()
+node = rclpy.create_node("idle_teleop", namespace="/frame")
+pub = node.create_publisher(WrenchStamped, "pendulum/torque_cmd", 10)
+stop = []
+signal.signal(signal.SIGTERM, lambda *a: stop.append(1))
+print("ready", flush=True)
+while not stop:
+    rclpy.spin_once(node, timeout_sec=0.05)
+print("sent", 0, flush=True)
+"""
+
+#: ``ros2 topic pub -r 5 /frame/pendulum/torque_cmd``, started during the run (once the loop's
+#: ``/clock`` passed 0.5 s): a fixed 5 N m at 5 Hz, stamped 0
+PUB_PEER = """
+import signal, time
+import rclpy
+from geometry_msgs.msg import WrenchStamped
+from rosgraph_msgs.msg import Clock
+rclpy.init()
+node = rclpy.create_node("topic_pub", namespace="/frame")
+clock = [0]
+node.create_subscription(Clock, "/clock", lambda m: clock.__setitem__(0, m.clock.sec * 10**9
+                         + m.clock.nanosec), rclpy.qos.qos_profile_sensor_data)
+pub = node.create_publisher(WrenchStamped, "pendulum/torque_cmd", 10)
+cmd = WrenchStamped()
+cmd.wrench.torque.z = 5.0
+stop = []
+signal.signal(signal.SIGTERM, lambda *a: stop.append(1))
+print("ready", flush=True)
+sent, due = 0, time.monotonic()
+while not stop:
+    rclpy.spin_once(node, timeout_sec=0.05)
+    if clock[0] >= 5 * 10**8 and pub.get_subscription_count() and time.monotonic() >= due:
+        pub.publish(cmd)
+        sent, due = sent + 1, due + 0.2
+print("sent", sent, flush=True)
+"""
+
+
+def writer_refusals(gate: dict) -> int:
+    return sum(gate[f"rejected_{r}"] for r in REASONS)
+
+
+@functools.cache
+def reference() -> Any:
+    """The one-process loop of the scene the tests launch."""
+    return run_closed_loop(thesis_scene("thesis_lqg", SHORT_LQG))
+
+
+def loop_beside(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, backend: str, peer: str,
+                **params: Any) -> tuple[dict, dict[str, np.ndarray], int, dict]:
+    """The three nodes on ``backend`` (sim_node pinned to controller_node, as a launch pins it)
+    beside the ``peer`` script: the result, the histories, what the peer sent, and the torque
+    command's gate report."""
+    monkeypatch.setenv("STILLFRAME_RMW", backend)
+    result, hist, sent = run_loop_beside(tmp_path, peer, "thesis_lqg", SHORT_LQG,
+                                         command_writer="controller_node", **params)
+    return result, hist, sent, result["command_gates"]["pendulum/torque_cmd"]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_an_idle_publisher_on_the_command_topic_changes_nothing(
+        ros_domain: int, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, backend: str) -> None:
+    result, hist, _, gate = loop_beside(tmp_path, monkeypatch, backend, IDLE_PEER)
+    np.testing.assert_array_equal(hist["command"], reference().command)
+    np.testing.assert_array_equal(hist["truth"], reference().truth)
+    assert writer_refusals(gate) == 0 and gate["ignored_writers"] == ""
+    assert result["lockstep_timeouts"] == 0
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_an_idle_publisher_changes_nothing_in_real_time(
+        ros_domain: int, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, backend: str) -> None:
+    """The issue's run (rclpy): every command refused as ``ambiguous_writer`` before, the
+    reductions negative. Now no command is refused for its writer and the controller's commands
+    are applied (how many in time, and so the reductions, depend on the machine's load: the
+    degraded verdict reports that, not this test)."""
+    result, _, _, gate = loop_beside(tmp_path, monkeypatch, backend, IDLE_PEER, mode="realtime")
+    assert writer_refusals(gate) == 0 and gate["ignored_writers"] == ""
+    assert gate["writer"] == "/frame/controller_node"
+    assert result["commands_in_time"] > 0 and result["peak_command"] > 0
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_a_writing_peer_is_refused_counted_and_named(
+        ros_domain: int, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, backend: str) -> None:
+    _, hist, sent, gate = loop_beside(tmp_path, monkeypatch, backend, PUB_PEER)
+    assert 0 < writer_refusals(gate) <= sent, (gate, sent)
+    assert gate["writer"] == "/frame/controller_node"
+    assert gate["ignored_writers"] == "/frame/topic_pub" or (
+        backend == "dds" and gate["ignored_writers"].startswith("010f")), gate
+    np.testing.assert_array_equal(hist["command"], reference().command)
+
+
+def launch(*args: str) -> subprocess.Popen:
+    return subprocess.Popen(
+        [sys.executable, "-m", "stillframe", "launch", str(SCENES / "thesis_lqg.yaml"),
+         *[a for o in SHORT_LQG for a in ("--set", o)], "--backend", "dds", *args],
+        env=child_env(), cwd=REPO_ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+        text=True)
+
+
+@pytest.mark.slow
+def test_two_launches_on_one_domain_never_both_stall(ros_domain: int) -> None:
+    """Started in the same instant: the later launcher refuses with one line naming the earlier
+    one (exit 2), before starting any node when discovery shows it within ``LOOK_S``, at once
+    when it shows it later (a loaded machine); the earlier one runs to its end, undisturbed in
+    the first case. A third one, started while the first runs, refuses too."""
+    first, second = launch("--json"), launch("--json")
+    _out, err = second.communicate(timeout=120)
+    if second.returncode == 0:          # the other one started later: swap
+        first, second = second, first
+        _out, err = second.communicate(timeout=120)
+    assert second.returncode == 2, err[-2000:]
+    lines = [line for line in err.splitlines() if line.startswith("stillframe launch")]
+    assert len(lines) == 1 and "another stillframe loop is running on ROS_DOMAIN_ID=" \
+        f"{ros_domain}: /_stillframe_launch_{first.pid}_" in lines[0], err
+    third = launch()
+    err3 = third.communicate(timeout=120)[1]
+    result = json.loads(first.communicate(timeout=300)[0])
+    assert first.returncode == 0
+    if "started sim_node" not in err:   # refused before its nodes ran
+        assert result["lockstep_timeouts"] == 0
+    assert third.returncode == 2 and f"/_stillframe_launch_{first.pid}_" in err3, err3
+
+
+#: ``ros2 topic pub -r 10 /chatter std_msgs/msg/String``: a peer on a topic of its own
+CHATTER = """
+import signal, time
+import rclpy
+from std_msgs.msg import String
+rclpy.init()
+node = rclpy.create_node("talker")
+pub = node.create_publisher(String, "/chatter", 10)
+stop = []
+signal.signal(signal.SIGTERM, lambda *a: stop.append(1))
+print("ready", flush=True)
+sent = 0
+while not stop:
+    pub.publish(String(data=f"hello {sent}"))
+    sent += 1
+    time.sleep(0.1)
+print("sent", sent, flush=True)
+"""
+
+
+def stillframe_cli(*args: str) -> subprocess.Popen:
+    return subprocess.Popen([sys.executable, "-m", "stillframe", *args], env=child_env(),
+                            cwd=REPO_ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True)
+
+
+@pytest.mark.slow
+@pytest.mark.skipif("rclpy" not in BACKENDS, reason="rclpy not installed")
+def test_the_loop_keeps_controlling_beside_tools(ros_domain: int, tmp_path: Path) -> None:
+    """Beside a lock-step launch with its recorder: ``stillframe topic echo`` and ``topic hz``,
+    a second recorder of every topic, ``stillframe monitor`` with a Foxglove client subscribed
+    to every topic, and a real rclpy talker on ``/chatter``. The run is the one-process loop's
+    to the last bit, and every tool got what it asked for."""
+    monitor = stillframe_cli("monitor", "--port", "0", "--max-rate", "0")
+    ready = ""
+    while "Monitor ready" not in ready:
+        ready = monitor.stderr.readline()
+        assert ready or monitor.poll() is None, "monitor did not start"
+    url = ready.split("foxglove ", 1)[1].split(",")[0].strip()
+    done, seen = asyncio.Event(), Capture()
+    client = threading.Thread(target=asyncio.run, args=(capture(url, None, done, seen),),
+                              daemon=True)
+    client.start()
+    tools = [stillframe_cli("topic", "echo", "/frame/floor1/imu", "--field", "header.stamp.sec"),
+             stillframe_cli("topic", "hz", "/frame/state_estimate"),
+             stillframe_cli("record", "-o", str(tmp_path / "second"), "--all"),
+             start_python(CHATTER)]
+    assert tools[-1].stdout.readline().strip() == "ready"
+    try:
+        done_launch = subprocess.run(
+            [sys.executable, "-m", "stillframe", "launch", str(SCENES / "thesis_lqg.yaml"),
+             *[a for o in SHORT_LQG for a in ("--set", o)], "--record", str(tmp_path / "bag"),
+             "--out", str(tmp_path / "out"), "--json"],
+            env=child_env(), cwd=REPO_ROOT, capture_output=True, text=True, timeout=300)
+    finally:
+        for proc in (*tools, monitor):
+            proc.send_signal(signal.SIGINT if proc is not tools[-1] else signal.SIGTERM)
+        outputs = [finish(proc, timeout=30) for proc in (*tools, monitor)]
+        client.join(10)
+    assert done_launch.returncode == 0, done_launch.stderr[-3000:]
+    result = json.loads(done_launch.stdout)
+    with np.load(tmp_path / "out" / "result.npz") as data:
+        np.testing.assert_array_equal(data["command"], reference().command)
+        np.testing.assert_array_equal(data["truth"], reference().truth)
+    assert result["lockstep_timeouts"] == 0
+    echo, hz, _, chatter, _ = outputs
+    assert echo[0].split().count("0") >= 5             # stamps of the first second echoed
+    assert "average rate" in hz[0], hz
+    steps = result["steps"]
+    for bag in ("bag", "second"):
+        counts = {t.name: t.count for t in bag_summary(tmp_path / bag, messages.TYPESTORE).topics}
+        assert counts["/frame/floor1/imu"] == steps, (bag, counts)
+    assert int(chatter[0].split()[-1]) > 0
+    assert len(seen.messages.get("/frame/floor1/imu", [])) > 0, "the Foxglove client got none"
+
+
+@pytest.mark.slow
+def test_a_degraded_real_time_run_says_so_and_strict_fails(ros_domain: int) -> None:
+    """A real-time launch beside a peer writing commands (forced: every one it writes is
+    refused): the simulator's log and ``/diagnostics`` name the peer, the JSON says
+    ``"degraded": true`` with the refused commands among the reasons, and ``--strict`` ends it
+    with exit code 6 and one line giving them."""
+    peer = start_python(PUB_PEER)
+    assert peer.stdout.readline().strip() == "ready"
+    try:
+        run = launch("--mode", "realtime", "--strict", "--json")
+        out, err = run.communicate(timeout=300)
+    finally:
+        peer.send_signal(signal.SIGTERM)
+        sent = int(finish(peer, timeout=20)[0].split()[-1])
+    result = json.loads(out)
+    gate = result["command_gates"]["pendulum/torque_cmd"]
+    assert sent > 0 and gate["rejected_second_writer"] > 0, gate
+    assert result["degraded"] is True
+    assert f"{result['rejected_commands']} refused commands" in result["degraded_reasons"]
+    # the simulator's log and /diagnostics name the peer (by its GID until the graph has its
+    # name: the only eProsima, vendor 01.0f, writer)
+    named = [line for line in err.splitlines()
+             if "[sim_node]" in line and "pendulum/torque_cmd: refusing the samples of another "
+             "writer: " in line]
+    assert named and ("/frame/topic_pub" in named[-1] or ": 010f" in named[-1]), err[-3000:]
+    sim = next(v for k, v in result["diagnostics"].items() if k.endswith("sim_node"))
+    assert sim["pendulum_torque_cmd_ignored_writers"] == gate["ignored_writers"] != ""
+    lines = [line for line in err.splitlines() if line.startswith("stillframe launch")]
+    assert run.returncode == 6
+    assert lines == ["stillframe launch: error: degraded real-time run, its figures are not the "
+                     f"controller's: {'; '.join(result['degraded_reasons'])}"], err[-2000:]

@@ -1,0 +1,42 @@
+"""The degraded verdict of a real-time run (:mod:`stillframe.app.run_verdict`): each reason
+forced by its counter in a hand-made evaluation and status, none for a clean run or a lock-step
+one."""
+
+from __future__ import annotations
+
+import pytest
+
+from stillframe.app.run_verdict import DEADLINE_MISS_LIMIT, verdict
+
+#: a clean real-time run of 960 samples (30 s at 32 Hz)
+CLEAN = {"mode": "realtime", "steps": 960, "deadline_misses": 0, "rejected_commands": 0,
+         "commands_in_time": 958, "degraded_samples": 0, "safe_state_samples": 0,
+         "reduction_pct": {"displacement": [70.0, 80.0, 63.0]}}
+STATUS = {"/frame/controller_node": {"watchdog": "0"}, "/frame/sim_node": {"step": "960"}}
+
+
+def test_a_clean_run_and_a_lockstep_run_are_not_degraded() -> None:
+    assert verdict(CLEAN, STATUS) == []
+    assert verdict({**CLEAN, "mode": "lockstep", "rejected_commands": 5}, STATUS) == []
+    # at the limit, not over it
+    at_limit = round(DEADLINE_MISS_LIMIT * 960)
+    assert verdict({**CLEAN, "deadline_misses": at_limit - 1}, STATUS) == []
+
+
+@pytest.mark.parametrize(("changed", "status", "reason"), [
+    ({"deadline_misses": 81}, STATUS,
+     "81 deadline misses (8.4 % of 960 samples, over 1 %)"),
+    ({}, {**STATUS, "/frame/controller_node": {"watchdog": "12"}}, "12 watchdog zeros"),
+    ({"rejected_commands": 960}, STATUS, "960 refused commands"),
+    ({"commands_in_time": 0}, STATUS, "the controller never commanded in time"),
+    ({"degraded_samples": 400, "safe_state_samples": 100}, STATUS,
+     "500 of 960 samples degraded (zero actuation applied)"),
+])
+def test_each_reason_alone(changed: dict, status: dict, reason: str) -> None:
+    assert verdict({**CLEAN, **changed}, status) == [reason]
+
+
+def test_the_issues_run_gives_every_reason_it_had() -> None:
+    """81 deadline misses, 12 watchdog zeros and every command refused by an idle peer."""
+    run = {**CLEAN, "deadline_misses": 81, "rejected_commands": 960, "commands_in_time": 0}
+    assert len(verdict(run, {"/frame/controller_node": {"watchdog": "12"}})) == 4
