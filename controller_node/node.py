@@ -206,7 +206,7 @@ class ControllerNode:
         values = {"mode": self.params.mode, "rate_hz": self.rate.read(),
                   "commands": c.commands, "saturated": c.saturated, "singular": c.singular,
                   "watchdog": c.watchdog, "watchdog_active": cmd.watchdog,
-                  "runaway": c.runaway,
+                  "runaway": c.runaway, "fallback": c.fallback,
                   "enabled": cmd.enabled,
                   "last_command": float(cmd.vector[self.controller.actuator]),
                   **self.matching.counts,
@@ -217,6 +217,8 @@ class ControllerNode:
                            "periods (estimator stale or gone); commanding zero"),
             (c.runaway, f"control law output non-finite or beyond {RUNAWAY_FACTOR:g}x the "
                         f"limit {c.runaway} times"),
+            (c.fallback, f"MPC solve failed {c.fallback} times; the anti-windup LQG command "
+                         "was sent instead"),
         ) if flag]
         if intruders := self.gates.message():
             problems.append(intruders)

@@ -62,6 +62,7 @@ from stillframe.contract.signals import Sample, actuator_of
 from stillframe.errors import InputError
 from stillframe.loop.closed_loop import LoopHistory, evaluate
 from stillframe.loop.command_gate import CommandGate
+from stillframe.loop.energy_balance import EnergyTopic
 from stillframe.loop.pacing import Pacer, wait_until
 from stillframe.loop.watchdog import MissRateGuard, command_expired
 from stillframe.loop.wiring import command_topic, estimator_inputs
@@ -117,6 +118,8 @@ class SimNode:
         self.publishers = {s.name: TappedPublisher(node, s.type_name, s.name, params.qos(s))
                            for s in (*SAMPLE_TOPICS, topics.STATE_TRUTH)}
         self.messages = SensorMessages(scene.sensors)
+        #: pH plant: energy_balance and the live passivity check (None for the other plants)
+        self.energy = EnergyTopic.of(node, self.plant, scene, params.qos(topics.ENERGY_BALANCE))
         self.diagnostics = Diagnostics(node, params.diagnostics_period_s)
         limits = (scene.actuators.torque_limit, scene.actuators.force_limit)
         self.inputs = InputGates(node, "command_writer")
@@ -208,6 +211,8 @@ class SimNode:
         cdrs = self.messages.cdr(sample, ns)
         for pub, cdr in zip(self.publishers.values(), cdrs, strict=True):
             pub.publish(cdr)
+        if self.energy is not None:
+            self.energy.publish(float(sample.truth[3]))
         self.published_at[ns] = time.monotonic()
         oldest = ns - self.delay.periods * self.pacer.period_ns
         for old in [t for t in self.published_at if t < oldest]:
@@ -265,6 +270,9 @@ class SimNode:
             prefix = spec.name.replace("/", "_")
             values.update({f"{prefix}_{key}": value for key, value in gate.report().items()})
         bad = sum(self.pacer.counts.values()) + sum(self.counts.values())
+        if self.energy is not None:
+            values.update(self.energy.values())
+            bad += self.energy.check.violations
         return values, ERROR if self.guard.tripped else WARN if bad else OK
 
     def degraded_message(self) -> str:
@@ -274,7 +282,9 @@ class SimNode:
 
     def publish_status(self) -> None:
         values, level = self.status()
-        message = "; ".join(m for m in (self.degraded_message(), self.inputs.message()) if m)
+        passivity = self.energy.check.message() if self.energy is not None else ""
+        message = "; ".join(m for m in (self.degraded_message(), self.inputs.message(),
+                                        passivity) if m)
         self.diagnostics.publish(self.now_ns, values, level, message)
 
     def step(self, k: int) -> np.ndarray | None:

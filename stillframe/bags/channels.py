@@ -23,7 +23,7 @@ from scipy import signal
 
 from stillframe.bags.storage import open_bag
 from stillframe.contract.messages import TYPESTORE
-from stillframe.contract.topics import CONTRACT
+from stillframe.contract.topics import CONDITIONAL, CONTRACT
 from stillframe.errors import IdentificationError, InputError
 
 #: Default field per message type: that of the first contract topic of the type, and std_msgs'
@@ -101,7 +101,7 @@ def _split_path(path: str, spec: str) -> list[tuple[str, list[int]]]:
 def _default_field(topic: str, msgtype: str) -> str:
     """The contract's field for a contract topic (matched by its name under any namespace),
     else the type's default."""
-    for spec in CONTRACT:
+    for spec in (*CONTRACT, *CONDITIONAL):
         if spec.field and spec.type_name == msgtype and topic.endswith("/" + spec.name):
             return spec.field
     if msgtype not in DEFAULT_FIELDS:

@@ -105,12 +105,30 @@ class Estimator(Section):
 class Controller(Section):
     """controller: the control law and its supervisor."""
 
-    type: Literal["none", "lqg", "euk_pendulum", "euk_floor", "passivity"] = key("none")
+    type: Literal["none", "lqg", "euk_pendulum", "euk_floor", "passivity", "mpc"] = key(
+        "none", doc=("mpc: linear model predictive control on the design model with the "
+                     "limits of the torque, its rate and the pendulum angle (OSQP)"))
     start: float = key(0.0, non_negative, doc="enable time [s]")
     state_weights: Floats8 = key(THESIS_STATE_WEIGHTS, non_negative,
                                  doc="LQG: diagonal of Q_z (eq. 5.229)")
     input_weight: float = key(1e-4, positive, doc="LQG: Q_u (eq. 5.230)")
     feedforward: bool = key(False, doc="LQG: feed the measured excitation force forward")
+    anti_windup: bool = key(False, doc=(
+        "LQG: condition the command on the actuator's limits and controller.angle_limit one "
+        "period ahead on the design model (docs/controllers.md)"))
+    angle_limit: float | None = key(0.5, positive, doc=(
+        "LQG anti-windup and MPC: largest pendulum angle [rad] the command may lead to (the "
+        "design model's linear range; null: none); a soft constraint in MPC"))
+    horizon: int = key(20, positive, doc="MPC: prediction horizon [samples]")
+    rate_weight: float = key(0.0, non_negative, doc="MPC: weight of the torque step (Δu)^2")
+    angle_penalty: float = key(1e6, positive, doc=(
+        "MPC: weight of the squared excess of |phi| over controller.angle_limit (and 1e-3 of "
+        "it on the excess itself), relative to the weight R + B'PB of the torque's deviation "
+        "from the LQR's plan"))
+    max_iter: int | None = key(None, positive, doc=(
+        "MPC: OSQP iteration limit per sample (null: one per 5 us of the period, 50 to 4000: "
+        "200 at 1 kHz); a solve that does not finish falls back to the anti-windup LQG "
+        "command (counted, in /diagnostics)"))
     hold_stiffness: float = key(0.0, non_negative, doc=(
         "EUK: kp [1/s^2] of the virtual constraint x3'' = -kd x3' - kp x3 (0: eq. 5.240)"))
     hold_damping: float = key(0.0, non_negative, doc="EUK: kd [1/s]")

@@ -118,6 +118,9 @@ class Model(Section):
                                        doc="auto: frequency band the scene must reproduce [Hz]")
     tolerance: float = key(0.01, in_range(1e-12, 1.0),
                            doc="auto: relative error allowed in the band")
+    energy_tolerance: float | None = key(None, in_range(1e-16, 1.0), doc=(
+        "auto: energy consistency asked for: the largest discrete energy-balance error per step "
+        "allowed, relative to the stored energy (only runs that measure one qualify: ph)"))
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -128,6 +131,13 @@ class Integrator(Section):
     dt: float = key(1e-3, positive, doc="fixed step, or output step of adaptive methods [s]")
     rtol: float = key(1e-10, positive)
     atol: float = key(1e-12, positive)
+    max_halvings: int = key(12, in_range(0, 40), doc=(
+        "fixed steps: a step whose Newton iteration fails, whose result is not finite or whose "
+        "RK4 error estimate is too large is halved again and again down to dt / 2^max_halvings "
+        "(0: such a step is an error at once)"))
+    error_limit: float | None = key(1e-5, positive, doc=(
+        "RK4: largest embedded local error estimate per step, relative to 1 + |x| "
+        "(null: no estimate)"))
 
 
 @dataclass(frozen=True, kw_only=True)

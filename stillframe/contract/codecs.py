@@ -203,6 +203,29 @@ class EstimateMessages:
         return state, self._cov_cdr.pack(*cov.tolist())
 
 
+class EnergyMessage:
+    """``energy_balance`` (:data:`~stillframe.contract.topics.ENERGY_BALANCE`): the pH plant's
+    stored energy and port powers of one sample."""
+
+    def __init__(self) -> None:
+        n = len(topics.ENERGY_FIELDS)
+        self.msg = messages.new("std_msgs/msg/Float64MultiArray")
+        self.msg.layout.dim = [messages.new("std_msgs/msg/MultiArrayDimension",
+                                            label=",".join(topics.ENERGY_FIELDS), size=n,
+                                            stride=n)]
+        self.msg.data = np.zeros(n)
+        self._cdr = FixedWriter(self.msg, ("data",))
+
+    def cdr(self, t: float, balance: np.ndarray) -> bytearray:
+        """The CDR of [t, *balance] in a preallocated buffer the next call rewrites."""
+        return self._cdr.pack(t, *np.asarray(balance, dtype=np.float64).tolist())
+
+
+def energy_values(msg: Any) -> dict[str, float]:
+    """An ``energy_balance`` message as {field: value} (:data:`topics.ENERGY_FIELDS`)."""
+    return dict(zip(topics.ENERGY_FIELDS, (float(v) for v in msg.data), strict=True))
+
+
 class CommandMessage:
     """The command on its topic: ``torque.z`` (pendulum) or ``force.x`` (floor 3)."""
 

@@ -64,7 +64,7 @@ class Command:
 
 
 #: The actuator each controller type drives, an index into :attr:`Command.vector`.
-ACTUATOR = {"lqg": 0, "euk_pendulum": 0, "euk_floor": 1, "passivity": 0}
+ACTUATOR = {"lqg": 0, "euk_pendulum": 0, "euk_floor": 1, "passivity": 0, "mpc": 0}
 
 
 def actuator_of(scene: Scene) -> int | None:

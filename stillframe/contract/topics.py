@@ -77,14 +77,29 @@ DIAGNOSTICS = TopicSpec(
     "per node: loop rate, latency, deadline misses, rejected messages, saturation",
 )
 
+#: ``energy_balance``'s ``data``, in this order (also its ``layout.dim[0].label``, comma-joined)
+ENERGY_FIELDS: tuple[str, ...] = ("t_s", "stored_J", "excitation_W", "actuator_W", "noise_W",
+                                  "dissipated_W")
+ENERGY_BALANCE = TopicSpec(
+    "energy_balance", "std_msgs/msg/Float64MultiArray", "default",
+    "pH plant (model.type: ph) only, one per sample: data = [t_k (s), H(t_k) above rest (J), "
+    "mean power over the period just ended supplied through the excitation, actuator and "
+    "process-noise ports (W), mean dissipated power (W)]; layout.dim[0]: label = the field names "
+    "comma-joined, size = stride = 6. T·(P_excitation + P_actuator + P_noise − P_dissipated) of "
+    "sample k equals H(t_k) − H(t_k−1) to round-off; powers are 0 at t = 0",
+    "data[1]",
+)
+
 CONTRACT: tuple[TopicSpec, ...] = (
     CLOCK, *FLOOR_IMU, PENDULUM_JOINT_STATES, EXCITATION_WRENCH, FLOOR3_LOAD_CELL, TORQUE_CMD,
     FORCE_CMD,
     STATE_ESTIMATE, STATE_COVARIANCE, STATE_TRUTH, DIAGNOSTICS,
 )
+#: topics a loop node publishes only for some scenes (not every launch has them)
+CONDITIONAL: tuple[TopicSpec, ...] = (ENERGY_BALANCE,)
 
 
 #: the ``/diagnostics`` values the status line shows, when a node reports them
 STATUS_KEYS: tuple[str, ...] = ("sim_time_s", "step", "realtime_factor", "lockstep_timeouts",
                                 "deadline_misses", "overruns", "rejected", "partial_updates",
-                                "saturated", "watchdog")
+                                "saturated", "watchdog", "passivity_violations")

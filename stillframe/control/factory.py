@@ -5,7 +5,8 @@ from __future__ import annotations
 from stillframe.config.scene import Scene
 from stillframe.contract.signals import ACTUATOR
 from stillframe.control.euk import EUKLaw
-from stillframe.control.lqg import LQGLaw, design_lqr
+from stillframe.control.limits import CommandLimits
+from stillframe.control.lqg import ConditionedLQGLaw, LQGLaw, design_lqr
 from stillframe.control.passivity import PassivityLaw
 from stillframe.control.prediction import DelayPredictor
 from stillframe.control.supervisor import Controller
@@ -34,11 +35,22 @@ def make_controller(scene: Scene, design: FrameModel) -> Controller:
     floor = scene.excitation.floor
     delay = scene.actuators.delay_periods
     predictor = None
-    if c.type == "lqg":
-        law = LQGLaw(design_lqr(design, period, c.state_weights, c.input_weight, TORQUE_INPUT,
-                                floor), c.feedforward)
+    if c.type in ("lqg", "mpc"):
+        lqr = design_lqr(design, period, c.state_weights, c.input_weight, TORQUE_INPUT, floor)
+        limits = CommandLimits.of(scene)
+        if c.type == "mpc":
+            from stillframe.control.mpc import MPCLaw, iteration_limit  # OSQP where MPC runs
+
+            law = MPCLaw(lqr, c.input_weight,
+                         limits=limits, horizon=c.horizon, angle_index=design.phi_index,
+                         rate_weight=c.rate_weight, angle_penalty=c.angle_penalty,
+                         max_iter=iteration_limit(c.max_iter, period))
+        elif c.anti_windup:
+            law = ConditionedLQGLaw(lqr, c.feedforward, limits, design.phi_index)
+        else:
+            law = LQGLaw(lqr, c.feedforward)
         if delay:
-            predictor = DelayPredictor(law.design.A, law.design.B, delay, period)
+            predictor = DelayPredictor(lqr.A, lqr.B, delay, period)
     elif c.type in ("euk_pendulum", "euk_floor"):
         variant = "pendulum" if c.type == "euk_pendulum" else "floor"
         law = EUKLaw(design, variant, floor, c.hold_stiffness, c.hold_damping, c.singular_margin)

@@ -9,6 +9,16 @@ Optional feedforward of the measured excitation d (load cell): for x⁺ = A x + 
 held, the optimal law is u = −K x − K_d d with K_d = (R + BᵀPB)⁻¹ Bᵀ (I − A_clᵀ)⁻¹ P E,
 A_cl = A − BK (the LQ regulator with a known constant disturbance); for the harmonic load it is
 the quasi-static approximation.
+
+Anti-windup (``controller.anti_windup``, :class:`ConditionedLQGLaw`): the command −K ẑ is
+conditioned on what can be realised (Hanus' conditioning technique, here on a static gain): it
+is moved to the nearest command that the actuator applies unchanged (``actuators.torque_limit``,
+``torque_rate_limit``, ``controller.limit``) and that keeps the pendulum angle predicted one
+period ahead on the design model, φ⁺ = (A ẑ + E d)_φ + (B)_φ u, within ``controller.angle_limit``
+(:mod:`stillframe.control.limits`). The estimator is fed the applied torque (observer-based
+anti-windup, already so in the loop), so its state never winds up; what the conditioning adds is
+that the loop stays where the linear design holds instead of throwing the light pendulum over
+the top.
 """
 
 from __future__ import annotations
@@ -18,6 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from stillframe.control.limits import CommandLimits, condition
 from stillframe.design.coordinates import physical_selector
 from stillframe.design.discrete import first_order_hold
 from stillframe.design.riccati import solve_dare
@@ -36,14 +47,19 @@ class LQRDesign:
     E: np.ndarray
 
 
+def state_weight(model: FrameModel, state_weights: Sequence[float]) -> np.ndarray:
+    """Q = Sᵀ diag(Q_z) S on the design state from the weights of the physical state."""
+    S = physical_selector(model)
+    return S.T @ np.diag(state_weights) @ S
+
+
 def design_lqr(model: FrameModel, period: float, state_weights: Sequence[float],
                input_weight: float, input_index: int, excited_floor: int) -> LQRDesign:
     """DLQR for input ``input_index`` of u = [f1, f2, f3, torque] (3: the pendulum torque)."""
     A_c, B_c = model.linearized().state_space()
     d = first_order_hold(A_c, B_c, period)
     A, B, E = d.phi, d.gamma0[:, [input_index]], d.gamma0[:, [excited_floor - 1]]
-    S = physical_selector(model)
-    Q = S.T @ np.diag(state_weights) @ S
+    Q = state_weight(model, state_weights)
     R = np.array([[input_weight]])
     P = solve_dare(A, B, Q, R, what="LQR design")
     BtP = B.T @ P
@@ -64,4 +80,26 @@ class LQGLaw:
         u = -float(self.design.gain[0] @ z)
         if self.feedforward:
             u -= float(self.design.feedforward[0, 0]) * force
+        return u, False
+
+
+class ConditionedLQGLaw(LQGLaw):
+    """LQG with anti-windup: −K ẑ conditioned on ``limits`` (module docstring)."""
+
+    def __init__(self, design: LQRDesign, feedforward: bool, limits: CommandLimits,
+                 angle_index: int) -> None:
+        super().__init__(design, feedforward)
+        self.limits = limits
+        self.angle_row = design.A[angle_index]
+        self.angle_force = float(design.E[angle_index, 0])
+        self.angle_gain = float(design.B[angle_index, 0])
+        self.previous = 0.0
+        self.conditioned = 0  # commands changed by the conditioning
+
+    def __call__(self, z: np.ndarray, force: float) -> tuple[float, bool]:
+        u, _ = super().__call__(z, force)
+        free = float(self.angle_row @ z) + self.angle_force * force
+        u, changed = condition(u, self.limits, self.previous, free, self.angle_gain)
+        self.conditioned += changed
+        self.previous = u
         return u, False

@@ -7,11 +7,14 @@ a non-finite law output also gives zero (flagged ``singular``); otherwise the la
 clipped to ±``limit`` and to ±``actuator_limit`` (the scene's actuator saturation: a command the
 actuator cannot apply is never sent). A law output more than :data:`RUNAWAY_FACTOR` times the
 tighter of the two limits is flagged ``runaway`` (counted, and ``/diagnostics`` warns): the sign of
-an estimate or a design that no longer matches the plant.
+an estimate or a design that no longer matches the plant. A law that can fall back to a safe
+command (MPC: a solve that did not finish) keeps its count in ``fallbacks``; ``fallback`` here
+follows it (``/diagnostics`` warns).
 """
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -33,6 +36,7 @@ class ControllerCounters:
     singular: int = 0
     watchdog: int = 0
     runaway: int = 0
+    fallback: int = 0
 
 
 class Controller:
@@ -53,6 +57,21 @@ class Controller:
         self.enabled = True
         self.latest: Estimate | None = None
         self.counters = ControllerCounters()
+        self.law_s: list[float] = []       # wall time of every law evaluation (compute_stats)
+        self.law_cpu_s: list[float] = []   # … and this thread's CPU time for it
+
+    def compute_stats(self) -> dict[str, float]:
+        """p50, p99 and max of the law's wall time per sample [s], ``cpu_…`` of its CPU time
+        (what preemption by other processes does not inflate), ``solve_…`` of the solver's own
+        wall time for a law that keeps it (MPC); empty before the first command."""
+        stats: dict[str, float] = {}
+        for name, times in (("", self.law_s), ("cpu_", self.law_cpu_s),
+                            ("solve_", getattr(self.law, "solve_s", []))):
+            if len(times):
+                p50, p99 = np.percentile(times, [50, 99])
+                stats.update({f"{name}p50": float(p50), f"{name}p99": float(p99),
+                              f"{name}max": float(np.max(times))})
+        return stats
 
     def stale(self, t: float) -> bool:
         """True when at time t the newest estimate is ``watchdog_periods`` periods old or more
@@ -83,7 +102,11 @@ class Controller:
             return out
         out.enabled = True
         z = latest.z if self.predictor is None else self.predictor.ahead(latest.t, latest.z)
+        started, started_cpu = time.perf_counter(), time.thread_time()
         value, out.singular = self.law(z, force)
+        self.law_s.append(time.perf_counter() - started)
+        self.law_cpu_s.append(time.thread_time() - started_cpu)
+        c.fallback = getattr(self.law, "fallbacks", 0)   # laws with a safe fallback count it
         if not np.isfinite(value):
             value, out.singular = 0.0, True
         bounds = [b for b in (self.limit, self.actuator_limit) if b]

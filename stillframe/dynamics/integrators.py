@@ -7,6 +7,17 @@
   E − (h/2)J is factored once and kept while iterations contract fast, refactored otherwise; on
   a linear system it is exact and one iteration suffices.
 - :func:`reference_solution`: scipy's adaptive DOP853 or Radau at tight tolerances.
+
+Subdivision (:class:`Subdivision`, scene keys ``integrator.max_halvings`` and
+``integrator.error_limit``): a step that fails is taken again as two half steps, each of which
+may be halved again, down to a floor of dt / 2^max_halvings. A step fails when the implicit
+midpoint's Newton iteration does not converge, when the result is not finite, or (RK4) when the
+embedded third-order estimate of the local error exceeds ``error_limit`` · (1 + |x|) in some
+component: with k₅ = f(t + h, x₁), the third-order solution x̂₁ = x₀ + h/6 (k₁ + 2k₂ + 2k₃ + k₅)
+differs from RK4's by h/6 (k₄ − k₅) = O(h⁴) (k₅ is the next step's k₁, first same as last).
+A pendulum whipping over the top at hundreds of rad/s is physical and goes on with smaller steps;
+what remains an error is a non-finite starting state or a step that still fails at the floor.
+``subdivisions`` counts the halvings done.
 """
 
 from __future__ import annotations
@@ -22,6 +33,59 @@ from scipy.integrate import solve_ivp
 
 from stillframe.dynamics.systems import DescriptorSystem, LinearSystem
 from stillframe.errors import InputError, IntegrationError
+
+
+@dataclass(frozen=True)
+class Subdivision:
+    """When and how far a failing fixed step is split (module docstring).
+
+    ``max_halvings``: the floor is dt / 2^max_halvings (0: a failing step is an error at once);
+    ``error_limit``: RK4's local error bound relative to 1 + |x| (None: no estimate).
+    """
+
+    max_halvings: int = 12
+    error_limit: float | None = 1e-5
+
+    @classmethod
+    def of(cls, section: object) -> Subdivision:
+        """From a section holding ``max_halvings`` and ``error_limit`` (the scene's
+        ``integrator``)."""
+        return cls(max_halvings=section.max_halvings, error_limit=section.error_limit)
+
+    @property
+    def limit_code(self) -> float:
+        """``error_limit`` for the compiled kernels: a negative number switches it off."""
+        return -1.0 if self.error_limit is None else float(self.error_limit)
+
+
+#: no subdivision and no error estimate: the bare fixed-step method
+NO_SUBDIVISION = Subdivision(max_halvings=0, error_limit=None)
+
+
+class StepRejected(Exception):  # noqa: N818 (a signal between step() and _step_impl, not an error)
+    """Raised by ``_step_impl`` when its step failed and should be subdivided; ``cause`` is
+    ``newton`` or ``error``."""
+
+    def __init__(self, cause: str) -> None:
+        super().__init__(cause)
+        self.cause = cause
+
+
+def floor_failure(cause: str, t: float, h: float, method: str,
+                  halvings: int) -> IntegrationError:
+    """The error for a step that still fails at the floor dt / 2^halvings (``h`` the floor)."""
+    if cause == "newton":
+        error = not_converged(t, h)
+    elif cause == "error":
+        error = IntegrationError(
+            f"integrator.dt: the {method} error estimate still exceeds integrator.error_limit "
+            f"at t = {t:.6g} s with dt = {h:g} s")
+    else:
+        error = non_finite(t, h, method)
+    if halvings:
+        error.args = (f"{error.args[0]} after {halvings} halvings of the step "
+                      "(integrator.max_halvings)",)
+    return error
 
 
 def not_converged(t: float, h: float) -> IntegrationError:
@@ -47,8 +111,10 @@ class Integrator(ABC):
 
     - ``h > 0`` and finite, else :class:`~stillframe.errors.InputError`;
     - returns x(t + h) as a new array and never modifies ``x``;
-    - the result is finite, else :class:`~stillframe.errors.IntegrationError` naming t + h and
-      ``h`` (a step beyond the stability limit, or a failed Newton iteration);
+    - a step that fails (``_step_impl`` raises :class:`StepRejected`, or returns a non-finite
+      state) is subdivided as ``subdivision`` says (module docstring) and counted in
+      ``subdivisions``; the result is finite, else :class:`~stillframe.errors.IntegrationError`
+      naming t and the floor step (a non-finite start, or a step failing at the floor);
     - an integrator may keep state between calls (a factored iteration matrix, the previous
       increment as predictor), so one instance serves one trajectory.
 
@@ -59,14 +125,44 @@ class Integrator(ABC):
     name: ClassVar[str]
     order: ClassVar[int]
     explicit: ClassVar[bool]
+    subdivision: Subdivision = Subdivision()
+    subdivisions: int = 0
 
     def step(self, system: DescriptorSystem, t: float, x: np.ndarray, h: float) -> np.ndarray:
         if not (np.isfinite(h) and h > 0):
             raise InputError(f"integrator.dt: the step must be > 0 and finite, got {h!r}")
-        with np.errstate(over="ignore", invalid="ignore"):  # checked below
-            x1 = self._step_impl(system, t, x, h)
-        check_finite(x1, t + h, h, self.name)
+        check_finite(x, t, h, self.name)
+        x1, cause = self._attempt(system, t, x, h)
+        if x1 is None:
+            x1 = self._subdivide(system, t, x, h, 1, cause)
         return x1
+
+    def _attempt(self, system: DescriptorSystem, t: float, x: np.ndarray,
+                 h: float) -> tuple[np.ndarray | None, str]:
+        """One step, or (None, why) when it failed."""
+        try:
+            with np.errstate(over="ignore", invalid="ignore"):  # checked below
+                x1 = self._step_impl(system, t, x, h)
+        except StepRejected as rejected:
+            return None, rejected.cause
+        except (ValueError, OverflowError):  # math on inf inside a model
+            return None, "non-finite"
+        if not np.all(np.isfinite(x1)):
+            return None, "non-finite"
+        return x1, ""
+
+    def _subdivide(self, system: DescriptorSystem, t: float, x: np.ndarray, h: float,
+                   depth: int, cause: str) -> np.ndarray:
+        """x(t + h) as two half steps, each halved again while it fails."""
+        if depth > self.subdivision.max_halvings:
+            raise floor_failure(cause, t, h, self.name, depth - 1)
+        self.subdivisions += 1
+        half = 0.5 * h
+        for start in (t, t + half):
+            x1, why = self._attempt(system, start, x, half)
+            x = x1 if x1 is not None else self._subdivide(system, start, x, half, depth + 1,
+                                                          why)
+        return x
 
     @abstractmethod
     def _step_impl(self, system: DescriptorSystem, t: float, x: np.ndarray,
@@ -88,7 +184,13 @@ class RK4(Integrator):
         k2 = f(t + 0.5 * h, x + 0.5 * h * k1)
         k3 = f(t + 0.5 * h, x + 0.5 * h * k2)
         k4 = f(t + h, x + h * k3)
-        return x + (h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+        x1 = x + (h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+        limit = self.subdivision.error_limit
+        if limit is not None and np.all(np.isfinite(x1)):
+            error = (h / 6.0) * np.abs(k4 - f(t + h, x1))
+            if np.any(error > limit * (1.0 + np.abs(x1))):
+                raise StepRejected("error")
+        return x1
 
 
 @dataclass
@@ -160,20 +262,25 @@ class ImplicitMidpoint(Integrator):
                 self._refactor(system, tm, 0.5 * (x + x1), (x1 - x) / h, h)
                 fresh = True
             previous = size
-        raise not_converged(t, h)
+        raise StepRejected("newton")
 
 
 FIXED_STEP = {"rk4": RK4, "midpoint": ImplicitMidpoint}
 ADAPTIVE = {"dop853": "DOP853", "radau": "Radau"}
 
 
-def make_integrator(method: str) -> Integrator:
+def make_integrator(method: str, subdivision: Subdivision | None = None) -> Integrator:
+    """The fixed-step integrator ``method`` subdividing as ``subdivision`` says (default:
+    :class:`Subdivision`'s defaults)."""
     try:
-        return FIXED_STEP[method]()
+        integrator = FIXED_STEP[method]()
     except KeyError:
         raise InputError(
             f"integrator.method: {method!r} is not a fixed-step method ({', '.join(FIXED_STEP)})"
         ) from None
+    if subdivision is not None:
+        integrator.subdivision = subdivision
+    return integrator
 
 
 def check_finite(x: np.ndarray, t: float, h: float, method: str) -> None:

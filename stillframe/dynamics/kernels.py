@@ -35,7 +35,7 @@ from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import reverse_cuthill_mckee
 
 from stillframe.dynamics.excitation import FloorLoad
-from stillframe.dynamics.integrators import non_finite, not_converged
+from stillframe.dynamics.integrators import Subdivision, floor_failure
 from stillframe.dynamics.models.frame import FrameModel
 from stillframe.dynamics.models.structure import DampingParts
 from stillframe.errors import IntegrationError
@@ -143,12 +143,18 @@ def _derivative(x, u, f_ext, floor_index, i3, K, C, Minv, w, p, Q, out):
 
 
 @numba.njit(cache=True)
-def _rk4_run(x, t0, h, n_steps, stride, out, floor_index, i3, K, C, Minv, w, p, u, load_kind,
-             load_floor, amps, omegas, phases, pulse):
-    """Advance ``n_steps`` RK4 steps from x (in place); every ``stride``-th state goes to ``out``.
+def _rk4_run(x, t0, h, k0, n_steps, stride, out, error_limit, floor_index, i3, K, C, Minv, w, p,
+             u, load_kind, load_floor, amps, omegas, phases, pulse):
+    """Advance steps k0 … n_steps − 1 of RK4 from x (in place; step k starts at t0 + k h); the
+    state after step k goes to ``out[(k + 1) // stride]`` when ``stride`` divides k + 1.
 
-    Returns the number of steps taken: n_steps, or the step at which the state became
-    non-finite.
+    With ``error_limit`` ≥ 0 each step is checked by the embedded third-order estimate
+    (h/6)|k₄ − k₅|, k₅ = f(t + h, x₁), against error_limit · (1 + |x₁|); k₅ is reused as the next
+    step's k₁ (first same as last: the same numbers as computing it afresh).
+
+    Returns (k, status): status 0 when all steps are done (k = n_steps); otherwise k is the step
+    that failed, x is still its starting state, and status is 1 (error estimate too large) or 2
+    (non-finite result).
     """
     nd = K.shape[0] + 1
     m = 2 * nd
@@ -156,21 +162,27 @@ def _rk4_run(x, t0, h, n_steps, stride, out, floor_index, i3, K, C, Minv, w, p, 
     k2 = np.empty(m)
     k3 = np.empty(m)
     k4 = np.empty(m)
+    k5 = np.empty(m)
     xs = np.empty(m)
+    x1 = np.empty(m)
     scratch = np.empty(K.shape[0])
     f_ext = np.zeros(3)
-    out[0, :] = x
-    row = 1
-    f_end = _force(t0, load_kind, amps, omegas, phases, pulse)
+    f_end = _force(t0 + k0 * h, load_kind, amps, omegas, phases, pulse)
     half = 0.5 * h
-    for k in range(n_steps):
+    checked = error_limit >= 0.0
+    have_k1 = False
+    for k in range(k0, n_steps):
         t = t0 + k * h
         # the load at t, t + h/2 (stages 2 and 3) and t + h (reused as the next step's start)
         f_start = f_end
         f_mid = _force(t + half, load_kind, amps, omegas, phases, pulse)
         f_end = _force(t + h, load_kind, amps, omegas, phases, pulse)
         f_ext[load_floor] = f_start
-        _derivative(x, u, f_ext, floor_index, i3, K, C, Minv, w, p, scratch, k1)
+        if have_k1:
+            for i in range(m):
+                k1[i] = k5[i]
+        else:
+            _derivative(x, u, f_ext, floor_index, i3, K, C, Minv, w, p, scratch, k1)
         f_ext[load_floor] = f_mid
         _stage(x, half, k1, xs)
         _derivative(xs, u, f_ext, floor_index, i3, K, C, Minv, w, p, scratch, k2)
@@ -181,15 +193,22 @@ def _rk4_run(x, t0, h, n_steps, stride, out, floor_index, i3, K, C, Minv, w, p, 
         _derivative(xs, u, f_ext, floor_index, i3, K, C, Minv, w, p, scratch, k4)
         finite = True
         for i in range(m):
-            x[i] += (h / 6.0) * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
-            if not math.isfinite(x[i]):
+            x1[i] = x[i] + (h / 6.0) * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
+            if not math.isfinite(x1[i]):
                 finite = False
         if not finite:
-            return k + 1
+            return k, 2
+        if checked:
+            _derivative(x1, u, f_ext, floor_index, i3, K, C, Minv, w, p, scratch, k5)
+            for i in range(m):
+                if (h / 6.0) * abs(k4[i] - k5[i]) > error_limit * (1.0 + abs(x1[i])):
+                    return k, 1
+            have_k1 = True
+        for i in range(m):
+            x[i] = x1[i]
         if (k + 1) % stride == 0:
-            out[row, :] = x
-            row += 1
-    return n_steps
+            out[(k + 1) // stride, :] = x
+    return n_steps, 0
 
 
 # --- implicit midpoint on the banded model -------------------------------------------------------
@@ -238,12 +257,13 @@ def _solve_s(cb, b, Z, W, rhs, tmp, out):
 
 
 @numba.njit(cache=True)
-def _midpoint_run(x, t0, h, n_steps, stride, out, floor_index, i3, Mb, Kb, b, cb, Z, W, w, p, u,
-                  load_kind, load_floor, amps, omegas, phases, pulse):
-    """Advance ``n_steps`` implicit-midpoint steps (structural DOFs in banded order).
+def _midpoint_run(x, t0, h, k0, n_steps, stride, out, floor_index, i3, Mb, Kb, b, cb, Z, W, w,
+                  p, u, load_kind, load_floor, amps, omegas, phases, pulse):
+    """Advance steps k0 … n_steps − 1 of the implicit midpoint rule (structural DOFs in banded
+    order; stepping and output as :func:`_rk4_run`).
 
-    Returns the steps taken: n_steps, or −(k + 1) if Newton failed at step k, or k + 1 if the
-    state became non-finite at step k.
+    Returns (k, status): (n_steps, 0) when done; otherwise x is the starting state of the failed
+    step k and status is 1 (Newton did not converge) or 2 (non-finite result).
     """
     n = Mb.shape[0]
     nd = n + 1
@@ -254,12 +274,13 @@ def _midpoint_run(x, t0, h, n_steps, stride, out, floor_index, i3, Mb, Kb, b, cb
     y = np.empty(n)
     lr = np.empty(max(Z.shape[1], 1))
     w3 = w[i3]
-    out[0, :] = x
-    row = 1
-    for k in range(n_steps):
+    start = np.empty(x.size)
+    for k in range(k0, n_steps):
         tm = t0 + (k + 0.5) * h
-        q0 = x[:n]
-        v0 = x[nd:nd + n]
+        for i in range(x.size):
+            start[i] = x[i]
+        q0 = start[:n]
+        v0 = start[nd:nd + n]
         phi0, dphi0 = x[n], x[nd + n]
         _band_matvec(Mb, b, v0, rhs)
         _band_matvec(Kb, b, q0, tmp)
@@ -297,7 +318,7 @@ def _midpoint_run(x, t0, h, n_steps, stride, out, floor_index, i3, Mb, Kb, b, cb
                 converged = True
                 break
         if not converged:
-            return -(k + 1)
+            return k, 1
         phim = phi0 + 0.5 * h * pm
         sigma = h * ml * math.sin(phim) * pm * pm - 2.0 * ml * math.cos(phim) * (pm - dphi0)
         finite = True
@@ -309,12 +330,13 @@ def _midpoint_run(x, t0, h, n_steps, stride, out, floor_index, i3, Mb, Kb, b, cb
                 finite = False
         x[n] = phi0 + h * pm
         x[nd + n] = 2.0 * pm - dphi0
-        if not finite:
-            return k + 1
+        if not (finite and math.isfinite(x[n]) and math.isfinite(x[nd + n])):
+            for i in range(x.size):
+                x[i] = start[i]
+            return k, 2
         if (k + 1) % stride == 0:
-            out[row, :] = x
-            row += 1
-    return n_steps
+            out[(k + 1) // stride, :] = x
+    return n_steps, 0
 
 
 # --- Python side ---------------------------------------------------------------------------------
@@ -340,11 +362,19 @@ def banded_order(model: FrameModel) -> np.ndarray:
     return np.asarray(reverse_cuthill_mckee(pattern, symmetric_mode=True), dtype=np.int64)
 
 
-class CompiledFrame:
-    """A FrameModel prepared for the compiled kernels; :meth:`run` advances a state."""
+#: the kernels' failure codes as :func:`~stillframe.dynamics.integrators.floor_failure` causes
+_CAUSE = {"rk4": {1: "error", 2: "non-finite"}, "midpoint": {1: "newton", 2: "non-finite"}}
 
-    def __init__(self, model: FrameModel) -> None:
+
+class CompiledFrame:
+    """A FrameModel prepared for the compiled kernels; :meth:`run` advances a state, subdividing
+    failed steps as ``subdivision`` says (:mod:`stillframe.dynamics.integrators`), counted in
+    ``subdivisions``."""
+
+    def __init__(self, model: FrameModel, subdivision: Subdivision | None = None) -> None:
         self.model = model
+        self.subdivision = Subdivision() if subdivision is None else subdivision
+        self.subdivisions = 0
         s = model.structure
         p = model
         self.params = np.array([p.m4, p.l4, p.g, p.r4, p.pendulum_inertia])
@@ -360,10 +390,11 @@ class CompiledFrame:
         self.parts = parts
 
     # dense RK4 ----------------------------------------------------------------------------------
-    def _rk4(self, x, t0, h, n_steps, stride, out, u, load) -> int:
+    def _rk4(self, x, t0, h, k0, n_steps, stride, out, u, load) -> tuple[int, int]:
         m = self.model
-        return _rk4_run(x, t0, h, n_steps, stride, out, self.floor_index, m.i3, m.k_struct,
-                        m.c_struct, m.m_const_inv, m.floor3_column, self.params, u, *load)
+        return _rk4_run(x, t0, h, k0, n_steps, stride, out, self.subdivision.limit_code,
+                        self.floor_index, m.i3, m.k_struct, m.c_struct, m.m_const_inv,
+                        m.floor3_column, self.params, u, *load)
 
     # banded midpoint ----------------------------------------------------------------------------
     def banded_step_matrix(self, h: float) -> tuple:
@@ -420,35 +451,59 @@ class CompiledFrame:
         out[:, nd:nd + n] = states[:, nd:nd + n][:, self.position]
         return out
 
-    def _midpoint(self, x, t0, h, n_steps, stride, out, u, load) -> int:
+    def _midpoint(self, x, t0, h, k0, n_steps, stride, out, u, load) -> tuple[int, int]:
         b, cb, Z, W, w, Mb, Kb = self.banded_step_matrix(h)
         floor = self.position[self.floor_index]
         i3 = int(self.position[self.model.i3])
-        return _midpoint_run(x, t0, h, n_steps, stride, out, floor, i3, Mb, Kb, b, cb, Z, W, w,
-                             self.params, u, *load)
+        return _midpoint_run(x, t0, h, k0, n_steps, stride, out, floor, i3, Mb, Kb, b, cb, Z, W,
+                             w, self.params, u, *load)
+
+    def _subdivide(self, kernel, method: str, x: np.ndarray, t: float, h: float, u, load,
+                   depth: int, cause: str) -> None:
+        """Advance x (in place) over [t, t + h) as two half steps, each halved again while it
+        fails, down to the floor of ``subdivision.max_halvings``."""
+        if depth > self.subdivision.max_halvings:
+            raise floor_failure(cause, t, h, method, depth - 1)
+        self.subdivisions += 1
+        half = 0.5 * h
+        scratch = np.empty((2, x.size))
+        for start in (t, t + half):
+            _, status = kernel(x, start, half, 0, 1, 1, scratch, u, load)
+            if status:
+                self._subdivide(kernel, method, x, start, half, u, load, depth + 1,
+                                _CAUSE[method][status])
 
     def run(self, method: str, x0: np.ndarray, h: float, n_steps: int,
             load: FloorLoad | None = None, control: np.ndarray | None = None, t0: float = 0.0,
             stride: int = 1) -> np.ndarray:
         """States every ``stride`` steps (rows, the first is x0) after ``n_steps`` steps.
 
-        Raises IntegrationError (like :func:`stillframe.dynamics.integrators.integrate`) when the
-        state
-        becomes non-finite or Newton fails.
+        A step that fails (Newton, a non-finite result, RK4's error estimate) is subdivided
+        (class docstring); IntegrationError (like
+        :func:`stillframe.dynamics.integrators.integrate`) for a non-finite x0 or a step still
+        failing at the floor.
         """
         arrays = load_arrays(load)
         if arrays is None:
             raise ValueError("this load has no compiled form; use stillframe.dynamics.integrators")
+        if not np.all(np.isfinite(x0)):
+            raise floor_failure("non-finite", t0, h, method, 0)
         u = np.zeros(4) if control is None else np.asarray(control, float)
         out = np.empty((n_steps // stride + 1, x0.size))
         banded = method == "midpoint"
         x = self._to_banded_state(np.asarray(x0, float)) if banded else np.array(x0, float)
+        out[0] = x
         kernel = self._midpoint if banded else self._rk4
-        done = kernel(x, t0, h, n_steps, stride, out, u, arrays)
-        if done < 0:
-            raise not_converged(t0 - done * h, h)
-        if done != n_steps:
-            raise non_finite(t0 + done * h, h, method)
+        k = 0
+        while True:
+            k, status = kernel(x, t0, h, k, n_steps, stride, out, u, arrays)
+            if not status:
+                break
+            self._subdivide(kernel, method, x, t0 + k * h, h, u, arrays, 1,
+                            _CAUSE[method][status])
+            k += 1
+            if k % stride == 0:
+                out[k // stride] = x
         return self._from_banded_states(out) if banded else out
 
 
@@ -463,10 +518,11 @@ Observer = Callable[[int, float, np.ndarray], None]
 
 
 def compiled_integrate(model: FrameModel, load: FloorLoad | None, method: str, x0: np.ndarray,
-                       dt: float, n_steps: int, observer: Observer | None = None,
-                       chunk: int = 4096) -> np.ndarray:
-    """Like :func:`stillframe.dynamics.integrators.integrate` on the compiled kernels, in chunks."""
-    frame = CompiledFrame(model)
+                       dt: float, n_steps: int, *, observer: Observer | None = None,
+                       chunk: int = 4096, subdivision: Subdivision | None = None) -> int:
+    """Like :func:`stillframe.dynamics.integrators.integrate` on the compiled kernels, in chunks;
+    returns the number of subdivisions."""
+    frame = CompiledFrame(model, subdivision)
     x = np.array(x0, float)
     if observer:
         observer(0, 0.0, x)
@@ -479,7 +535,7 @@ def compiled_integrate(model: FrameModel, load: FloorLoad | None, method: str, x
                 observer(done + j, (done + j) * dt, states[j])
         x = states[-1]
         done += steps
-    return x
+    return frame.subdivisions
 
 
 def compiles(load: object, method: str) -> bool:

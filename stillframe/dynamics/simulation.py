@@ -11,7 +11,13 @@ import numpy as np
 
 from stillframe.config.scene import Initial, Scene
 from stillframe.dynamics.excitation import floor_load
-from stillframe.dynamics.integrators import ADAPTIVE, integrate, make_integrator, reference_solution
+from stillframe.dynamics.integrators import (
+    ADAPTIVE,
+    Subdivision,
+    integrate,
+    make_integrator,
+    reference_solution,
+)
 from stillframe.dynamics.kernels import compiled_integrate, compiles
 from stillframe.dynamics.models import FrameModel, build_model
 from stillframe.dynamics.ph import scene_model as ph_scene
@@ -95,6 +101,7 @@ def simulate(scene: Scene, duration: float | None = None,
     if method == "rk4":
         check_rk4_step(model, dt)
     start = time.perf_counter()
+    subdivisions = 0
     if method in ADAPTIVE:
         t_eval = np.arange(n_steps + 1) * dt
         states = reference_solution(system, x0, t_eval, method, scene.integrator.rtol,
@@ -109,14 +116,19 @@ def simulate(scene: Scene, duration: float | None = None,
             if progress and k % every == 0:
                 progress(k / n_steps)
 
+        subdivision = Subdivision.of(scene.integrator)
         if compiled:
-            compiled_integrate(model, system.load, method, x0, dt, n_steps, observer=observe)
+            subdivisions = compiled_integrate(model, system.load, method, x0, dt, n_steps,
+                                              observer=observe, subdivision=subdivision)
         else:
-            integrate(system, x0, dt, n_steps, make_integrator(method), observer=observe)
+            integrator = make_integrator(method, subdivision)
+            integrate(system, x0, dt, n_steps, integrator, observer=observe)
+            subdivisions = integrator.subdivisions
     wall = time.perf_counter() - start
     meta = {"model": model.name, "dofs": model.n_dof, "integrator": method, "dt": dt,
             "compiled": compiled,
-            "steps": n_steps, "wall_s": wall, "steps_per_s": n_steps / wall}
+            "steps": n_steps, "subdivisions": subdivisions, "wall_s": wall,
+            "steps_per_s": n_steps / wall}
     history = recorder.history(meta)
     warning = drift_warning(model, history.floors, scene.rig.columns.lengths)
     if warning:
@@ -130,6 +142,6 @@ def _ph_history(scene: Scene, duration: float, progress: Progress | None) -> His
     start = time.perf_counter()
     run = ph_scene.simulate(scene, duration, progress)
     wall = time.perf_counter() - start
-    meta = {**run.pop("meta"), "compiled": False, "wall_s": wall}
+    meta = {**run.pop("meta"), "compiled": True, "wall_s": wall}
     meta["steps_per_s"] = meta["steps"] / wall
     return History(**run, meta=meta)

@@ -134,8 +134,10 @@ def run_closed_loop(scene: Scene, progress: Progress | None = None) -> LoopHisto
         "loop_s": done - looping,   # without the set-up: what sim_node's wall_s counts
         "loop_cpu_s": time.process_time() - looping_cpu,
         "plant": {"model": plant.model.name, "integrator": plant.integrator.name,
-                  "dt": plant.h, "actuator_limited": plant.actuators.limited},
+                  "dt": plant.h, "actuator_limited": plant.actuators.limited,
+                  "subdivisions": getattr(plant, "subdivisions", 0)},  # pH: its own steps
         "estimator": vars(estimator.counters) if estimator else None,
         "controller": vars(controller.counters) if controller else None,
+        "controller_compute_s": controller.compute_stats() if controller else None,
     })
     return history

@@ -3,9 +3,10 @@
 One page (``stillframe/data/dashboard.html``) of Plotly charts: per floor the true and
 estimated displacement (``state_truth``, ``state_estimate``) with the measured acceleration
 (``floorN/imu``); the pendulum angle; the command (torque in N·m on the left axis, force in N on
-the right) with its limits; the controller's start marked on every chart; and each node's
-counters from ``/diagnostics``, red when an error counter is non-zero. The page polls ``/data``
-twice a second. Decimation happens before any work is done on a sample: the loop's topics are read
+the right) with its limits; on the pH plant its energy balance (``energy_balance``: H and the port
+and dissipated powers); the controller's start marked on every chart; and each node's counters
+from ``/diagnostics``, red when an error counter is non-zero. The page polls ``/data`` twice a
+second. Decimation happens before any work is done on a sample: the loop's topics are read
 from their monitor taps (:mod:`stillframe.middleware.taps`, thinned by the loop's writers) when
 published, else from the topics, by polled subscriptions (KEEP_LAST 1), and every ``1 / rate_hz``
 s of wall time the newest sample of each is taken, decoded and kept; each series keeps its last
@@ -32,6 +33,7 @@ from plotly.offline import get_plotlyjs
 from stillframe.contract import messages
 from stillframe.contract.topics import (
     DIAGNOSTICS,
+    ENERGY_BALANCE,
     FLOOR_IMU,
     FORCE_CMD,
     PENDULUM_JOINT_STATES,
@@ -67,7 +69,14 @@ SERIES: dict[str, tuple[TopicSpec, Callable[[Any], list[float]]]] = {
     "encoder": (PENDULUM_JOINT_STATES, lambda m: [float(m.position[0])]),
     "torque_cmd": (TORQUE_CMD, lambda m: [float(m.wrench.torque.z)]),
     "force_cmd": (FORCE_CMD, lambda m: [float(m.wrench.force.x)]),
+    "energy": (ENERGY_BALANCE, lambda m: [float(v) for v in m.data[1:]]),
 }
+#: a series' sample time where its message has no header (default: ``header.stamp``)
+STAMPS: dict[str, Callable[[Any], float]] = {"energy": lambda m: float(m.data[0])}
+
+
+def _header_stamp(msg: Any) -> float:
+    return messages.stamp_ns(msg.header.stamp) * 1e-9
 
 
 #: each chart of the page: (title, left axis, right axis or None), every axis with its unit
@@ -75,6 +84,7 @@ CHARTS: dict[str, tuple[str, str, str | None]] = {
     **{f"floor{n}": (f"floor {n}", "x [m]", "a [m/s²]") for n in (1, 2, 3)},
     "pendulum": ("pendulum angle", "φ [rad]", None),
     "command": ("command and limits", "torque [N·m]", "force [N]"),
+    "energy": ("energy balance", "H [J]", "power [W]"),
 }
 TIME_AXIS = "t [s]"
 
@@ -134,13 +144,13 @@ class Dashboard(TopicFollower):
 
     def on_new_topic(self, topic: str, msgtype: str, offers: list[QoSProfile]) -> RawCallback:
         name, values = self._by_topic[topic]
+        stamp = STAMPS.get(name, _header_stamp)
 
         def keep(data: bytes, _: Any) -> None:
             """Keep the newest sample of the topic (one per poll: the reader keeps one)."""
             msg = messages.deserialize(data, msgtype)
             with self._lock:
-                self.series[name].keep((messages.stamp_ns(msg.header.stamp) * 1e-9,
-                                        values(msg)))
+                self.series[name].keep((stamp(msg), values(msg)))
 
         return keep
 

@@ -17,7 +17,13 @@ from stillframe.config.scene import Scene
 from stillframe.contract.signals import Sample
 from stillframe.design.identified import frame_for
 from stillframe.dynamics.excitation import floor_load
-from stillframe.dynamics.integrators import check_finite, integrate, make_integrator, non_finite
+from stillframe.dynamics.integrators import (
+    Subdivision,
+    check_finite,
+    integrate,
+    make_integrator,
+    non_finite,
+)
 from stillframe.dynamics.kernels import CompiledFrame, compiles
 from stillframe.dynamics.simulation import initial_state
 from stillframe.dynamics.systems import LinearSystem, MechanicalSystem
@@ -65,7 +71,8 @@ class Plant:
         self.excited_floor = scene.excitation.floor
         self.system = (LinearSystem(model.linearized(), load) if scene.plant.model == "file"
                        else MechanicalSystem(model, load))
-        self.integrator = make_integrator(scene.integrator.method)
+        subdivision = Subdivision.of(scene.integrator)
+        self.integrator = make_integrator(scene.integrator.method, subdivision)
         self.x = initial_state(model, scene.initial)
         n = model.n_dof
         self.n_dof = n
@@ -75,8 +82,9 @@ class Plant:
         self._substep_times = np.arange(1, self.substeps + 1) * self.h   # after t_k
         self.linear = self._linear_period(scene)
         #: the nonlinear model's substeps on the compiled kernels where they handle its load
-        self.compiled = (CompiledFrame(model) if isinstance(self.system, MechanicalSystem)
-                         and compiles(load, self.integrator.name) else None)
+        compiled = isinstance(self.system, MechanicalSystem) and compiles(load,
+                                                                          self.integrator.name)
+        self.compiled = CompiledFrame(model, subdivision) if compiled else None
         self._acceleration_rows = None
         if isinstance(self.system, LinearSystem):
             rows = [n + i for i in model.floor_index]
@@ -108,6 +116,11 @@ class Plant:
         recorded = self.physical_index[RECORDED]
         return make_linear_period(self.system, self.load, discretization, self.period,
                                   self.substeps, recorded)
+
+    @property
+    def subdivisions(self) -> int:
+        """How many steps were halved so far (:mod:`stillframe.dynamics.integrators`)."""
+        return (self.compiled or self.integrator).subdivisions
 
     @property
     def t(self) -> float:

@@ -1,12 +1,21 @@
 """The simulated rig as the frame pHDAE (``model.type: ph``,
-:mod:`stillframe.dynamics.ph.scene_model`).
+:mod:`stillframe.dynamics.ph.scene_model`), stepped by the compiled AVF midpoint rule
+(:class:`~stillframe.dynamics.ph.frame_step.CompiledFramePH`).
 
 Same interface and sample/advance protocol as :class:`stillframe.plant.frame_plant.Plant`: the
-actuators'
-[torque, floor-3 force] drive the input ports [f3, torque] held over the period while the AVF
-midpoint integrator takes its steps; the floor accelerations the accelerometers read are the
-exact ones of the index-1 form at t_k. Process noise is not supported (the pH state is not the
-8-vector it would be added to).
+actuators' [torque, floor-3 force] drive the input ports [f3, torque] held over the period; the
+floor accelerations the accelerometers read are those of the index-1 form at t_k.
+
+Process noise enters through the force ports [f1, f2, f3, torque] (a pH system takes energy only
+through its ports), drawn from the same seeded stream as the FE plant's (eight normals per
+period): the velocity entries of ``plant.process_noise_std`` become a force held over the period,
+m σ_v / T (the impulse that gives the floor's mass, or the pendulum's inertia about the hinge,
+the FE plant's velocity jump), the displacement entries a force doublet ±4 m σ_x / T² over the
+two halves of the period (net impulse zero, displacement σ_x on that mass). The doublet needs an
+even number of integrator steps per period; otherwise the scene is rejected naming the key.
+
+:meth:`PHPlant.energy_sample` gives the balance of the period just ended: H at t_k and the mean
+power of each port group and of the dissipation, whose integral is ΔH to round-off.
 """
 
 from __future__ import annotations
@@ -16,68 +25,90 @@ import numpy as np
 from stillframe.config.scene import Scene
 from stillframe.contract.signals import Sample
 from stillframe.dynamics.excitation import floor_load
-from stillframe.dynamics.ph import frame, scene_model
-from stillframe.dynamics.ph.integrator import MidpointDAE
-from stillframe.dynamics.ph.reference import index1_rhs
+from stillframe.dynamics.ph import scene_model
+from stillframe.dynamics.ph.frame_step import ENERGY_TERMS
 from stillframe.errors import InputError
 from stillframe.plant.actuators import Actuators
 from stillframe.plant.sensors import Sensors
 
+#: the balance published per sample (:data:`stillframe.contract.topics.ENERGY_FIELDS`)
+BALANCE_TERMS = ("stored", *ENERGY_TERMS)
+
 
 class PHPlant:
-    """The frame pHDAE with seeded sensor noise and limited actuators."""
+    """The frame pHDAE with seeded sensor and process noise and limited actuators."""
 
     def __init__(self, scene: Scene, period: float, substeps: int) -> None:
-        if any(scene.plant.process_noise_std):
-            raise InputError("plant.process_noise_std: model.type ph takes no process noise")
         self.period, self.substeps = period, substeps
         self.h = period / substeps
-        self.system = scene_model.scene_system(scene)
+        fs = scene_model.scene_frame(scene)
+        self.system = self.model = fs.system
+        self.stepper = self.integrator = fs.stepper(self.h)
         self.load = floor_load(scene.excitation, scene.duration + period)
         self.excited_floor = scene.excitation.floor
         self.control = np.zeros(4)
-        self.integrator = MidpointDAE(self.system, self.h, self.inputs)
-        self.model = self.system
-        self._rates = index1_rhs(self.system, self.inputs)
-        self.x = scene_model.initial_state(self.system, scene)
-        self.lam = np.zeros(self.system.n_constraints)
-        self._previous: np.ndarray | None = None
+        self.z = self.stepper.reduce(scene_model.initial_state(self.system, scene))
         self.sensors = Sensors(scene.sensors, np.random.default_rng(scene.sensors.seed))
         self.actuators = Actuators(scene.actuators, period)
         self.k = 0
-        self._fine: list[tuple[float, ...]] = []
-        self._record(0.0)
+        self._noise_forces = self._noise_scale(scene)
+        self.process_rng = np.random.default_rng(scene.plant.seed)
+        self.noise = np.zeros(4)
+        self._offsets = (np.arange(substeps) + 0.5) * self.h
+        self._fine = [np.concatenate([[0.0], self._floor_state()])]
+        self._balance = np.zeros(len(ENERGY_TERMS))
+        self._zero = np.zeros(4)
+
+    def _noise_scale(self, scene: Scene) -> np.ndarray | None:
+        """Force std per port [velocity part (4), displacement doublet (4)], or None."""
+        std = np.asarray(scene.plant.process_noise_std, float)
+        if not std.any():
+            return None
+        p = scene.rig.pendulum
+        inertia = np.array([*scene.rig.floor_masses, p.inertia + p.mass * p.half_length**2])
+        if std[:4].any() and self.substeps % 2:
+            raise InputError(
+                f"plant.process_noise_std: model.type ph takes displacement noise as a force "
+                f"doublet over the two halves of the sample period, which needs an even number of "
+                f"integrator steps per sample (have {self.substeps}); set the first four entries "
+                "to 0 or halve integrator.dt")
+        T = self.period
+        return np.concatenate([inertia * std[4:] / T, 4.0 * inertia * std[:4] / T**2])
 
     def warm_up(self) -> None:
-        """Nothing to load before the loop (:meth:`Plant.warm_up`): the pHDAE steps in numpy."""
-
-    def inputs(self, t: float) -> np.ndarray:
-        u = self.control.copy()
-        if self.load is not None:
-            u[:3] += self.load(t)
-        return u
+        """Load the compiled kernel now (one step on a copy of the state, thrown away)."""
+        self.stepper.run(self.z.copy(), np.zeros((1, 3)), self._zero, self._zero)
 
     @property
     def t(self) -> float:
         return self.k * self.period
 
-    def _reading(self) -> dict:
-        return frame.sensors(self.system, self.x)
+    def _floor_state(self) -> np.ndarray:
+        r = self.stepper.readings(self.z)
+        return np.concatenate([r["floors"][0], r["floor_velocities"][0]])
 
     def physical(self) -> np.ndarray:
         """True [x1, x2, x3, φ, ẋ1, ẋ2, ẋ3, φ̇]."""
-        r = self._reading()
-        return np.array([*r["floors"], r["phi"], *r["floor_velocities"], r["phi_rate"]])
+        r = self.stepper.readings(self.z)
+        return np.array([*r["floors"][0], r["phi"][0], *r["floor_velocities"][0],
+                         r["phi_rate"][0]])
 
     def force(self, t: float) -> float:
         return float(self.load(t)[self.excited_floor - 1]) if self.load else 0.0
 
+    def _loads(self, t0: float) -> np.ndarray:
+        loads = np.zeros((self.substeps, 3))
+        if self.load is not None:
+            loads[:, self.excited_floor - 1] = self.load.force_at(t0 + self._offsets)
+        return loads
+
     def sample(self) -> Sample:
         t = self.t
-        rates = self._rates(t, self.x)[self.system.n_q:2 * self.system.n_q]
-        accelerations = np.array([rates[self.system.q_slices[f"floor{i}"].start]
-                                  for i in (1, 2, 3)])
-        readings, force = self.sensors.read(accelerations, self._reading()["phi"], self.force(t))
+        u = self.control + self.noise
+        if self.load is not None:
+            u[:3] += self.load(t)
+        accelerations = self.stepper.floor_accelerations(self.z, u)
+        readings, force = self.sensors.read(accelerations, self.physical()[3], self.force(t))
         applied = np.array([self.actuators.torque.value, self.actuators.force.value])
         return Sample(t, readings, force, truth=self.physical(), applied=applied)
 
@@ -85,17 +116,36 @@ class PHPlant:
         applied = self.actuators.apply(command)
         self.control = np.array([0.0, 0.0, applied[1], applied[0]])
         t0 = self.t
-        for j in range(self.substeps):
-            guess = None if self._previous is None else 2 * self.x - self._previous
-            self._previous = self.x
-            self.x, self.lam = self.integrator.step(self.x, self.lam, t0 + j * self.h, guess)
-            self._record(t0 + (j + 1) * self.h)
+        loads = self._loads(t0)
+        scale = self._noise_forces
+        if scale is None:
+            parts = [(loads, self._zero)]
+        else:
+            draw = self.process_rng.standard_normal(8)
+            held = scale[:4] * draw[4:]
+            doublet = scale[4:] * draw[:4]
+            half = self.substeps // 2 if doublet.any() else self.substeps
+            parts = [(loads[:half], held + doublet), (loads[half:], held - doublet)]
+        records, energies = [], []
+        for chunk, noise in parts:
+            if not len(chunk):
+                continue
+            self.noise = noise
+            record, energy = self.stepper.run(self.z, chunk, self.control, noise, t0=t0)
+            records.append(record)
+            energies.append(energy)
+        self._balance = np.concatenate(energies).sum(axis=0)
+        times = t0 + np.arange(1, self.substeps + 1) * self.h
+        self._fine.extend(np.column_stack([times, np.concatenate(records)]))
         self.k += 1
         return applied
 
-    def _record(self, t: float) -> None:
-        r = self._reading()
-        self._fine.append((t, *r["floors"], *r["floor_velocities"]))
+    def energy_sample(self) -> tuple[float, np.ndarray]:
+        """(t_k, [H above rest at t_k, then the mean power over the period just ended of the
+        excitation, actuator and noise ports (supplied, W) and of the dissipation (W)]); the
+        powers are zero before the first period. Layout: :data:`BALANCE_TERMS`."""
+        return self.t, np.concatenate([[self.stepper.energy(self.z)],
+                                       self._balance / self.period])
 
     def truth_history(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         r = np.asarray(self._fine)

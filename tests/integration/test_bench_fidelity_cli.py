@@ -96,6 +96,9 @@ def test_bench_speed_reports_ratios_of_one_run() -> None:
     assert doc["implicit_step_cost"]["exponent"] == pytest.approx(
         np.polyfit(np.log(dofs), np.log(cost), 1)[0])
     assert all(r["bandwidth"] <= 4 for r in rows)  # banded solves: constant half-bandwidth
+    ph, fe = doc["ph"], doc["fe3_midpoint_plant"]
+    assert ph["ph_over_fe_cost"] == pytest.approx(ph["us_per_step"] / fe["us_per_step"])
+    assert ph["rate_1khz_real_time_factor"] == pytest.approx(1e3 / ph["rate_1khz_us_per_period"])
 
 
 @pytest.mark.parametrize("duration", ["-1", "0.015"])

@@ -224,7 +224,9 @@ def test_the_loop_keeps_controlling_beside_tools(ros_domain: int, tmp_path: Path
         done_launch = subprocess.run(
             [sys.executable, "-m", "stillframe", "launch", str(SCENES / "thesis_lqg.yaml"),
              *[a for o in SHORT_LQG for a in ("--set", o)], "--record", str(tmp_path / "bag"),
-             "--out", str(tmp_path / "out"), "--json"],
+             "--out", str(tmp_path / "out"), "--json",
+             # eight processes on the machine: a late sample is waited for, not held over
+             "--lockstep-timeout", "10"],
             env=child_env(), cwd=REPO_ROOT, capture_output=True, text=True, timeout=300)
     finally:
         for proc in (*tools, monitor):

@@ -22,6 +22,7 @@ BENCHES: tuple[str, ...] = (
     "stillframe.app.commands.bench_faults",
     "stillframe.app.commands.bench_soak",
     "stillframe.app.commands.bench_cli",
+    "stillframe.app.commands.bench_controllers",
 )
 
 

@@ -5,7 +5,11 @@
 - FE model with 40 elements per column, implicit midpoint at 1 ms: real-time factor (simulated
   seconds per CPU second), compiled banded vs the generic dense :class:`ImplicitMidpoint`;
 - cost of one compiled implicit step against the number of DOFs (FE 10…200 elements per
-  column), with the fitted exponent of cost ∝ DOFs^p.
+  column), with the fitted exponent of cost ∝ DOFs^p;
+- the port-Hamiltonian plant against the FE midpoint plant on the same mesh (3 elements per
+  column, ``thesis_fe`` at 32 Hz, 32 steps per sample): CPU time per integrator step of the
+  plant's sample + advance, and the ratio ``ph_over_fe_cost`` (target ≤ 3); and the pH plant at
+  1 kHz (one step per sample) as a real-time factor (target ≥ 1).
 
 Times are CPU times (``time.process_time``) of one process on one core, the least of
 :data:`REPEATS` runs for every path alike.
@@ -95,8 +99,51 @@ def measure(quick: bool = False) -> dict:
     dofs = np.array([r["dofs"] for r in rows], float)
     cost = np.array([r["us_per_step"] for r in rows])
     exponent = float(np.polyfit(np.log(dofs), np.log(cost), 1)[0])
+    say("pH plant against the FE midpoint plant, 3 elements per column")
     return {"lumped_rk4": rk4, "fe40_midpoint_1ms": fe40,
-            "implicit_step_cost": {"rows": rows, "exponent": exponent}}
+            "implicit_step_cost": {"rows": rows, "exponent": exponent},
+            **plant_costs(quick)}
+
+
+PH_TARGET_RATIO = 3.0
+
+
+def _plant_step_us(overrides: list[str], seconds: float) -> tuple[float, float]:
+    """CPU µs per integrator step and per sample period of a plant's sample + advance."""
+    from stillframe.config.scene import load_scene
+    from stillframe.locations import SCENES_DIR
+    from stillframe.plant.frame_plant import make_plant
+
+    scene = load_scene(SCENES_DIR / "thesis_fe.yaml", overrides)
+    plant = make_plant(scene)
+    plant.warm_up()
+    periods = round(seconds * scene.sensors.rate_hz)
+    command = np.zeros(2)
+
+    def work() -> None:
+        for _ in range(periods):
+            plant.sample()
+            plant.advance(command)
+
+    per_period = _cpu(work) / periods
+    return 1e6 * per_period / plant.substeps, 1e6 * per_period
+
+
+def plant_costs(quick: bool = False) -> dict:
+    """The pH plant's step against the FE midpoint plant's on the same mesh, and the pH plant at
+    1 kHz (the ``ph`` entry of :func:`measure`)."""
+    mesh = ["model.elements_per_column=3", "integrator.method=midpoint", "sensors.rate_hz=32",
+            "integrator.dt=9.765625e-4"]
+    seconds = 2.0 if quick else 10.0
+    fe_us, _ = _plant_step_us([*mesh, "model.type=fe"], seconds)
+    ph_us, _ = _plant_step_us([*mesh, "model.type=ph"], seconds)
+    fast = [*mesh, "model.type=ph", "sensors.rate_hz=1000", "integrator.dt=1e-3"]
+    _, period_us = _plant_step_us(fast, seconds / 4)
+    return {"fe3_midpoint_plant": {"us_per_step": fe_us},
+            "ph": {"elements_per_column": 3, "us_per_step": ph_us,
+                   "ph_over_fe_cost": ph_us / fe_us, "target_ratio": PH_TARGET_RATIO,
+                   "rate_1khz_us_per_period": period_us,
+                   "rate_1khz_real_time_factor": 1e3 / period_us}}
 
 
 def run(args: argparse.Namespace) -> int:
@@ -121,4 +168,13 @@ def run(args: argparse.Namespace) -> int:
                        [[x["elements_per_column"], x["dofs"], x["bandwidth"], x["us_per_step"]]
                         for x in c["rows"]]))
     print(f"fitted cost ~ DOFs^{c['exponent']:.2f} (linear = 1)")
+    ph, fe = result["ph"], result["fe3_midpoint_plant"]
+    print("\nplant step, 3 elements per column, thesis_fe at 32 Hz (sample + advance per step):")
+    print(format_table(["plant", "us/step"], [["FE, compiled midpoint", fe["us_per_step"]],
+                                              ["pH, compiled AVF midpoint", ph["us_per_step"]]]))
+    print(f"ratio pH/FE {ph['ph_over_fe_cost']:.2f}; target <= {PH_TARGET_RATIO:g}: "
+          f"{'met' if ph['ph_over_fe_cost'] <= PH_TARGET_RATIO else 'NOT met'}")
+    print(f"pH plant at 1 kHz (one step per sample): {ph['rate_1khz_us_per_period']:.1f} us per "
+          f"period, {ph['rate_1khz_real_time_factor']:.1f}x real time; target 1x: "
+          f"{'met' if ph['rate_1khz_real_time_factor'] >= 1 else 'NOT met'}")
     return 0

@@ -46,10 +46,18 @@ def rayleigh_ratio(omega: np.ndarray, alpha: float, beta: float) -> np.ndarray:
 
 def damping_parts(structure: Structure, damping: Damping) -> DampingParts:
     """The scene's ``damping`` section as :class:`DampingParts` of the structure."""
-    n = structure.n_dof
+    return damping_parts_of(structure.mass, structure.stiffness, damping, structure.name)
+
+
+def damping_parts_of(mass: np.ndarray, stiffness: np.ndarray, damping: Damping,
+                     name: str) -> DampingParts:
+    """:func:`damping_parts` of any positive definite (M, K), e.g. the pH frame's structure in
+    the null space of its constraints; ``name`` is the model the error messages name."""
+    n = mass.shape[0]
     if damping.model == "none":
         return DampingParts(0.0, 0.0, np.zeros((n, 0)), np.zeros(0))
-    omega, phi = undamped_modes(structure)
+    w2, phi = low_modes_first(stiffness, mass)
+    omega = np.sqrt(w2)
     if damping.model == "rayleigh":
         zeta = rayleigh_ratio(omega, damping.alpha, damping.beta)
         bad = np.flatnonzero(zeta < 0)
@@ -58,7 +66,7 @@ def damping_parts(structure: Structure, damping: Damping) -> DampingParts:
             raise InputError(
                 f"damping.beta: Rayleigh damping (alpha={damping.alpha:g}, beta={damping.beta:g}) "
                 f"gives structural mode {j + 1} at {omega[j] / (2 * np.pi):.4g} Hz the negative "
-                f"damping ratio {zeta[j]:.3g}; use damping.model: modal for the {structure.name} "
+                f"damping ratio {zeta[j]:.3g}; use damping.model: modal for the {name} "
                 "model"
             )
         return DampingParts(damping.alpha, damping.beta, np.zeros((n, 0)), np.zeros(0))
@@ -68,4 +76,4 @@ def damping_parts(structure: Structure, damping: Damping) -> DampingParts:
     if r < omega.size:
         beta_high = 2.0 * damping.high_mode_ratio / omega[r]
     extra = 2.0 * ratios[:r] * omega[:r] - beta_high * omega[:r] ** 2
-    return DampingParts(0.0, beta_high, structure.mass @ phi[:, :r], extra)
+    return DampingParts(0.0, beta_high, mass @ phi[:, :r], extra)

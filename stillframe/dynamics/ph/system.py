@@ -56,8 +56,17 @@ class BodyDamping:
     matrix: np.ndarray
 
 
+@dataclass(frozen=True)
+class VelocityDamping:
+    """A constant R ⪰ 0 on the velocities ν[indices] of several bodies (a structure's damping
+    written in the null space of its constraints, :mod:`stillframe.dynamics.ph.scene_model`)."""
+
+    indices: np.ndarray
+    matrix: np.ndarray
+
+
 Input = PortInput | DistributedInput
-Damper = RotaryDamper | BodyDamping
+Damper = RotaryDamper | BodyDamping | VelocityDamping
 
 
 class PHSystem:
@@ -179,6 +188,8 @@ class PHSystem:
             if isinstance(d, RotaryDamper):
                 c = (self.port_position(q, d.a)[1][2] - self.port_position(q, d.b)[1][2]) @ A
                 R += d.coefficient * np.outer(c, c)
+            elif isinstance(d, VelocityDamping):
+                R[np.ix_(d.indices, d.indices)] += d.matrix
             else:
                 sl = self.q_slices[d.body]
                 R[sl, sl] += d.matrix

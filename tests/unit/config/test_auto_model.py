@@ -51,3 +51,23 @@ def test_impossible_requests_fail_clearly() -> None:
                                                       "model.tolerance=1e-8"]))
     with pytest.raises(InputError, match=r"model\.band_hz: the lower edge must be below"):
         resolve_model(scene_from_dict({"name": "t"}, [*MODAL, "model.band_hz=[20, 10]"]))
+
+
+def test_energy_consistency_asked_picks_the_ph_model_and_says_why() -> None:
+    """With model.energy_tolerance only runs that keep a discrete power balance qualify: the
+    measured pH rows (balance error ~1e-14 of H), cheapest first; the reason names the energy
+    criterion and the cheaper FrameModel run it rejected for having no balance."""
+    scene, choice = resolve_model(scene_from_dict(
+        {"name": "t"}, [*MODAL, "model.band_hz=[0, 15]", "model.tolerance=0.01",
+                        "model.energy_tolerance=1e-12"]))
+    assert scene.model.type == "ph" and choice.model.startswith("ph")
+    assert "energy consistency asked (model.energy_tolerance 1e-12)" in choice.reason
+    assert "no discrete energy balance" in choice.reason
+    # the same request without the energy tolerance: a FrameModel (pH is not a candidate)
+    _, plain = resolve_model(scene_from_dict(
+        {"name": "t"}, [*MODAL, "model.band_hz=[0, 15]", "model.tolerance=0.01"]))
+    assert not plain.model.startswith("ph")
+    with pytest.raises(InputError, match=r"only pH runs keep a discrete energy balance"):
+        resolve_model(scene_from_dict({"name": "t"}, [
+            *MODAL, "model.band_hz=[0, 15]", "model.tolerance=0.01",
+            "model.energy_tolerance=1e-16"]))

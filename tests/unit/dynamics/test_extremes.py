@@ -12,7 +12,7 @@ import scipy.linalg as sla
 
 from stillframe.config.scene import scene_from_dict
 from stillframe.dynamics.excitation import floor_load
-from stillframe.dynamics.integrators import reference_solution
+from stillframe.dynamics.integrators import NO_SUBDIVISION, reference_solution
 from stillframe.dynamics.kernels import CompiledFrame
 from stillframe.dynamics.models import build_model, build_structure
 from stillframe.dynamics.models.damping import undamped_modes
@@ -45,11 +45,18 @@ def _grows(frame: CompiledFrame, x0: np.ndarray, h: float, steps: int = 20_000) 
      "initial.floors=[1e-4, -1e-4, 1e-4]"],
 ])
 def test_rk4_blows_up_just_beyond_the_predicted_limit_and_not_just_below(overrides) -> None:
-    _, model, frame, x0 = _setup(overrides)
+    _, model, subdivided, x0 = _setup(overrides)
+    frame = CompiledFrame(model, NO_SUBDIVISION)  # the bare method
     x0[model.n_dof:] = 1e-3  # excite every mode, the fastest included
     limit = rk4_stable_step(model)
     assert not _grows(frame, x0, 0.99 * limit)
     assert _grows(frame, x0, 1.01 * limit)
+    # with the error estimate (the default) the steps beyond the limit are halved where needed:
+    # the energy of the free (passive) model never grows, as it does for the bare method
+    states = subdivided.run("rk4", x0, 1.01 * limit, 2000, stride=100)
+    energy = [model.energy(x[:model.n_dof], x[model.n_dof:]) for x in states]
+    assert np.all(np.isfinite(states)) and max(energy) <= energy[0] * (1 + 1e-9)
+    assert subdivided.subdivisions > 0
     if "damping.model=none" in overrides:
         # undamped: the limit is the imaginary-axis bound h ω_max = 2√2 (closed form)
         omega_max = np.max(np.abs(np.linalg.eigvals(model.linearized().state_space()[0])))

@@ -8,9 +8,11 @@ import pytest
 from stillframe.config.scene import scene_from_dict
 from stillframe.dynamics.excitation import floor_load
 from stillframe.dynamics.integrators import (
+    NO_SUBDIVISION,
     RK4,
     ImplicitMidpoint,
     IntegrationError,
+    Subdivision,
     integrate,
     reference_solution,
 )
@@ -111,5 +113,14 @@ def test_rk4_beyond_its_stability_limit_fails_with_a_clear_error() -> None:
                                             "initial.floors=[0.001, 0.0, 0.0]"])
     model = build_model(scene)
     system = MechanicalSystem(model)
+    bare = RK4()
+    bare.subdivision = NO_SUBDIVISION
     with pytest.raises(IntegrationError, match=r"integrator\.dt: the state became non-finite"):
-        integrate(system, initial_state(model, scene.initial), 1e-3, 20_000, RK4())
+        integrate(system, initial_state(model, scene.initial), 1e-3, 20_000, bare)
+    # subdivided, the step needs more than one halving (the limit is 0.361 ms): a floor of
+    # dt/2 is reached at the first step and named
+    once = RK4()
+    once.subdivision = Subdivision(max_halvings=1)
+    with pytest.raises(IntegrationError, match=r"integrator\.dt: .* at t = 0 s .* after 1 "
+                       r"halvings of the step \(integrator\.max_halvings\)"):
+        integrate(system, initial_state(model, scene.initial), 1e-3, 20_000, once)

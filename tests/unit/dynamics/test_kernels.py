@@ -7,7 +7,13 @@ import pytest
 
 from stillframe.config.scene import scene_from_dict
 from stillframe.dynamics.excitation import floor_load
-from stillframe.dynamics.integrators import RK4, ImplicitMidpoint, integrate
+from stillframe.dynamics.integrators import (
+    NO_SUBDIVISION,
+    RK4,
+    ImplicitMidpoint,
+    Subdivision,
+    integrate,
+)
 from stillframe.dynamics.kernels import CompiledFrame, banded_order, bandwidth
 from stillframe.dynamics.models import build_model
 from stillframe.dynamics.simulation import initial_state, simulate
@@ -92,8 +98,12 @@ def test_compiled_rk4_beyond_its_stability_limit_fails_with_a_clear_error() -> N
     scene = scene_from_dict({"name": "t"}, ["model.type=fe", "damping.model=modal",
                                             "initial.floors=[0.001, 0.0, 0.0]"])
     model = build_model(scene)
+    x0 = initial_state(model, scene.initial)
     with pytest.raises(IntegrationError, match=r"integrator\.dt: the state became non-finite"):
-        CompiledFrame(model).run("rk4", initial_state(model, scene.initial), 1e-3, 20_000)
+        CompiledFrame(model, NO_SUBDIVISION).run("rk4", x0, 1e-3, 20_000)
+    with pytest.raises(IntegrationError, match=r"integrator\.dt: .* at t = 0 s .* after 1 "
+                       r"halvings of the step \(integrator\.max_halvings\)"):
+        CompiledFrame(model, Subdivision(max_halvings=1)).run("rk4", x0, 1e-3, 20_000)
 
 
 def test_simulate_uses_the_compiled_path_and_matches_the_generic_one() -> None:

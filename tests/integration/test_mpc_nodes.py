@@ -1,0 +1,40 @@
+"""``controller.type: mpc`` in controller_node (issue 30): on either backend the three nodes in
+lock-step give the one-process loop's numbers bit for bit on the torque-limited case, and
+failed solves (forced by an iteration limit of 5) are counted alike and reported on
+``/diagnostics``."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from stillframe.app.launcher import run_scene
+from stillframe.locations import SCENES_DIR
+from stillframe.loop.closed_loop import run_closed_loop
+from tests.support.nodes import SHORT_LQG
+from tests.support.scenes import thesis_scene
+
+MPC = [*SHORT_LQG, "plant.model=scene", "model.type=lumped", "design.model=lumped",
+       "actuators.torque_limit=2", "actuators.torque_rate_limit=40", "controller.type=mpc",
+       "controller.max_iter=5"]
+
+
+@pytest.mark.parametrize("backend", ["dds", "rclpy"])
+def test_mpc_through_the_nodes_equals_one_process(ros_domain: int, tmp_path: Path,
+                                                  backend: str) -> None:
+    result = run_scene(SCENES_DIR / "thesis_lqg.yaml", MPC, tmp_path, backends=[backend])
+    reference = run_closed_loop(thesis_scene("thesis_lqg", MPC))
+    e = result.evaluation
+    for key in ("reduction_pct", "peak_uncontrolled", "peak_controlled", "peak_command"):
+        assert e[key] == reference.evaluation[key], key
+    assert e["lockstep_timeouts"] == 0
+    with np.load(result.history_file) as hist:
+        for key in ("t", "truth", "command", "force", "fine_floors", "fine_velocities"):
+            np.testing.assert_array_equal(hist[key], getattr(reference, key), err_msg=key)
+    assert np.max(np.abs(reference.command[:, 0])) <= 2.0
+    fallbacks = reference.evaluation["controller"]["fallback"]
+    assert fallbacks > 0
+    statuses = {name.rsplit("/", 1)[-1]: values for name, values in result.diagnostics.items()}
+    assert statuses["controller_node"]["fallback"] == str(fallbacks)
