@@ -18,11 +18,12 @@ from __future__ import annotations
 import sys
 
 from controller_node.node import ControllerNode
-from estimator_node.node import EstimatorNode, build
+from estimator_node.node import EstimatorNode
 from sim_node import node as sim_node
 from stillframe.contract import topics
 from stillframe.middleware import api, intra_process
-from stillframe.node_runtime.support import declare_loop_parameters, wait_for_peers
+from stillframe.node_runtime.base import Cycle, Managed
+from stillframe.node_runtime.support import wait_for_peers
 
 #: longest wait of one spin of the estimator's node [s]: the controller's messages (the load
 #: cell it matches) are taken at least this often
@@ -32,12 +33,19 @@ SPIN_S = 0.001
 HOUSEKEEPING_S = 0.0005
 
 
-class Container:
-    """The estimator and the controller of one process, stepped together."""
+class Container(Cycle):
+    """The estimator and the controller of one process, stepped together (the node runtime's
+    cycle over both)."""
 
     def __init__(self, estimator: EstimatorNode, controller: ControllerNode) -> None:
         self.estimator = estimator
         self.controller = controller
+
+    def process_ready(self) -> int:
+        return self.advance()
+
+    def next_wait(self) -> float:
+        return SPIN_S
 
     def advance(self) -> int:
         """Estimate and command whatever is ready (an estimate reaches the controller as it is
@@ -59,19 +67,14 @@ class Container:
         self.estimator.publish_status()
         self.controller.publish_status()
 
-    def run(self) -> None:
-        """Wait for the simulator in lock-step, then estimate and control until shutdown."""
+    def start(self) -> None:
+        """Wait for the simulator in lock-step, then take the inputs."""
         if self.controller.params.lockstep:
             wait_for_peers(self.controller.node, self.controller.peers_ready)
         self.controller.subscribe_inputs()
         if self.controller.params.lockstep:
             wait_for_peers(self.estimator.node, self.estimator.peers_ready)
         self.estimator.subscribe_inputs()
-        while api.ok():
-            self.spin(SPIN_S)
-            self.advance()
-            self.housekeeping()
-        self.finish()
 
 
 def run_with_sim(sim: sim_node.SimNode, container: Container) -> None:
@@ -108,11 +111,16 @@ def main() -> int:
                                   else None]
     intra_process.enable()
     ns = topics.DEFAULT_NAMESPACE
-    names = ["estimator_node", "controller_node", *(["sim_node"] if with_sim else [])]
-    nodes = [api.create_node(name, namespace=ns) for name in names]
+    pair = [api.create_node(cls.NAME, namespace=ns, managed=True)
+            for cls in (EstimatorNode, ControllerNode)]
+    nodes = [*pair, *([api.create_node("sim_node", namespace=ns)] if with_sim else [])]
     try:
-        container = Container(build(nodes[0]),
-                              ControllerNode(nodes[1], declare_loop_parameters(nodes[1])))
+        # managed nodes, brought up here: configure, activate (their lifecycle services serve
+        # later transitions, e.g. a deactivated controller commanding zero)
+        estimator, controller = (
+            Managed(cls, node, realtime=False).bring_up()
+            for cls, node in zip((EstimatorNode, ControllerNode), pair, strict=True))
+        container = Container(estimator, controller)  # type: ignore[arg-type]
         if with_sim:
             run_with_sim(sim_node.build(nodes[2]), container)
         else:

@@ -38,6 +38,7 @@ from __future__ import annotations
 
 import sys
 import time
+from typing import Any
 
 import numpy as np
 
@@ -54,44 +55,38 @@ from stillframe.contract.signals import Command, Estimate
 from stillframe.control.factory import make_controller
 from stillframe.control.supervisor import RUNAWAY_FACTOR
 from stillframe.design.coordinates import design_map
-from stillframe.errors import InputError
 from stillframe.loop import fast_inputs
 from stillframe.loop.matching import ForceMatching
 from stillframe.loop.watchdog import EstimateWatchdog
 from stillframe.loop.wiring import design_model
-from stillframe.loop.writer_gate import InputGates
 from stillframe.middleware import api
-from stillframe.middleware.params import Parameter, SetParametersResult, finite_floats
+from stillframe.middleware.params import Parameter, SetParametersResult
 from stillframe.middleware.taps import TappedPublisher
-from stillframe.node_runtime.realtime import (
-    Realtime,
-    RealtimeOptions,
-    declare_realtime,
-    start_realtime,
-)
+from stillframe.node_runtime import base
+from stillframe.node_runtime.declarations import ControllerParameterValues
+from stillframe.node_runtime.parameters import NodeParameters
 from stillframe.node_runtime.support import (
     ERROR,
     OK,
     WARN,
-    Diagnostics,
     Durations,
     LoopParameters,
     RateMeter,
-    check_settable,
-    declare_loop_parameters,
     reaches_peer,
     wait_for_peers,
 )
 
-RUN_TIME_PARAMETERS = frozenset({"enabled", "command_limit"})
 
-
-class ControllerNode:
+class ControllerNode(base.LoopNode):
     """The controller, its subscriptions and the command publisher."""
 
-    def __init__(self, node: api.Node, params: LoopParameters) -> None:
-        self.node = node
-        self.params = params
+    NAME = "controller_node"
+    WRITER_PINS = ("estimate_writer", "sensor_writer")
+    MANAGED = True
+
+    def __init__(self, node: api.Node, params: LoopParameters,
+                 values: dict[type, NodeParameters] | None = None) -> None:
+        super().__init__(node, params, values)
         scene = params.scene
         design = design_model(scene)
         self.controller = make_controller(scene, design)
@@ -100,46 +95,46 @@ class ControllerNode:
         spec = COMMAND_TOPICS[self.controller.actuator]
         self.pub = TappedPublisher(node, spec.type_name, spec.name, spec.qos)
         self.out = CommandMessage(self.controller.actuator)
-        self.diagnostics = Diagnostics(node, params.diagnostics_period_s)
         self.sim_time = bool(node.get_parameter("use_sim_time").value)
         self.clock_ns = 0                   # the newest /clock of the simulator (sim time)
-        self.gates = InputGates(node, "estimate_writer", "sensor_writer")
         self.matching = ForceMatching(round(params.lockstep_timeout_s / 4 * 1e9), params.lockstep)
         self.watchdog = EstimateWatchdog(self.controller, self.grid)
         self.last_command = Command(0.0)
         self.input_at: float | None = None   # when the last load-cell reading arrived
         self.compute = Durations()
         self.rate = RateMeter()
-        self.rt = Realtime(RealtimeOptions())   # main() enters the practices the node asks for
-        self.declare_run_time_parameters()
+        settings = self.setting(ControllerParameterValues)
+        self.enabled = settings.enabled
+        self.controller.limit = settings.command_limit or None
 
-    def declare_run_time_parameters(self) -> None:
-        """``enabled`` and ``command_limit`` (from the command line, else the scene), applied
-        now and on every accepted set."""
-        enabled = self.node.declare_parameter("enabled", True)
-        limit = self.node.declare_parameter("command_limit", self.controller.limit or 0.0)
-        result = self.on_set_parameters([enabled, limit])
-        if not result.successful:
-            raise InputError(f"parameter {result.reason}")
-        self.node.add_on_set_parameters_callback(self.on_set_parameters)
-
-    def on_set_parameters(self, parameters: list[Parameter]) -> SetParametersResult:
-        """Check every new value, then apply them all (or none)."""
-        settable = check_settable(parameters, RUN_TIME_PARAMETERS)
-        if not settable.successful:
-            return settable
-        for p in parameters:
-            if p.name == "command_limit":
-                reason = finite_floats(p.value, "command_limit")
-                if reason or p.value < 0:
-                    return SetParametersResult(False, reason or (
-                        f"command_limit: must be >= 0 (0: no limit), got {p.value}"))
+    def apply(self, parameters: list[Parameter]) -> SetParametersResult:
+        """``enabled`` and ``command_limit`` (checked by their declarations) in effect from the
+        next sample on."""
         for p in parameters:
             if p.name == "enabled":
-                self.controller.enabled = p.value
+                self.enabled = p.value
+                self.controller.enabled = self.enabled and self.activated
             elif p.name == "command_limit":
                 self.controller.limit = p.value or None
         return SetParametersResult(True)
+
+    def activate(self) -> None:
+        """Control again from the next estimate (when ``enabled``)."""
+        super().activate()
+        self.controller.enabled = self.enabled
+
+    def deactivate(self) -> None:
+        """Zero commands from the next estimate on, published as usual (the simulator in
+        lock-step still gets its answer)."""
+        super().deactivate()
+        self.controller.enabled = False
+
+    def reset(self) -> None:
+        """A new controller from the scene (``cleanup``), its settings kept."""
+        limit, enabled = self.controller.limit, self.controller.enabled
+        self.controller = make_controller(self.params.scene, design_model(self.params.scene))
+        self.controller.limit, self.controller.enabled = limit, enabled
+        self.watchdog = EstimateWatchdog(self.controller, self.grid)
 
     def subscribe_inputs(self) -> None:
         est, wrench, clock = topics.STATE_ESTIMATE, topics.EXCITATION_WRENCH, topics.CLOCK
@@ -186,7 +181,7 @@ class ControllerNode:
         self.pub.publish(self.out.cdr(command, self.grid.ns(command.t)))
         self.last_command = command
 
-    def check_watchdog(self) -> None:
+    def check(self) -> None:
         """Command zero at the newest sample time seen (load cell, or ``/clock`` with
         ``use_sim_time``) when the estimates are stale (module docstring)."""
         ns = self.matching.sample_ns
@@ -200,7 +195,7 @@ class ControllerNode:
                                            "commanding zero")
         self.send(self.controller.command(t, None, self.matching.force))
 
-    def publish_status(self) -> None:
+    def status(self) -> tuple[dict[str, Any], int, str]:
         c = self.controller.counters
         cmd = self.last_command
         values = {"mode": self.params.mode, "rate_hz": self.rate.read(),
@@ -229,49 +224,30 @@ class ControllerNode:
                             "(simulator stale or gone)")
         level = ERROR if cmd.watchdog or idle_s > self.params.stale_input_s else (
             WARN if problems or values["refused_writers"] else OK)
-        self.diagnostics.publish(max(self.matching.last_ns, 0), values, level, "; ".join(problems))
+        return values, level, "; ".join(problems)
+
+    def status_stamp(self) -> int:
+        return max(self.matching.last_ns, 0)
 
     def peers_ready(self) -> bool:
         return reaches_peer(self.node, self.pub)
 
-    def run(self) -> None:
-        """Wait for the command's subscribers in lock-step, then control until shutdown."""
+    def start(self) -> None:
+        """Wait for the command's subscribers in lock-step, then take the inputs."""
         if self.params.lockstep:
             self.node.get_logger().info("lock-step: waiting for the simulator")
             wait_for_peers(self.node, self.peers_ready)
         self.subscribe_inputs()
-        while api.ok():
-            left = self.matching.wait_ns_left(time.monotonic_ns())
-            self.node.spin_once(0.05 if left is None else min(left * 1e-9, 0.05))
-            self.process_ready()
-            self.rt.idle()
-            self.housekeeping()
-        self.publish_status()
 
-    def housekeeping(self) -> bool:
-        """Between samples: the watchdog, the graph read until the first sample,
-        ``/diagnostics`` when due; whether a status was published."""
-        self.check_watchdog()
-        self.gates.keep_graph_read()
-        if not (self.gates.announce(self.node.get_logger()) or self.diagnostics.due()):
-            return False
-        self.publish_status()
-        return True
+    def next_wait(self) -> float:
+        left = self.matching.wait_ns_left(time.monotonic_ns())
+        return 0.05 if left is None else min(left * 1e-9, 0.05)
 
 
 @api.node_main
 def main() -> int:
     """Run the node (console script ``controller_node``); bad parameters exit 2 with one line."""
-    node = api.create_node("controller_node", namespace=topics.DEFAULT_NAMESPACE)
-    try:
-        params = declare_loop_parameters(node)
-        rt = declare_realtime(node)
-        controller = ControllerNode(node, params)
-        controller.rt = start_realtime(node, rt)
-        controller.run()
-    finally:
-        node.destroy_node()
-    return 0
+    return base.main(ControllerNode)
 
 
 if __name__ == "__main__":

@@ -57,9 +57,11 @@ import functools
 import sys
 import time
 from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 
+from stillframe.config.scene import Scene
 from stillframe.contract import topics
 from stillframe.contract.codecs import (
     COMMAND_TOPICS,
@@ -75,47 +77,48 @@ from stillframe.contract.codecs import (
 from stillframe.contract.signals import actuator_of
 from stillframe.errors import InputError
 from stillframe.estimation.base import Filter
-from stillframe.estimation.factory import make_estimator
+from stillframe.estimation.factory import FILTERS, make_estimator
 from stillframe.estimation.kalman import LinearFilter
 from stillframe.loop import fast_inputs
 from stillframe.loop.assembly import Ready, SampleAssembly
 from stillframe.loop.wiring import command_topic, design_model, estimator_inputs
-from stillframe.loop.writer_gate import InputGates
 from stillframe.middleware import api
-from stillframe.middleware.params import Parameter, SetParametersResult, finite_floats
+from stillframe.middleware.params import Parameter, SetParametersResult
 from stillframe.middleware.taps import TappedPublisher
-from stillframe.node_runtime.realtime import (
-    Realtime,
-    RealtimeOptions,
-    declare_realtime,
-    start_realtime,
+from stillframe.node_runtime import base
+from stillframe.node_runtime.declarations import (
+    EstimatorParameterValues,
+    NoiseParameterValues,
 )
+from stillframe.node_runtime.parameters import NodeParameters
 from stillframe.node_runtime.support import (
     ERROR,
     OK,
     WARN,
-    Diagnostics,
     Durations,
     LoopParameters,
     RateMeter,
-    check_settable,
-    declare_loop_parameters,
     has_publisher,
     reaches_peer,
     wait_for_peers,
 )
 
 
-class EstimatorNode:
+class EstimatorNode(base.LoopNode):
     """The estimator, its subscriptions, and the per-stamp assembly of samples."""
 
-    def __init__(self, node: api.Node, params: LoopParameters, partial_after_s: float) -> None:
-        self.node = node
-        self.params = params
+    NAME = "estimator_node"
+    WRITER_PINS = ("command_writer", "sensor_writer")
+    MANAGED = True
+
+    def __init__(self, node: api.Node, params: LoopParameters,
+                 values: dict[type, NodeParameters] | None = None) -> None:
+        super().__init__(node, params, values)
         scene = params.scene
         self.estimator = make_estimator(scene, design_model(scene))
         self.inputs = estimator_inputs(scene)
         self.active = actuator_of(scene)
+        partial_after_s = self.setting(EstimatorParameterValues).partial_after_s
         wait_s = params.lockstep_timeout_s / 2 if params.lockstep else partial_after_s
         self.assembly = SampleAssembly(self.inputs, self.active, SampleGrid(params.period),
                                        round(wait_s * 1e9), params.lockstep,
@@ -124,60 +127,54 @@ class EstimatorNode:
         self.state_pub = TappedPublisher(node, spec.type_name, spec.name, spec.qos)
         self.cov_pub = TappedPublisher(node, cov.type_name, cov.name, cov.qos)
         self.out = EstimateMessages()
-        self.diagnostics = Diagnostics(node, params.diagnostics_period_s)
-        self.gates = InputGates(node, "command_writer", "sensor_writer")
         for i, spec in enumerate(COMMAND_TOPICS):
             fast_inputs.subscribe(node, spec.type_name, spec.name, params.reader_qos(spec),
                                   command_reader(i), functools.partial(self.on_command, i),
                                   self.gates.add(spec.name, "command_writer"))
         self.counts = {"estimates": 0, "initialised_from_measurements": 0,
-                       "skipped_before_initialisation": 0}
+                       "skipped_before_initialisation": 0, "held_while_inactive": 0}
         self.compute = Durations()
         self.rate = RateMeter()
-        self.rt = Realtime(RealtimeOptions())   # main() enters the practices the node asks for
         self.input_at: float | None = None   # when the last sample input arrived
-        if isinstance(self.estimator, Filter):
-            self.declare_run_time_parameters()
-        else:
-            node.add_on_set_parameters_callback(check_settable)   # truth: nothing to tune
+        noise = (self.setting(NoiseParameterValues) if NoiseParameterValues
+                 in self.declarations(scene) else None)
+        self.noise = {} if noise is None else {
+            "process_noise_std": noise.process_noise_std,
+            "measurement_noise_std": noise.measurement_noise_std}
+        if self.noise:
+            self.set_noise(self.noise)
 
     # -- parameters ----------------------------------------------------------------------
-    def declare_run_time_parameters(self) -> None:
-        """The noise settings (from the command line, else the scene), applied now and on
-        every accepted set."""
-        config = self.params.scene.estimator
-        self.noise = {"process_noise_std": list(config.process_noise_std),
-                      "measurement_noise_std": list(config.measurement_noise_std)}
-        declared = [self.node.declare_parameter(name, value)
-                    for name, value in self.noise.items()]
-        result = self.on_set_parameters(declared)
-        if not result.successful:
-            raise InputError(f"parameter {result.reason}")
-        self.node.add_on_set_parameters_callback(self.on_set_parameters)
+    @classmethod
+    def declarations(cls, scene: Scene) -> tuple[type[NodeParameters], ...]:
+        """The noise parameters only for the filters (not ``truth``)."""
+        return tuple(c for c in super().declarations(scene)
+                     if c is not NoiseParameterValues or scene.estimator.type in FILTERS)
 
-    def on_set_parameters(self, parameters: list[Parameter]) -> SetParametersResult:
-        """Check the new noise settings and redesign the filter with them (all or nothing)."""
-        settable = check_settable(parameters, frozenset(self.noise))
-        if not settable.successful:
-            return settable
-        noise = dict(self.noise)
-        for p in parameters:
-            if p.name in noise:
-                length = len(noise[p.name])
-                reason = finite_floats(p.value, p.name, length)
-                if not reason and p.name == "process_noise_std" and min(p.value) < 0:
-                    reason = f"{p.name}: must be >= 0, got {p.value}"
-                if not reason and p.name == "measurement_noise_std" and min(p.value) <= 0:
-                    reason = f"{p.name}: must be > 0, got {p.value}"
-                if reason:
-                    return SetParametersResult(False, reason)
-                noise[p.name] = list(p.value)
-        try:
+    def set_noise(self, noise: dict[str, list[float]]) -> None:
+        """Redesign the filter with ``noise``; InputError when it cannot be designed."""
+        if isinstance(self.estimator, Filter):
             self.estimator.set_noise(noise["process_noise_std"], noise["measurement_noise_std"])
+
+    def apply(self, parameters: list[Parameter]) -> SetParametersResult:
+        """The new noise settings (checked by their declarations): the filter redesigned with
+        them (all or nothing)."""
+        noise = {**self.noise, **{p.name: list(p.value) for p in parameters}}
+        try:
+            self.set_noise(noise)
         except InputError as exc:
             return SetParametersResult(False, str(exc))
         self.noise = noise
         return SetParametersResult(True)
+
+    def reset(self) -> None:
+        """A new filter from the scene (``cleanup``, or the loop's time jumped), its counters
+        and noise settings kept."""
+        counters = self.estimator.counters
+        self.estimator = make_estimator(self.params.scene, design_model(self.params.scene))
+        self.estimator.counters = counters
+        if self.noise:
+            self.set_noise(self.noise)
 
     # -- inputs --------------------------------------------------------------------------
     def subscribe_inputs(self) -> None:
@@ -213,12 +210,7 @@ class EstimatorNode:
     def process_ready(self) -> int:
         """Use every pending stamp that is ready, oldest first; how many were used."""
         if self.assembly.take_jump():        # a new run of the loop: a new filter
-            counters = self.estimator.counters
-            self.estimator = make_estimator(self.params.scene, design_model(self.params.scene))
-            self.estimator.counters = counters
-            if isinstance(self.estimator, Filter):
-                self.estimator.set_noise(self.noise["process_noise_std"],
-                                         self.noise["measurement_noise_std"])
+            self.reset()
         used = 0
         while (ready := self.assembly.pop_ready(time.monotonic_ns())) is not None:
             self.use(ready)
@@ -241,6 +233,9 @@ class EstimatorNode:
         self.assembly.used(ready.ns)
         if estimate is None:
             return
+        if not self.activated:      # inactive: the filter kept current, nothing published
+            self.counts["held_while_inactive"] += 1
+            return
         state, cov = self.out.cdr(estimate, ready.ns)
         self.state_pub.publish(state)
         self.cov_pub.publish(cov)
@@ -252,7 +247,7 @@ class EstimatorNode:
         left = self.assembly.wait_ns_left(time.monotonic_ns())
         return 0.1 if left is None else min(0.1, left * 1e-9)
 
-    def publish_status(self) -> None:
+    def status(self) -> tuple[dict[str, Any], int, str]:
         c, a = self.estimator.counters, self.assembly
         values = {"mode": self.params.mode, "rate_hz": self.rate.read(), **self.counts,
                   **a.counts, "updates": c.updates, "stale": c.stale,
@@ -269,59 +264,33 @@ class EstimatorNode:
         if idle_s > self.params.stale_input_s:
             level, stale = ERROR, (f"stale input: no sample for {idle_s:.3g} s "
                                    "(simulator stale or gone)")
-        message = "; ".join(m for m in (stale, self.gates.message()) if m)
-        self.diagnostics.publish(max(a.last_ns, 0), values, level, message)
+        return values, level, "; ".join(m for m in (stale, self.gates.message()) if m)
+
+    def status_stamp(self) -> int:
+        return max(self.assembly.last_ns, 0)
 
     def peers_ready(self) -> bool:
         """The controller reads the estimates and publishes the scene's command topic."""
         return reaches_peer(self.node, self.state_pub) and has_publisher(
             self.node, command_topic(self.params.scene).name)
 
-    def run(self) -> None:
-        """Wait for the controller in lock-step, then estimate until shutdown."""
+    def start(self) -> None:
+        """Wait for the controller in lock-step, then take the inputs."""
         if self.params.lockstep and self.active is not None:
             self.node.get_logger().info("lock-step: waiting for the controller")
             wait_for_peers(self.node, self.peers_ready)
         self.subscribe_inputs()
-        while api.ok():
-            self.node.spin_once(self.next_wait())
-            self.process_ready()
-            self.rt.idle()
-            self.housekeeping()
-        self.publish_status()
-
-    def housekeeping(self) -> bool:
-        """Between samples: the graph read until the first one, ``/diagnostics`` when due;
-        whether a status was published."""
-        self.gates.keep_graph_read()
-        if not (self.gates.announce(self.node.get_logger()) or self.diagnostics.due()):
-            return False
-        self.publish_status()
-        return True
 
 
 def build(node: api.Node) -> EstimatorNode:
     """The estimator on ``node`` from its parameters (InputError naming a wrong one)."""
-    params = declare_loop_parameters(node)
-    partial = node.declare_parameter("partial_after_s", 0.5 * params.period,
-                                     read_only=True).value
-    if not partial > 0:
-        raise InputError(f"parameter 'partial_after_s': must be > 0, got {partial}")
-    return EstimatorNode(node, params, float(partial))
+    return EstimatorNode.build(node)
 
 
 @api.node_main
 def main() -> int:
     """Run the node (console script ``estimator_node``); bad parameters exit 2 with one line."""
-    node = api.create_node("estimator_node", namespace=topics.DEFAULT_NAMESPACE)
-    try:
-        rt = declare_realtime(node)     # before build(): the node refuses changes once built
-        estimator = build(node)
-        estimator.rt = start_realtime(node, rt)
-        estimator.run()
-    finally:
-        node.destroy_node()
-    return 0
+    return base.main(EstimatorNode)
 
 
 if __name__ == "__main__":

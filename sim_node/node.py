@@ -59,34 +59,26 @@ from stillframe.contract.codecs import (
     command_reader,
 )
 from stillframe.contract.signals import Sample, actuator_of
-from stillframe.errors import InputError
-from stillframe.loop.closed_loop import LoopHistory, evaluate
+from stillframe.loop.closed_loop import LoopHistory, evaluate, plant_report
 from stillframe.loop.command_gate import CommandGate
 from stillframe.loop.energy_balance import EnergyTopic
 from stillframe.loop.pacing import Pacer, wait_until
 from stillframe.loop.watchdog import MissRateGuard, command_expired
 from stillframe.loop.wiring import command_topic, estimator_inputs
-from stillframe.loop.writer_gate import InputGates
 from stillframe.middleware import api
 from stillframe.middleware.clock import ClockPublisher
 from stillframe.middleware.names import is_hidden
 from stillframe.middleware.taps import TappedPublisher
-from stillframe.node_runtime.realtime import (
-    Realtime,
-    RealtimeOptions,
-    declare_realtime,
-    start_realtime,
-)
+from stillframe.node_runtime import base
+from stillframe.node_runtime.declarations import SimParameterValues
+from stillframe.node_runtime.parameters import NodeParameters
 from stillframe.node_runtime.support import (
     ERROR,
     OK,
     RECORDER_NODE,
     WARN,
-    Diagnostics,
     Durations,
     LoopParameters,
-    check_settable,
-    declare_loop_parameters,
     hears_peer,
     reaches_peer,
     wait_for_peers,
@@ -97,17 +89,25 @@ from stillframe.plant.frame_plant import make_plant
 LOOP_NODES = ("sim_node", "estimator_node", "controller_node")
 
 
-class SimNode:
-    """The plant, its publishers and the command subscriptions of one node."""
+class SimNode(base.LoopNode):
+    """The plant, its publishers and the command subscriptions of one node.
 
-    def __init__(self, node: api.Node, params: LoopParameters, discovery_timeout_s: float,
-                 await_recorder: list[str] | None = None,
-                 command_timeout_periods: int = 3, command_miss_limit: float = 0.25) -> None:
-        self.node = node
-        self.command_timeout_periods = command_timeout_periods
-        self.await_recorder = [t for t in (await_recorder or []) if t]
-        self.params = params
-        self.discovery_timeout_s = discovery_timeout_s
+    Not a managed node: it drives the loop's time (each sample waits for its command in
+    lock-step), so an inactive simulator would stall the estimator and the controller rather
+    than leave them idle; it starts the run when its peers are there and ends it (docs/nodes.md,
+    lifecycle)."""
+
+    NAME = "sim_node"
+    WRITER_PINS = ("command_writer",)
+
+    def __init__(self, node: api.Node, params: LoopParameters,
+                 values: dict[type, NodeParameters] | None = None) -> None:
+        super().__init__(node, params, values)
+        settings = self.setting(SimParameterValues)
+        self.command_timeout_periods = settings.command_timeout_periods
+        self.await_recorder = [t for t in settings.await_recorder if t]
+        self.discovery_timeout_s = settings.discovery_timeout_s
+        self.result_file = settings.result_file
         scene = params.scene
         self.plant = make_plant(scene)
         self.plant.warm_up()                # its kernels now, not in the first sample
@@ -120,9 +120,8 @@ class SimNode:
         self.messages = SensorMessages(scene.sensors)
         #: pH plant: energy_balance and the live passivity check (None for the other plants)
         self.energy = EnergyTopic.of(node, self.plant, scene, params.qos(topics.ENERGY_BALANCE))
-        self.diagnostics = Diagnostics(node, params.diagnostics_period_s)
         limits = (scene.actuators.torque_limit, scene.actuators.force_limit)
-        self.inputs = InputGates(node, "command_writer")
+        self.inputs = self.gates
         self.gates = [CommandGate(limit, self.inputs.add(spec.name, "command_writer"),
                                   active=i == self.active)
                       for i, (limit, spec) in enumerate(zip(limits, COMMAND_TOPICS, strict=True))]
@@ -143,15 +142,13 @@ class SimNode:
         self.pacer = Pacer(self.grid.ns(self.plant.period), params.lockstep,
                            round(params.lockstep_timeout_s * 1e9))
         self.counts = {"rejected_commands": 0, "safe_state_samples": 0, "degraded_samples": 0}
-        self.guard = MissRateGuard(max(10, round(1.0 / self.plant.period)), command_miss_limit)
+        self.guard = MissRateGuard(max(10, round(1.0 / self.plant.period)),
+                                   settings.command_miss_limit)
         self.k = 0
-        self.rt = Realtime(RealtimeOptions())   # main() enters the practices the node asks for
         self.pacer.start(time.monotonic_ns())   # again when the first sample is due
         #: handles messages for at most the given seconds while the sim waits: the node's
         #: ``spin_once``, or the composed process's (``container_node``)
-        self.spin: Callable[[float], None] = node.spin_once
-        self.result_file = ""
-        node.add_on_set_parameters_callback(check_settable)   # nothing changes while it runs
+        self.spin: Callable[[float], None] = node.spin_once   # type: ignore[method-assign]
 
     def on_command(self, actuator: int, cdr: bytes, info: api.MessageInfo) -> None:
         """Take a command its topic's gate lets through (module docstring); count the others."""
@@ -254,7 +251,7 @@ class SimNode:
         wait_until(when_ns, time.monotonic_ns, self.spin, self.rt.spin_margin_ns,
                    api.ok)
 
-    def status(self) -> tuple[dict[str, Any], int]:
+    def status(self) -> tuple[dict[str, Any], int, str]:
         lat = self.latency.recent()
         elapsed = (time.monotonic_ns() - self.pacer.started_ns) * 1e-9
         values = {
@@ -273,19 +270,18 @@ class SimNode:
         if self.energy is not None:
             values.update(self.energy.values())
             bad += self.energy.check.violations
-        return values, ERROR if self.guard.tripped else WARN if bad else OK
+        passivity = self.energy.check.message() if self.energy is not None else ""
+        message = "; ".join(m for m in (self.degraded_message(), self.inputs.message(),
+                                        passivity) if m)
+        return values, ERROR if self.guard.tripped else WARN if bad else OK, message
+
+    def status_stamp(self) -> int:
+        return self.now_ns
 
     def degraded_message(self) -> str:
         g = self.guard
         return (f"control path degraded: {g.misses} of the last {g.window} commands missed "
                 "their deadline; applying zero actuation") if g.tripped else ""
-
-    def publish_status(self) -> None:
-        values, level = self.status()
-        passivity = self.energy.check.message() if self.energy is not None else ""
-        message = "; ".join(m for m in (self.degraded_message(), self.inputs.message(),
-                                        passivity) if m)
-        self.diagnostics.publish(self.now_ns, values, level, message)
 
     def step(self, k: int) -> np.ndarray | None:
         """Sample k: publish, wait for its command, advance. The row [t, truth (8), command
@@ -328,7 +324,9 @@ class SimNode:
         return np.concatenate([[sample.t], sample.truth, control, [sample.force]])
 
     def run(self) -> LoopHistory | None:
-        """The scene's duration, lock-step or real-time; None when interrupted."""
+        """The scene's duration, lock-step or real-time. Interrupted (SIGINT, SIGTERM: a launch
+        whose other node died), the samples run so far, ``"complete": false`` and no
+        evaluation; None when interrupted before the first sample."""
         p, plant = self.params, self.plant
         log = self.node.get_logger()
         log.info(f"{p.mode}: waiting for the estimator and controller")
@@ -342,29 +340,36 @@ class SimNode:
         self.inputs.read_graph()
         self.pacer.start(time.monotonic_ns())
         wall = time.perf_counter()
+        done = 0
         for k in range(n):
             row = self.step(k)
             if row is None:
-                return None
+                break
             rows[k] = row
-        self.k = n
-        self.publish_status()
+            done = k + 1
+        if done == 0:
+            return None
+        self.k, rows = done, rows[:done]
+        if done == n:
+            self.publish_status()
         fine_t, floors, velocities = plant.truth_history()
-        history = LoopHistory(rows[:, 0], rows[:, 1:9], np.full((n, 8), np.nan), rows[:, 9:11],
-                              rows[:, 11], fine_t, floors, velocities)
-        if self.active is not None:
+        history = LoopHistory(rows[:, 0], rows[:, 1:9], np.full((done, 8), np.nan),
+                              rows[:, 9:11], rows[:, 11], fine_t, floors, velocities)
+        if self.active is not None and done == n:
             history.evaluation = evaluate(history, p.scene)
         history.evaluation.update({
-            "mode": p.mode, "steps": n, "wall_s": time.perf_counter() - wall,
+            "complete": done == n, "steps_planned": n,
+            "mode": p.mode, "steps": done, "wall_s": time.perf_counter() - wall,
             "malformed_samples": sum(api.MALFORMED.values()),
             **self.pacer.counts, **self.counts, "latency_ms": self.latency.summary(),
             "commands_in_time": self.commands_in_time,
             "command_gates": {spec.name: gate.report()
                               for gate, spec in zip(self.gates, COMMAND_TOPICS, strict=True)},
             "max_lateness_ms": 1e-6 * self.pacer.max_lateness_ns,
-            "plant": {"model": plant.model.name, "integrator": plant.integrator.name,
-                      "dt": plant.h, "actuator_limited": plant.actuators.limited},
+            "plant": plant_report(plant),
         })
+        if self.energy is not None:     # pH plant: the last balance and the passivity check
+            history.evaluation["energy_balance"] = self.energy.values()
         return history
 
 
@@ -380,30 +385,14 @@ def write_result(history: LoopHistory, path: Path) -> None:
 def build(node: api.Node) -> SimNode:
     """The simulator on ``node`` from its parameters (InputError naming a wrong one), its
     real-time practices entered."""
-    params = declare_loop_parameters(node)
-    result = node.declare_parameter("result_file", "", read_only=True).value
-    discovery = node.declare_parameter("discovery_timeout_s", 30.0, read_only=True).value
-    if not discovery >= 0:
-        raise InputError(f"parameter 'discovery_timeout_s': must be >= 0, got {discovery}")
-    # topics the launch's recorder must subscribe before lock-step starts ("*": all)
-    await_recorder = node.declare_parameter("await_recorder", [""], read_only=True).value
-    timeout = node.declare_parameter("command_timeout_periods", 3, read_only=True).value
-    if not (isinstance(timeout, int) and timeout >= 1):
-        raise InputError(f"parameter 'command_timeout_periods': must be an integer >= 1, "
-                         f"got {timeout!r}")
-    miss_limit = node.declare_parameter("command_miss_limit", 0.25, read_only=True).value
-    if not (isinstance(miss_limit, float) and 0.0 <= miss_limit < 1.0):
-        raise InputError(f"parameter 'command_miss_limit': must be a float in [0, 1), "
-                         f"got {miss_limit!r}")
-    rt = declare_realtime(node)
-    sim = SimNode(node, params, float(discovery), list(await_recorder), timeout, miss_limit)
-    sim.result_file = str(result)
-    sim.rt = start_realtime(node, rt)
+    sim = SimNode.build(node)
+    sim.enter_realtime()
     return sim
 
 
 def run(sim: SimNode) -> None:
-    """The scene, then its result in ``result_file`` (when given and not interrupted)."""
+    """The scene, then its result in ``result_file`` (when given; a partial one, marked
+    ``"complete": false``, when interrupted after the first sample)."""
     history = sim.run()
     if history is not None and sim.result_file:
         write_result(history, Path(sim.result_file))

@@ -12,15 +12,19 @@ from __future__ import annotations
 
 import argparse
 import ast
+import contextlib
 import importlib
 import importlib.util
+import math
 import os
 import re
+import signal
 import sys
 from pathlib import Path
+from typing import Any, NoReturn
 
 from stillframe.app.ros_tools import VERBOSE_ENV
-from stillframe.errors import StillframeError
+from stillframe.errors import InputError, StillframeError
 
 COMMANDS: tuple[str, ...] = (
     "stillframe.app.commands.modes",
@@ -28,6 +32,7 @@ COMMANDS: tuple[str, ...] = (
     "stillframe.app.commands.bench",
     "stillframe.app.commands.topic",
     "stillframe.app.commands.param",
+    "stillframe.app.commands.lifecycle",
     "stillframe.app.commands.bag",
     "stillframe.app.commands.record",
     "stillframe.app.commands.play",
@@ -46,6 +51,29 @@ COMMANDS: tuple[str, ...] = (
     "stillframe.app.commands.interface",
     "stillframe.app.commands.daemon",
 )
+
+
+def _finite(text: str) -> float:
+    """``float`` for argparse without nan and ±inf (no option means them)."""
+    value = float(text)
+    if not math.isfinite(value):
+        raise ValueError(text)
+    return value
+
+
+_finite.__name__ = "float"      # argparse's message: "invalid float value: 'nan'"
+
+
+class _Parser(argparse.ArgumentParser):
+    """A usage error is one line naming the argument, and where to read more (exit 2), as
+    every other bad input; ``-h`` still prints the usage."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self.register("type", float, _finite)     # every type=float option: no nan, no inf
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} -h)\n")
 
 
 def _module_of(argv: list[str]) -> str | None:
@@ -74,7 +102,7 @@ def synopsis(module: str) -> str:
 def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
     """The parser of every command (``argv`` None), or of the one ``argv`` names; when it names
     none (``--help``, a typo), the list of commands with their synopses, importing none."""
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="stillframe",
         description="Simulate, identify and control a flexible frame with an active mass damper.",
     )
@@ -92,18 +120,42 @@ def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
     return parser
 
 
+#: the exit code of a command whose reader went away (``| head``): a shell's for SIGPIPE
+BROKEN_PIPE = 128 + signal.SIGPIPE
+
+
+def _quiet_stdout() -> None:
+    """After a broken pipe: nothing more goes to stdout, and the interpreter's last flush does
+    not complain (Python's documented recipe, docs.python.org/3/library/signal.html)."""
+    with contextlib.suppress(OSError, ValueError):
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+
+
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     args = build_parser(argv).parse_args(argv)
     if args.verbose:
         os.environ[VERBOSE_ENV] = "1"  # read by the tools' own nodes
     try:
-        return int(args.func(args) or 0)
+        code = int(args.func(args) or 0)
+        sys.stdout.flush()
+        return code
     except StillframeError as exc:
         print(f"stillframe {args.command}: error: {exc}", file=sys.stderr)
         return exc.exit_code
+    except BrokenPipeError:
+        _quiet_stdout()
+        return BROKEN_PIPE
     except KeyboardInterrupt:
         return 130
+    except OSError as exc:
+        # a file named on the command line (or under a directory named there) that cannot be
+        # written or read: read-only, a full disk (no file name then), a parent that is a file
+        where = f"{exc.filename}: " if exc.filename is not None else ""
+        print(f"stillframe {args.command}: error: {where}{exc.strerror or exc}",
+              file=sys.stderr)
+        return InputError.exit_code
 
 
 if __name__ == "__main__":

@@ -191,8 +191,9 @@ def run_experiment(scene_path: Path, user: Sequence[str], out: Path, test: Ident
     progress(f"[1/5] identification test: white noise {test.force_std:g} N on floor 1 held at "
              f"{scene.sensors.rate_hz:g} Hz, {test.duration:g} s, through sim_node ({mode}), "
              f"recorded to {out / 'bag'}")
-    run_scene(scene_path, ident_set, out / "test", mode, out / "bag", lockstep_timeout_s,
-              record_topics=[INPUT_TOPIC, *OUTPUT_TOPICS], backends=backends)
+    run_scene(scene_path, ident_set, out=out / "test", mode=mode, record=out / "bag",
+              lockstep_timeout_s=lockstep_timeout_s, record_topics=[INPUT_TOPIC, *OUTPUT_TOPICS],
+              backends=backends)
     progress("[2/5] OKID + ERA/DC (order 6) + MKR on the bag")
     record = read_record(out / "bag", [Channel(INPUT_TOPIC)], [Channel(t) for t in OUTPUT_TOPICS])
     try:
@@ -208,8 +209,8 @@ def run_experiment(scene_path: Path, user: Sequence[str], out: Path, test: Ident
              ("true_design", designs["true_design"])), start=3):
         what = "the identified model" if name == "identified_design" else "the true model"
         progress(f"[{step}/5] LQG designed on {what}: closed loop through the three nodes")
-        result = run_scene(scene_path, overrides, out / name, mode, None, lockstep_timeout_s,
-                           backends=backends)
+        result = run_scene(scene_path, overrides, out=out / name, mode=mode,
+                           lockstep_timeout_s=lockstep_timeout_s, backends=backends)
         evaluation[name], histories[name] = result.evaluation, result.history_file
     return ExperimentResult(scene, loop, identified, record.samples, record.dt,
                             true_structure(loop), evaluation, histories,

@@ -58,7 +58,8 @@ def lockstep_row(lab: Lab, fault: Fault, duration: float, out: Path,
                  overrides: Sequence[str]) -> dict[str, Any]:
     with applied(lab, fault):
         started = time.perf_counter()
-        result = run_scene(SCENE, [*lockstep_overrides(duration), *overrides], out, "lockstep",
+        result = run_scene(SCENE, [*lockstep_overrides(duration), *overrides], out=out,
+                           mode="lockstep",
                            lockstep_timeout_s=LOCKSTEP_TIMEOUT_S, backends=backends,
                            hosts=host_prefixes(lab))
         launch_wall = time.perf_counter() - started
@@ -82,8 +83,8 @@ def realtime_row(lab: Lab, fault: Fault, duration: float, out: Path,
                                  STATE_ESTIMATE.qos)
 
     with applied(lab, fault):
-        result = run_scene(SCENE, [*realtime_overrides(RATE_HZ, duration), *overrides], out,
-                           "realtime",
+        result = run_scene(SCENE, [*realtime_overrides(RATE_HZ, duration), *overrides],
+                           out=out, mode="realtime",
                            prepare=observe, backends=backends, hosts=host_prefixes(lab))
     with np.load(result.history_file) as data:
         truth = data["truth"]

@@ -6,7 +6,9 @@ the launcher, which forwards one SIGINT to each child) and, on Linux, with a par
 (SIGTERM) so that no child outlives a killed launcher. The launcher keeps a hidden node on the
 same ROS domain that listens to ``/diagnostics`` for the status line. The run ends when
 sim_node exits after writing its result file (the scene's duration has passed); a child that
-exits before that, or with a failure code, ends the run with :class:`NodeDiedError` naming it.
+exits before that, or with a failure code, ends the run with :class:`NodeDiedError` naming it,
+after the others were stopped (SIGINT first) and what they wrote was kept: the error carries a
+partial result marked ``"complete": false``, also written to the result file.
 """
 
 from __future__ import annotations
@@ -27,14 +29,19 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import yaml
+
 from stillframe.app import running_graph
 from stillframe.config.scene import Scene, load_scene
-from stillframe.contract.topics import STATUS_KEYS
+from stillframe.contract import messages
+from stillframe.contract.topics import DEFAULT_NAMESPACE, STATUS_KEYS
 from stillframe.errors import InputError
+from stillframe.fidelity.auto_model import resolve_model
 from stillframe.locations import REPO_ROOT
 from stillframe.middleware import api, discovery, names
+from stillframe.node_runtime.declarations import MODES, NODE_PARAMETERS, ManagedParameterValues
 
-NODES: tuple[str, ...] = ("sim_node", "estimator_node", "controller_node")
+NODES: tuple[str, ...] = tuple(NODE_PARAMETERS)
 #: the process that hosts the estimator and the controller with ``--compose``
 CONTAINER = "container_node"
 #: what ``--compose`` may put in the container: nothing, the estimator and controller, all
@@ -43,7 +50,20 @@ COMPOSE = ("", "pair", "all")
 LOOP = ("estimator_node", "controller_node")
 #: the children whose middleware backend ``--backend NAME=BACKEND`` can choose
 BACKEND_TARGETS: tuple[str, ...] = (*NODES, "recorder", "monitor")
-MODES: tuple[str, ...] = ("lockstep", "realtime")
+#: the node processes that are managed (lifecycle) nodes: the launch configures and activates
+#: them (the container brings its nodes up itself)
+MANAGED: tuple[str, ...] = tuple(n for n, declared in NODE_PARAMETERS.items()
+                                 if ManagedParameterValues in declared)
+#: how long a managed node may take to serve its lifecycle services (its imports and the scene)
+#: [s]
+LIFECYCLE_TIMEOUT_S = 60.0
+#: how long one look for a managed node's ``get_state`` waits [s]
+PROBE_S = 1.0
+#: how long a managed node may take to answer one transition (configure builds its estimator
+#: or controller: well under a second here) [s]
+TRANSITION_TIMEOUT_S = 20.0
+#: the resolved scene the launch hands every node, beside the result file
+RESOLVED_SCENE = "scene.resolved.yaml"
 #: seconds a child gets to exit after SIGINT, then after SIGTERM, before SIGKILL
 STOP_GRACE_S = 10.0
 #: the log line by which a helper child says it is ready (the nodes start after it)
@@ -59,6 +79,8 @@ class NodeDiedError(RuntimeError):
     def __init__(self, name: str, how: str, tail: Sequence[str]) -> None:
         super().__init__(f"{name} died ({how})")
         self.name, self.how, self.tail = name, how, list(tail)
+        #: what the run still wrote (:meth:`Launcher.run` fills it in): ``"complete": false``
+        self.partial: LaunchResult | None = None
 
     @classmethod
     def exited(cls, child: Child) -> NodeDiedError:
@@ -68,7 +90,7 @@ class NodeDiedError(RuntimeError):
         return cls(child.name, how, child.tail)
 
 
-def node_command(package: str, scene: Path, overrides: Sequence[str], mode: str,
+def node_command(package: str, scene: Path, overrides: Sequence[str], mode: str, *,
                  params: dict[str, Any] | None = None, args: Sequence[str] = ()) -> list[str]:
     """``python -m PACKAGE.node ARGS --ros-args -p scene:=... -p overrides:=[...] -p mode:=...``.
 
@@ -278,6 +300,9 @@ class LaunchOptions:
 
     scene: Path
     overrides: list[str] = field(default_factory=list)
+    #: the scene already loaded with its overrides and resolved (``model: auto`` chosen); None:
+    #: the launcher does it, once, and hands the nodes the result (:data:`RESOLVED_SCENE`)
+    resolved: Scene | None = None
     mode: str = "lockstep"
     result_file: Path = Path("result.json")
     record_dir: Path | None = None
@@ -311,11 +336,14 @@ class Launcher:
         self.backends = parse_backends(options.backends)
         self.discovery = launch_discovery()
         self.options = options
+        self.scene = options.resolved or resolve_model(
+            load_scene(options.scene.resolve(), options.overrides))[0]
         self.status = StatusLine()
         self.processes = ProcessSet(self.status.echo)
         self.node = api.create_node(running_graph.launcher_name(), argv=["stillframe"])
         self.created = time.monotonic()
         self.statuses: dict[str, dict[str, str]] = {}
+        self.callers: dict[str, api.Node] = {}
         self.node.create_subscription("diagnostic_msgs/msg/DiagnosticArray", "/diagnostics",
                                       self._on_diagnostics, "default")
 
@@ -328,42 +356,54 @@ class Launcher:
         o = self.options
         sim_params: dict[str, Any] = {"result_file": str(o.result_file.resolve()),
                                       "command_writer": "controller_node"}
-        if o.record_dir is not None and o.mode == "lockstep":
+        if o.record_dir is not None:     # in real time too: the bag misses no first sample
             sim_params["await_recorder"] = [
                 names.resolve_topic(t) for t in o.record_topics] or ["*"]
         # every loop node: the estimator's and controller's lock-step waits are parts of it
         shared = ({} if o.lockstep_timeout_s is None
                   else {"lockstep_timeout_s": float(o.lockstep_timeout_s)})
-        scene = o.scene.resolve()
+        scene = self.scene_file()
         children = []
         if o.record_dir is not None:
             children.append(("recorder", [sys.executable, "-m", "stillframe", "record", "-o",
                                           str(o.record_dir), "--use-sim-time",
                                           *(o.record_topics or ["--all"])]))
         if o.monitor_args is not None:
-            sets = [arg for override in o.overrides for arg in ("--set", override)]
             children.append(("monitor", [sys.executable, "-m", "stillframe", "monitor",
                                          "--dashboard", "--use-sim-time", "--scene", str(scene),
-                                         *sets, *o.monitor_args]))
+                                         *o.monitor_args]))
         nodes = self.nodes()
         # the pair's container takes no real-time parameters (it composes two nodes' loops);
         # with the simulator in it, the simulator's practices are the process's
         rt = {"rt": o.rt, **({"rt_cpus": o.rt_cpus} if o.rt_cpus else {})} if o.rt else {}
         sim = self.simulator()
         children += [(name, [*o.hosts.get("estimator_node" if name == CONTAINER else name, []),
-                             *node_command(name, scene, o.overrides, o.mode, {
+                             *node_command(name, scene, [], o.mode, params={
                                  **shared, **(rt if name in (sim, *LOOP) else {}),
-                                 **(sim_params if name == sim else {})},
-                                 ["all"] if name == sim == CONTAINER else [])])
+                                 **(sim_params if name == sim else {}),
+                                 **({"autostart": False} if name in MANAGED else {})},
+                                 args=["all"] if name == sim == CONTAINER else [])])
                      for name in reversed(nodes)]
         return children
+
+    def scene_file(self) -> Path:
+        """Where the resolved scene goes: beside the result file."""
+        return self.options.result_file.resolve().with_name(RESOLVED_SCENE)
+
+    def write_scene(self) -> Path:
+        """The resolved scene as YAML (:meth:`scene_file`), for every node to read (floats as
+        ``repr`` writes them: the same numbers)."""
+        path = self.scene_file()
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(yaml.safe_dump(self.scene.to_dict(), sort_keys=False))
+        return path
 
     def nodes(self) -> list[str]:
         """The node processes of the scene, a container in place of those it composes."""
         o = self.options
         if o.compose not in COMPOSE:
             raise InputError(f"--compose {o.compose}: expected one of {', '.join(COMPOSE[1:])}")
-        nodes = nodes_for(load_scene(o.scene.resolve(), o.overrides))
+        nodes = nodes_for(self.scene)
         if o.compose and {"estimator_node", "controller_node"} <= set(nodes):
             return [CONTAINER] if o.compose == "all" else ["sim_node", CONTAINER]
         return nodes
@@ -384,6 +424,7 @@ class Launcher:
         self.options.result_file.unlink(missing_ok=True)
         try:
             running_graph.refuse_if_running(self.node, self.created, (*NODES, CONTAINER))
+            self.write_scene()
             commands = self.commands()
             self.status.echo(f"discovery range {self.discovery}; backends " + ", ".join(
                 f"{name} {self.backend(name)}" for name, _ in commands))
@@ -394,11 +435,14 @@ class Launcher:
                     self._wait_for_line(child, READY_LINES[name])
                 elif mixed:
                     self._wait_for_line(child, "middleware backend")
+            managed = [name for name, _ in commands if name in MANAGED]
+            deadline = time.monotonic() + LIFECYCLE_TIMEOUT_S
             simulator = self.simulator()
             sim = next(c for c in self.processes.children if c.name == simulator)
             watch = time.monotonic()
             while api.ok():
                 self.node.spin_once(0.1)
+                managed = [name for name in managed if not self.bring_up(name, deadline)]
                 if time.monotonic() >= watch + running_graph.WATCH_S:
                     running_graph.check(self.node)
                     watch = time.monotonic()
@@ -416,11 +460,58 @@ class Launcher:
             self.node.spin_once(0.0)    # the nodes' last statuses, written as they stopped
             if (dead := self.processes.first_failure()) is not None:
                 raise NodeDiedError.exited(dead)
+        except NodeDiedError as exc:
+            exc.partial = self._partial(exc)
+            raise
         finally:
             self.processes.stop_all()
             self.status.close()
+            for caller in self.callers.values():
+                caller.destroy_node()
             self.node.destroy_node()
         return self._result()
+
+    def bring_up(self, name: str, deadline: float) -> bool:
+        """``configure``, then ``activate`` the managed node ``name`` through its
+        ``change_state`` service once its ``get_state`` answers, as a lifecycle-aware ``ros2
+        launch`` emits the transitions; False while it does not answer yet (the launch goes on
+        meanwhile), NodeDiedError when it refuses, or answers nothing by ``deadline``
+        (monotonic). The calls go through a node of the target's backend (services do not cross
+        DDS vendors)."""
+        child = next(c for c in self.processes.children if c.name == name)
+        caller = self._caller(self.backend(name))
+        prefix = f"{DEFAULT_NAMESPACE}/{name}"
+        if caller.call_service("lifecycle_msgs/srv/GetState", f"{prefix}/get_state",
+                               messages.new("lifecycle_msgs/srv/GetState_Request"),
+                               PROBE_S) is None:
+            if time.monotonic() > deadline:
+                raise NodeDiedError(name, f"no lifecycle services after "
+                                          f"{LIFECYCLE_TIMEOUT_S:g} s", child.tail)
+            return False
+        for transition in ("configure", "activate"):
+            request = messages.new("lifecycle_msgs/srv/ChangeState_Request",
+                                   transition=messages.new("lifecycle_msgs/msg/Transition",
+                                                           label=transition))
+            response = caller.call_service("lifecycle_msgs/srv/ChangeState",
+                                           f"{prefix}/change_state", request,
+                                           TRANSITION_TIMEOUT_S)
+            if response is None or not response.success:
+                if child.proc.poll() is not None:   # died meanwhile: say how
+                    raise NodeDiedError.exited(child)
+                raise NodeDiedError(name, f"{transition} " + (
+                    "failed" if response else "not answered"), child.tail)
+        self.status.echo(f"{name}: configured and active")
+        return True
+
+    def _caller(self, backend: str) -> api.Node:
+        """The launcher's node on ``backend`` (made on first use)."""
+        if self.node.backend == backend:
+            return self.node
+        if backend not in self.callers:
+            self.callers[backend] = api.create_node(
+                f"_stillframe_lifecycle_{backend}_{os.getpid()}", argv=["stillframe"],
+                backend=backend)
+        return self.callers[backend]
 
     def _wait_for_line(self, child: Child, text: str, timeout_s: float = 20.0) -> None:
         """Wait for ``child`` to log ``text`` before starting the next: nodes start once the
@@ -440,6 +531,29 @@ class Launcher:
                 raise NodeDiedError(child.name, f"no {text!r} after {timeout_s:g} s", child.tail)
             time.sleep(0.05)
 
+    def _partial(self, died: NodeDiedError) -> LaunchResult:
+        """After a node died: stop the others (SIGINT first: the simulator writes the samples
+        it ran, the recorder closes its bag), then write what there is to the result file,
+        marked ``"complete": false``, with the dead node, how each other child stopped, the
+        nodes' last statuses and the bag."""
+        self.processes.stop_all()
+        self.node.spin_once(0.0)     # the statuses the nodes wrote as they stopped
+        path = self.options.result_file
+        try:
+            written = json.loads(path.read_text())
+        except (OSError, ValueError):
+            written = {}        # the simulator died, or stopped before its first sample
+        stopped = {c.name: _how_stopped(c.proc.returncode) for c in self.processes.children
+                   if c.name != died.name}
+        evaluation = {**written, "complete": False, "died": {"node": died.name, "how": died.how},
+                      "stopped": stopped, "diagnostics": dict(self.statuses)}
+        if self.options.record_dir is not None:
+            evaluation["bag"] = _bag_state(self.options.record_dir)
+        with contextlib.suppress(OSError):
+            path.write_text(json.dumps(evaluation, indent=2) + "\n")
+        history = path.with_suffix(".npz")
+        return LaunchResult(evaluation, path, history, dict(self.statuses))
+
     def _result(self) -> LaunchResult:
         path = self.options.result_file
         try:
@@ -449,28 +563,50 @@ class Launcher:
         return LaunchResult(evaluation, path, path.with_suffix(".npz"), dict(self.statuses))
 
 
-def run_scene(scene: Path, overrides: Sequence[str], out: Path, mode: str = "lockstep",
-              record: Path | None = None, lockstep_timeout_s: float | None = None,
+def _how_stopped(code: int | None) -> str:
+    if code is None:
+        return "still running"
+    return f"ended by {signal.Signals(-code).name}" if code < 0 else f"exit code {code}"
+
+
+def _bag_state(bag: Path) -> dict[str, Any]:
+    """Whether the recorder closed its bag (metadata written) and how many messages it holds."""
+    try:
+        meta = yaml.safe_load((bag / "metadata.yaml").read_text())
+        count = int(meta["rosbag2_bagfile_information"]["message_count"])
+    except (OSError, ValueError, KeyError, TypeError, yaml.YAMLError):
+        return {"path": str(bag), "closed": False,
+                "note": f"not closed: recover it with stillframe bag reindex {bag}"}
+    return {"path": str(bag), "closed": True, "messages": count}
+
+
+def run_scene(scene: Path, overrides: Sequence[str] = (), *, out: Path,
+              mode: str = "lockstep", record: Path | None = None,
+              lockstep_timeout_s: float | None = None,
               prepare: Callable[[Any], None] | None = None,
               record_topics: Sequence[str] = (), backends: Sequence[str] = (),
               monitor_args: Sequence[str] | None = None, compose: str = "",
               rt: str = "", rt_cpus: Sequence[int] = (),
-              hosts: dict[str, list[str]] | None = None) -> LaunchResult:
-    """Launch ``scene`` through the three nodes to its end; sim_node's results go to ``out``
-    (``result.json``, ``result.npz``); ``record`` records ``record_topics`` (default all) into
-    a bag; ``backends`` are ``--backend`` values (:func:`parse_backends`); ``monitor_args``
-    (e.g. ports) start ``stillframe monitor`` beside the nodes; ``compose`` runs nodes in one
-    process (``container_node``: "pair" the estimator and controller, "all" every node);
-    ``rt`` and ``rt_cpus`` are the loop nodes' real-time practices and CPUs
-    (:mod:`stillframe.node_runtime.realtime`); ``hosts``
-    runs nodes on other hosts (:attr:`LaunchOptions.hosts`).
-    ``prepare(node)`` may subscribe the launcher's hidden node to more topics before the
-    children start."""
+              hosts: dict[str, list[str]] | None = None,
+              resolved: Scene | None = None) -> LaunchResult:
+    """Launch ``scene`` with ``overrides`` through the three nodes to its end; sim_node's
+    results go to ``out`` (``result.json``, ``result.npz``, beside the resolved scene the nodes
+    read); ``record`` records ``record_topics`` (default all) into a bag; ``backends`` are
+    ``--backend`` values (:func:`parse_backends`); ``monitor_args`` (e.g. ports) start
+    ``stillframe monitor`` beside the nodes; ``compose`` runs nodes in one process
+    (``container_node``: "pair" the estimator and controller, "all" every node); ``rt`` and
+    ``rt_cpus`` are the loop nodes' real-time practices and CPUs
+    (:mod:`stillframe.node_runtime.realtime`); ``hosts`` runs nodes on other hosts
+    (:attr:`LaunchOptions.hosts`); ``resolved``: the scene already loaded and resolved (else it
+    is done here, once). ``prepare(node)`` may subscribe the launcher's hidden node to more
+    topics before the children start."""
     out.mkdir(parents=True, exist_ok=True)
-    launcher = Launcher(LaunchOptions(scene, list(overrides), mode, out / "result.json", record,
-                                      lockstep_timeout_s, list(record_topics), list(backends),
-                                      None if monitor_args is None else list(monitor_args),
-                                      compose, rt, list(rt_cpus), dict(hosts or {})))
+    launcher = Launcher(LaunchOptions(
+        scene, list(overrides), resolved, mode=mode, result_file=out / "result.json",
+        record_dir=record, lockstep_timeout_s=lockstep_timeout_s,
+        record_topics=list(record_topics), backends=list(backends),
+        monitor_args=None if monitor_args is None else list(monitor_args), compose=compose,
+        rt=rt, rt_cpus=list(rt_cpus), hosts=dict(hosts or {})))
     if prepare is not None:
         prepare(launcher.node)
     return launcher.run()

@@ -24,7 +24,7 @@ from scipy import signal
 from stillframe.bags.storage import open_bag
 from stillframe.contract.messages import TYPESTORE
 from stillframe.contract.topics import CONDITIONAL, CONTRACT
-from stillframe.errors import IdentificationError, InputError
+from stillframe.errors import BagError, IdentificationError, InputError
 
 #: Default field per message type: that of the first contract topic of the type, and std_msgs'
 #: Float64's ``data``.
@@ -161,13 +161,23 @@ def read_series(bag: str | Path, channels: Sequence[Channel]) -> list[Series]:
         stamps: dict[str, list[int | None]] = {t: [] for t in topics}
         logtimes: dict[str, list[int]] = {t: [] for t in topics}
         values: list[list[float]] = [[] for _ in resolved]
+        corrupt: dict[str, list] = {}     # topic: [count, first log time, reason]
         for connection, logtime, raw in reader.messages(connections=wanted):
-            msg = reader.deserialize(raw, connection.msgtype)
+            try:
+                msg = reader.deserialize(raw, connection.msgtype)
+            except Exception as exc:    # rosbags raises struct, index, value, unicode errors
+                seen = corrupt.setdefault(connection.topic, [0, logtime, type(exc).__name__])
+                seen[0] += 1
+                continue
             stamps[connection.topic].append(_stamp_ns(msg))
             logtimes[connection.topic].append(logtime)
             for i, (full, items, msgtype) in enumerate(resolved):
                 if full.topic == connection.topic:
                     values[i].append(_extract(msg, items, full, msgtype))
+    if corrupt:
+        raise BagError(f"bag {bag}: messages that do not decode (corrupt CDR): " + "; ".join(
+            f"{topic}: {n} of {n + len(stamps[topic])}, the first at log time {first} ns "
+            f"({reason})" for topic, (n, first, reason) in sorted(corrupt.items())))
     out = []
     for (full, _, _), vals in zip(resolved, values, strict=True):
         header = stamps[full.topic]

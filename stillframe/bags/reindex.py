@@ -1,42 +1,86 @@
-"""Recover a bag whose recorder was killed (SIGKILL, power loss): ``stillframe bag reindex DIR``.
+"""Recover a bag whose recorder died or whose file was cut: ``stillframe bag reindex DIR``.
 
 A killed recorder leaves an MCAP file without its summary and footer, and no ``metadata.yaml``
-(:mod:`stillframe.bags.storage`: both are written on close). The ``mcap`` package's
-:class:`~mcap.stream_reader.StreamReader` reads such a file front to back and yields the records
-of every chunk it can read completely (with CRC checks), then stops at the truncated tail; the
-package has no recovery routine of its own (the Go ``mcap recover`` CLI is not on PyPI). The
+(:mod:`stillframe.bags.storage`: both are written on close); a copy or a disk that ran out of
+space leaves a file cut anywhere, inside a record, a chunk, the summary or the footer. Like
+``ros2 bag reindex`` (and the Go ``mcap recover``, which is not on PyPI) this keeps every
+message that is whole in the file:
+
+1. the ``mcap`` package's :class:`~mcap.stream_reader.StreamReader` reads the file front to back
+   and yields every complete record (chunks whole, with their CRCs checked), until the cut;
+2. the record the cut fell in, if it is a chunk, is read with the package's own
+   :meth:`mcap.records.Chunk.read` (which returns the bytes there are), its compressed stream
+   (none, zstd or lz4) decoded as far as it goes with a streaming decompressor, and the records
+   inside it read again with ``StreamReader`` up to the last whole one.
+
+The mcap package has no recovery routine, so step 2 is ours; it is the only part written here.
+A chunk whose CRC does not match (a damaged, not a cut, file) is skipped and counted. The
 recovered schemas, channels and messages are written again with
-:class:`stillframe.bags.storage.BagWriter`
-into a complete bag in DIR (the damaged file kept beside it as ``*.damaged``), which
-``ros2 bag``, rosbags and ``mcap`` read. Like ``ros2 bag reindex``, what was recorded up to the
-last complete chunk survives; the messages of the chunk being filled when the recorder died are
-lost.
+:class:`stillframe.bags.storage.BagWriter` into a complete bag in DIR (the damaged file kept
+beside it as ``*.damaged``), which ``ros2 bag``, rosbags and ``mcap`` read. Messages whose
+channel or schema was lost, or whose type the typestore cannot learn from the schema, are counted
+as dropped, never silently.
 """
 
 from __future__ import annotations
 
+import copy
+import io
 import shutil
+import struct
 import tempfile
-from dataclasses import dataclass
+from collections.abc import Iterator
+from dataclasses import dataclass, field
 from pathlib import Path
 
+import lz4.frame
+import zstandard
+from mcap.data_stream import ReadDataStream
 from mcap.exceptions import McapError
-from mcap.records import Channel, Message, Schema
-from mcap.stream_reader import StreamReader
+from mcap.opcode import Opcode
+from mcap.records import Channel, Chunk, Footer, Message, Schema
+from mcap.stream_reader import MAGIC_SIZE, StreamReader, breakup_chunk
 from rosbags.rosbag2.metadata import parse_qos
+from rosbags.typesys import get_types_from_msg
 from rosbags.typesys.store import Typestore
 
+from stillframe.bags.full_disk import RESERVE_NAME
 from stillframe.bags.storage import BagWriter
 from stillframe.errors import BagError
+
+MAGIC = b"\x89MCAP0\r\n"
+#: what reading a cut or damaged MCAP stream can raise (struct.error: a cut inside a field;
+#: UnicodeDecodeError, a ValueError: a cut inside a string; CRC failures are ValueErrors)
+READ_ERRORS = (McapError, struct.error, ValueError, EOFError, MemoryError)
+#: opcode (1 byte) and record length (8 bytes) before every MCAP record
+RECORD_PREFIX = 9
+
+
+@dataclass
+class Salvage:
+    """What a front-to-back read of a (possibly cut) MCAP file found."""
+
+    schemas: dict[int, Schema] = field(default_factory=dict)
+    channels: dict[int, Channel] = field(default_factory=dict)
+    messages: list[Message] = field(default_factory=list)
+    #: the file ended before its footer and closing magic
+    truncated: bool = False
+    #: messages read from the chunk the cut fell in
+    from_partial_chunk: int = 0
+    #: whole chunks skipped because their CRC or compression failed
+    bad_chunks: int = 0
 
 
 @dataclass(frozen=True)
 class Recovered:
-    """What reindexing kept: messages per topic, and whether the file was cut short."""
+    """What reindexing kept: messages per topic, whether the file was cut short, and what was
+    dropped (by reason)."""
 
     path: Path
     counts: dict[str, int]
     truncated: bool
+    from_partial_chunk: int = 0
+    dropped: dict[str, int] = field(default_factory=dict)
 
     @property
     def total(self) -> int:
@@ -52,46 +96,161 @@ def _mcap_file(bag: Path) -> Path:
     return files[0]
 
 
-def read_complete_chunks(path: Path) -> tuple[list[Schema], dict[int, Channel],
-                                              list[Message], bool]:
-    """Schemas, channels and messages of every complete chunk, and whether the file was cut."""
-    schemas: list[Schema] = []
-    channels: dict[int, Channel] = {}
-    found: list[Message] = []
-    truncated = False
-    with path.open("rb") as stream:
+def _take(salvage: Salvage, record: object) -> None:
+    if isinstance(record, Schema):
+        salvage.schemas[record.id] = record
+    elif isinstance(record, Channel):
+        salvage.channels[record.id] = record
+    elif isinstance(record, Message):
+        salvage.messages.append(record)
+
+
+def whole_records(stream: io.BufferedIOBase, *, skip_magic: bool = False) -> Iterator[object]:
+    """The complete records of an MCAP stream, in order, chunks not broken up; stops quietly at
+    the first record the stream does not hold whole (``stream.tell()`` is then the end of the
+    last one yielded)."""
+    try:
+        yield from StreamReader(stream, skip_magic=skip_magic, emit_chunks=True,
+                                validate_crcs=False).records
+    except READ_ERRORS:
+        return
+
+
+def decoded_prefix(chunk: Chunk) -> bytes:
+    """As much of a cut chunk's records as its compressed bytes give (no CRC: it is cut)."""
+    if chunk.compression == "":
+        return chunk.data
+    if chunk.compression == "zstd":
         try:
-            for record in StreamReader(stream, validate_crcs=True).records:
-                if isinstance(record, Schema):
-                    schemas.append(record)
-                elif isinstance(record, Channel):
-                    channels[record.id] = record
-                elif isinstance(record, Message):
-                    found.append(record)
-        except (McapError, ValueError, EOFError):
-            truncated = True
-    return schemas, channels, found, truncated
+            return zstandard.ZstdDecompressor().decompressobj().decompress(chunk.data)
+        except zstandard.ZstdError:
+            return b""
+    if chunk.compression == "lz4":
+        try:
+            return lz4.frame.LZ4FrameDecompressor().decompress(chunk.data)
+        except RuntimeError:
+            return b""
+    return b""
+
+
+def _partial_chunk(tail: bytes) -> Chunk | None:
+    """The chunk the file was cut in, from the bytes after the last whole record, or None."""
+    if len(tail) < RECORD_PREFIX or tail[0] != Opcode.CHUNK:
+        return None
+    try:
+        return Chunk.read(ReadDataStream(io.BytesIO(tail[RECORD_PREFIX:])))
+    except READ_ERRORS:
+        return None
+
+
+def salvage(path: Path) -> Salvage:
+    """Every whole schema, channel and message of the MCAP file at ``path`` (module docstring).
+    A file that does not start as MCAP (beyond a cut inside the magic) is a :class:`BagError`."""
+    found = Salvage()
+    with path.open("rb") as stream:
+        head = stream.read(MAGIC_SIZE)
+        if not MAGIC.startswith(head) or not head:
+            raise BagError(f"{path}: not an MCAP file (its first bytes are not the MCAP magic)")
+        stream.seek(0)
+        end = MAGIC_SIZE if len(head) == MAGIC_SIZE else 0
+        footer = False
+        for record in whole_records(stream):
+            end = stream.tell()
+            if isinstance(record, Chunk):
+                try:
+                    inner = breakup_chunk(record, validate_crc=True)
+                except (*READ_ERRORS, zstandard.ZstdError, RuntimeError):
+                    found.bad_chunks += 1
+                    continue
+                for item in inner:
+                    _take(found, item)
+            else:
+                footer = footer or isinstance(record, Footer)
+                _take(found, record)
+        stream.seek(end)
+        tail = stream.read()
+    found.truncated = not (footer and tail[-MAGIC_SIZE:] == MAGIC)
+    chunk = _partial_chunk(tail) if found.truncated else None
+    if chunk is not None:
+        before = len(found.messages)
+        for record in whole_records(io.BytesIO(decoded_prefix(chunk)), skip_magic=True):
+            _take(found, record)
+        found.from_partial_chunk = len(found.messages) - before
+    return found
+
+
+def _learn_type(typestore: Typestore, schema: Schema) -> bool:
+    """Teach ``typestore`` a ``ros2msg`` schema's type it lacks; False if it cannot."""
+    if schema.name in typestore.fielddefs:
+        return True
+    if schema.encoding != "ros2msg":
+        return False
+    try:
+        typestore.register(get_types_from_msg(schema.data.decode(), schema.name))
+    except Exception:   # rosbags raises its own and plain errors for bad text
+        return False
+    return schema.name in typestore.fielddefs
+
+
+def _qos(channel: Channel) -> list:
+    try:
+        return parse_qos(channel.metadata.get("offered_qos_profiles", ""))
+    except Exception:   # a damaged QoS text costs the QoS, not the topic
+        return []
+
+
+def _unique(path: Path) -> Path:
+    """``path`` or ``path.N``: never overwrite what an earlier reindex kept."""
+    candidate, n = path, 0
+    while candidate.exists():
+        n += 1
+        candidate = path.with_name(f"{path.name}.{n}")
+    return candidate
 
 
 def reindex(bag: str | Path, typestore: Typestore) -> Recovered:
-    """Rewrite the bag at ``bag`` from its complete chunks (module docstring)."""
+    """Rewrite the bag at ``bag`` from every whole message in its MCAP file (module docstring).
+    Types the typestore lacks are learnt from the bag's schemas on a copy of it."""
     bag = Path(bag)
     source = _mcap_file(bag)
-    schemas, channels, found, truncated = read_complete_chunks(source)
-    names = {s.id: s.name for s in schemas}
-    with tempfile.TemporaryDirectory(dir=bag.parent) as tmp:
-        fresh = Path(tmp) / bag.name
-        with BagWriter(fresh, typestore) as writer:
-            topics: dict[int, str] = {}
-            for channel in channels.values():
-                qos = parse_qos(channel.metadata.get("offered_qos_profiles", ""))
-                writer.add_topic(channel.topic, names[channel.schema_id], qos)
-                topics[channel.id] = channel.topic
-            for message in sorted(found, key=lambda m: m.log_time):
-                writer.write(topics[message.channel_id], message.log_time, message.data)
-            counts = {topic: writer.count(topic) for topic in sorted(topics.values())}
-        source.rename(source.with_name(source.name + ".damaged"))
-        (bag / "metadata.yaml").unlink(missing_ok=True)
-        for item in fresh.iterdir():
-            shutil.move(str(item), bag / item.name)
-    return Recovered(bag, counts, truncated)
+    (bag / RESERVE_NAME).unlink(missing_ok=True)    # a killed recorder's reserve: room to work
+    try:
+        found = salvage(source)
+    except OSError as exc:
+        raise BagError(f"{source}: cannot read: {exc.strerror or exc}") from None
+    store = typestore
+    if any(s.name not in typestore.fielddefs for s in found.schemas.values()):
+        store = copy.deepcopy(typestore)    # learn the bag's own types on a copy
+    dropped: dict[str, int] = {}
+    try:
+        with tempfile.TemporaryDirectory(dir=bag.parent) as tmp:
+            fresh = Path(tmp) / bag.name
+            with BagWriter(fresh, store) as writer:
+                topics: dict[int, str] = {}
+                for channel in found.channels.values():
+                    schema = found.schemas.get(channel.schema_id)
+                    if schema is None or not _learn_type(store, schema) \
+                            or channel.topic in topics.values():
+                        continue
+                    writer.add_topic(channel.topic, schema.name, _qos(channel))
+                    topics[channel.id] = channel.topic
+                for message in sorted(found.messages, key=lambda m: m.log_time):
+                    if message.channel_id not in topics:
+                        dropped["unknown_channel_or_type"] = \
+                            dropped.get("unknown_channel_or_type", 0) + 1
+                        continue
+                    writer.write(topics[message.channel_id], message.log_time, message.data)
+                counts = {topic: writer.count(topic) for topic in sorted(topics.values())}
+            if found.bad_chunks:
+                dropped["bad_chunks"] = found.bad_chunks
+            source.rename(_unique(source.with_name(source.name + ".damaged")))
+            (bag / "metadata.yaml").unlink(missing_ok=True)
+            for item in fresh.iterdir():
+                shutil.move(str(item), bag / item.name)
+    except OSError as exc:
+        raise BagError(f"{bag}: cannot write the reindexed bag: {exc.strerror or exc}") from None
+    return Recovered(bag, counts, found.truncated, found.from_partial_chunk, dropped)
+
+
+__all__ = ["READ_ERRORS", "Recovered", "Salvage", "decoded_prefix", "reindex", "salvage",
+           "whole_records"]

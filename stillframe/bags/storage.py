@@ -16,8 +16,9 @@ has no footer and reads as truncated.
 from __future__ import annotations
 
 import re
+import shutil
 import time
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -30,6 +31,7 @@ from rosbags.rosbag2 import Reader, ReaderError, StoragePlugin, Writer, WriterEr
 from rosbags.rosbag2.metadata import dump_qos_v9
 from rosbags.typesys.store import Typestore
 
+from stillframe.bags.full_disk import DiskLedger
 from stillframe.errors import BagError, InputError
 
 METADATA_VERSION = 9
@@ -39,7 +41,7 @@ ROS_DISTRO = "jazzy"
 #: What reading a damaged bag can raise (rosbags lets KeyError/TypeError through for
 #: incomplete QoS records).
 _BAG_ERRORS = (AnyReaderError, ReaderError, OSError, yaml.YAMLError, KeyError, TypeError,
-               ValueError)
+               ValueError, RecursionError)
 SERVICE_EVENT_SUFFIX = "/_service_event"
 
 
@@ -116,6 +118,16 @@ class BagWriter:
             self._writer.open()
         except (OSError, WriterError) as exc:
             raise BagError(f"{self.path}: cannot create bag: {exc}") from None
+        try:
+            self._ledger = DiskLedger(self._writer, self.path)
+        except BagError:
+            self._writer.abort()
+            shutil.rmtree(self.path, ignore_errors=True)    # nothing recorded: leave nothing
+            raise
+        # the metadata record in the MCAP file, then metadata.yaml, name the distro
+        storage = self._writer.storage
+        close_storage = storage.close
+        storage.close = lambda version, text: close_storage(version, _name_distro(text))
         self._connections: dict[str, Connection] = {}
 
     def add_topic(self, topic: str, msgtype: str, offered_qos: Sequence[Qos] = ()) -> None:
@@ -134,19 +146,55 @@ class BagWriter:
         """Append one message (CDR bytes) received at ``stamp_ns``."""
         self._writer.write(self._connections[topic], stamp_ns, data)
 
+    def writer_of(self, topic: str) -> Callable[[int, bytes | memoryview], None]:
+        """:meth:`write` for one topic, as short as it goes: ``write(stamp_ns, data)``, the
+        recorder's per-message call (:meth:`.full_disk.DiskLedger.message_writer`)."""
+        return self._ledger.message_writer(self._connections[topic].id)
+
     def count(self, topic: str) -> int:
         return self._writer.counts[self._connections[topic].id]
 
     def close(self) -> None:
-        """Write index, footer and ``metadata.yaml``; safe to call twice."""
-        if self._writer.storage is not None:
-            storage = self._writer.storage
-            close_storage = storage.close
-            # the metadata record in the MCAP file, then metadata.yaml, name the distro
-            storage.close = lambda version, text: close_storage(version, _name_distro(text))
-            self._writer.close()
-            meta = self.path / "metadata.yaml"
-            meta.write_text(_name_distro(meta.read_text()))
+        """Write index, footer and ``metadata.yaml``; safe to call twice. After a write that
+        failed (a full disk) the bag is closed with the chunks that reached the file
+        (:mod:`stillframe.bags.full_disk`) and :class:`BagError` says what it holds."""
+        if self._writer.storage is None:
+            return
+        ledger = self._ledger
+        failure = ledger.failure
+        if failure is None:
+            ledger.release_reserve()
+            ledger.fold_times()
+            try:
+                self._writer.close()
+                self._name_metadata_distro()
+                return
+            except (OSError, BagError) as exc:
+                failure = ledger.failure or exc
+        reason = failure.strerror if isinstance(failure, OSError) and failure.strerror else (
+            str(failure))
+        received = ledger.written + ledger.pending()
+        if ledger.close_after_failure():
+            self._name_metadata_distro()
+            kept = sum(self._writer.counts.values())
+            raise BagError(f"{self.path}: {reason}: recording stopped; the bag is closed with "
+                           f"{kept} of the {received} messages received (the rest did not fit)")
+        raise BagError(f"{self.path}: {reason}: recording stopped; "
+                       f"{ledger.storage.path.name} keeps {ledger.written} of the {received} "
+                       f"messages received in complete chunks but no index: free some space, "
+                       f"then run `stillframe bag reindex {self.path}`")
+
+    def _name_metadata_distro(self) -> None:
+        """``metadata.yaml`` with :data:`ROS_DISTRO` (the MCAP metadata record has it already:
+        the storage's ``close`` is wrapped); written beside and moved, so that a full disk
+        leaves rosbags' own file in place."""
+        meta = self.path / "metadata.yaml"
+        fresh = meta.with_suffix(".yaml.distro")
+        try:
+            fresh.write_text(_name_distro(meta.read_text()))
+            fresh.replace(meta)
+        except OSError:
+            fresh.unlink(missing_ok=True)
 
     def __enter__(self) -> BagWriter:
         return self
@@ -166,7 +214,7 @@ def _culprit(bag: Path) -> Path:
     own, else ``metadata.yaml``."""
     try:
         files = _storage_files(bag)
-    except (OSError, yaml.YAMLError, KeyError, TypeError):
+    except (OSError, yaml.YAMLError, KeyError, TypeError, ValueError, RecursionError):
         return bag / "metadata.yaml"
     for path in files:
         if not path.is_file():

@@ -11,6 +11,7 @@ from dataclasses import dataclass
 from typing import Any, Literal
 
 from stillframe.config.schema import (
+    SEED_RANGE,
     Floats,
     Floats3,
     Floats4,
@@ -18,15 +19,23 @@ from stillframe.config.schema import (
     Section,
     in_range,
     key,
-    non_negative,
-    positive,
+    magnitude,
+    up_to,
 )
 
 THESIS_STATE_WEIGHTS: Floats8 = (1e2, 1e2, 1e2, 1e-2, 1e2, 1e2, 1e2, 1e-2)  # Q_z, eq. 5.229
 
 
+#: the longest actuation delay, in sample periods (the LQG predicts over it; 31 s at 32 Hz)
+MAX_DELAY_PERIODS = 1000
+#: LQG weights within twelve decades of 1 (the Riccati solution stays finite in doubles)
+MAX_WEIGHT = 1e12
+#: the longest MPC prediction horizon, in samples (the QP grows with it)
+MAX_HORIZON = 1000
+
+
 def _limit(doc: str) -> Any:
-    return key(None, positive, doc=doc)
+    return key(None, up_to(1e12), doc=doc)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -41,29 +50,29 @@ class Plant(Section):
         "model file only: substeps of the scene's integrator at integrator.dt, or zoh: each "
         "substep exact for the held command and a force linear between substeps (matrix "
         "exponential)"))
-    process_noise_std: Floats8 = key((0.0,) * 8, non_negative, doc=(
+    process_noise_std: Floats8 = key((0.0,) * 8, in_range(0.0, 1e6), doc=(
         "std of the increments added to the physical state once per sample (eq. 5.215)"))
-    seed: int = key(0, doc="process-noise random seed")
+    seed: int = key(0, in_range(*SEED_RANGE), doc="process-noise random seed")
 
 
 @dataclass(frozen=True, kw_only=True)
 class Sensors(Section):
     """sensors: the floor accelerometers, the pendulum encoder and the load cell."""
 
-    rate_hz: float = key(32.0, positive, doc="sample rate = control rate [Hz]")
-    accelerometer_noise_std: float = key(0.0, non_negative, doc="[m/s^2]")
-    accelerometer_bias: Floats3 = key((0.0, 0.0, 0.0), doc="[m/s^2]")
-    encoder_resolution: float = key(0.0, non_negative, doc="angle step [rad], 0: exact")
-    encoder_noise_std: float = key(0.0, non_negative, doc="[rad], before quantisation")
-    load_cell_noise_std: float = key(0.0, non_negative, doc="[N]")
-    seed: int = key(1, doc="sensor-noise random seed")
+    rate_hz: float = key(32.0, up_to(1e5), doc="sample rate = control rate [Hz]")
+    accelerometer_noise_std: float = key(0.0, in_range(0.0, 1e6), doc="[m/s^2]")
+    accelerometer_bias: Floats3 = key((0.0, 0.0, 0.0), magnitude(1e6), doc="[m/s^2]")
+    encoder_resolution: float = key(0.0, in_range(0.0, 10.0), doc="angle step [rad], 0: exact")
+    encoder_noise_std: float = key(0.0, in_range(0.0, 1e3), doc="[rad], before quantisation")
+    load_cell_noise_std: float = key(0.0, in_range(0.0, 1e9), doc="[N]")
+    seed: int = key(1, in_range(*SEED_RANGE), doc="sensor-noise random seed")
 
 
 @dataclass(frozen=True, kw_only=True)
 class Actuators(Section):
     """actuators: saturation and slew limits (null: none), and a fixed actuation delay."""
 
-    delay_periods: int = key(0, non_negative, doc=(
+    delay_periods: int = key(0, in_range(0, MAX_DELAY_PERIODS), doc=(
         "the command stamped t_k is applied from t_k+d on (a playout buffer: network delay and "
         "jitter up to d periods cost nothing more; LQG predicts d periods ahead)"))
     torque_limit: float | None = _limit("pendulum torque saturation [N m]")
@@ -90,15 +99,15 @@ class Estimator(Section):
     type: Literal["none", "truth", "kf", "tvkf", "ekf"] = key("none", doc=(
         "truth: the controller sees the true state; kf: steady-state Kalman filter; "
         "tvkf: time-varying Kalman filter; ekf: extended Kalman filter (nonlinear model)"))
-    process_noise_std: Floats8 = key((1e-3,) * 8, non_negative,
+    process_noise_std: Floats8 = key((1e-3,) * 8, in_range(0.0, 1e6),
                                      doc="W0, per sample (eq. 5.221)")
-    measurement_noise_std: Floats4 = key((1e-3,) * 4, positive,
+    measurement_noise_std: Floats4 = key((1e-3,) * 4, up_to(1e6),
                                          doc="V0 of [a1, a2, a3, phi] (eq. 5.222)")
-    initial_offset: Floats8 = key((0.0,) * 8, doc=(
+    initial_offset: Floats8 = key((0.0,) * 8, magnitude(1e3), doc=(
         "mean initial estimate minus the true initial state (5.219)"))
-    initial_std: Floats8 = key((1e-4,) * 4 + (1e-5,) * 4, positive,
+    initial_std: Floats8 = key((1e-4,) * 4 + (1e-5,) * 4, up_to(1e3),
                                doc="square roots of the initial covariance diagonal (5.220)")
-    max_substep: float = key(5e-3, positive, doc="EKF: longest RK4 prediction step [s]")
+    max_substep: float = key(5e-3, up_to(1.0), doc="EKF: longest RK4 prediction step [s]")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -108,39 +117,41 @@ class Controller(Section):
     type: Literal["none", "lqg", "euk_pendulum", "euk_floor", "passivity", "mpc"] = key(
         "none", doc=("mpc: linear model predictive control on the design model with the "
                      "limits of the torque, its rate and the pendulum angle (OSQP)"))
-    start: float = key(0.0, non_negative, doc="enable time [s]")
-    state_weights: Floats8 = key(THESIS_STATE_WEIGHTS, non_negative,
+    start: float = key(0.0, in_range(0.0, 1e6), doc="enable time [s]")
+    state_weights: Floats8 = key(THESIS_STATE_WEIGHTS, in_range(0.0, MAX_WEIGHT),
                                  doc="LQG: diagonal of Q_z (eq. 5.229)")
-    input_weight: float = key(1e-4, positive, doc="LQG: Q_u (eq. 5.230)")
+    input_weight: float = key(1e-4, in_range(1.0 / MAX_WEIGHT, MAX_WEIGHT),
+                              doc="LQG: Q_u (eq. 5.230)")
     feedforward: bool = key(False, doc="LQG: feed the measured excitation force forward")
     anti_windup: bool = key(False, doc=(
         "LQG: condition the command on the actuator's limits and controller.angle_limit one "
         "period ahead on the design model (docs/controllers.md)"))
-    angle_limit: float | None = key(0.5, positive, doc=(
+    angle_limit: float | None = key(0.5, up_to(10.0), doc=(
         "LQG anti-windup and MPC: largest pendulum angle [rad] the command may lead to (the "
         "design model's linear range; null: none); a soft constraint in MPC"))
-    horizon: int = key(20, positive, doc="MPC: prediction horizon [samples]")
-    rate_weight: float = key(0.0, non_negative, doc="MPC: weight of the torque step (Δu)^2")
-    angle_penalty: float = key(1e6, positive, doc=(
+    horizon: int = key(20, up_to(MAX_HORIZON), doc="MPC: prediction horizon [samples]")
+    rate_weight: float = key(0.0, in_range(0.0, MAX_WEIGHT),
+                             doc="MPC: weight of the torque step (Δu)^2")
+    angle_penalty: float = key(1e6, up_to(MAX_WEIGHT), doc=(
         "MPC: weight of the squared excess of |phi| over controller.angle_limit (and 1e-3 of "
         "it on the excess itself), relative to the weight R + B'PB of the torque's deviation "
         "from the LQR's plan"))
-    max_iter: int | None = key(None, positive, doc=(
+    max_iter: int | None = key(None, up_to(1_000_000), doc=(
         "MPC: OSQP iteration limit per sample (null: one per 5 us of the period, 50 to 4000: "
         "200 at 1 kHz); a solve that does not finish falls back to the anti-windup LQG "
         "command (counted, in /diagnostics)"))
-    hold_stiffness: float = key(0.0, non_negative, doc=(
+    hold_stiffness: float = key(0.0, in_range(0.0, 1e9), doc=(
         "EUK: kp [1/s^2] of the virtual constraint x3'' = -kd x3' - kp x3 (0: eq. 5.240)"))
-    hold_damping: float = key(0.0, non_negative, doc="EUK: kd [1/s]")
-    shaping_stiffness: float = key(0.0, non_negative, doc=(
+    hold_damping: float = key(0.0, in_range(0.0, 1e9), doc="EUK: kd [1/s]")
+    shaping_stiffness: float = key(0.0, in_range(0.0, 1e9), doc=(
         "passivity: k_p [N m/rad] of u = -k_p phi - k_d phi' (energy shaping)"))
-    injection_damping: float = key(0.05, positive, doc=(
+    injection_damping: float = key(0.05, up_to(1e9), doc=(
         "passivity: k_d [N m s/rad] (damping injection through the torque port)"))
     singular_margin: float = key(0.02, in_range(1e-6, 1.0), doc=(
         "EUK pendulum: damping of the singularity-robust inverse, as a fraction of the "
         "gain at rest"))
     limit: float | None = _limit("command saturation [N m or N]")
-    watchdog_periods: int = key(3, positive, doc="periods without a fresh estimate")
+    watchdog_periods: int = key(3, up_to(1_000_000), doc="periods without a fresh estimate")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -150,7 +161,7 @@ class Evaluation(Section):
     baseline: Literal["before_start", "open_loop"] = key("before_start", doc=(
         "uncontrolled peaks from the window before controller.start of the same run (the "
         "thesis), or from the last window of a second run without control (same seeds)"))
-    window: float = key(10.0, positive, doc=(
+    window: float = key(10.0, up_to(1e6), doc=(
         "steady-state peaks: max |.| over the window before controller.start (without "
         "control) and over the last window of the run (with control) [s]"))
     reference_displacement_pct: Floats = key((), doc=(

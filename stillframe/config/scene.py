@@ -24,52 +24,61 @@ from stillframe.config.loop_sections import (
     Sensors,
 )
 from stillframe.config.schema import (
+    SEED_RANGE,
     Floats,
     Floats2,
     Floats3,
     Section,
     in_range,
     key,
-    non_negative,
-    positive,
+    magnitude,
     section,
     set_dotted,
+    show,
+    up_to,
     validate,
 )
-from stillframe.config.yamlio import load_yaml
+from stillframe.config.yamlio import load_yaml, problem
 from stillframe.errors import InputError
+
+#: the finite-element mesh and the modal model's modes at most (matrices of 3 * 2 * n + 1)
+MAX_ELEMENTS = 200
+#: integrator steps of one run at most (duration / integrator.dt): the simulator keeps a row
+#: of 7 values per step (1e7 steps: 560 MB)
+MAX_STEPS = 10_000_000
 
 
 @dataclass(frozen=True, kw_only=True)
 class Columns(Section):
     """rig.columns: the steel blades of each story (§5.2)."""
 
-    lengths: Floats3 = key((0.23, 0.28, 0.23), positive, doc="L1..L3 [m]")
-    width: float = key(0.035, positive, doc="b [m]")
-    thickness: float = key(0.001, positive, doc="h [m]")
-    density: float = key(7860.0, non_negative, doc="rho [kg/m^3]")
-    youngs_modulus: float = key(207e9, positive, doc="E [Pa]")
-    per_story: int = key(2, positive, doc="blades per story")
+    lengths: Floats3 = key((0.23, 0.28, 0.23), in_range(1e-4, 100.0), doc="L1..L3 [m]")
+    width: float = key(0.035, in_range(1e-6, 10.0), doc="b [m]")
+    thickness: float = key(0.001, in_range(1e-6, 1.0), doc="h [m]")
+    density: float = key(7860.0, in_range(0.0, 1e5), doc="rho [kg/m^3]")
+    youngs_modulus: float = key(207e9, in_range(1e3, 1e13), doc="E [Pa]")
+    per_story: int = key(2, up_to(100), doc="blades per story")
 
 
 @dataclass(frozen=True, kw_only=True)
 class Pendulum(Section):
     """rig.pendulum: the pendulum of the damper, hinged on floor 3."""
 
-    half_length: float = key(0.0825, positive, doc="L4 [m]")
-    mass: float = key(0.083, positive, doc="m4 [kg]")
-    inertia: float = key(8.32e-4, positive, doc="Izz,4 about the centre of mass [kg m^2]")
-    hinge_damping: float = key(2.432e-3, non_negative, doc="r4 [N m s/rad]")
+    half_length: float = key(0.0825, in_range(1e-4, 100.0), doc="L4 [m]")
+    mass: float = key(0.083, in_range(1e-6, 1e6), doc="m4 [kg]")
+    inertia: float = key(8.32e-4, in_range(1e-12, 1e9),
+                         doc="Izz,4 about the centre of mass [kg m^2]")
+    hinge_damping: float = key(2.432e-3, in_range(0.0, 1e9), doc="r4 [N m s/rad]")
 
 
 @dataclass(frozen=True, kw_only=True)
 class Rig(Section):
     """rig: the test rig; defaults are the thesis's (§5.2)."""
 
-    floor_masses: Floats3 = key((1.281, 0.814, 1.380), positive, doc="m1..m3 [kg]")
+    floor_masses: Floats3 = key((1.281, 0.814, 1.380), in_range(1e-6, 1e7), doc="m1..m3 [kg]")
     columns: Columns = section(Columns)
     pendulum: Pendulum = section(Pendulum)
-    gravity: float = key(9.81, non_negative, doc="g [m/s^2]")
+    gravity: float = key(9.81, in_range(0.0, 100.0), doc="g [m/s^2]")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -77,8 +86,8 @@ class Damping(Section):
     """damping: structural damping of the frame."""
 
     model: Literal["rayleigh", "modal", "none"] = key("rayleigh")
-    alpha: float = key(0.9751, doc="mass-proportional coefficient [1/s]")
-    beta: float = key(-2.8815e-4, doc="stiffness-proportional coefficient [s]")
+    alpha: float = key(0.9751, magnitude(1e6), doc="mass-proportional coefficient [1/s]")
+    beta: float = key(-2.8815e-4, magnitude(1.0), doc="stiffness-proportional coefficient [s]")
     modal_ratios: Floats = key(
         (0.0395, 0.0030, 0.0042), in_range(0.0, 1.0),
         doc="zeta of the first structural modes (thesis ERA/DC identification, §5.5)",
@@ -92,19 +101,19 @@ class Excitation(Section):
 
     type: Literal["none", "harmonics", "hammer", "white_noise", "chirp"] = key("none")
     floor: int = key(1, in_range(1, 3), doc="floor the force acts on")
-    amplitudes: Floats = key((0.1, 0.1, 0.1), doc="harmonics: force amplitudes [N]")
-    frequencies_hz: Floats = key((1.9, 5.7, 8.8), non_negative, doc="harmonics [Hz]")
-    phases: Floats = key((), doc="harmonics: phases [rad], zeros when empty")
-    impulse: float = key(0.05, doc="hammer: impulse [N s]")
-    time: float = key(0.0, non_negative, doc="hammer: time of the blow [s]")
-    width: float = key(5e-3, positive, doc="hammer: duration of the half-sine pulse [s]")
-    std: float = key(0.1, non_negative, doc="white noise: force std [N]")
-    rate_hz: float = key(1000.0, positive, doc="white noise: sample-and-hold rate [Hz]")
-    seed: int = key(0, doc="white noise: random seed")
-    amplitude: float = key(0.1, doc="chirp: amplitude [N]")
-    f0_hz: float = key(0.5, positive, doc="chirp: start frequency [Hz]")
-    f1_hz: float = key(12.0, positive, doc="chirp: end frequency [Hz]")
-    sweep_s: float = key(20.0, positive, doc="chirp: sweep duration [s]")
+    amplitudes: Floats = key((0.1, 0.1, 0.1), magnitude(1e9), doc="harmonics: force amplitudes [N]")
+    frequencies_hz: Floats = key((1.9, 5.7, 8.8), in_range(0.0, 1e5), doc="harmonics [Hz]")
+    phases: Floats = key((), magnitude(1e6), doc="harmonics: phases [rad], zeros when empty")
+    impulse: float = key(0.05, magnitude(1e9), doc="hammer: impulse [N s]")
+    time: float = key(0.0, in_range(0.0, 1e6), doc="hammer: time of the blow [s]")
+    width: float = key(5e-3, up_to(1e3), doc="hammer: duration of the half-sine pulse [s]")
+    std: float = key(0.1, in_range(0.0, 1e9), doc="white noise: force std [N]")
+    rate_hz: float = key(1000.0, up_to(1e6), doc="white noise: sample-and-hold rate [Hz]")
+    seed: int = key(0, in_range(*SEED_RANGE), doc="white noise: random seed")
+    amplitude: float = key(0.1, magnitude(1e9), doc="chirp: amplitude [N]")
+    f0_hz: float = key(0.5, up_to(1e5), doc="chirp: start frequency [Hz]")
+    f1_hz: float = key(12.0, up_to(1e5), doc="chirp: end frequency [Hz]")
+    sweep_s: float = key(20.0, up_to(1e6), doc="chirp: sweep duration [s]")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -112,9 +121,9 @@ class Model(Section):
     """model: which dynamics model simulates the rig."""
 
     type: Literal["lumped", "fe", "modal", "ph", "auto"] = key("lumped")
-    elements_per_column: int = key(3, positive)
-    modes: int = key(3, positive, doc="modal: retained fixed-interface column modes")
-    band_hz: Floats2 = key((0.0, 15.0), non_negative,
+    elements_per_column: int = key(3, up_to(MAX_ELEMENTS), doc="fe: mesh size")
+    modes: int = key(3, up_to(MAX_ELEMENTS), doc="modal: retained fixed-interface column modes")
+    band_hz: Floats2 = key((0.0, 15.0), in_range(0.0, 1e5),
                                        doc="auto: frequency band the scene must reproduce [Hz]")
     tolerance: float = key(0.01, in_range(1e-12, 1.0),
                            doc="auto: relative error allowed in the band")
@@ -128,14 +137,15 @@ class Integrator(Section):
     """integrator: the time integration of the model."""
 
     method: Literal["rk4", "midpoint", "dop853", "radau"] = key("rk4")
-    dt: float = key(1e-3, positive, doc="fixed step, or output step of adaptive methods [s]")
-    rtol: float = key(1e-10, positive)
-    atol: float = key(1e-12, positive)
+    dt: float = key(1e-3, in_range(1e-9, 1.0),
+                    doc="fixed step, or output step of adaptive methods [s]")
+    rtol: float = key(1e-10, in_range(1e-15, 1.0))
+    atol: float = key(1e-12, in_range(1e-300, 1.0))
     max_halvings: int = key(12, in_range(0, 40), doc=(
         "fixed steps: a step whose Newton iteration fails, whose result is not finite or whose "
         "RK4 error estimate is too large is halved again and again down to dt / 2^max_halvings "
         "(0: such a step is an error at once)"))
-    error_limit: float | None = key(1e-5, positive, doc=(
+    error_limit: float | None = key(1e-5, up_to(1.0), doc=(
         "RK4: largest embedded local error estimate per step, relative to 1 + |x| "
         "(null: no estimate)"))
 
@@ -144,10 +154,10 @@ class Integrator(Section):
 class Initial(Section):
     """initial: the state at t = 0."""
 
-    floors: Floats3 = key((0.0, 0.0, 0.0), doc="x1..x3 [m]")
+    floors: Floats3 = key((0.0, 0.0, 0.0), magnitude(100.0), doc="x1..x3 [m]")
     phi: float = key(0.0, doc="pendulum angle from hanging [rad]")
-    floor_velocities: Floats3 = key((0.0, 0.0, 0.0), doc="[m/s]")
-    phi_rate: float = key(0.0, doc="[rad/s]")
+    floor_velocities: Floats3 = key((0.0, 0.0, 0.0), magnitude(1e3), doc="[m/s]")
+    phi_rate: float = key(0.0, magnitude(1e4), doc="[rad/s]")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -162,7 +172,7 @@ class Scene(Section):
     integrator: Integrator = section(Integrator)
     excitation: Excitation = section(Excitation)
     initial: Initial = section(Initial)
-    duration: float = key(10.0, positive, doc="[s]")
+    duration: float = key(10.0, up_to(1e6), doc="[s]")
     plant: Plant = section(Plant)
     sensors: Sensors = section(Sensors)
     actuators: Actuators = section(Actuators)
@@ -172,17 +182,22 @@ class Scene(Section):
     evaluation: Evaluation = section(Evaluation)
 
 
+#: a scene file's size at most (a scene is a page of YAML; this keeps /dev/zero out)
+MAX_SCENE_BYTES = 1 << 20
+
+
 def _read(path: Path) -> dict[str, Any]:
     try:
-        text = path.read_text()
+        with path.open("rb") as stream:
+            raw = stream.read(MAX_SCENE_BYTES + 1)
     except OSError as exc:
         raise InputError(f"{path}: cannot read scene ({exc.strerror})") from None
+    if len(raw) > MAX_SCENE_BYTES:
+        raise InputError(f"{path}: more than {MAX_SCENE_BYTES >> 20} MiB; not a scene")
     try:
-        data = load_yaml(text)
+        data = load_yaml(raw)
     except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        where = f" at line {mark.line + 1}" if mark else ""
-        raise InputError(f"{path}: not valid YAML{where}") from None
+        raise InputError(f"{path}: not valid YAML: {problem(exc)}") from None
     if not isinstance(data, dict):
         raise InputError(f"{path}: a scene is a mapping of keys, got {type(data).__name__}")
     return data
@@ -193,11 +208,12 @@ def apply_overrides(data: dict[str, Any], overrides: list[str]) -> None:
     for item in overrides:
         dotted, sep, text = item.partition("=")
         if not sep or not dotted:
-            raise InputError(f"--set {item}: expected dotted.key=value")
+            raise InputError(f"--set {show(item, 80, quote=False)}: expected dotted.key=value")
         try:
             value = load_yaml(text) if text else ""
-        except yaml.YAMLError:
-            raise InputError(f"--set {item}: value is not valid YAML") from None
+        except yaml.YAMLError as exc:
+            raise InputError(f"--set {show(item, 80, quote=False)}: value is not valid YAML: "
+                             f"{problem(exc)}") from None
         set_dotted(data, dotted.strip(), value)
 
 
@@ -210,6 +226,11 @@ def _check_consistency(scene: Scene) -> None:
                 "excitation: amplitudes, frequencies_hz and phases need the same length "
                 f"(got {n}, {len(exc.frequencies_hz)}, {len(exc.phases)})"
             )
+    if scene.duration / scene.integrator.dt > MAX_STEPS:
+        raise InputError(
+            f"duration: {scene.duration:g} s at integrator.dt {scene.integrator.dt:g} s is "
+            f"{scene.duration / scene.integrator.dt:.3g} steps; at most {MAX_STEPS:.0e} "
+            "(a shorter run or a longer step)")
     if scene.integrator.dt > scene.duration:
         raise InputError(
             f"integrator.dt: {scene.integrator.dt:g} s is longer than duration {scene.duration:g} s"

@@ -78,6 +78,24 @@ def non_negative(value: Any) -> str | None:
     return None if all(v >= 0 for v in _values(value)) else "must be >= 0"
 
 
+def up_to(high: float) -> Check:
+    """> 0 and at most ``high``: a physical bound on a size, a rate, a count."""
+
+    def check(value: Any) -> str | None:
+        return None if all(0 < v <= high for v in _values(value)) else f"must lie in (0, {high:g}]"
+
+    return check
+
+
+def magnitude(high: float) -> Check:
+    """|value| at most ``high`` (a signed quantity: an offset, an amplitude)."""
+    return in_range(-high, high)
+
+
+#: a random seed: what numpy's generators take (a whole number >= 0), within 64 bits
+SEED_RANGE = (0, 2**63 - 1)
+
+
 def in_range(low: float, high: float) -> Check:
     def check(value: Any) -> str | None:
         ok = all(low <= v <= high for v in _values(value))
@@ -129,16 +147,29 @@ def _specs(cls: type[Section]) -> tuple[_Spec, ...]:
     return _SPECS[cls]
 
 
+def show(value: Any, width: int = 60, *, quote: bool = True) -> str:
+    """``repr(value)`` (text as it is without ``quote``) cut to ``width`` characters, for
+    one-line messages (a 3000-deep list or a 4000-digit number stays one short line)."""
+    try:
+        text = repr(value) if quote or not isinstance(value, str) else value
+    except (ValueError, RecursionError):     # an int beyond Python's digit limit; deep nesting
+        text = f"<{type(value).__name__}>"
+    return text if len(text) <= width else text[: width - 1] + "…"
+
+
 def _number(key: str, value: Any, kind: type) -> float | int:
     if isinstance(value, bool) or not isinstance(value, int | float):
-        raise InputError(f"{key}: expected a number, got {type(value).__name__} {value!r}")
+        raise InputError(f"{key}: expected a number, got {type(value).__name__} {show(value)}")
     if kind is int:
         if isinstance(value, float) and not value.is_integer():
-            raise InputError(f"{key}: expected a whole number, got {value!r}")
+            raise InputError(f"{key}: expected a whole number, got {show(value)}")
         return int(value)
-    value = float(value)
+    try:
+        value = float(value)
+    except OverflowError:
+        raise InputError(f"{key}: {show(value)} is too large") from None
     if not math.isfinite(value):
-        raise InputError(f"{key}: must be finite, got {value!r}")
+        raise InputError(f"{key}: must be finite, got {show(value)}")
     return value
 
 
@@ -149,23 +180,23 @@ def _leaf(key: str, spec: _Spec, value: Any) -> Any:
         out: Any = _number(key, value, spec.kind)
     elif spec.kind is tuple:
         if not isinstance(value, list | tuple):
-            raise InputError(f"{key}: expected a list of numbers, got {value!r}")
+            raise InputError(f"{key}: expected a list of numbers, got {show(value)}")
         out = tuple(_number(f"{key}[{i}]", v, float) for i, v in enumerate(value))
         if spec.length is not None and len(out) != spec.length:
             raise InputError(f"{key}: expected {spec.length} values, got {len(out)}")
     elif spec.kind is bool:
         if not isinstance(value, bool):
-            raise InputError(f"{key}: expected true or false, got {value!r}")
+            raise InputError(f"{key}: expected true or false, got {show(value)}")
         out = value
     else:
         if not isinstance(value, str):
-            raise InputError(f"{key}: expected text, got {value!r}")
+            raise InputError(f"{key}: expected text, got {show(value)}")
         if spec.choices and value not in spec.choices:
-            raise InputError(f"{key}: {value!r} is not one of {', '.join(spec.choices)}")
+            raise InputError(f"{key}: {show(value)} is not one of {', '.join(spec.choices)}")
         out = value
     problem = spec.field.check(out) if spec.field.check is not None else None
     if problem:
-        raise InputError(f"{key}: {problem} (got {out!r})")
+        raise InputError(f"{key}: {problem} (got {show(out)})")
     return out
 
 
@@ -176,7 +207,7 @@ def validate(cls: type[S], data: Any, prefix: str = "") -> S:
     if data is None:
         data = {}
     if not isinstance(data, Mapping):
-        raise InputError(f"{where}: expected a mapping of keys, got {data!r}")
+        raise InputError(f"{where}: expected a mapping of keys, got {show(data)}")
     keys = _specs(cls)
     unknown = sorted(set(data) - {s.name for s in keys}, key=str)
     if unknown:

@@ -21,7 +21,7 @@ from stillframe.locations import DATA_DIR
 
 TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
 #: ``.srv`` definitions of the services the stack serves (``rcl_interfaces``' parameter
-#: services), missing from the ``rosbags`` typestore.
+#: services; ``lifecycle_msgs``' in its directory), missing from the ``rosbags`` typestore.
 SERVICE_DEFINITIONS = DATA_DIR / "srv"
 
 
@@ -30,7 +30,7 @@ def register_services(package: str, directory: Path) -> None:
     ``directory`` (fields of other types refer to ``package/msg/...``, as in ``.srv`` files)."""
     types = {}
     for path in sorted(directory.glob("*.srv")):
-        request, response = path.read_text().split("\n---\n")
+        request, response = ("\n" + path.read_text()).split("\n---\n")
         for text, part in ((request, "Request"), (response, "Response")):
             parsed = get_types_from_msg(text, f"{package}/msg/{path.stem}_{part}")
             types.update({name.replace("/msg/", "/srv/", 1): defs
@@ -39,6 +39,7 @@ def register_services(package: str, directory: Path) -> None:
 
 
 register_services("rcl_interfaces", SERVICE_DEFINITIONS)
+register_services("lifecycle_msgs", SERVICE_DEFINITIONS / "lifecycle_msgs")
 
 #: numpy dtype of each ROS primitive that ``rosbags`` keeps in numpy arrays.
 NUMPY_DTYPES: dict[str, type] = {

@@ -31,9 +31,11 @@ from stillframe.config.scene import Scene
 from stillframe.contract.signals import Command
 from stillframe.control.factory import make_controller
 from stillframe.estimation.factory import make_estimator
+from stillframe.loop.energy_balance import EnergyLedger
 from stillframe.loop.wiring import design_model
 from stillframe.plant.actuation_delay import ActuationDelay
-from stillframe.plant.frame_plant import make_plant
+from stillframe.plant.frame_plant import Plant, make_plant
+from stillframe.plant.ph_plant import PHPlant
 
 Progress = Callable[[float], None]
 
@@ -94,6 +96,15 @@ def evaluate(history: LoopHistory, scene: Scene) -> dict:
     }
 
 
+def plant_report(plant: Plant | PHPlant) -> dict:
+    """What the result says of the plant: model, integrator, step, the commands its actuators
+    changed, the integrator steps halved (:mod:`stillframe.dynamics.integrators`; the pH plant
+    takes its own steps and halves none)."""
+    return {"model": plant.model.name, "integrator": plant.integrator.name, "dt": plant.h,
+            "actuator_limited": plant.actuators.limited,
+            "subdivisions": getattr(plant, "subdivisions", 0)}
+
+
 def run_closed_loop(scene: Scene, progress: Progress | None = None) -> LoopHistory:
     """Run the scene's plant, estimator and controller lock-step for ``scene.duration``."""
     started = time.perf_counter()
@@ -105,10 +116,13 @@ def run_closed_loop(scene: Scene, progress: Progress | None = None) -> LoopHisto
     rows = np.full((n, 20), np.nan)
     control = np.zeros(2)
     delay = ActuationDelay(scene.actuators.delay_periods)
+    ledger = EnergyLedger.of(plant, scene)      # pH plant: balance and passivity check
     every = max(1, n // 100)
     looping, looping_cpu = time.perf_counter(), time.process_time()
     for k in range(n):
         sample = plant.sample()
+        if ledger is not None and sample.truth is not None:   # the pH plant reports its truth
+            ledger.update(float(sample.truth[3]))
         estimate = estimator.step(sample, control) if estimator else None
         command = (controller.command(sample.t, estimate, sample.force) if controller
                    else Command(sample.t))
@@ -133,11 +147,11 @@ def run_closed_loop(scene: Scene, progress: Progress | None = None) -> LoopHisto
         "wall_s": done - started,
         "loop_s": done - looping,   # without the set-up: what sim_node's wall_s counts
         "loop_cpu_s": time.process_time() - looping_cpu,
-        "plant": {"model": plant.model.name, "integrator": plant.integrator.name,
-                  "dt": plant.h, "actuator_limited": plant.actuators.limited,
-                  "subdivisions": getattr(plant, "subdivisions", 0)},  # pH: its own steps
+        "plant": plant_report(plant),
         "estimator": vars(estimator.counters) if estimator else None,
         "controller": vars(controller.counters) if controller else None,
         "controller_compute_s": controller.compute_stats() if controller else None,
     })
+    if ledger is not None:
+        history.evaluation["energy_balance"] = ledger.values()
     return history

@@ -83,28 +83,50 @@ class PassivityCheck:
                 f"t = {self.first_violation_t:.6g} s)")
 
 
-class EnergyTopic:
-    """sim_node's ``energy_balance`` publisher and its passivity check (pH plant only)."""
+class EnergyLedger:
+    """The pH plant's balance at each sample and the passivity check over it: what sim_node
+    publishes and reports, and what the one-process loop reports alike."""
 
-    def __init__(self, node: Any, plant: Any, scene: Scene, qos: Any) -> None:
-        spec = topics.ENERGY_BALANCE
+    def __init__(self, plant: Any, scene: Scene) -> None:
         self.plant = plant
+        self.check = PassivityCheck(scene, plant.period)
+        self.t = 0.0
+        self.last = np.zeros(len(topics.ENERGY_FIELDS) - 1)
+
+    @classmethod
+    def of(cls, plant: Any, scene: Scene) -> EnergyLedger | None:
+        """The ledger of a plant that keeps its energy balance, else None."""
+        return cls(plant, scene) if hasattr(plant, "energy_sample") else None
+
+    def update(self, phi: float) -> None:
+        """Sample t_k's balance (call after ``plant.sample()``), checked."""
+        self.t, self.last = self.plant.energy_sample()
+        self.check.update(self.t, self.last, phi)
+
+    def values(self) -> dict[str, Any]:
+        return {"energy_stored_J": float(self.last[0]), **self.check.values()}
+
+
+class EnergyTopic:
+    """sim_node's ``energy_balance`` publisher over an :class:`EnergyLedger` (pH plant only)."""
+
+    def __init__(self, node: Any, ledger: EnergyLedger, qos: Any) -> None:
+        spec = topics.ENERGY_BALANCE
+        self.ledger = ledger
+        self.check = ledger.check
         self.publisher = TappedPublisher(node, spec.type_name, spec.name, qos)
         self.message = EnergyMessage()
-        self.check = PassivityCheck(scene, plant.period)
-        self.last = np.zeros(len(topics.ENERGY_FIELDS) - 1)
 
     @classmethod
     def of(cls, node: Any, plant: Any, scene: Scene, qos: Any) -> EnergyTopic | None:
         """The topic for a plant that keeps its energy balance, else None."""
-        return cls(node, plant, scene, qos) if hasattr(plant, "energy_sample") else None
+        ledger = EnergyLedger.of(plant, scene)
+        return None if ledger is None else cls(node, ledger, qos)
 
     def publish(self, phi: float) -> None:
         """Sample t_k's balance, checked and published (call after ``plant.sample()``)."""
-        t, balance = self.plant.energy_sample()
-        self.last = balance
-        self.check.update(t, balance, phi)
-        self.publisher.publish(self.message.cdr(t, balance))
+        self.ledger.update(phi)
+        self.publisher.publish(self.message.cdr(self.ledger.t, self.ledger.last))
 
     def values(self) -> dict[str, Any]:
-        return {"energy_stored_J": float(self.last[0]), **self.check.values()}
+        return self.ledger.values()

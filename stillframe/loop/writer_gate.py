@@ -39,7 +39,6 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
-from stillframe.errors import InputError
 from stillframe.middleware import api
 
 #: why a sample is refused for its writer
@@ -247,31 +246,34 @@ class WriterGate:
     def report(self) -> dict[str, object]:
         """For ``/diagnostics``: the node taken, the writers ignored, refusals by reason."""
         if not self.owner and self.taken:   # the first writer was taken without its name
-            self.owner = next((name for g, name in self.writers()
-                               if g in self.taken and name.strip("/")), "")
-        taken = self.owner or ", ".join(sorted(self.name_of(g) for g in self.taken))
+            listed = [(g, name) for g, name in self.writers() if name.strip("/")]
+            self.owner = next((name for g, name in listed if g in self.taken or (
+                self.pinned and same_node(name, self.pinned))), "")
+        if self.owner or not self.taken:
+            taken = self.owner
+        elif self.pinned and any(g.startswith(STREAM_KEY) for g in self.taken):
+            taken = self.pinned                 # no GID: the pin, until the graph names it
+        elif any(g.startswith(STREAM_KEY) for g in self.taken):     # no GID, no pin, no name
+            taken = " or ".join(sorted({name for _, name in self.writers() if name.strip("/")}))
+        else:
+            taken = ", ".join(sorted(self.name_of(g) for g in self.taken))
         return {"writer": taken, "ignored_writers": ",".join(self.ignored()),
                 **{f"rejected_{r}": self.rejected[r] for r in REASONS}}
 
 
 class InputGates:
-    """The :class:`WriterGate` of each input topic of a node, reported together; ``parameters``
-    are the node's read-only string parameters that name the node a gate takes ("": the first
-    writer seen), declared here."""
+    """The :class:`WriterGate` of each input topic of a node, reported together; ``pins`` maps
+    the node's parameters that name the node a gate takes to their values ("": the first writer
+    seen; declared by the node runtime, :mod:`stillframe.node_runtime.declarations`)."""
 
-    def __init__(self, node: api.Node, *parameters: str) -> None:
+    def __init__(self, node: api.Node, pins: dict[str, str]) -> None:
         self.node = node
         self.gates: dict[str, WriterGate] = {}
-        self.pins: dict[str, str] = {}
+        self.pins = dict(pins)
         self.samples_seen = False       # a gate has seen samples (:meth:`keep_graph_read`)
         self.next_graph_read = 0
         self.next_announce = 0
         self.announced: dict[str, list[str]] = {}     # topic -> the writers last logged
-        for name in parameters:
-            pinned = node.declare_parameter(name, "", read_only=True).value
-            if not isinstance(pinned, str):
-                raise InputError(f"parameter '{name}': must be a node name, got {pinned!r}")
-            self.pins[name] = pinned
 
     def add(self, topic: str, parameter: str) -> WriterGate:
         """The gate of ``topic``, taking the writers of the node ``parameter`` names."""

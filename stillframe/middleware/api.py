@@ -34,8 +34,10 @@ from stillframe.middleware.backend_choice import (
     has_rclpy,
 )
 from stillframe.middleware.clock import Clock, Time
+from stillframe.middleware.cyclone_log import count_deserialization_failures
 from stillframe.middleware.interface import (
     MALFORMED,
+    ManagedNode,
     MessageInfo,
     Node,
     Publisher,
@@ -50,17 +52,20 @@ from stillframe.middleware.interface import (
 )
 from stillframe.middleware.params import Parameter, SetParametersResult
 
-__all__ = ["BACKENDS", "BACKEND_ENV", "MALFORMED", "MessageInfo", "Node", "Parameter", "Publisher",
-           "SetParametersResult", "Subscription", "Timer", "TopicEndpointInfo", "backend_name",
+__all__ = ["BACKENDS", "BACKEND_ENV", "MALFORMED", "ManagedNode", "MessageInfo", "Node",
+           "Parameter", "Publisher", "SetParametersResult", "Subscription", "Timer",
+           "TopicEndpointInfo", "backend_name",
            "check_backend", "create_node", "deliver", "freeze_setup_objects", "has_rclpy",
            "install_signal_handlers", "node_main", "ok", "shutdown", "spin", "spin_once",
            "spin_until"]
 
 
 def create_node(name: str, namespace: str | None = None, argv: list[str] | None = None,
-                backend: str | None = None) -> Node:
+                backend: str | None = None, *, managed: bool = False) -> Node:
     """A node on ``backend`` (default :func:`backend_name`); ``argv`` (default ``sys.argv``)
-    may carry ``--ros-args``.
+    may carry ``--ros-args``. ``managed``: a lifecycle node (:class:`.interface.ManagedNode`:
+    rclpy's ``LifecycleNode``, or the ``dds`` backend's same services), made so by its
+    ``manage(on_transition)``.
 
     ``namespace`` is the default namespace (``-r __ns:=`` overrides it, as does ``__node``
     the name). Logs the backend in use.
@@ -71,7 +76,8 @@ def create_node(name: str, namespace: str | None = None, argv: list[str] | None 
         from stillframe.middleware.dds_services import ServiceNode as NodeClass
     else:
         from stillframe.middleware.rclpy_backend import RclpyNode as NodeClass
-    node = NodeClass(name, namespace or "/", args)
+    node = NodeClass(name, namespace or "/", args, **(
+        {"managed": True} if managed and backend == "rclpy" else {}))
     install_signal_handlers()
     node.get_logger().info(f"middleware backend: {backend}", once=True)
     return node
@@ -84,6 +90,8 @@ def node_main(main: Callable[[], int | None]) -> Callable[[], int]:
 
     @functools.wraps(main)
     def wrapped() -> int:
+        if backend_name() == "dds":     # Cyclone's dropped samples counted (cyclone_log)
+            count_deserialization_failures()
         try:
             return int(main() or 0)
         except StillframeError as exc:

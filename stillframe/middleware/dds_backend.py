@@ -464,8 +464,16 @@ class DdsSubscription:
                                      self.writer_gid(info.publication_handle))
 
     def take(self) -> list[tuple[bytes, interface.MessageInfo]]:
-        """The samples waiting, raw with their info, oldest first (polled subscriptions)."""
-        return [(bytes(data), self._info(info)) for data, info in self._taken()]
+        """The samples waiting, raw with their info, oldest first (polled subscriptions). Cyclone
+        keeps no reception time, so each is received at its source time stamp (the writer's
+        clock; on one host the system clock) moved onto the node's clock, never later than
+        now: one clock read per take, and a sample taken late keeps the time it was sent."""
+        now = self._clock.now_ns()
+        offset = now - time.time_ns()
+        return [(bytes(data), interface.MessageInfo(
+                    info.source_timestamp, min(info.source_timestamp + offset, now),
+                    self.writer_gid(info.publication_handle)))
+                for data, info in self._taken()]
 
     def take_and_dispatch(self) -> int:
         """Hand every waiting sample to the callback; the number handed."""

@@ -32,7 +32,7 @@ from cyclonedds.sub import DataReader
 
 from stillframe.contract import messages
 from stillframe.errors import InputError
-from stillframe.middleware import names, param_messages
+from stillframe.middleware import lifecycle, names, param_messages
 from stillframe.middleware.cyclone_raw import ANY_SAMPLES, take_raw, write_raw
 from stillframe.middleware.dds_backend import DdsNode, dds_qos, delete, user_data_field
 from stillframe.middleware.qos import QoSProfile
@@ -223,6 +223,28 @@ class ServiceNode(DdsNode):
         super().__init__(name, namespace, args)
         for suffix, (srv_type, answer) in param_messages.PARAMETER_SERVICES.items():
             self.create_service(srv_type, f"~/{suffix}", functools.partial(answer, self._params))
+
+    def manage(self, on_transition: lifecycle.TransitionCallback) -> None:
+        """Make this a managed node: rcl_lifecycle's state machine with ``on_transition`` as its
+        callbacks, served on the ``lifecycle_msgs`` services (``~/get_state``,
+        ``~/change_state``, ...) with ``~/transition_event`` published, as rclpy's
+        ``LifecycleNode`` serves them."""
+        events = self.create_publisher("lifecycle_msgs/msg/TransitionEvent",
+                                       lifecycle.TRANSITION_EVENT, "default")
+        self.lifecycle = lifecycle.StateMachine(
+            on_transition, lambda t: events.publish(lifecycle.event_msg(t)))
+        answers = lifecycle.answers(self.lifecycle, self.get_logger().warning)
+        for name, srv in lifecycle.SERVICES.items():
+            self.create_service(f"lifecycle_msgs/srv/{srv}", f"~/{name}", answers[name])
+
+    def lifecycle_state(self) -> str:
+        """The label of the managed node's state (``unconfigured``, ``active``, ...)."""
+        return self.lifecycle.label
+
+    def trigger(self, transition: str) -> str:
+        """Run the node's own ``transition`` (a label; ``shutdown`` from any primary state);
+        the outcome (:data:`.lifecycle.SUCCESS` ...), TransitionRefusedError if not available."""
+        return self.lifecycle.change(label=transition)
 
     def resolve_service_name(self, service: str) -> str:
         return names.resolve_topic(service, self.get_namespace(), self.get_name())

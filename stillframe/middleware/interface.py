@@ -118,6 +118,15 @@ class Node(Protocol):
     def destroy_node(self) -> None: ...
 
 
+class ManagedNode(Node, Protocol):
+    """A lifecycle node (``api.create_node(..., managed=True)``): rcl_lifecycle's states and
+    transitions (:mod:`.lifecycle`), served on the ``lifecycle_msgs`` services."""
+
+    def manage(self, on_transition: Callable[[str], str]) -> None: ...
+    def lifecycle_state(self) -> str: ...
+    def trigger(self, transition: str) -> str: ...
+
+
 #: samples per topic that did not decode (malformed CDR), dropped by the subscriptions of this
 #: process; the loop nodes report them in ``/diagnostics``
 MALFORMED: Counter[str] = Counter()

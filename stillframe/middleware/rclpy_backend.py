@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import array
 import importlib
+import time
 from collections.abc import Callable
 from typing import Any
 
@@ -21,6 +22,7 @@ from rcl_interfaces.msg import SetParametersResult as RclpySetParametersResult
 from rclpy.clock import ClockType
 from rclpy.duration import Duration
 from rclpy.executors import SingleThreadedExecutor
+from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 from rclpy.qos import (
     DurabilityPolicy,
     HistoryPolicy,
@@ -34,7 +36,7 @@ from rosbags.typesys.base import Nodetype
 
 from stillframe.contract import messages
 from stillframe.errors import InputError
-from stillframe.middleware import interface
+from stillframe.middleware import interface, lifecycle
 from stillframe.middleware.clock import SYSTEM_CLOCK, Clock, Time
 from stillframe.middleware.params import Parameter, SetCallback
 from stillframe.middleware.qos import (
@@ -176,25 +178,89 @@ class RclpyPolledSubscription:
         self._clock = clock
 
     def take(self) -> list[tuple[bytes, interface.MessageInfo]]:
+        """The samples waiting, each received at its arrival in rmw (``received_timestamp``,
+        system time) moved onto the node's clock: one clock read per take, not per sample,
+        and a sample taken late keeps the time it arrived."""
         taken = []
+        now = self._clock.now_ns()
+        offset = now - time.time_ns()
         with self.subscription.handle:
             while (got := self.subscription.handle.take_message(
                     self.subscription.msg_type, True)) is not None:
-                taken.append((got[0], message_info(got[1], self._clock)))
+                info = got[1]
+                arrived = info["received_timestamp"]
+                taken.append((got[0], interface.MessageInfo(
+                    info["source_timestamp"], min(arrived + offset, now) if arrived else now)))
         return taken
 
 
+#: our callbacks' outcomes as rclpy's
+RETURNS = {lifecycle.SUCCESS: TransitionCallbackReturn.SUCCESS,
+           lifecycle.FAILURE: TransitionCallbackReturn.FAILURE,
+           lifecycle.ERROR: TransitionCallbackReturn.ERROR}
+
+
+class ManagedNode(LifecycleNode):
+    """rclpy's ``LifecycleNode`` (its state machine, services and ``~/transition_event`` are
+    rcl_lifecycle's) calling one :data:`.lifecycle.TransitionCallback`; a transition that is not
+    available is refused with rcl_lifecycle's reason in the log, and the node goes on (rclpy
+    7.1 lets the error out of the service callback, which ends the process)."""
+
+    on_transition: lifecycle.TransitionCallback = staticmethod(lambda _: lifecycle.SUCCESS)
+
+    def _answer(self, name: str) -> TransitionCallbackReturn:
+        try:
+            return RETURNS[self.on_transition(name)]
+        except Exception as exc:
+            self.get_logger().error(f"{name} failed: {exc}")
+            return TransitionCallbackReturn.ERROR
+
+    def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
+        return self._answer("configure")
+
+    def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
+        return self._answer("cleanup")
+
+    def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
+        return self._answer("shutdown")
+
+    def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        return self._answer("activate")
+
+    def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        return self._answer("deactivate")
+
+    def on_error(self, state: LifecycleState) -> TransitionCallbackReturn:
+        return self._answer("error")
+
+    def _LifecycleNodeMixin__on_change_state(self, request: Any, response: Any) -> Any:  # noqa: N802
+        """rclpy's change-state service, with a refused transition answered (success false,
+        the reason logged as rclcpp logs it) instead of raised."""
+        current = self._state_machine.current_state[1]
+        transition = request.transition.label or request.transition.id
+        available = {(t[0], t[1]) for t in self._state_machine.available_transitions}
+        if not any(transition in pair for pair in available):
+            self.get_logger().warning(
+                f"Unable to start transition {transition} from current state {current}: "
+                f"No transition matching {transition} found for current state {current}")
+            response.success = False
+            return response
+        return LifecycleNode._LifecycleNodeMixin__on_change_state(self, request, response)
+
+
 class RclpyNode:
-    """:class:`.interface.Node` over an ``rclpy.node.Node``."""
+    """:class:`.interface.Node` over an ``rclpy.node.Node`` (``managed``: rclpy's
+    ``LifecycleNode``)."""
 
     backend = "rclpy"
     #: the process's wait (:mod:`.rclpy_wait`), beside rclpy's SingleThreadedExecutor
     _wait: SubscriptionWait | None = None
 
-    def __init__(self, name: str, namespace: str, args: list[str]) -> None:
+    def __init__(self, name: str, namespace: str, args: list[str], managed: bool = False) -> None:
         if not rclpy.ok():
             rclpy.init(args=["stillframe", *args], signal_handler_options=SignalHandlerOptions.NO)
-        self._node = rclpy.create_node(name, namespace=namespace)
+        self._node = (ManagedNode(name, namespace=namespace) if managed
+                      else rclpy.create_node(name, namespace=namespace))
         self.user_args = rclpy.utilities.remove_ros_args(["stillframe", *args])[1:]
         self._clock = RclpyClock(self._node.get_clock())
         if RclpyNode._wait is None:
@@ -203,6 +269,28 @@ class RclpyNode:
 
     def get_name(self) -> str:
         return self._node.get_name()
+
+    def manage(self, on_transition: lifecycle.TransitionCallback) -> None:
+        """The managed node's transition callbacks (it was created ``managed``)."""
+        self._node.on_transition = on_transition
+
+    def lifecycle_state(self) -> str:
+        return self._node._state_machine.current_state[1]
+
+    def trigger(self, transition: str) -> str:
+        """Run the node's own ``transition`` (a label); the outcome; TransitionRefusedError if it is
+        not available in the current state."""
+        triggers = {"configure": self._node.trigger_configure,
+                    "cleanup": self._node.trigger_cleanup,
+                    "activate": self._node.trigger_activate,
+                    "deactivate": self._node.trigger_deactivate,
+                    "shutdown": self._node.trigger_shutdown}
+        state = self.lifecycle_state()
+        if transition not in {t[1] for t in self._node._state_machine.available_transitions}:
+            raise lifecycle.TransitionRefusedError(
+                f"No transition matching {transition} found for current state {state}")
+        outcome = triggers[transition]()
+        return {v: k for k, v in RETURNS.items()}[outcome]
 
     def get_namespace(self) -> str:
         return self._node.get_namespace()

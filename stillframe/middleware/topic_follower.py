@@ -125,12 +125,17 @@ class TopicFollower:
         return [info.qos_profile
                 for info in self.node.get_publishers_info_by_topic(tap_topic(topic))]
 
-    def poll(self) -> None:
-        """Hand on what waits in each polled subscription."""
+    def poll(self) -> int:
+        """Hand on what waits in each polled subscription (taking until it is empty); the
+        number of samples handed on."""
+        handed = 0
         for topic, (_, sub) in list(self._subscriptions.items()):
             callback = self._found[topic][2]
-            for data, info in sub.take():
-                callback(data, info)
+            while taken := sub.take():
+                handed += len(taken)
+                for data, info in taken:
+                    callback(data, info)
+        return handed
 
     def _usable(self, topic: str, types: list[str], publishers: list[Any]) -> bool:
         """A topic is taken with its first type if that type is a Jazzy standard type and no
@@ -157,12 +162,10 @@ class TopicFollower:
         :data:`DRAIN_QUIET_S` (samples in flight when the signal came are kept), at most
         :data:`DRAIN_MAX_S`. The ``dds`` backend's subscriptions can be asked for them directly;
         under rclpy, what rclpy delivered before shutdown is all there is. A polled follower
-        hands on what waits."""
-        if self.polled:
-            self.poll()
-            return
-        takers = [take for _, sub in self._subscriptions.values()
-                  if (take := getattr(sub, "take_and_dispatch", None)) is not None]
+        polls (on either backend) until nothing came."""
+        takers = [self.poll] if self.polled else [
+            take for _, sub in self._subscriptions.values()
+            if (take := getattr(sub, "take_and_dispatch", None)) is not None]
         quiet_since = time.monotonic()
         end = quiet_since + DRAIN_MAX_S
         while takers and (now := time.monotonic()) - quiet_since < DRAIN_QUIET_S and now < end:

@@ -88,21 +88,6 @@ def parse_cpus(values: list[int]) -> tuple[int, ...]:
     return tuple(values)
 
 
-def declare_realtime(node: Any) -> RealtimeOptions:
-    """Declare the real-time parameters (read-only) and return what they ask for."""
-    practices = parse_practices(str(node.declare_parameter("rt", "", read_only=True).value))
-    priority = node.declare_parameter("rt_priority", 80, read_only=True).value
-    lo, hi = os.sched_get_priority_min(os.SCHED_FIFO), os.sched_get_priority_max(os.SCHED_FIFO)
-    if not (isinstance(priority, int) and lo <= priority <= hi):
-        raise InputError(f"parameter 'rt_priority': expected an integer {lo}..{hi}, "
-                         f"got {priority!r}")
-    cpus = parse_cpus(list(node.declare_parameter("rt_cpus", [NO_PINNING], read_only=True).value))
-    margin = node.declare_parameter("spin_margin_us", 200.0, read_only=True).value
-    if not (isinstance(margin, float) and 0 <= margin <= 10_000):
-        raise InputError(f"parameter 'spin_margin_us': expected 0..10000, got {margin!r}")
-    return RealtimeOptions(practices, priority, cpus, margin)
-
-
 def hold_cpu_latency(latency_us: int = 0) -> int:
     """Request at most ``latency_us`` of CPU wake-up latency for as long as the returned file
     descriptor stays open (the kernel drops the request when it is closed, or the process ends).

@@ -17,10 +17,8 @@ import numpy as np
 
 from stillframe.config.scene import Scene, load_scene
 from stillframe.contract import messages, topics
-from stillframe.errors import InputError
 from stillframe.fidelity.auto_model import resolve_model
 from stillframe.middleware import api
-from stillframe.middleware.params import Parameter, SetParametersResult
 from stillframe.middleware.qos import (
     PROFILES,
     Durability,
@@ -28,8 +26,9 @@ from stillframe.middleware.qos import (
     Reliability,
     as_profile,
 )
+from stillframe.node_runtime.declarations import LoopParameterValues
+from stillframe.node_runtime.parameters import declare
 
-MODES = ("lockstep", "realtime")
 #: the topics from the estimator to the simulator, read best effort in real time
 CONTROL_PATH = (topics.STATE_ESTIMATE, topics.TORQUE_CMD, topics.FORCE_CMD)
 #: After the peers are matched, spin this long so that the other side of every match (the
@@ -108,43 +107,13 @@ class LoopParameters:
         return spec.qos
 
 
-def _overrides(value: Any) -> list[str]:
-    if isinstance(value, list) and all(isinstance(v, str) for v in value):
-        return [v for v in value if v]
-    raise InputError(f"parameter 'overrides': expected a list of 'dotted.key=value' strings, "
-                     f"got {value!r}")
-
-
 def declare_loop_parameters(node: api.Node) -> LoopParameters:
-    """``scene`` (path), ``overrides`` (``--set`` strings), ``mode``, ``lockstep_timeout_s``,
-    ``diagnostics_period_s``; InputError naming the parameter when one is wrong."""
-    path = node.declare_parameter("scene", "", read_only=True).value
-    # a string list; the default [""] because a ROS parameter cannot be an empty list
-    overrides = _overrides(node.declare_parameter("overrides", [""], read_only=True).value)
-    mode = node.declare_parameter("mode", "lockstep", read_only=True).value
-    timeout = node.declare_parameter("lockstep_timeout_s", 1.0, read_only=True).value
-    diag = node.declare_parameter("diagnostics_period_s", 1.0, read_only=True).value
-    if not path:
-        raise InputError("parameter 'scene': give the scene file (--ros-args -p scene:=FILE)")
-    if mode not in MODES:
-        raise InputError(f"parameter 'mode': expected one of {', '.join(MODES)}, got {mode!r}")
-    if not timeout > 0:
-        raise InputError(f"parameter 'lockstep_timeout_s': must be > 0, got {timeout}")
-    if not diag > 0:
-        raise InputError(f"parameter 'diagnostics_period_s': must be > 0, got {diag}")
-    scene, _ = resolve_model(load_scene(path, overrides))
-    return LoopParameters(scene, mode, float(timeout), float(diag))
-
-
-def check_settable(parameters: list[Parameter],
-                   settable: frozenset[str] = frozenset()) -> SetParametersResult:
-    """An on-set-parameters check: refuse any parameter a loop node does not change while it
-    runs (the scene, mode, timeouts, ``use_sim_time``, and anything declared later)."""
-    for p in parameters:
-        if p.name not in settable:
-            return SetParametersResult(False, f"parameter {p.name!r} cannot change while the "
-                                              "node runs")
-    return SetParametersResult(True)
+    """The parameters every loop node declares (:class:`.declarations.LoopParameterValues`,
+    InputError naming a wrong one), with the scene loaded and its model resolved."""
+    values = declare(node, LoopParameterValues)
+    scene, _ = resolve_model(load_scene(values.scene, [v for v in values.overrides if v]))
+    return LoopParameters(scene, values.mode, values.lockstep_timeout_s,
+                          values.diagnostics_period_s)
 
 
 class Diagnostics:

@@ -38,6 +38,9 @@ BALANCE_TERMS = ("stored", *ENERGY_TERMS)
 class PHPlant:
     """The frame pHDAE with seeded sensor and process noise and limited actuators."""
 
+    #: steps halved so far (:attr:`Plant.subdivisions`): the AVF step at integrator.dt never is
+    subdivisions = 0
+
     def __init__(self, scene: Scene, period: float, substeps: int) -> None:
         self.period, self.substeps = period, substeps
         self.h = period / substeps

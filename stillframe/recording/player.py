@@ -53,6 +53,9 @@ class Player:
             t.name: node.create_publisher(t.type, t.name, player_offer(t.offered_qos))
             for t in played}
         self.published = 0
+        #: per topic, messages metadata.yaml counts that the pass could not read and publish
+        #: (their type in the storage file disagrees with metadata.yaml's)
+        self.dropped: dict[str, int] = {}
         self._wall0: int | None = None  # wall time (monotonic ns) of the pass's first message
         if clock_hz:
             clock = ClockPublisher(node)
@@ -95,6 +98,7 @@ class Player:
         self._wall0 = None
         if not self.publishers:
             return
+        read = dict.fromkeys(self.publishers, 0)
         for m in read_bag(self.path, messages.TYPESTORE, topics=list(self.publishers)):
             if self._wall0 is None:  # the bag is open: time starts with its first message
                 self._wall0 = time.monotonic_ns()
@@ -103,6 +107,18 @@ class Player:
                 return
             self.publishers[m.topic].publish(m.data)
             self.published += 1
+            read[m.topic] += 1
+        self.dropped = {t.name: t.count - read[t.name] for t in self.summary.topics
+                        if t.name in read and t.count > read[t.name]}
+
+    def dropped_text(self) -> str:
+        """One line on what a pass could not publish, by topic ("" if nothing)."""
+        types = {t.name: (t.type, t.count) for t in self.summary.topics}
+        return "; ".join(
+            f"{topic}: {n} of {types[topic][1]} (none of type {types[topic][0]}, as "
+            "metadata.yaml says, in the storage file)" if n == types[topic][1] else
+            f"{topic}: {n} of {types[topic][1]} (not in the storage file as metadata.yaml "
+            "says)" for topic, n in sorted(self.dropped.items()))
 
     def finish(self) -> bool:
         """Wait (at most ``ACK_TIMEOUT_S`` in all) until subscribers acknowledged everything."""

@@ -30,7 +30,7 @@ from typing import Any
 import numpy as np
 
 from stillframe.config.scene import scene_from_dict
-from stillframe.config.schema import Section
+from stillframe.config.schema import Section, set_dotted, show
 from stillframe.errors import InputError
 from stillframe.studies.executor import Outcome
 from stillframe.studies.vary import (
@@ -44,7 +44,14 @@ from stillframe.studies.vary import (
 
 WHATS: tuple[str, ...] = ("closed-loop", "simulate", "identify")
 NOISE_SEEDS: tuple[str, ...] = ("plant.seed", "sensors.seed", "excitation.seed")
-TIMING: tuple[str, ...] = ("wall_s", "loop_s", "loop_cpu_s", "steps_per_s", "cpu_s")
+TIMING: tuple[str, ...] = ("wall_s", "loop_s", "loop_cpu_s", "steps_per_s", "cpu_s",
+                           "controller_compute_s")
+
+
+def is_timing(column: str) -> bool:
+    """A column measured on the clock (it differs from run to run of the same values): one of
+    :data:`TIMING` or a part of one (``controller_compute_s.p50``)."""
+    return column.split(".", 1)[0] in TIMING
 """Figures that measure the machine, not the run (left out of comparisons)."""
 
 
@@ -100,6 +107,13 @@ def plan(scene: Section, set_overrides: list[str], variations: list[Variation], 
     data = scene.to_dict()
     for v in variations:
         check_nominal(v, lookup(data, v.key))
+        for value in v.values:      # every listed value must make a valid scene, before a run
+            trial = copy.deepcopy(data)
+            set_dotted(trial, v.key, value)
+            try:
+                scene_from_dict(trial)
+            except InputError as exc:
+                raise InputError(f"--vary {v.key}: the value {show(value)}: {exc}") from None
     fixed = {item.partition("=")[0].strip() for item in set_overrides}
     return Study(data, variations, seed, what, fixed)
 

@@ -18,6 +18,7 @@ from __future__ import annotations
 import itertools
 import json
 import math
+import re
 from dataclasses import dataclass
 from typing import Any
 
@@ -104,6 +105,10 @@ def parse_vary(item: str) -> Variation:
         return Variation(key, "grid", values=_grid(body, item))
     if dist.endswith("%") and "," not in dist:
         return Variation(key, "uniform", _percent(dist, item))
+    call = re.match(r"\s*([A-Za-z_]\w*)\s*\(", dist)
+    if call:
+        raise InputError(f"--vary {item}: {call.group(1)}(...) is not a distribution; write "
+                         "uniform:±P%, normal:P%, grid:lo:hi:n, or a list a,b,c")
     if colon and kind.isidentifier() and "," not in kind:
         raise InputError(f"--vary {item}: unknown distribution {kind!r} "
                          "(uniform:±P%, normal:P%, grid:lo:hi:n, or a list a,b,c)")

@@ -264,7 +264,8 @@ def test_garbage_cdr_on_the_wire_is_dropped_and_counted(ros_domain: int) -> None
     """A real rclpy peer puts garbage and truncated CDR on the wire under the right type names
     (rclpy publishes bytes as they are; Cyclone's writer refuses them): a reader on the rclpy
     backend drops and counts them (``malformed_samples``) and reads the rest; a reader on the
-    ``dds`` backend reads the rest too (Cyclone drops the garbage before our code sees it)."""
+    ``dds`` backend reads the rest too, and counts the garbage Cyclone drops before our code
+    sees it (from Cyclone's "deserialization ... failed" lines, issue 31)."""
     readers = {backend: subprocess.Popen(
         [sys.executable, str(REPO_ROOT / "tests" / "support" / "counting_reader.py"), backend],
         env=child_env(), cwd=REPO_ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
@@ -287,4 +288,33 @@ def test_garbage_cdr_on_the_wire_is_dropped_and_counted(ros_domain: int) -> None
     print(f"garbage sent by rclpy {garbage_sent}; read (good, malformed): {read}")
     assert garbage_sent > 0
     assert read["rclpy"][0] > 0 and read["rclpy"][1] > 0
-    assert read["dds"][0] > 0
+    assert read["dds"][0] > 0 and 0 < read["dds"][1] <= garbage_sent
+
+
+def test_cyclones_deserialisation_failures_are_counted_and_passed_on() -> None:
+    """The stderr tap (``middleware/cyclone_log.py``) in a real process: Cyclone's lines for
+    refused samples (as its receive thread writes them, straight to file descriptor 2) are
+    counted under their ROS topic, and every byte still reaches the real stderr."""
+    line = ("1795606091.187346 [226]       recv: data(application, vendor 1.15): "
+            "10f78fd:4f614cfd:0:1503 #70: deserialization rt/frame/{topic}/{type} failed "
+            "(for reasons unknown)\n")
+    script = (
+        "import os, sys\n"
+        "from stillframe.middleware import api\n"
+        "from stillframe.middleware.cyclone_log import count_deserialization_failures\n"
+        "count_deserialization_failures()\n"
+        "for t, ty in [('excitation/wrench', 'geometry_msgs::msg::dds_::WrenchStamped_'),\n"
+        "              ('floor1/imu', 'sensor_msgs::msg::dds_::Imu_')] * 3:\n"
+        f"    os.write(2, {line!r}.format(topic=t, type=ty).encode())\n"
+        "os.write(2, b'other output\\n')\n"
+        "import time\n"
+        "deadline = time.monotonic() + 60    # the tap's thread has counted them all\n"
+        "while sum(api.MALFORMED.values()) < 6 and time.monotonic() < deadline:\n"
+        "    time.sleep(0.01)\n"
+        "print(dict(api.MALFORMED), flush=True)\n")
+    done = subprocess.run([sys.executable, "-c", script], env=child_env(), cwd=REPO_ROOT,
+                          capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == "{'/frame/excitation/wrench': 3, '/frame/floor1/imu': 3}"
+    assert done.stderr.count("deserialization rt/frame/") == 6
+    assert done.stderr.endswith("other output\n")

@@ -6,11 +6,13 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 from rosbags.highlevel import AnyReader
 
@@ -42,6 +44,10 @@ def test_launch_equals_one_process_run(scene: str, ros_domain: int) -> None:
     for key in ("peak_command", "lockstep_timeouts", "steps", "wall_s"):
         assert isinstance(nodes[key], int | float), key
     assert nodes["lockstep_timeouts"] == 0
+    # the managed nodes brought up by the launch (lifecycle), and active to the end
+    for name in ("estimator_node", "controller_node"):
+        assert f"{name}: configured and active" in done.stderr
+        assert nodes["diagnostics"][f"/frame/{name}"]["lifecycle"] == "active"
     reference = one_process(scene, *SHORT)
     assert nodes["steps"] == reference["steps"] == 6 * 32
     # on a mismatch, show what the nodes counted (lost samples, partial updates, timeouts)
@@ -70,6 +76,45 @@ def test_killed_real_node_is_named(ros_domain: int) -> None:
     assert proc.returncode == 1, err[-3000:]
     assert "stillframe launch: error: estimator_node died (killed by SIGKILL)" in err
     assert not any(alive(pid) for pid in pids.values())
+
+
+def test_a_dying_node_leaves_a_partial_result_the_statuses_and_a_closed_bag(
+        tmp_path: Path, ros_domain: int) -> None:
+    """Issue 31 (3): the controller is SIGKILLed once the simulator has run samples (a status
+    line says so; the scene is long enough never to end first). The launcher names it, stops
+    the others with SIGINT, and keeps what the run has: the simulator's samples so far (in the
+    result and the histories), the nodes' statuses and the bag, closed; exit 1."""
+    out = tmp_path / "out"
+    proc = start_launch("--set", "duration=600", "--record", str(tmp_path / "bag"),
+                        "--out", str(out), "--json")
+    pids, lines = wait_for_children(proc, count=4, timeout=120)
+    while not any(int(m.group(1)) > 0 for line in lines
+                  if (m := re.search(r"sim_node: .*\bstep=(\d+)", line))):
+        line = proc.stderr.readline()
+        assert line, f"no status line with a step: {lines[-20:]}"
+        lines.append(line)
+    os.kill(pids["controller_node"], signal.SIGKILL)
+    stdout, err = proc.communicate(timeout=120)
+    assert proc.returncode == 1, err[-3000:]
+    assert "stillframe launch: error: controller_node died (killed by SIGKILL)" in err
+    assert not any(alive(pid) for pid in pids.values())
+    partial = json.loads(stdout)
+    assert partial["complete"] is False
+    assert partial["died"] == {"node": "controller_node", "how": "killed by SIGKILL"}
+    assert partial["stopped"] == {"recorder": "exit code 0", "sim_node": "exit code 0",
+                                  "estimator_node": "exit code 0"}
+    assert 0 < partial["steps"] < partial["steps_planned"] == 600 * 32
+    assert "/frame/sim_node" in partial["diagnostics"]
+    assert json.loads((out / "result.json").read_text()) == {
+        k: v for k, v in partial.items() if k != "scene"}
+    with np.load(out / "result.npz") as histories:
+        assert histories["t"].shape == (partial["steps"],)
+    assert partial["bag"]["closed"] is True
+    with AnyReader([tmp_path / "bag"]) as reader:
+        counts = {c.topic: c.msgcount for c in reader.connections}
+    assert sum(counts.values()) == partial["bag"]["messages"]
+    # the recorder has the simulator's samples up to its last one, not beyond
+    assert 0 < counts["/frame/floor1/imu"] <= partial["steps"] + 1
 
 
 def test_ctrl_c_stops_the_real_nodes_and_the_recorder(tmp_path: Path,

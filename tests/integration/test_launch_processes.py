@@ -26,9 +26,18 @@ from tests.support.middleware import run_stillframe
 SCENE = REPO_ROOT / "scenes" / "thesis_lqg.yaml"
 
 SIM = """\
-import json, sys, time
+import json, os, signal, sys, time
 args = dict(a.split(":=", 1) for a in sys.argv if ":=" in a)
+def stop(*_):
+    # as the real sim_node: interrupted, it writes the samples it ran, marked incomplete
+    with open(args["result_file"], "w") as f:
+        json.dump({{"complete": False, "steps": 7, "steps_planned": 1600}}, f)
+    sys.exit(0)
+signal.signal(signal.SIGINT, stop)
 print("sim argv", json.dumps(sys.argv[1:]), flush=True)
+deadline = time.monotonic() + 60    # a condition to wait for, forced rather than timed
+while {wait_for!r} and not os.path.exists({wait_for!r}) and time.monotonic() < deadline:
+    time.sleep(0.05)
 time.sleep(float({sim_seconds!r}))
 with open(args["result_file"], "w") as f:
     json.dump({result!r}, f)
@@ -47,7 +56,8 @@ from stillframe.node_runtime.support import Diagnostics
 from stillframe.middleware import api
 node = api.create_node("controller_node", namespace=topics.DEFAULT_NAMESPACE)
 diagnostics = Diagnostics(node, 3600.0)
-api.spin_until(node, lambda: diagnostics.pub.get_subscription_count() > 0, 30)
+api.spin_until(node, lambda: diagnostics.pub.get_subscription_count() > 0, 60)
+open("controller_matched", "w").close()     # the stand-in simulator ends only after this
 print("waiting", flush=True)
 while api.ok():
     node.spin_once(0.1)
@@ -59,7 +69,7 @@ RESULT = {"reduction_pct": {"displacement": [71.0, 75.0, 57.0], "velocity": [73.
 
 
 def write_stand_ins(root: Path, sim_seconds: float = 1.0, life: float = 3600,
-                    code: int = 0) -> None:
+                    code: int = 0, wait_for: str = "") -> None:
     """Packages sim_node/estimator_node/controller_node with a ``node`` module each: the sim
     writes RESULT after ``sim_seconds``; the others wait for SIGINT (exit 0) or exit with
     ``code`` after ``life`` seconds."""
@@ -67,7 +77,7 @@ def write_stand_ins(root: Path, sim_seconds: float = 1.0, life: float = 3600,
         (root / name).mkdir()
         (root / name / "__init__.py").write_text("")
     (root / "sim_node" / "node.py").write_text(
-        SIM.format(sim_seconds=sim_seconds, result=RESULT))
+        SIM.format(sim_seconds=sim_seconds, result=RESULT, wait_for=wait_for))
     (root / "estimator_node" / "node.py").write_text(WAITER.format(life=3600, code=0))
     (root / "controller_node" / "node.py").write_text(WAITER.format(life=life, code=code))
 
@@ -114,7 +124,7 @@ def test_node_command_passes_overrides_through_the_ros_parameter_parser() -> Non
     overrides = ["duration=4", "plant.process_noise_std=[0, 0, 0, 0, 0, 0, 0, 0]",
                  "description=a b: c"]
     argv = node_command("sim_node", Path("/s/scene.yaml"), overrides, "lockstep",
-                        {"result_file": "/tmp/r.json", "lockstep_timeout_s": 2.0})
+                        params={"result_file": "/tmp/r.json", "lockstep_timeout_s": 2.0})
     assert argv[1:3] == ["-m", "sim_node.node"]
     params = node_overrides(parse_ros_args(argv[3:]), "/sim_node")
     assert params == {"scene": "/s/scene.yaml", "mode": "lockstep", "overrides": overrides,
@@ -149,16 +159,20 @@ def test_launch_passes_sim_nodes_result_through_and_stops_the_others(
     err = "".join(lines) + err
     sim_argv = json.loads(next(line for line in err.splitlines() if "sim argv" in line)
                           .split("sim argv ", 1)[1])
-    assert "mode:=realtime" in sim_argv and 'overrides:=["duration=60"]' in sim_argv
+    # the resolved scene (duration 60 in it), no overrides to apply again
+    assert "mode:=realtime" in sim_argv and not any("overrides:=" in a for a in sim_argv)
+    assert any(a.startswith("scene:=") and a.endswith("/scene.resolved.yaml") for a in sim_argv)
     assert not any(alive(pid) for pid in pids.values())
 
 
 def test_the_nodes_last_statuses_written_as_they_stop_are_in_the_result(
         tmp_path: Path, ros_domain: int) -> None:
     """The controller reports only after the launcher stopped it (forced: its status period is
-    an hour): the launcher still takes that status before it returns. The simulator's 3 s
-    leave the controller time to match the launcher's reader."""
-    write_stand_ins(tmp_path, sim_seconds=3.0)
+    an hour): the launcher still takes that status before it returns. The stand-in simulator
+    ends only once the controller's status writer matched the launcher's reader (forced: it
+    waits for the file the controller writes then, not for a time that a loaded machine may
+    not keep)."""
+    write_stand_ins(tmp_path, sim_seconds=0.2, wait_for="controller_matched")
     (tmp_path / "controller_node" / "node.py").write_text(STATUS_AT_STOP.format())
     proc = start_launch(tmp_path, "--json", "--mode", "realtime")
     out, err = proc.communicate(timeout=120)
@@ -181,16 +195,43 @@ def test_ctrl_c_stops_every_child(tmp_path: Path, ros_domain: int) -> None:
 @pytest.mark.parametrize("how", ["killed", "exit"])
 def test_a_dead_node_is_named_and_the_rest_stopped(
         tmp_path: Path, ros_domain: int, how: str) -> None:
+    """The others are stopped cleanly (SIGINT, exit 0), and what the run has is kept: the
+    simulator's partial result, marked incomplete, with the dead node and how, on stdout
+    (``--json``) and under ``--out``; exit 1."""
     write_stand_ins(tmp_path, sim_seconds=3600, life=3600 if how == "killed" else 1, code=3)
-    proc = start_launch(tmp_path)
+    proc = start_launch(tmp_path, "--json", "--out", "out")
     pids, _ = wait_for_children(proc)
     if how == "killed":
         os.kill(pids["controller_node"], signal.SIGKILL)
-    _out, err = proc.communicate(timeout=60)
+    out, err = proc.communicate(timeout=60)
     assert proc.returncode == 1, err
     expected = "killed by SIGKILL" if how == "killed" else "exit code 3"
     assert f"stillframe launch: error: controller_node died ({expected})" in err
     assert not any(alive(pid) for pid in pids.values())
+    partial = {"complete": False, "steps": 7, "steps_planned": 1600,
+               "died": {"node": "controller_node", "how": expected},
+               "stopped": {"sim_node": "exit code 0", "estimator_node": "exit code 0"},
+               "diagnostics": {}}
+    assert json.loads(out) == {"scene": "thesis_lqg", **partial}
+    assert json.loads((tmp_path / "out" / "result.json").read_text()) == partial
+
+
+def test_a_killed_simulator_still_leaves_the_statuses_and_who_died(
+        tmp_path: Path, ros_domain: int) -> None:
+    """The simulator itself SIGKILLed: no samples to keep, and the partial result says so (no
+    ``steps``), with who died and how the others stopped; exit 1."""
+    write_stand_ins(tmp_path, sim_seconds=3600)
+    proc = start_launch(tmp_path, "--out", "out")
+    pids, _ = wait_for_children(proc)
+    os.kill(pids["sim_node"], signal.SIGKILL)
+    out, err = proc.communicate(timeout=60)
+    assert proc.returncode == 1, err
+    assert "stillframe launch: error: sim_node died (killed by SIGKILL)" in err
+    assert "partial result (complete: false): no samples; written to out/result.json" in out
+    assert json.loads((tmp_path / "out" / "result.json").read_text()) == {
+        "complete": False, "died": {"node": "sim_node", "how": "killed by SIGKILL"},
+        "stopped": {"estimator_node": "exit code 0", "controller_node": "exit code 0"},
+        "diagnostics": {}}
 
 
 def test_killed_launcher_leaves_no_orphans(tmp_path: Path, ros_domain: int) -> None:
@@ -212,7 +253,7 @@ def test_killed_launcher_leaves_no_orphans(tmp_path: Path, ros_domain: int) -> N
     (["launch", str(SCENE), "--record", str(REPO_ROOT / "bags" / "hammer")],
      f"stillframe launch: error: --record {REPO_ROOT / 'bags' / 'hammer'}: already exists"),
     (["launch", str(SCENE), "--set", "duration=-1"],
-     "stillframe launch: error: duration: must be > 0 (got -1.0)"),
+     "stillframe launch: error: duration: must lie in (0, 1e+06] (got -1.0)"),
     (["reproduce", str(REPO_ROOT / "scenes" / "hammer_test.yaml")],
      f"stillframe reproduce: error: {REPO_ROOT / 'scenes' / 'hammer_test.yaml'}: "
      "controller.type: the scene has no controller to evaluate"),

@@ -16,7 +16,7 @@ from stillframe.config.scene import load_scene
 from stillframe.errors import InputError
 from stillframe.locations import SCENES_DIR
 from stillframe.studies.cluster import local_processes
-from stillframe.studies.montecarlo import TIMING, plan
+from stillframe.studies.montecarlo import is_timing, plan
 from stillframe.studies.vary import Variation, combinations, draw, parse_vary
 
 SCENE = str(SCENES_DIR / "lqg_mismatch.yaml")
@@ -83,7 +83,7 @@ def _study(capsys, out: Path, *extra: str) -> tuple[dict, list[dict]]:
 
 
 def _without_timing(rows: list[dict]) -> list[dict]:
-    return [{k: v for k, v in r.items() if k not in TIMING} for r in rows]
+    return [{k: v for k, v in r.items() if not is_timing(k)} for r in rows]
 
 
 
@@ -106,7 +106,7 @@ def test_only_reproduces_a_run_bit_for_bit_and_the_external_cluster_gives_the_sa
         assert main(["montecarlo", *STUDY, "--only", str(run_id), "--json"]) == 0
         one = json.loads(capsys.readouterr().out)
         alone = {k: repr(v) if isinstance(v, float) else str(v) for k, v in one.items()
-                 if k not in TIMING}
+                 if not is_timing(k)}
         assert alone == _without_timing([rows[run_id]])[0]
     with local_processes(2) as address:
         external, external_rows = _study(capsys, tmp_path / "external", "--scheduler", address)
@@ -116,15 +116,16 @@ def test_only_reproduces_a_run_bit_for_bit_and_the_external_cluster_gives_the_sa
 
 
 def test_a_failing_run_is_recorded_and_the_others_finish(tmp_path, capsys):
-    """sensors.rate_hz = 30 Hz: 1/30 s is no whole number of 1/256 s steps; the scene refuses."""
+    """E = 1e13 Pa: a valid scene whose model the run refuses (the thesis's Rayleigh damping
+    gives a structural mode a negative damping ratio)."""
     out = tmp_path / "fail"
-    assert main(["montecarlo", SCENE, *SHORT, "--vary", "sensors.rate_hz=32,30", "--runs", "4",
-                 "--workers", "1", "--out", str(out), "--json"]) == 0
+    assert main(["montecarlo", SCENE, *SHORT, "--vary", "rig.columns.youngs_modulus=207e9,1e13",
+                 "--runs", "4", "--workers", "1", "--out", str(out), "--json"]) == 0
     document = json.loads(capsys.readouterr().out)
     with (out / "runs.csv").open() as handle:
         rows = list(csv.DictReader(handle))
     assert [r["status"] for r in rows] == ["ok", "failed", "ok", "failed"]
-    assert "does not divide the sample period" in rows[1]["error"]
+    assert "negative damping ratio" in rows[1]["error"]
     assert document["runs"] == 4 and document["failed"] == 2
     assert document["fractions"]["failed"] == 0.5
     assert set(document["errors"]) == {"1", "3"}
@@ -134,13 +135,22 @@ def test_a_failing_run_is_recorded_and_the_others_finish(tmp_path, capsys):
 
 def test_bad_study_input_is_one_line_exit_2(capsys):
     assert main(["montecarlo", SCENE, "--vary", "rig.floor_masses=±ten%"]) == 2
-    assert main(["montecarlo", SCENE, "--runs", "0"]) == 2
+    with pytest.raises(SystemExit) as usage:     # a usage error: argparse exits 2
+        main(["montecarlo", SCENE, "--runs", "0"])
+    assert usage.value.code == 2
     assert main(["montecarlo", SCENE, "--scheduler", "localhost:1"]) == 2
     assert main(["montecarlo", SCENE, "--runs", "3", "--only", "3"]) == 2
     assert main(["montecarlo", SCENE, "--target", "displacement>50"]) == 2
     assert main(["montecarlo", SCENE, "--seed", "-1"]) == 2
+    # issue 31: a call-like distribution was split at its comma; a listed value that makes no
+    # valid scene (sensors.rate_hz = 30 Hz: no whole number of 1/256 s steps) is refused
+    # before any run
+    assert main(["montecarlo", SCENE, "--vary", "duration=normal(1,2"]) == 2
+    assert main(["montecarlo", SCENE, "--vary", "sensors.rate_hz=32,30"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 6 and all(line.startswith("stillframe montecarlo: error: ") for line in err)
+    assert len(err) == 8 and all(line.startswith("stillframe montecarlo: error: ") for line in err)
+    assert "normal(...) is not a distribution" in err[6]
+    assert "the value 30: integrator.dt" in err[7]
 
 
 @pytest.mark.long

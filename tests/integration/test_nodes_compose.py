@@ -29,7 +29,7 @@ def test_composed_run_equals_one_process(ros_domain: int, tmp_path: Path, compos
                                          backend: str) -> None:
     """On rclpy (no intra-process hand-over there) the composed nodes reach each other through
     Fast DDS, and the numbers are the same."""
-    result = run_scene(SCENE, SHORT_LQG, tmp_path, record=tmp_path / "bag", backends=[backend],
+    result = run_scene(SCENE, SHORT_LQG, out=tmp_path, record=tmp_path / "bag", backends=[backend],
                        compose=compose)
     reference = run_closed_loop(thesis_scene("thesis_lqg", SHORT_LQG))
     e = result.evaluation

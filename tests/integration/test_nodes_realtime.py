@@ -18,6 +18,7 @@ from stillframe.contract import topics
 from stillframe.locations import REPO_ROOT
 from stillframe.loop.closed_loop import run_closed_loop
 from stillframe.middleware.api import create_node
+from stillframe.node_runtime.declarations import SimParameterValues
 from stillframe.node_runtime.support import LoopParameters
 from stillframe.plant.frame_plant import Plant
 from tests.support.middleware import child_env, finish, start_python, wait_for_line
@@ -63,7 +64,8 @@ def test_realtime_sim_counts_overruns_when_it_cannot_keep_up(ros_domain: int) ->
     period, n = 1.0 / scene.sensors.rate_hz, 10
     node = create_node("sim_node", namespace=topics.DEFAULT_NAMESPACE, argv=["test"])
     try:
-        sim = SimNode(node, LoopParameters(scene, "realtime", 1.0, 1.0), discovery_timeout_s=5.0)
+        sim = SimNode(node, LoopParameters(scene, "realtime", 1.0, 1.0),
+                      {SimParameterValues: SimParameterValues(discovery_timeout_s=5.0)})
         advance = sim.plant.advance
 
         def slow_advance(control: np.ndarray) -> np.ndarray:
@@ -112,7 +114,8 @@ def test_realtime_sim_holds_zero_while_half_the_commands_miss(ros_domain: int) -
     node = create_node("sim_node", namespace=topics.DEFAULT_NAMESPACE, argv=["test"])
     try:
         wait_for_line(commander, "ready")
-        sim = SimNode(node, LoopParameters(scene, "realtime", 1.0, 1.0), discovery_timeout_s=2.0)
+        sim = SimNode(node, LoopParameters(scene, "realtime", 1.0, 1.0),
+                      {SimParameterValues: SimParameterValues(discovery_timeout_s=2.0)})
         history = sim.run()
     finally:
         node.destroy_node()

@@ -35,7 +35,8 @@ def launch_and_read(tmp_path: Path, extra: list[str]) -> tuple[np.ndarray, dict,
     done = run_stillframe("launch", "scenes/ph_passivity.yaml", *sets, "--record", str(bag),
                           "--json", timeout=300)
     assert done.returncode == 0, done.stderr[-3000:]
-    assert json.loads(done.stdout)["steps"] == 96
+    result = json.loads(done.stdout)
+    assert result["steps"] == 96
     rows, labels, status = [], set(), None
     with next(bag.glob("*.mcap")).open("rb") as stream:
         for schema, channel, message in make_reader(stream).iter_messages():
@@ -48,6 +49,11 @@ def launch_and_read(tmp_path: Path, extra: list[str]) -> tuple[np.ndarray, dict,
                 for s in msg.status:
                     if s.name.endswith("sim_node"):
                         status = (s.level, s.message, {kv.key: kv.value for kv in s.values})
+    # the launch's result carries the sim's last balance and check, as /diagnostics did
+    values = status[2]
+    final = result["energy_balance"]
+    assert final["passivity_violations"] == int(values["passivity_violations"])
+    assert final["energy_stored_J"] == pytest.approx(rows[-1][1], rel=1e-12)
     return np.array(rows), status, sorted(labels)
 
 

@@ -38,6 +38,9 @@ def test_three_processes_on_the_ph_plant_equal_one_process(ros_domain: int,
     reference = run_closed_loop(thesis_scene("ph_passivity", SHORT))
     assert result["reduction_pct"] == reference.evaluation["reduction_pct"]
     assert result["plant"]["model"] == "ph2"
+    # the energy balance and the passivity check too (floats through JSON: to the last bit)
+    assert result["energy_balance"] == reference.evaluation["energy_balance"]
+    assert result["energy_balance"]["passivity_violations"] == 0
     np.testing.assert_array_equal(hist["truth"], reference.truth)
     np.testing.assert_array_equal(hist["command"], reference.command)
 
@@ -57,6 +60,7 @@ def test_three_processes_on_the_ph_plant_with_process_noise_equal_one_process(
     result, hist = run_loop(tmp_path, "thesis_lqg", LQG_PH)
     reference = run_closed_loop(thesis_scene("thesis_lqg", LQG_PH))
     assert result["plant"]["model"] == "ph3"
+    assert result["energy_balance"] == reference.evaluation["energy_balance"]
     np.testing.assert_array_equal(hist["truth"], reference.truth)
     np.testing.assert_array_equal(hist["command"], reference.command)
 

@@ -16,6 +16,7 @@ from pathlib import Path
 import pytest
 from mcap.reader import make_reader
 
+from stillframe.bags.full_disk import RESERVE_NAME
 from stillframe.bags.storage import read_bag
 from stillframe.contract import messages
 from stillframe.contract.messages import TYPESTORE
@@ -102,6 +103,7 @@ def test_killed_recorder_bag_reindexed_up_to_last_complete_chunk(ros_domain: int
                                                                  tmp_path: Path) -> None:
     bag, sent, _err = _run(tmp_path, signal.SIGKILL, 3000)
     assert not (bag / "metadata.yaml").exists()
+    assert (bag / RESERVE_NAME).exists()     # the killed recorder's room for its summary
     report = subprocess.run([sys.executable, "-m", "stillframe", "bag", "reindex", str(bag),
                              "--json"], env=child_env(), cwd=REPO_ROOT, capture_output=True,
                             text=True, check=True)
@@ -114,3 +116,4 @@ def test_killed_recorder_bag_reindexed_up_to_last_complete_chunk(ros_domain: int
     total = sum(len(v) for v in found.values())
     assert total == summary["messages"] and 0 < total < sent * len(TOPICS)
     assert (bag / f"{bag.name}.mcap.damaged").exists()
+    assert not (bag / RESERVE_NAME).exists()

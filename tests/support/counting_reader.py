@@ -1,8 +1,8 @@
 """A reader that counts, run as ``python tests/support/counting_reader.py BACKEND``: it reads
 ``/frame/floor1/imu``, ``/frame/pendulum/joint_states`` and ``/frame/excitation/wrench``
 (reliable, transient local) on ``BACKEND`` until SIGTERM and prints ``read GOOD MALFORMED``
-(samples decoded, and samples dropped as malformed by the delivery path every subscription
-uses)."""
+(samples decoded, and samples dropped as malformed: by the delivery path every subscription
+uses, and on the ``dds`` backend by Cyclone before it, counted from its log)."""
 
 from __future__ import annotations
 
@@ -14,6 +14,10 @@ import sys
 def main() -> None:
     os.environ["STILLFRAME_RMW"] = sys.argv[1]
     from stillframe.middleware import api
+    from stillframe.middleware.cyclone_log import count_deserialization_failures
+
+    if sys.argv[1] == "dds":     # as a node executable does (api.node_main)
+        count_deserialization_failures()
     from stillframe.middleware.qos import Durability, QoSProfile, Reliability
 
     qos = QoSProfile(depth=5, reliability=Reliability.RELIABLE,

@@ -1,10 +1,11 @@
 """``stillframe bag info DIR [--json]``: what ``ros2 bag info`` shows about a rosbag2 bag.
-``stillframe bag reindex DIR [--json]``: recover a bag whose recorder was killed, up to its last
-complete chunk (:mod:`stillframe.bags.reindex`)."""
+``stillframe bag reindex DIR [--json]``: recover a bag whose recorder was killed or whose file
+was cut: every whole message before the cut (:mod:`stillframe.bags.reindex`)."""
 
 from __future__ import annotations
 
 import argparse
+import sys
 
 from stillframe.app.commands.common import add_json_argument, emit_json
 from stillframe.text_table import format_table
@@ -18,8 +19,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     info.add_argument("bag", metavar="DIR", help="rosbag2 directory (metadata.yaml + .mcap/.db3)")
     add_json_argument(info)
     info.set_defaults(func=run_info)
-    again = verbs.add_parser("reindex", help="recover a bag whose recorder was killed (like "
-                             "ros2 bag reindex): keeps every complete chunk")
+    again = verbs.add_parser("reindex", help="recover a bag whose recorder was killed or whose "
+                             "file was cut (like ros2 bag reindex): keeps every whole message")
     again.add_argument("bag", metavar="DIR", help="rosbag2 directory with one .mcap file")
     add_json_argument(again)
     again.set_defaults(func=run_reindex)
@@ -44,9 +45,14 @@ def run_reindex(args: argparse.Namespace) -> int:
     result = reindex(args.bag, TYPESTORE)
     if args.json:
         emit_json({"bag": str(result.path), "truncated": result.truncated,
-                   "messages": result.total, "topics": result.counts})
+                   "messages": result.total, "topics": result.counts,
+                   "from_partial_chunk": result.from_partial_chunk, "dropped": result.dropped})
         return 0
-    state = "cut short; kept its complete chunks" if result.truncated else "complete"
-    print(f"{result.path}: {state}: {result.total} messages")
+    state = ("cut short; kept every whole message" if result.truncated else "complete")
+    partial = (f" ({result.from_partial_chunk} from the chunk it was cut in)"
+               if result.from_partial_chunk else "")
+    print(f"{result.path}: {state}: {result.total} messages{partial}")
+    for reason, count in result.dropped.items():
+        print(f"{result.path}: dropped {count} ({reason.replace('_', ' ')})", file=sys.stderr)
     print(format_table(["topic", "messages"], [[t, n] for t, n in result.counts.items()]))
     return 0

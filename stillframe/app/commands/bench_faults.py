@@ -14,7 +14,7 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
-from stillframe.app.commands.common import add_json_argument, emit_json
+from stillframe.app.commands.common import add_json_argument, emit_json, seconds
 from stillframe.app.commands.launch import add_netns_arguments
 from stillframe.app.net_faults import FAULTS, check_tools, fault_named
 from stillframe.errors import InputError
@@ -27,7 +27,7 @@ def register(benches: argparse._SubParsersAction) -> None:
     parser = benches.add_parser("faults", help="the loop on three hosts (network namespaces) "
                                                "under network faults",
                                 description=__doc__.split("\n\n", 1)[1])
-    parser.add_argument("--duration", type=float, default=10.0, metavar="S",
+    parser.add_argument("--duration", type=seconds, default=10.0, metavar="S",
                         help="simulated seconds of each run, control from half-time "
                              "(default 10)")
     parser.add_argument("--fault", dest="faults", action="append", default=[], metavar="NAME",

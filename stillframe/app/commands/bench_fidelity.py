@@ -12,7 +12,7 @@ import sys
 from dataclasses import asdict
 from pathlib import Path
 
-from stillframe.app.commands.common import add_json_argument, emit_json
+from stillframe.app.commands.common import add_json_argument, emit_json, seconds
 from stillframe.app.commands.montecarlo import add_executor_arguments
 from stillframe.errors import InputError
 from stillframe.text_table import format_table
@@ -24,7 +24,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     parser.add_argument("--plots", type=Path, metavar="DIR", help="write PNG diagrams here")
     parser.add_argument("--quick", action="store_true",
                         help="CI-sized run: 4 models, 3 steps, 1 s scenes")
-    parser.add_argument("--duration", type=float, help="simulated seconds per run")
+    parser.add_argument("--duration", type=seconds, help="simulated seconds per run")
     parser.add_argument("--write-table", type=Path, metavar="FILE",
                         help="write the model.type: auto table (JSON) here")
     add_executor_arguments(parser)

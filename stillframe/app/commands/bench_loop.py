@@ -31,7 +31,7 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
-from stillframe.app.commands.common import add_json_argument, emit_json
+from stillframe.app.commands.common import add_json_argument, emit_json, seconds
 from stillframe.app.commands.launch import (
     add_compose_arguments,
     add_realtime_arguments,
@@ -40,6 +40,12 @@ from stillframe.app.commands.launch import (
 from stillframe.app.launcher import run_scene
 from stillframe.app.run_verdict import watchdog_zeros
 from stillframe.bench.latency import LatencyLog
+from stillframe.bench.recorder_load import (
+    RecorderRun,
+    completeness,
+    recorder_process,
+    write_limit,
+)
 from stillframe.bench.stall_probe import stall_probe
 from stillframe.config.scene import load_scene
 from stillframe.contract.topics import DEFAULT_NAMESPACE, FLOOR_IMU, FORCE_CMD, TORQUE_CMD
@@ -59,7 +65,7 @@ ONE_PROCESS_RUNS = 3
 def register(benches: argparse._SubParsersAction) -> None:
     parser = benches.add_parser("loop", help="closed-loop latency (real time) and lock-step speed",
                                 description=__doc__.split("\n\n", 1)[1])
-    parser.add_argument("--duration", type=float, default=10.0, metavar="S",
+    parser.add_argument("--duration", type=seconds, default=10.0, metavar="S",
                         help="seconds of each real-time run (default 10)")
     parser.add_argument("--rate", dest="rates", action="append", type=float, default=[],
                         metavar="HZ", help="real-time rate (repeatable; default 100 and 1000)")
@@ -68,6 +74,11 @@ def register(benches: argparse._SubParsersAction) -> None:
     parser.add_argument("--backend", dest="backends", action="append", default=[],
                         choices=api.BACKENDS,
                         help="measure this backend (repeatable; default: every one installed)")
+    parser.add_argument("--record", action="store_true",
+                        help="run each real-time run twice, without and with `stillframe record "
+                             "--all` beside it: the recorder's CPU time per message, its "
+                             "messages/s, whether the bag is complete, its write path against "
+                             "a bare mcap writer")
     parser.add_argument("--stall-probe", action="store_true",
                         help="run cyclictest (rt-tests, root) beside each real-time run: "
                              "the machine's stalls of 1 ms or more, and its worst")
@@ -156,25 +167,42 @@ def observer_realtime(practices: str) -> Iterator[None]:
 def realtime(rate_hz: float, duration: float, out: Path, backend: str,
              rt: tuple[str, list[int]] = ("", []),
              monitor_args: list[str] | None = None, compose: str = "",
-             probe: bool = False) -> dict[str, Any]:
+             probe: bool = False, record: bool = False) -> dict[str, Any]:
     """The LQG scene in real time at ``rate_hz`` through the nodes on ``backend`` (composed as
     ``compose`` says): latency and deadline figures seen by an observer here;
-    ``monitor_args`` start a monitor beside them; ``probe``: cyclictest beside them."""
+    ``monitor_args`` start a monitor beside them; ``probe``: cyclictest beside them;
+    ``record``: ``stillframe record --all`` beside them (:mod:`stillframe.bench.recorder_load`)."""
     log = LatencyLog(round(1e9 / rate_hz))
     with (observer_backend(backend), observer_realtime(rt[0]),
-          stall_probe() if probe else contextlib.nullcontext() as stalls):
-        result = run_scene(SCENE, realtime_overrides(rate_hz, duration), out, "realtime",
+          stall_probe() if probe else contextlib.nullcontext() as stalls,
+          recorder_process(out / "bag", backend) if record
+          else contextlib.nullcontext() as recorder):
+        result = run_scene(SCENE, realtime_overrides(rate_hz, duration), out=out, mode="realtime",
                            prepare=observe(log), backends=[backend], rt=rt[0], rt_cpus=rt[1],
                            monitor_args=monitor_args, compose=compose)
     e = result.evaluation
+    recorded = recorder_figures(recorder, e["steps"], rate_hz) if recorder else {}
     summary = log.summary()
     zeros = watchdog_zeros(result.diagnostics)
     return {"backend": backend, "compose": compose, "rate_hz": rate_hz, "rt": rt[0],
             "rt_cpus": rt[1], **summary, "watchdog_zeros": zeros,
             "within_period_pct": within_period_pct(summary, zeros or 0),
             "sim_overruns": e.get("overruns"), "sim_deadline_misses": e.get("deadline_misses"),
-            "steps": e["steps"], "load_1min": os.getloadavg()[0],
+            "steps": e["steps"], "degraded_samples": e.get("degraded_samples"),
+            "load_1min": os.getloadavg()[0], "record": record, **recorded,
             **(stalls.summary if stalls else {})}
+
+
+def recorder_figures(recorder: RecorderRun, steps: int, rate_hz: float) -> dict[str, Any]:
+    """The recorder's CPU time per message (from its ready line to its exit, discovery and
+    closing the bag included), the messages it wrote per second of the run, the per-step topics
+    it holds against ``steps``, and its write path against a bare mcap writer."""
+    counts = completeness(recorder.bag, steps, rate_hz)
+    n = counts["bag_messages"]
+    return {**counts, "recorder_cpu_s": recorder.cpu_s,
+            "recorder_cpu_us_per_msg": 1e6 * recorder.cpu_s / n if n else float("nan"),
+            "recorder_msgs_per_s": n * rate_hz / steps if steps else float("nan"),
+            **write_limit(recorder.bag)}
 
 
 def within_period_pct(summary: dict[str, Any], zeros: int) -> float:
@@ -227,12 +255,12 @@ def lockstep(out: Path, backend: str, one: dict[str, Any], compose: str,
     composed in one process."""
     scene = load_scene(SCENE)
     started = time.perf_counter()
-    nodes = run_scene(SCENE, [], out, "lockstep", backends=[backend], rt=rt[0],
+    nodes = run_scene(SCENE, out=out, mode="lockstep", backends=[backend], rt=rt[0],
                       rt_cpus=rt[1]).evaluation
     launch_wall = time.perf_counter() - started
     composed = {}
     if compose:
-        c = run_scene(SCENE, [], out / "composed", "lockstep", backends=[backend],
+        c = run_scene(SCENE, out=out / "composed", mode="lockstep", backends=[backend],
                       compose=compose, rt=rt[0], rt_cpus=rt[1]).evaluation
         composed = {"compose": compose, "composed_steps_per_s": c["steps"] / c["wall_s"],
                     "composed_over_one_process": one["loop_s"] / c["wall_s"],
@@ -251,6 +279,26 @@ def lockstep(out: Path, backend: str, one: dict[str, Any], compose: str,
     }
 
 
+def recorder_table(rows: list[dict[str, Any]]) -> str:
+    """Each real-time run without and with the recorder: the loop's figures, the recorder's
+    cost and throughput, and whether the bag holds every per-step sample."""
+    def recorded(r: dict[str, Any], key: str, form: str) -> str:
+        return format(r[key], form) if r["record"] else "-"
+
+    return format_table(
+        ["backend", "rate [Hz]", "recorder", "sim deadline misses", "degraded", "p50 [us]",
+         "p99 [us]", "recorder CPU [us/msg]", "recorded [msg/s]", "per-step in bag / steps",
+         "holes", "write path [msg/CPU s]", "bare mcap [msg/CPU s]"],
+        [[r["backend"], f"{r['rate_hz']:g}", "yes" if r["record"] else "no",
+          r["sim_deadline_misses"], "-" if r["degraded_samples"] is None else r["degraded_samples"],
+          f"{r['p50_us']:.0f}", f"{r['p99_us']:.0f}",
+          recorded(r, "recorder_cpu_us_per_msg", ".1f"), recorded(r, "recorder_msgs_per_s", ".0f"),
+          f"{r['per_step_min']} / {r['steps']}" if r["record"] else "-",
+          r["per_step_holes"] if r["record"] else "-",
+          recorded(r, "write_path_msgs_per_s", ".0f"), recorded(r, "mcap_msgs_per_s", ".0f")]
+         for r in rows])
+
+
 def run(args: argparse.Namespace) -> int:
     if not args.duration >= 1.0:
         raise InputError("bench loop: --duration must be >= 1 s")
@@ -267,11 +315,15 @@ def run(args: argparse.Namespace) -> int:
     with tempfile.TemporaryDirectory(prefix="stillframe-bench-loop-") as tmp:
         for backend in backends:
             for rate in rates:
-                print(f"{backend}: real time at {rate:g} Hz for {args.duration:g} s"
-                      + (f" (--rt {rt[0]})" if rt[0] else ""), file=sys.stderr)
-                rows.append(realtime(rate, args.duration, Path(tmp) / f"{backend}{rate:g}",
-                                     backend, rt, compose=args.compose,
-                                     probe=args.stall_probe))
+                for record in (False, True) if args.record else (False,):
+                    print(f"{backend}: real time at {rate:g} Hz for {args.duration:g} s"
+                          + (f" (--rt {rt[0]})" if rt[0] else "")
+                          + (", recorded" if record else ""), file=sys.stderr)
+                    rows.append(realtime(
+                        rate, args.duration,
+                        Path(tmp) / f"{backend}{rate:g}{'-recorded' if record else ''}",
+                        backend, rt, compose=args.compose, probe=args.stall_probe,
+                        record=record))
             if args.lockstep:
                 print(f"{backend}: lock-step, the full LQG scene", file=sys.stderr)
                 speeds.append(lockstep(Path(tmp) / f"{backend}-lockstep", backend, one,
@@ -293,6 +345,8 @@ def run(args: argparse.Namespace) -> int:
           r["unobserved"], r["sim_overruns"] if r["sim_overruns"] is not None else "-",
           f"{r['probe_stalls']} ({r['probe_max_us']})" if "probe_stalls" in r else "-",
           f"{r['load_1min']:.2f}"] for r in rows]))
+    if args.record:
+        print(recorder_table(rows))
     print(format_table(["figure", "backend", "measured", "goal", "met"],
                        [[g["figure"], g["backend"], f"{g['value']:.4g}", g["goal"],
                          "yes" if g["met"] else "NO"] for g in goals]))

@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 
 from stillframe.app.commands.bench_loop import SCENE, observer_backend, realtime
-from stillframe.app.commands.common import add_json_argument, emit_json
+from stillframe.app.commands.common import add_json_argument, emit_json, seconds
 from stillframe.errors import InputError
 from stillframe.middleware import api
 from stillframe.monitor.foxglove_client import Capture, capture
@@ -45,7 +45,7 @@ def register(benches: argparse._SubParsersAction) -> None:
                         help="runs of each kind, in alternating order (default 3)")
     parser.add_argument("--rate", type=float, default=1000.0, metavar="HZ",
                         help="sample rate of the real-time runs (default 1000)")
-    parser.add_argument("--duration", type=float, default=10.0, metavar="S",
+    parser.add_argument("--duration", type=seconds, default=10.0, metavar="S",
                         help="seconds of each real-time run (default 10)")
     parser.add_argument("--watch", choices=WATCH, default="every-topic",
                         help="what watches the monitor besides the dashboard page: a Foxglove "
@@ -146,7 +146,7 @@ def one_run(out: Path, mode: str, watched: str | None, rate_hz: float, duration:
             figures = realtime(rate_hz, duration, out, backend, monitor_args=monitor_args)
         else:
             with observer_backend(backend):
-                evaluation = run_scene(SCENE, [], out, mode, backends=[backend],
+                evaluation = run_scene(SCENE, out=out, mode=mode, backends=[backend],
                                        monitor_args=monitor_args).evaluation
             figures = {"steps": evaluation["steps"],
                        "steps_per_s": evaluation["steps"] / evaluation["wall_s"]}

@@ -41,9 +41,9 @@ def register(benches: argparse._SubParsersAction) -> None:
 
 
 def _timing_free(rows: list[dict]) -> list[dict]:
-    from stillframe.studies.montecarlo import TIMING
+    from stillframe.studies.montecarlo import is_timing
 
-    return [{k: v for k, v in r.items() if k not in TIMING} for r in rows]
+    return [{k: v for k, v in r.items() if not is_timing(k)} for r in rows]
 
 
 def run(args: argparse.Namespace) -> int:

@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from stillframe.app.commands.common import add_json_argument, emit_json
+from stillframe.app.commands.common import add_json_argument, emit_json, seconds
 from stillframe.errors import InputError
 from stillframe.locations import SCENES_DIR
 from stillframe.middleware import api
@@ -50,7 +50,7 @@ PLANTS: tuple[tuple[str, list[str]], ...] = (
 def register(benches: argparse._SubParsersAction) -> None:
     parser = benches.add_parser("scaling", help="cost per lock-step sample against plant size",
                                 description=__doc__.split("\n\n", 1)[1])
-    parser.add_argument("--duration", type=float, default=4.0, metavar="S",
+    parser.add_argument("--duration", type=seconds, default=4.0, metavar="S",
                         help="simulated seconds per run (default 4: 128 samples)")
     parser.add_argument("--no-nodes", action="store_true",
                         help="one process only (no node processes)")
@@ -98,7 +98,7 @@ def through_nodes(sets: list[str], out: Path, backend: str) -> dict[str, Any]:
     lock-step timeouts (a sample the simulator stopped waiting for)."""
     from stillframe.app.launcher import run_scene
 
-    result = run_scene(SCENE, sets, out, "lockstep", backends=[backend]).evaluation
+    result = run_scene(SCENE, sets, out=out, mode="lockstep", backends=[backend]).evaluation
     return {"nodes_us": 1e6 * result["wall_s"] / result["steps"],
             "lockstep_timeouts": result.get("lockstep_timeouts")}
 

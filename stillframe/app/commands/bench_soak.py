@@ -20,7 +20,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from stillframe.app.commands.common import add_json_argument, emit_json
+from stillframe.app.commands.common import add_json_argument, emit_json, seconds
 from stillframe.app.launcher import Launcher, LaunchOptions
 from stillframe.bench.soak import RssLog, rss_bytes
 from stillframe.config.scene import load_scene
@@ -41,13 +41,13 @@ COUNTERS = ("lockstep_timeouts", "safe_state_samples", "rejected_commands", "mal
 def register(benches: argparse._SubParsersAction) -> None:
     parser = benches.add_parser("soak", help="one hour of lock-step LQG: memory and counters",
                                 description=__doc__.split("\n\n", 1)[1])
-    parser.add_argument("--duration", type=float, default=3600.0, metavar="S",
+    parser.add_argument("--duration", type=seconds, default=3600.0, metavar="S",
                         help="simulated seconds (default 3600: 115,200 samples)")
     parser.add_argument("--warmup", type=float, default=0.1, metavar="FRACTION",
                         help="part of the run before the growth is measured (default 0.1)")
     parser.add_argument("--every", type=float, default=2.0, metavar="S",
                         help="wall seconds between RSS samples (default 2)")
-    parser.add_argument("--lockstep-timeout", type=float, default=LOCKSTEP_TIMEOUT_S, metavar="S",
+    parser.add_argument("--lockstep-timeout", type=seconds, default=LOCKSTEP_TIMEOUT_S, metavar="S",
                         help=f"sim_node's wait for a command (default {LOCKSTEP_TIMEOUT_S:g} s: "
                              "a timeout is then a lost sample, not a busy machine)")
     add_json_argument(parser)

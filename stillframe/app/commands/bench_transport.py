@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import argparse
 
-from stillframe.app.commands.common import add_json_argument, emit_json
+from stillframe.app.commands.common import add_json_argument, emit_json, seconds
 from stillframe.errors import InputError
 from stillframe.text_table import format_table
 
@@ -18,7 +18,7 @@ def register(benches: argparse._SubParsersAction) -> None:
         "transport", help="ping-pong RTT between two processes: raw Cyclone DDS and the node API "
                           "on each backend"
     )
-    parser.add_argument("--duration", type=float, default=10.0, metavar="S",
+    parser.add_argument("--duration", type=seconds, default=10.0, metavar="S",
                         help="seconds of pinging per variant (default 10)")
     parser.add_argument("--rate", type=float, default=1000.0, metavar="HZ",
                         help="pings per second (default 1000)")

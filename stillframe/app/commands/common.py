@@ -4,10 +4,12 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from stillframe.errors import InputError
 from stillframe.locations import find_scene, shipped_scenes
 
 if TYPE_CHECKING:
@@ -21,7 +23,10 @@ def scene_path(text: str) -> Path:
     """SCENE as a path (an argparse ``type``): a file, or a shipped scene by name. A path that
     does not exist is kept (loading it names it in one line); a bare name matching no shipped
     scene is an argparse error listing them."""
-    found = find_scene(text)
+    try:
+        found = find_scene(text)
+    except OSError:     # a name the file system refuses (too long): loading it says so
+        return Path(text)
     if found is None and (Path(text).suffix or "/" in text):
         return Path(text)
     if found is None:
@@ -29,6 +34,9 @@ def scene_path(text: str) -> Path:
             f"{text!r} is neither a scene file nor a shipped scene (shipped: "
             f"{', '.join(shipped_scenes())})")
     return found
+
+#: the longest duration a command takes (the scene key ``duration``'s bound)
+MAX_SECONDS = 1e6
 
 
 def add_scene_arguments(parser: argparse.ArgumentParser) -> None:
@@ -39,6 +47,49 @@ def add_scene_arguments(parser: argparse.ArgumentParser) -> None:
         help="override a scene value, e.g. --set model.type=fe (repeatable; YAML values)",
     )
     add_json_argument(parser)
+
+
+def seconds(text: str) -> float:
+    """An argparse ``type`` for a duration: a finite number of seconds in (0, 1e6] (the scene's
+    ``duration`` bound); anything else is a usage error naming the value (exit 2)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number of seconds") from None
+    if not 0 < value <= MAX_SECONDS:
+        raise argparse.ArgumentTypeError(f"{text!r}: seconds must lie in (0, {MAX_SECONDS:g}]")
+    return value
+
+
+def whole(low: int, high: int) -> Any:
+    """An argparse ``type`` for a count with physical bounds (runs, workers, mesh elements,
+    ports): a whole number in [low, high], else a usage error naming it (exit 2)."""
+
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text[:40]!r} is not a whole number") from None
+        if not low <= value <= high:
+            raise argparse.ArgumentTypeError(f"{value}: must lie in [{low}, {high}]")
+        return value
+
+    parse.__name__ = "whole number"
+    return parse
+
+
+def check_output(option: str, path: str | Path | None) -> None:
+    """Before any work: InputError when ``path`` (a file or directory to write) cannot be made:
+    an ancestor that is a file, or a directory that cannot be written (read-only)."""
+    if path is None:
+        return
+    target = Path(path)
+    existing = next(p for p in (target, *target.parents) if p.exists() or p == Path(p.anchor))
+    if existing != target and not existing.is_dir():
+        raise InputError(f"{option} {target}: {existing} is a file, not a directory")
+    folder = existing if existing.is_dir() else existing.parent
+    if not os.access(folder, os.W_OK):
+        raise InputError(f"{option} {target}: {folder} is not writable")
 
 
 def add_json_argument(parser: argparse.ArgumentParser) -> None:

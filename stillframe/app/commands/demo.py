@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
+from stillframe.app.commands.common import check_output
 from stillframe.app.commands.launch import add_launch_arguments, print_evaluation, report_death
 from stillframe.config.scene import Scene
 from stillframe.errors import InputError
@@ -83,14 +84,16 @@ def run(args: argparse.Namespace) -> int:
     from stillframe.config.scene import load_scene
     from stillframe.loop.closed_loop import open_loop_truth
 
+    check_output("--out", args.out)
+
     scene = load_scene(DEMO_SCENE, args.overrides)
     out: Path = args.out
     clear_previous(out)
     print(f"demo: {scene.name} through sim_node, estimator_node and controller_node "
           f"({args.mode}), recording to {out / 'bag'}", file=sys.stderr)
     try:
-        result = run_scene(DEMO_SCENE, args.overrides, out, args.mode, out / "bag",
-                           args.lockstep_timeout, backends=args.backends)
+        result = run_scene(DEMO_SCENE, args.overrides, out=out, mode=args.mode, record=out / "bag",
+                           lockstep_timeout_s=args.lockstep_timeout, backends=args.backends)
     except NodeDiedError as exc:
         return report_death("demo", exc)
     except KeyboardInterrupt:

@@ -13,7 +13,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from stillframe.app.commands.common import add_scene_arguments, emit_json
+from stillframe.app.commands.common import add_scene_arguments, check_output, emit_json
 from stillframe.app.commands.launch import add_launch_arguments, report_death
 
 
@@ -39,6 +39,8 @@ def run(args: argparse.Namespace) -> int:
     from stillframe.app.experiment import IdentificationTest, run_experiment, write_summary
     from stillframe.app.experiment_report import document, plot_comparison, print_report
     from stillframe.app.launcher import NodeDiedError
+
+    check_output("--out", args.out)
 
     test = IdentificationTest(args.test_force, args.test_duration, args.test_seed)
     try:

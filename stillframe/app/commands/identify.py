@@ -13,7 +13,7 @@ import sys
 import time
 from typing import TYPE_CHECKING, Any
 
-from stillframe.app.commands.common import add_json_argument, emit_json
+from stillframe.app.commands.common import add_json_argument, check_output, emit_json
 from stillframe.errors import InputError
 
 if TYPE_CHECKING:
@@ -125,6 +125,9 @@ def run(args: argparse.Namespace) -> int:
     from stillframe.bags.channels import DEFAULT_JITTER, Channel, read_record
     from stillframe.identification.pipeline import identify
     from stillframe.identification.report import format_matrix, identification_document, modes_table
+
+    check_output("--save-model", args.save_model)
+    check_output("--plots", args.plots)
 
     progress = Progress(args.progress or sys.stderr.isatty())
     inputs = [Channel.parse(s) for s in args.inputs]

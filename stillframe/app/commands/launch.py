@@ -6,8 +6,11 @@ reductions (thesis eq. 5.233, 5.287); ``--json`` prints it as one document
 ``{"reduction_pct": {"displacement": [...], "velocity": [...]}, "peak_command": ...,
 "lockstep_timeouts": ..., "steps": ..., "wall_s": ..., "degraded": false, "degraded_reasons":
 [], ...}``. A degraded real-time run (:mod:`stillframe.app.run_verdict`) ends with a warning line
-giving the reasons, and with ``--strict`` with exit code 6. Exit code 1 names a node that died,
-130 follows Ctrl-C (every child stopped and reaped).
+giving the reasons, and with ``--strict`` with exit code 6. Exit code 1 names a node that died
+(how: its exit code or signal) after the others were stopped cleanly; what the run still has (the
+samples the simulator ran, the statuses, the closed bag) is printed and written under ``--out``
+as a partial result marked ``"complete": false``. 130 follows Ctrl-C (every child stopped and
+reaped).
 """
 
 from __future__ import annotations
@@ -21,14 +24,17 @@ from typing import Any
 
 from stillframe.app.commands.common import (
     add_scene_arguments,
+    check_output,
     emit_json,
     scene_from_args,
+    seconds,
+    whole,
 )
 from stillframe.app.launcher import MODES
 from stillframe.app.net_faults import FAULTS
 from stillframe.app.run_verdict import verdict
 from stillframe.config.scene import Scene
-from stillframe.errors import DegradedRunError, InputError
+from stillframe.errors import BagError, DegradedRunError, InputError
 from stillframe.text_table import format_table
 
 
@@ -37,7 +43,7 @@ def add_launch_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--mode", choices=MODES, default="lockstep",
                         help="lockstep: deterministic, as fast as the nodes go (default); "
                              "realtime: paced by the wall clock")
-    parser.add_argument("--lockstep-timeout", type=float, default=None, metavar="S",
+    parser.add_argument("--lockstep-timeout", type=seconds, default=None, metavar="S",
                         help="sim_node's wait for a command before it holds the previous one "
                              "(given to every loop node: the estimator waits half, the "
                              "controller a quarter)")
@@ -63,9 +69,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     parser.add_argument("--monitor", action="store_true",
                         help="also run `stillframe monitor --dashboard` (Foxglove bridge and "
                              "live dashboard on 127.0.0.1)")
-    parser.add_argument("--monitor-port", type=int, default=8765, metavar="P",
+    parser.add_argument("--monitor-port", type=whole(0, 65535), default=8765, metavar="P",
                         help="with --monitor: Foxglove WebSocket port (default 8765; 0: any)")
-    parser.add_argument("--dashboard-port", type=int, default=8080, metavar="P",
+    parser.add_argument("--dashboard-port", type=whole(0, 65535), default=8080, metavar="P",
                         help="with --monitor: dashboard port (default 8080; 0: any)")
     parser.add_argument("--monitor-max-rate", type=float, default=None, metavar="HZ",
                         help="with --monitor: samples forwarded per second and topic at most "
@@ -176,12 +182,39 @@ def realtime_arguments(args: argparse.Namespace) -> tuple[str, list[int]]:
     return ",".join(sorted(practices)), list(parse_cpus(cpus)) if cpus else []
 
 
+#: how ``stillframe record`` states a bag failure (a full disk), which ``launch`` passes on
+RECORDER_ERROR = "stillframe record: error: "
+
+
 def report_death(command: str, exc: Exception) -> int:
-    """One line naming the dead node, then the last lines it printed."""
+    """One line naming the dead node, then the last lines it printed; a recorder that ended on
+    a bag failure (a full disk: the bag closed with what fit) gives its own line and exit 3."""
+    if getattr(exc, "name", "") == "recorder" and (line := next(
+            (t for t in getattr(exc, "tail", []) if t.startswith(RECORDER_ERROR)), None)):
+        print(f"stillframe {command}: error: recorder: {line.removeprefix(RECORDER_ERROR)}",
+              file=sys.stderr)
+        return BagError.exit_code
     print(f"stillframe {command}: error: {exc}", file=sys.stderr)
     for line in getattr(exc, "tail", []):
         print(f"  {line}", file=sys.stderr)
     return 1
+
+
+def print_partial(evaluation: dict[str, Any], scene: Scene, args: argparse.Namespace) -> None:
+    """What a run whose node died still has (``"complete": false``): the JSON document with
+    ``--json``, else one line on what was kept; the file under ``--out`` in both cases."""
+    if args.json:
+        emit_json({"scene": scene.name, **evaluation})
+        return
+    steps = evaluation.get("steps")
+    planned = evaluation.get("steps_planned")
+    kept = [f"{steps} of {planned} steps" if steps is not None else "no samples"]
+    if (bag := evaluation.get("bag")) is not None:
+        kept.append(f"bag {bag['path']} ({bag['messages']} messages)" if bag["closed"]
+                    else bag["note"])
+    if args.out is not None:
+        kept.append(f"written to {args.out / 'result.json'}")
+    print(f"scene {scene.name}: partial result (complete: false): {'; '.join(kept)}")
 
 
 def monitor_args(args: argparse.Namespace) -> list[str]:
@@ -196,6 +229,9 @@ def run(args: argparse.Namespace) -> int:
     from stillframe.app.launcher import NodeDiedError, run_scene
     from stillframe.app.net_faults import hosts_if
 
+    check_output("--out", args.out)
+    check_output("--record", args.record)
+
     scene = scene_from_args(args)
     rt, rt_cpus = realtime_arguments(args)
     if args.record_topics and args.record is None:
@@ -203,13 +239,17 @@ def run(args: argparse.Namespace) -> int:
     with tempfile.TemporaryDirectory(prefix="stillframe-launch-") as tmp:
         try:
             with hosts_if(args.netns, args.netns_prefix, args.fault) as hosts:
-                result = run_scene(Path(args.scene), args.overrides, args.out or Path(tmp),
-                                   args.mode, args.record, args.lockstep_timeout,
+                result = run_scene(Path(args.scene), args.overrides, out=args.out or Path(tmp),
+                                   mode=args.mode, record=args.record,
+                                   lockstep_timeout_s=args.lockstep_timeout, resolved=scene,
                                    record_topics=args.record_topics, backends=args.backends,
                                    monitor_args=monitor_args(args) if args.monitor else None,
                                    compose=args.compose, rt=rt, rt_cpus=rt_cpus, hosts=hosts)
         except NodeDiedError as exc:
-            return report_death("launch", exc)
+            code = report_death("launch", exc)
+            if exc.partial is not None:
+                print_partial(exc.partial.evaluation, scene, args)
+            return code
         except KeyboardInterrupt:
             print("stillframe launch: interrupted; every node stopped", file=sys.stderr)
             return 130

@@ -4,11 +4,14 @@ from __future__ import annotations
 
 import argparse
 
+import numpy as np
+
 from stillframe.app.commands.common import (
     add_scene_arguments,
     emit_json,
     scene_from_args,
 )
+from stillframe.errors import InputError
 from stillframe.text_table import format_table
 
 
@@ -18,16 +21,32 @@ def register(sub: argparse._SubParsersAction) -> None:
     parser.set_defaults(func=run)
 
 
+def check_finite_modes(table: dict, scene: str) -> None:
+    """InputError naming the first mode whose frequency, damping or shape (normalised to floor
+    1) is not finite: a rig out of proportion, never NaNs printed with exit 0."""
+    for i, (f, z, shape) in enumerate(zip(table["frequencies_hz"], table["damping_ratios"],
+                                          table["mode_shapes"], strict=True)):
+        if not np.all(np.isfinite([f, z, *shape])):
+            raise InputError(f"scene {scene}: mode {i + 1} is not finite (f {f:.4g} Hz, zeta "
+                             f"{z:.4g}, shape {', '.join(f'{v:.3g}' for v in shape)}): a rig "
+                             "parameter is out of proportion to the others")
+
+
 def run(args: argparse.Namespace) -> int:
     from stillframe.dynamics.modal_analysis import modal_table
     from stillframe.dynamics.models import build_model
     from stillframe.dynamics.ph import scene_model
 
     scene = scene_from_args(args)
-    if scene.model.type == "ph":
-        table = scene_model.modal_table(scene)
-    else:
-        table = modal_table(build_model(scene))
+    try:
+        if scene.model.type == "ph":
+            table = scene_model.modal_table(scene)
+        else:
+            table = modal_table(build_model(scene))
+    except np.linalg.LinAlgError as exc:
+        raise InputError(f"scene {scene.name}: its model has no modes ({exc}); a rig "
+                         "parameter is out of proportion to the others") from None
+    check_finite_modes(table, scene.name)
     if args.json:
         emit_json(table)
         return 0

@@ -17,7 +17,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from stillframe.app.commands.common import add_scene_arguments, emit_json
+from stillframe.app.commands.common import add_scene_arguments, check_output, emit_json, whole
 from stillframe.errors import InputError
 from stillframe.text_table import format_table
 
@@ -27,7 +27,7 @@ TARGET = re.compile(r"^(displacement|velocity)>=(-?\d+(\.\d*)?)$")
 
 def add_executor_arguments(parser: argparse.ArgumentParser) -> None:
     """``--workers K`` and ``--scheduler tcp://HOST:PORT`` (stillframe.studies.executor)."""
-    parser.add_argument("--workers", type=int, default=None, metavar="K",
+    parser.add_argument("--workers", type=whole(1, 1024), default=None, metavar="K",
                         help="local worker processes (default: one per core)")
     parser.add_argument("--scheduler", default=None, metavar="tcp://HOST:PORT",
                         help="run on this Dask scheduler's workers instead of a local cluster")
@@ -41,7 +41,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     parser.add_argument("--vary", action="append", default=[], metavar="KEY=DIST",
                         help="vary a scene key: ±10%%, normal:5%%, a,b,c or grid:lo:hi:n "
                              "(repeatable)")
-    parser.add_argument("--runs", type=int, default=None, metavar="N",
+    parser.add_argument("--runs", type=whole(1, 1_000_000), default=None, metavar="N",
                         help=f"number of runs (default: the grid's size, else {DEFAULT_RUNS})")
     parser.add_argument("--seed", type=int, default=0, metavar="S", help="study seed")
     parser.add_argument("--what", choices=WHATS, default="closed-loop", help="what one run is")
@@ -89,6 +89,8 @@ def run(args: argparse.Namespace) -> int:
     from stillframe.studies.executor import run_tasks
     from stillframe.studies.montecarlo import flatten, plan, row, run_one
     from stillframe.studies.vary import parse_vary
+
+    check_output("--out", args.out)
 
     variations = [parse_vary(item) for item in args.vary]
     scene = load_scene(args.scene, args.overrides)
@@ -139,6 +141,11 @@ def run(args: argparse.Namespace) -> int:
         print(f"stillframe montecarlo: interrupted; kept the {len(rows)} runs that finished",
               file=sys.stderr)
         return 130
+    if rows and document["failed"] == len(rows):
+        first = min(document["errors"])
+        print(f"stillframe montecarlo: error: every run failed (run {first}: "
+              f"{document['errors'][first]})", file=sys.stderr)
+        return 1
     return 0
 
 

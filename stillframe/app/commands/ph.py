@@ -9,7 +9,7 @@ import sys
 
 import numpy as np
 
-from stillframe.app.commands.common import add_json_argument, emit_json
+from stillframe.app.commands.common import add_json_argument, emit_json, whole
 from stillframe.dynamics.ph import crank_slider, fourbar
 from stillframe.dynamics.ph.manufactured import l2_errors, observed_rates
 from stillframe.errors import InputError
@@ -22,19 +22,19 @@ def register(sub: argparse._SubParsersAction) -> None:
     cases.required = True
 
     conv = cases.add_parser("convergence", help="manufactured-solution L2 error rates")
-    conv.add_argument("--elements", type=int, nargs="+", default=[8, 16, 32, 64],
+    conv.add_argument("--elements", type=whole(1, 1024), nargs="+", default=[8, 16, 32, 64],
                       help="meshes (each twice the previous)")
     add_json_argument(conv)
 
     bars = cases.add_parser("fourbar", help="four-bar pulsations at a crank angle (§6.1)")
     bars.add_argument("--crank-angle", type=float, required=True, metavar="DEG")
-    bars.add_argument("--elements", type=int, default=4, help="elements per link")
-    bars.add_argument("--count", type=int, default=3, help="pulsations to print")
+    bars.add_argument("--elements", type=whole(1, 1024), default=4, help="elements per link")
+    bars.add_argument("--count", type=whole(1, 1000), default=3, help="pulsations to print")
     bars.add_argument("--plot", metavar="PNG", help="sweep the crank angle and plot (Fig. 6)")
     add_json_argument(bars)
 
     crank = cases.add_parser("crank-slider", help="rotating crank-slider, coupler midpoint (§6.2)")
-    crank.add_argument("--elements", type=int, default=4, help="coupler elements (even)")
+    crank.add_argument("--elements", type=whole(2, 1024), default=4, help="coupler elements (even)")
     crank.add_argument("--dt", type=float, default=2e-5, help="time step [s]")
     crank.add_argument("--crank-angle-end", type=float, default=8.0, metavar="RAD")
     crank.add_argument("--plot", metavar="PNG", help="midpoint deformation over the crank angle")

@@ -28,7 +28,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from stillframe.errors import InputError
+    from stillframe.errors import BagError, InputError
     from stillframe.middleware.api import create_node, ok
     from stillframe.recording.player import Player
 
@@ -52,4 +52,7 @@ def run(args: argparse.Namespace) -> int:
                                + ("" if acked else " (some not acknowledged by subscribers)"))
     finally:
         node.destroy_node()
+    if player.dropped:      # counted and said, never dropped silently
+        raise BagError(f"{args.bag}: could not play {sum(player.dropped.values())} messages: "
+                       + player.dropped_text())
     return 0

@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 import sys
 
+from stillframe.app.commands.common import check_output
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     parser = sub.add_parser(
@@ -28,14 +30,16 @@ def run(args: argparse.Namespace) -> int:
     from stillframe.node_runtime.support import RECORDER_NODE
     from stillframe.recording.recorder import Recorder
 
+    check_output("-o", args.output)
+
     if args.all == bool(args.topics):
         raise InputError("give either --all or one or more TOPICs")
     topics = [resolve_topic(t) for t in args.topics]
-    sim = ["--ros-args", "-p", "use_sim_time:=true"] if args.use_sim_time else []
-    node = create_node(RECORDER_NODE, argv=[*sys.argv[:1], *sim])
+    # the node stays on system time: the recorder stamps on /clock itself (recording.recorder)
+    node = create_node(RECORDER_NODE, argv=sys.argv[:1])
     try:
         with BagWriter(args.output, messages.TYPESTORE) as bag:
-            recorder = Recorder(node, bag, topics)
+            recorder = Recorder(node, bag, topics, sim_time=args.use_sim_time)
             node.get_logger().info(f"Recording to '{args.output}' "
                                    f"({'all topics' if args.all else ', '.join(topics)})")
             spin(node)

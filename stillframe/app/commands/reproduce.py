@@ -81,7 +81,7 @@ def run(args: argparse.Namespace) -> int:
             print(f"[{i + 1}/{len(paths)}] {scene.name} through the three nodes ({args.mode})",
                   file=sys.stderr)
             try:
-                result = run_scene(path, args.overrides, Path(tmp) / str(i), args.mode,
+                result = run_scene(path, args.overrides, out=Path(tmp) / str(i), mode=args.mode,
                                    lockstep_timeout_s=args.lockstep_timeout,
                                    backends=args.backends)
             except NodeDiedError as exc:

@@ -17,8 +17,10 @@ import numpy as np
 
 from stillframe.app.commands.common import (
     add_scene_arguments,
+    check_output,
     emit_json,
     scene_and_choice,
+    seconds,
 )
 from stillframe.dynamics.simulation import History, simulate
 from stillframe.errors import InputError
@@ -31,7 +33,7 @@ CSV_COLUMNS = ("t", "x1", "x2", "x3", "v1", "v2", "v3", "a1", "a2", "a3", "phi",
 def register(sub: argparse._SubParsersAction) -> None:
     parser = sub.add_parser("simulate", help="integrate a scene open loop and summarise it")
     add_scene_arguments(parser)
-    parser.add_argument("--duration", type=float, help="override the scene's duration [s]")
+    parser.add_argument("--duration", type=seconds, help="override the scene's duration [s]")
     parser.add_argument("--out", type=Path, help="write time histories (.npz or .csv)")
     parser.set_defaults(func=run)
 
@@ -58,9 +60,10 @@ def _progress(fraction: float) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    check_output("--out", args.out)
+    if args.duration is not None:   # the scene's checks (steps at most) apply to it
+        args.overrides = [*args.overrides, f"duration={args.duration!r}"]
     scene, choice = scene_and_choice(args)
-    if args.duration is not None and args.duration <= 0:
-        raise InputError(f"--duration: must be > 0 (got {args.duration:g})")
     show = None if args.json or not sys.stderr.isatty() else _progress
     history = simulate(scene, args.duration, progress=show)
     if show:

@@ -12,6 +12,7 @@ import time
 from collections import deque
 from typing import Any
 
+from stillframe.app.commands.common import seconds
 from stillframe.app.ros_tools import (
     add_strategy_arguments,
     add_verbs,
@@ -57,7 +58,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     hz.add_argument("topic", metavar="TOPIC")
     hz.add_argument("--window", "-w", type=int, default=10000, metavar="N",
                     help="number of intervals in the statistics (default 10000)")
-    hz.add_argument("--duration", type=float, metavar="S",
+    hz.add_argument("--duration", type=seconds, metavar="S",
                     help="stop after S seconds (default: until Ctrl-C)")
     add_wait_argument(hz)
     hz.set_defaults(func=run_hz)

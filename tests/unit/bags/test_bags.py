@@ -410,3 +410,41 @@ def test_incomplete_qos_record_is_a_bag_error_naming_the_mcap(tmp_path: Path) ->
     write_like_ros2_bag_record(path, channel_qos="- history: keep_last\n  depth: 7\n")
     with pytest.raises(BagError, match=f"{path / 'partial_0.mcap'}: unreadable bag file"):
         bag_summary(path, TS)
+
+
+def test_the_recorders_write_path_writes_what_rosbags_writer_writes(tmp_path: Path) -> None:
+    """``BagWriter.writer_of`` (one ``struct.pack`` per record into rosbags' open chunk) against
+    rosbags' own ``Writer.write`` on the same messages, across several chunks: the ``mcap``
+    package reads the same records, and ``metadata.yaml`` says the same counts and times."""
+    rng = np.random.default_rng(3)
+    sent = [("/a" if rng.random() < 0.6 else "/b", T0 + 1000 * i, imu(T0 + i, float(i)))
+            for i in range(12_000)]      # about 5 MB: five chunks
+    fast = tmp_path / "fast"
+    with BagWriter(fast, TS) as bag:
+        for topic in ("/a", "/b"):
+            bag.add_topic(topic, "sensor_msgs/msg/Imu")
+        writers = {topic: bag.writer_of(topic) for topic in ("/a", "/b")}
+        for topic, stamp, data in sent:
+            writers[topic](stamp, data)
+    reference = tmp_path / "reference"
+    with Writer(reference, version=9, storage_plugin=StoragePlugin.MCAP) as bag:
+        conns = {t: bag.add_connection(t, "sensor_msgs/msg/Imu", typestore=TS)
+                 for t in ("/a", "/b")}
+        for topic, stamp, data in sent:
+            bag.write(conns[topic], stamp, data)
+
+    def records(path: Path) -> list[tuple[str, int, int, bytes]]:
+        with (path / f"{path.name}.mcap").open("rb") as stream:
+            return [(channel.topic, message.log_time, message.publish_time, message.data)
+                    for _, channel, message in make_reader(stream).iter_messages()]
+
+    assert records(fast) == records(reference) == [(t, s, s, d) for t, s, d in sent]
+
+    def meta(path: Path) -> dict:
+        info = yaml.safe_load((path / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+        return {"count": info["message_count"], "start": info["starting_time"],
+                "duration": info["duration"],
+                "topics": {t["topic_metadata"]["name"]: t["message_count"]
+                           for t in info["topics_with_message_count"]}}
+
+    assert meta(fast) == meta(reference)

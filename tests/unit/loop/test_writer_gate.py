@@ -100,7 +100,7 @@ class Parameters:
 
 
 def test_the_graph_is_kept_read_until_a_first_writer_is_taken_then_left_alone() -> None:
-    gates = InputGates(Parameters(), "sensor_writer")  # type: ignore[arg-type]
+    gates = InputGates(Parameters(), {"sensor_writer": ""})  # type: ignore[arg-type]
     graphs = {topic: Graph((SIM, "/frame/sim_node")) for topic in ("/a", "/b")}
     for topic, graph in graphs.items():
         gates.gates[topic] = graph.gate()
@@ -139,7 +139,7 @@ def test_without_writer_ids_the_writers_are_counted_not_listed_and_the_graph_lef
     writers (a C call there), never for the endpoint list (44 µs), and a sample without a GID
     ends the graph reads before the first sample as a taken writer does."""
     node = CountingNode()
-    gates = InputGates(node, "sensor_writer")  # type: ignore[arg-type]
+    gates = InputGates(node, {"sensor_writer": ""})  # type: ignore[arg-type]
     gate = gates.add("/a", "sensor_writer")
     clock = iter(range(0, 10 * RECHECK_NS, RECHECK_NS))
     with unittest.mock.patch("time.monotonic_ns", lambda: next(clock)):
@@ -176,7 +176,7 @@ class Log:
 
 def test_without_writer_ids_a_writing_stranger_is_refused_counted_and_named_at_once() -> None:
     graph = Graph((SIM, "/frame/sim_node"), (STRAY, "/frame/teleop"))
-    gates = InputGates(Parameters(), "command_writer")  # type: ignore[arg-type]
+    gates = InputGates(Parameters(), {"command_writer": ""})  # type: ignore[arg-type]
     gate = gates.gates["/cmd"] = graph.gate("sim_node")
     assert all(gate.admits(b"", n) for n in range(1, 301))
     log = Log()
@@ -230,3 +230,15 @@ def test_without_writer_ids_a_restart_the_graph_shows_late_is_taken_after_a_rech
     graph.now += RECHECK_NS
     assert gate.admits(b"", 3) and gate.admits(b"", 4)         # asked again: a restart
     assert dict(gate.rejected) == {"second_writer": 2}
+
+
+def test_without_writer_ids_the_pinned_node_is_reported_once_the_graph_names_it() -> None:
+    """The first stream taken before the pinned node's writer is in the graph: reported by the
+    pin's name when the graph has it, never by another writer's (an idle one's) name."""
+    graph = Graph((STRAY, "/frame/idle_teleop"))
+    gate = graph.gate("sim_node")
+    assert gate.admits(b"", 1) and gate.admits(b"", 2)
+    assert gate.report()["writer"] == "sim_node"
+    graph.writers.append((SIM, "/frame/sim_node"))
+    assert gate.report()["writer"] == "/frame/sim_node"
+    assert gate.report()["ignored_writers"] == ""

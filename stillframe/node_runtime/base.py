@@ -1,0 +1,313 @@
+"""The declared base of the loop nodes (sim_node, estimator_node, controller_node) and of the
+container that composes them: the cycle, the parameters, ``/diagnostics``, the writer gates, the
+real-time practices and the lifecycle.
+
+- :class:`Cycle`: spin → process → idle → housekeeping, until shutdown, then a last status;
+  a node (or the container) says what each step is.
+- :class:`LoopNode`: a :class:`Cycle` on one node, with its declared parameters
+  (:data:`.declarations.NODE_PARAMETERS`, checked at start and at every set), ``/diagnostics``
+  from :meth:`LoopNode.status`, the writer gates named by its ``*_writer`` parameters and the
+  real-time practices of its ``rt`` parameters.
+- :class:`Managed`: a managed (lifecycle) node's states around a :class:`LoopNode` class:
+  unconfigured until ``configure`` builds the node from the scene, inactive, active, finalized
+  (docs/nodes.md, lifecycle).
+"""
+
+from __future__ import annotations
+
+from typing import Any, ClassVar, TypeVar
+
+from stillframe.contract.topics import DEFAULT_NAMESPACE
+from stillframe.errors import InputError
+from stillframe.loop.writer_gate import InputGates
+from stillframe.middleware import api, lifecycle
+from stillframe.middleware.params import Parameter, SetParametersResult
+from stillframe.node_runtime.declarations import (
+    NODE_PARAMETERS,
+    ManagedParameterValues,
+    RealtimeParameterValues,
+)
+from stillframe.node_runtime.parameters import (
+    NodeParameters,
+    current,
+    declare,
+    defaults,
+    set_check,
+)
+from stillframe.node_runtime.realtime import (
+    NO_PINNING,
+    Realtime,
+    RealtimeOptions,
+    parse_practices,
+    start_realtime,
+)
+from stillframe.node_runtime.support import Diagnostics, LoopParameters, declare_loop_parameters
+
+N = TypeVar("N", bound="LoopNode")
+P = TypeVar("P", bound=NodeParameters)
+#: how long an idle managed node (not active yet, or finalized) waits in one spin [s]
+IDLE_SPIN_S = 0.1
+
+
+class Cycle:
+    """spin → process → idle → housekeeping until shutdown (:meth:`run`)."""
+
+    def start(self) -> None:
+        """Before the first cycle (the peers of lock-step, the subscriptions)."""
+
+    def spin(self, timeout_s: float) -> None:
+        raise NotImplementedError
+
+    def next_wait(self) -> float:
+        """The longest wait of the next spin [s]."""
+        return IDLE_SPIN_S
+
+    def process_ready(self) -> int:
+        """Handle what is ready; how many samples were handled."""
+        raise NotImplementedError
+
+    def idle(self) -> None:
+        """Between samples (the collector's work with the real-time practice ``gc``)."""
+
+    def housekeeping(self) -> bool:
+        """Between samples: watchdogs, graph reads, ``/diagnostics`` when due; whether a status
+        was published."""
+        return False
+
+    def finish(self) -> None:
+        """After the last cycle (a last status)."""
+
+    def cycle(self) -> None:
+        self.spin(self.next_wait())
+        self.process_ready()
+        self.idle()
+        self.housekeeping()
+
+    def run(self) -> None:
+        self.start()
+        while api.ok():
+            self.cycle()
+        self.finish()
+
+
+def realtime_options(values: RealtimeParameterValues) -> RealtimeOptions:
+    """What a node's ``rt``, ``rt_priority``, ``rt_cpus`` and ``spin_margin_us`` ask for."""
+    cpus = () if values.rt_cpus == [NO_PINNING] else tuple(values.rt_cpus)
+    return RealtimeOptions(parse_practices(values.rt), values.rt_priority, cpus,
+                           values.spin_margin_us)
+
+
+class LoopNode(Cycle):
+    """One loop node: its parameters, diagnostics, writer gates, real-time practices and cycle.
+
+    A subclass names its node (:attr:`NAME`, whose declarations are
+    :data:`.declarations.NODE_PARAMETERS`), the parameters that pin its writer gates
+    (:attr:`WRITER_PINS`), applies its dynamic parameters (:meth:`apply`) and reports
+    (:meth:`status`)."""
+
+    NAME: ClassVar[str]
+    WRITER_PINS: ClassVar[tuple[str, ...]] = ()
+    MANAGED: ClassVar[bool] = False
+
+    def __init__(self, node: api.Node, params: LoopParameters,
+                 values: dict[type, NodeParameters] | None = None) -> None:
+        self.node = node
+        self.params = params
+        self.values = values or {}
+        pins = {name: getattr(v, name) for v in self.values.values()
+                for name in self.WRITER_PINS if hasattr(v, name)}
+        self.gates = InputGates(node, {name: pins.get(name, "") for name in self.WRITER_PINS})
+        self.diagnostics = Diagnostics(node, params.diagnostics_period_s)
+        self.rt = Realtime(RealtimeOptions())   # enter_realtime() applies what was asked
+        self.activated = True                      # lifecycle: inactive nodes do not act
+
+    # -- parameters ----------------------------------------------------------------------
+    @classmethod
+    def declarations(cls, scene: Any) -> tuple[type[NodeParameters], ...]:
+        """The node's declarations beyond the loop's (the scene may leave some out)."""
+        return NODE_PARAMETERS[cls.NAME][1:]
+
+    @classmethod
+    def declare(cls, node: api.Node) -> tuple[LoopParameters, dict[type, NodeParameters]]:
+        """Declare every parameter of the node, each checked by its declaration (InputError
+        naming the first wrong one); the scene is loaded once its parameters are known."""
+        params = declare_loop_parameters(node)
+        values = {c: declare(node, c, params.scene) for c in cls.declarations(params.scene)}
+        return params, values
+
+    @classmethod
+    def build(cls: type[N], node: api.Node) -> N:
+        """The node from its parameters (not in real time yet: :meth:`enter_realtime`)."""
+        params, values = cls.declare(node)
+        loop = cls(node, params, values)
+        node.add_on_set_parameters_callback(loop.on_set_parameters)
+        return loop
+
+    def setting(self, cls: type[P]) -> P:
+        """The node's values of the declarations ``cls`` (their defaults for the scene when the
+        node was made without them, as a test makes it)."""
+        return self.values.get(cls) or defaults(cls, self.params.scene)  # type: ignore[return-value]
+
+    def on_set_parameters(self, parameters: list[Parameter]) -> SetParametersResult:
+        """The declarations' check (read-only and undeclared refused, values checked), then
+        :meth:`apply`."""
+        result = set_check(*self.values)(parameters)
+        return self.apply(parameters) if result.successful else result
+
+    def apply(self, parameters: list[Parameter]) -> SetParametersResult:
+        """Put checked dynamic parameters into effect (all or none)."""
+        return SetParametersResult(True)
+
+    def enter_realtime(self) -> None:
+        """Apply the real-time practices the parameters ask for, and log what took effect."""
+        self.rt = start_realtime(self.node, realtime_options(
+            self.setting(RealtimeParameterValues)))
+
+    # -- lifecycle -----------------------------------------------------------------------
+    def activate(self) -> None:
+        self.activated = True
+
+    def deactivate(self) -> None:
+        self.activated = False
+
+    def reset(self) -> None:
+        """``cleanup``: forget the run (a new estimator or controller from the scene)."""
+
+    # -- the cycle -----------------------------------------------------------------------
+    def spin(self, timeout_s: float) -> None:
+        self.node.spin_once(timeout_s)
+
+    def idle(self) -> None:
+        self.rt.idle()
+
+    def housekeeping(self) -> bool:
+        self.gates.keep_graph_read()
+        self.check()
+        if not (self.gates.announce(self.node.get_logger()) or self.diagnostics.due()):
+            return False
+        self.publish_status()
+        return True
+
+    def check(self) -> None:
+        """Every cycle, before the status (the controller's watchdog)."""
+
+    def status(self) -> tuple[dict[str, Any], int, str]:
+        """``/diagnostics``: the values, the level and the message."""
+        raise NotImplementedError
+
+    def status_stamp(self) -> int:
+        """The stamp of the status [ns]: the newest sample handled."""
+        return 0
+
+    def publish_status(self) -> None:
+        values, level, message = self.status()
+        if self.node_is_managed():
+            values = {**values, "lifecycle": "active" if self.activated else "inactive"}
+        self.diagnostics.publish(self.status_stamp(), values, level, message)
+
+    def node_is_managed(self) -> bool:
+        return self.MANAGED and hasattr(self.node, "lifecycle_state")
+
+    def finish(self) -> None:
+        self.publish_status()
+
+
+class Managed(Cycle):
+    """A managed node (rcl_lifecycle's states, docs/nodes.md): parameters declared at start;
+    ``configure`` builds the node (``cleanup`` and a later ``configure`` start it afresh);
+    ``activate`` and ``deactivate`` switch what it does (:meth:`LoopNode.deactivate`); the
+    cycle starts (the lock-step wait for the peers, the subscriptions) at the first
+    activation. With ``autostart`` (the default) the node configures and activates itself."""
+
+    def __init__(self, cls: type[LoopNode], node: api.ManagedNode, *,
+                 realtime: bool = True) -> None:
+        self.cls = cls
+        self.node = node
+        self.realtime = realtime    # enter the node's real-time practices when configured
+        self.params, self.values = cls.declare(node)
+        self.loop: LoopNode | None = None
+        self.started = False
+        node.manage(self.on_transition)
+        node.add_on_set_parameters_callback(self.on_set_parameters)
+
+    def on_set_parameters(self, parameters: list[Parameter]) -> SetParametersResult:
+        """The declarations' check; the node applies what passes once configured (before, the
+        values wait for ``configure``)."""
+        if self.loop is not None:
+            return self.loop.on_set_parameters(parameters)
+        return set_check(*self.values)(parameters)
+
+    def on_transition(self, name: str) -> str:
+        """The callback of every transition (:data:`.lifecycle.TransitionCallback`)."""
+        log = self.node.get_logger()
+        try:
+            if name == "configure":
+                if self.loop is None:
+                    self.values = {c: current(self.node, c) for c in self.values}
+                    self.loop = self.cls(self.node, self.params, self.values)
+                    if self.realtime:
+                        self.loop.enter_realtime()
+                    self.loop.deactivate()
+                else:
+                    self.loop.reset()
+            elif name == "activate" and self.loop is not None:
+                self.loop.activate()
+            elif name in ("deactivate", "cleanup", "shutdown", "error") and self.loop:
+                self.loop.deactivate()
+                if name == "cleanup":
+                    self.loop.reset()
+        except InputError as exc:
+            log.error(f"{name}: {exc}")
+            return lifecycle.FAILURE
+        except Exception as exc:    # anything else is rcl_lifecycle's error: errorprocessing
+            log.error(f"{name}: {type(exc).__name__}: {exc}")
+            return lifecycle.ERROR
+        log.info(f"lifecycle: {name} done")
+        return lifecycle.SUCCESS
+
+    def autostart(self) -> None:
+        """:meth:`bring_up` now when the ``autostart`` parameter says so."""
+        if self.values[ManagedParameterValues].autostart:  # type: ignore[attr-defined]
+            self.bring_up()
+
+    def bring_up(self) -> LoopNode:
+        """``configure`` and ``activate``; the node (InputError when a transition fails)."""
+        for transition in ("configure", "activate"):
+            if self.node.trigger(transition) != lifecycle.SUCCESS:
+                raise InputError(f"{self.cls.NAME}: {transition} failed (see the log)")
+        assert self.loop is not None
+        return self.loop
+
+    def spin(self, timeout_s: float) -> None:
+        self.node.spin_once(timeout_s)
+
+    def cycle(self) -> None:
+        if self.loop is None or not (self.started or self.loop.activated):
+            self.spin(IDLE_SPIN_S)      # unconfigured, or not active yet: the services only
+            return
+        if not self.started:
+            self.loop.start()
+            self.started = True
+        self.loop.cycle()
+
+    def finish(self) -> None:
+        if self.started and self.loop is not None:
+            self.loop.finish()
+
+
+def main(cls: type[LoopNode]) -> int:
+    """Run the node of ``cls`` (a console script's ``main``): created (managed when the class
+    is), its parameters declared, its cycle until SIGINT or SIGTERM."""
+    node = api.create_node(cls.NAME, namespace=DEFAULT_NAMESPACE, managed=cls.MANAGED)
+    try:
+        if cls.MANAGED:
+            managed = Managed(cls, node)  # type: ignore[arg-type]
+            managed.autostart()
+            managed.run()
+        else:
+            loop = cls.build(node)
+            loop.enter_realtime()
+            loop.run()
+    finally:
+        node.destroy_node()
+    return 0

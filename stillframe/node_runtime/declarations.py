@@ -1,0 +1,203 @@
+"""Every loop node's parameters, declared once (:mod:`.parameters`); docs/nodes.md's reference
+is generated from them (:data:`NODE_PARAMETERS`, :func:`.parameters.reference`):
+``python -m stillframe.node_runtime.declarations`` writes it between the markers of
+:data:`REFERENCE_MARKERS`."""
+
+from __future__ import annotations
+
+import os
+import sys
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Literal
+
+from stillframe.errors import InputError
+from stillframe.node_runtime.parameters import (
+    FromScene,
+    NodeParameters,
+    between,
+    limited,
+    non_negative,
+    of_length,
+    param,
+    positive,
+    reference,
+)
+from stillframe.node_runtime.realtime import NO_PINNING, PRACTICES, parse_cpus, parse_practices
+
+#: the modes of the loop, one constant for every process (launch, nodes, benchmarks)
+MODES = ("lockstep", "realtime")
+
+
+def _refusal(parse: Callable[[Any], object], name: str) -> Callable[[Any], str | None]:
+    """A check from a parser that raises InputError (its text, without the parameter's name)."""
+    def check(value: Any) -> str | None:
+        try:
+            parse(value)
+        except InputError as exc:
+            return str(exc).removeprefix(f"parameter '{name}': ")
+        return None
+
+    return check
+
+
+def _scene_file(value: str) -> str | None:
+    return None if value else "give the scene file (--ros-args -p scene:=FILE)"
+
+
+_FIFO = (os.sched_get_priority_min(os.SCHED_FIFO), os.sched_get_priority_max(os.SCHED_FIFO))
+
+
+@dataclass(frozen=True)
+class LoopParameterValues(NodeParameters):
+    """Every loop node: the scene and the loop's timing."""
+
+    scene: str = param("", limited(_scene_file, "required"), doc=(
+        "scene file (YAML, see closed-loop.md); `stillframe launch` hands the nodes the scene it "
+        "resolved, with its overrides applied and `model: auto` chosen"))
+    overrides: list[str] = param([""], doc=(
+        "`dotted.key=value` strings applied like `--set` (empty strings are ignored: a ROS "
+        "parameter cannot be an empty list), e.g. `-p 'overrides:=[\"duration=6\"]'`"))
+    mode: Literal["lockstep", "realtime"] = param("lockstep", doc=(
+        "lock-step (the one-process numbers, bit for bit) or real time (below)"))
+    lockstep_timeout_s: float = param(1.0, positive, unit="s", doc=(
+        "wall time the simulator waits for a command in lock-step (the estimator waits half of "
+        "it, the controller a quarter; see the protocol)"))
+    diagnostics_period_s: float = param(1.0, positive, unit="s", doc=(
+        "wall time between `/diagnostics` messages"))
+
+
+@dataclass(frozen=True)
+class RealtimeParameterValues(NodeParameters):
+    """Every loop node: the real-time practices (:mod:`.realtime`)."""
+
+    rt: str = param("", limited(_refusal(parse_practices, "rt"), "`all` or a comma list of "
+                                + ", ".join(f"`{p}`" for p in PRACTICES)), doc=(
+        "real-time practices (realtime.md); a practice the OS refuses is skipped with a "
+        "warning; empty: none"))
+    rt_priority: int = param(80, between(*_FIFO), doc="the `SCHED_FIFO` priority of `fifo`")
+    rt_cpus: list[int] = param([NO_PINNING], limited(_refusal(parse_cpus, "rt_cpus"),
+                                                     "CPUs of this process, or [-1]"),
+                               doc="the CPUs of `affinity`; `[-1]`: no pinning")
+    spin_margin_us: float = param(200.0, between(0, 10_000), unit="us", doc=(
+        "with `spin`, sim_node polls instead of sleeping for this long before a due time"))
+
+
+@dataclass(frozen=True)
+class ManagedParameterValues(NodeParameters):
+    """The managed (lifecycle) nodes: estimator_node and controller_node."""
+
+    autostart: bool = param(True, doc=(
+        "configure and activate at start (a node run by hand); `stillframe launch` sets false "
+        "and brings the node through `configure` and `activate` itself, like a lifecycle-aware "
+        "`ros2 launch`"))
+
+
+@dataclass(frozen=True)
+class SimParameterValues(NodeParameters):
+    """sim_node."""
+
+    result_file: str = param("", doc=(
+        "at the end, write the evaluation as JSON here and the histories as `.npz` beside it; "
+        "empty: none"))
+    discovery_timeout_s: float = param(30.0, non_negative, unit="s", doc=(
+        "longest wait for the estimator and controller before the first sample; after it the "
+        "run starts anyway, with a warning"))
+    await_recorder: list[str] = param([""], doc=(
+        "topics the launch's recorder must subscribe before lock-step starts (`*`: every topic "
+        "of the loop); empty: none"))
+    command_writer: str = param("", doc=(
+        "the node allowed to command (`controller_node` under `stillframe launch`); empty: the "
+        "first writer seen; other writers are ignored and reported"))
+    command_timeout_periods: int = param(3, limited(
+        lambda v: None if v >= 1 else "must be >= 1", ">= 1"), unit="periods", doc=(
+        "zero actuation (the safe state, `safe_state_samples`) once the newest command is this "
+        "many periods old"))
+    command_miss_limit: float = param(0.25, between(0.0, 1.0, high_open=True), doc=(
+        "real time: zero actuation while more than this share of the last second's samples "
+        "missed their command (`degraded_samples`); 0: never"))
+
+
+def _half_period(scene: Any) -> float:
+    return 0.5 / scene.sensors.rate_hz
+
+
+@dataclass(frozen=True)
+class EstimatorParameterValues(NodeParameters):
+    """estimator_node (the noise parameters exist for the filters kf, tvkf and ekf)."""
+
+    partial_after_s: float = param(FromScene("half a period", _half_period), positive,
+                                   unit="s", doc=(
+        "real time: how long after a stamp's first message the estimator updates with the "
+        "channels that have arrived"))
+    sensor_writer: str = param("", doc=(
+        "the node whose sensor samples (and `state_truth`) are taken, e.g. `sim_node`; empty: "
+        "the first writer seen"))
+    command_writer: str = param("", doc=(
+        "as sim_node's, for the commands the estimator reads (the actuation in effect where a "
+        "report was lost)"))
+
+
+@dataclass(frozen=True)
+class NoiseParameterValues(NodeParameters):
+    """estimator_node with a filter (kf, tvkf, ekf): W0 and V0, settable while it runs."""
+
+    process_noise_std: list[float] = param(
+        FromScene("`estimator.process_noise_std`",
+                  lambda s: list(s.estimator.process_noise_std)),
+        of_length(8, non_negative),
+        dynamic=True, doc=(
+            "W0 (eq. 5.221): Q is recomputed, for `kf` the stationary covariance and gain too"))
+    measurement_noise_std: list[float] = param(
+        FromScene("`estimator.measurement_noise_std`",
+                  lambda s: list(s.estimator.measurement_noise_std)),
+        of_length(4, positive),
+        dynamic=True, doc="V0 (eq. 5.222): the same recomputation with R")
+
+
+@dataclass(frozen=True)
+class ControllerParameterValues(NodeParameters):
+    """controller_node."""
+
+    estimate_writer: str = param("", doc=(
+        "the node whose `state_estimate` is taken, e.g. `estimator_node`; empty: the first "
+        "writer seen"))
+    sensor_writer: str = param("", doc=(
+        "the node whose load cell (`excitation/wrench`) and, with `use_sim_time`, `/clock` are "
+        "taken, e.g. `sim_node`; empty: the first writer seen"))
+    enabled: bool = param(True, dynamic=True, doc=(
+        "false: the command is 0 from the next sample on (published as usual); true: the law "
+        "again"))
+    command_limit: float = param(
+        FromScene("`controller.limit` (0 if none)", lambda s: s.controller.limit or 0.0),
+        non_negative, unit="N m or N", dynamic=True, doc=(
+            "the command is clipped to ±limit; 0: no limit"))
+
+
+_COMMON = (LoopParameterValues, RealtimeParameterValues)
+#: the parameter declarations of each node, in the order they are declared
+NODE_PARAMETERS: dict[str, tuple[type[NodeParameters], ...]] = {
+    "sim_node": (*_COMMON, SimParameterValues),
+    "estimator_node": (*_COMMON, ManagedParameterValues, EstimatorParameterValues,
+                       NoiseParameterValues),
+    "controller_node": (*_COMMON, ManagedParameterValues, ControllerParameterValues),
+}
+
+#: the lines between which docs/nodes.md holds :func:`.parameters.reference`
+REFERENCE_MARKERS = ("<!-- parameter reference: generated from "
+                     "stillframe/node_runtime/declarations.py -->",
+                     "<!-- end of the parameter reference -->")
+
+
+def with_reference(text: str) -> str:
+    """``text`` (docs/nodes.md) with the reference between its markers made anew."""
+    start, end = REFERENCE_MARKERS
+    head, _, rest = text.partition(start + "\n")
+    _, _, tail = rest.partition(end)
+    return f"{head}{start}\n{reference(NODE_PARAMETERS)}{end}{tail}"
+
+
+if __name__ == "__main__":
+    page = Path(sys.argv[1] if len(sys.argv) > 1 else "docs/nodes.md")
+    page.write_text(with_reference(page.read_text()))

@@ -1,0 +1,253 @@
+"""The loop nodes' parameters, declared once as data, the way a scene's keys are
+(:mod:`stillframe.config.schema`).
+
+A node's parameters are a frozen dataclass; each field is one parameter, its annotation the ROS
+parameter type (``str``, ``bool``, ``int``, ``float``, ``Literal["a", "b"]`` for a choice,
+``list[str]``, ``list[float]``, ``list[int]``) and :func:`param` its default, check, unit, doc and
+whether it may change while the node runs::
+
+    lockstep_timeout_s: float = param(1.0, positive, unit="s", doc="...")
+
+:func:`declare` declares every field on a node and validates the values it got (from the command
+line, a parameter file or the default) with the field's type and check; the node's
+on-set-parameters callback (:func:`set_check`) refuses a read-only parameter and checks a new value
+of a dynamic one with the same declaration, so ``stillframe param set`` and ``ros2 param set`` are
+held to what the node was started with. A default that depends on the scene is a
+:class:`FromScene`. The parameter reference in docs/nodes.md is :func:`reference` of the
+declarations (``tests/unit/node_runtime/test_parameters.py`` holds the two equal).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+from collections.abc import Callable
+from dataclasses import MISSING, dataclass
+from typing import Any, Literal, NamedTuple, TypeVar, get_args, get_origin, get_type_hints
+
+from stillframe.config.schema import Check
+from stillframe.errors import InputError
+from stillframe.middleware.params import Parameter, SetParametersResult
+
+P = TypeVar("P", bound="NodeParameters")
+
+
+@dataclass(frozen=True)
+class FromScene:
+    """A default taken from the scene: ``value(scene)``, documented as ``doc``."""
+
+    doc: str
+    value: Callable[[Any], Any]
+
+
+@dataclass(frozen=True)
+class ParamField:
+    """What a parameter's annotation cannot say."""
+
+    check: Check | None = None
+    doc: str = ""
+    unit: str = ""
+    dynamic: bool = False
+    #: the range or choices as the reference shows them (a check's own text otherwise)
+    limits: str = ""
+
+
+def param(default: Any, check: Check | None = None, *, doc: str, unit: str = "",
+          dynamic: bool = False, limits: str = "") -> Any:
+    """A node parameter: its default (a ROS value or :class:`FromScene`), check (an error text
+    or None, as the scene's checks), unit, doc; ``dynamic``: settable while the node runs. A
+    list default is held as a tuple (a dataclass default must not be mutable)."""
+    if isinstance(default, list):
+        default = tuple(default)
+    return dataclasses.field(default=default, metadata={"param": ParamField(
+        check, doc, unit, dynamic, limits or getattr(check, "limits", ""))})
+
+
+def limited(check: Check, limits: str) -> Check:
+    """``check`` with the text the reference shows for it (``> 0``, ``[0, 1)``...)."""
+    check.limits = limits  # type: ignore[attr-defined]
+    return check
+
+
+def positive_number(value: Any) -> str | None:
+    return None if all(v > 0 for v in _items(value)) else "must be > 0"
+
+
+def non_negative_number(value: Any) -> str | None:
+    return None if all(v >= 0 for v in _items(value)) else "must be >= 0"
+
+
+def between(low: float, high: float, *, high_open: bool = False) -> Check:
+    """``low <= value <= high`` (``< high`` with ``high_open``)."""
+    def check(value: Any) -> str | None:
+        ok = all(low <= v and (v < high if high_open else v <= high) for v in _items(value))
+        return None if ok else f"must lie in [{low:g}, {high:g}{')' if high_open else ']'}"
+
+    return limited(check, f"[{low:g}, {high:g}{')' if high_open else ']'}")
+
+
+def of_length(n: int, check: Check) -> Check:
+    """A list of ``n`` values, each passing ``check``."""
+    def checked(value: Any) -> str | None:
+        return f"expected {n} values" if len(value) != n else check(value)
+
+    return limited(checked, f"{n} values {getattr(check, 'limits', '')}".strip())
+
+
+positive = limited(positive_number, "> 0")
+non_negative = limited(non_negative_number, ">= 0")
+
+
+def _items(value: Any) -> list[Any]:
+    return value if isinstance(value, list) else [value]
+
+
+class ParamSpec(NamedTuple):
+    """One declared parameter."""
+
+    name: str
+    kind: type            # bool, int, float, str, or list
+    item: type | None     # the item type of a list
+    choices: tuple[str, ...] | None
+    default: Any
+    field: ParamField
+
+    @property
+    def type_text(self) -> str:
+        """The ROS parameter type (``double``, ``string[]``...)."""
+        ros = {bool: "bool", int: "integer", float: "double", str: "string"}
+        return f"{ros[self.item]}[]" if self.kind is list else ros[self.kind]
+
+    def default_for(self, scene: Any) -> Any:
+        """The ROS default (a list for a list parameter)."""
+        value = self.default.value(scene) if isinstance(self.default, FromScene) else self.default
+        return list(value) if isinstance(value, tuple) else value
+
+    def problem(self, value: Any) -> str | None:
+        """Why ``value`` is not a valid value of this parameter (None: it is)."""
+        if self.kind is list:
+            if not isinstance(value, list) or not all(_is(v, self.item) for v in value):
+                return f"expected a list of {self.type_text[:-2]}, got {value!r}"
+            items = value
+        else:
+            if not _is(value, self.kind):
+                return f"expected {self.type_text}, got {value!r}"
+            items = [value]
+        if (self.kind is float or self.item is float) and not all(map(math.isfinite, items)):
+            return f"must be finite, got {value!r}"
+        if self.choices and value not in self.choices:
+            return f"expected one of {', '.join(self.choices)}, got {value!r}"
+        problem = self.field.check(value) if self.field.check else None
+        if problem and ", got " not in problem:
+            problem += f" (got {value!r})"
+        return problem
+
+
+def _is(value: Any, kind: type) -> bool:
+    if kind is float:
+        return isinstance(value, float)
+    if kind is int:
+        return isinstance(value, int) and not isinstance(value, bool)
+    return isinstance(value, kind)
+
+
+@dataclass(frozen=True)
+class NodeParameters:
+    """Base of a node's parameter declarations (frozen dataclasses of :func:`param` fields)."""
+
+    @classmethod
+    def specs(cls) -> tuple[ParamSpec, ...]:
+        """The parameters in declaration order (worked out once per class)."""
+        if "_specs" not in cls.__dict__:
+            hints = get_type_hints(cls)
+            cls._specs = tuple(_spec(f, hints[f.name]) for f in dataclasses.fields(cls))
+        return cls.__dict__["_specs"]
+
+    @classmethod
+    def dynamic(cls) -> frozenset[str]:
+        return frozenset(s.name for s in cls.specs() if s.field.dynamic)
+
+
+def _spec(f: dataclasses.Field, hint: Any) -> ParamSpec:
+    meta = f.metadata.get("param")
+    if meta is None or f.default is MISSING:
+        raise TypeError(f"{f.name}: declare node parameters with param(default, ...)")
+    if get_origin(hint) is Literal:
+        return ParamSpec(f.name, str, None, get_args(hint), f.default, meta)
+    if get_origin(hint) is list:
+        return ParamSpec(f.name, list, get_args(hint)[0], None, f.default, meta)
+    if hint in (bool, int, float, str):
+        return ParamSpec(f.name, hint, None, None, f.default, meta)
+    raise TypeError(f"{f.name}: a node parameter cannot have the type {hint!r}")
+
+
+def declare(node: Any, cls: type[P], scene: Any = None) -> P:
+    """Declare every parameter of ``cls`` on ``node`` (read-only unless dynamic) and return their
+    values, each checked by its declaration (InputError naming the first wrong one). ``scene``
+    gives the defaults taken from it."""
+    values = {}
+    for spec in cls.specs():
+        value = node.declare_parameter(spec.name, spec.default_for(scene),
+                                       read_only=not spec.field.dynamic).value
+        if spec.kind is float and isinstance(value, int) and not isinstance(value, bool):
+            value = float(value)
+        if problem := spec.problem(value):
+            raise InputError(f"parameter {spec.name!r}: {problem}")
+        values[spec.name] = value
+    return cls(**values)
+
+
+def defaults(cls: type[P], scene: Any = None) -> P:
+    """The defaults of ``cls``'s parameters (those from the scene for ``scene``)."""
+    return cls(**{s.name: s.default_for(scene) for s in cls.specs()})
+
+
+def current(node: Any, cls: type[P]) -> P:
+    """The values of ``cls``'s parameters as ``node`` holds them now (after sets)."""
+    return cls(**{s.name: node.get_parameter(s.name).value for s in cls.specs()})
+
+
+def set_check(*classes: type[NodeParameters]) -> Callable[[list[Parameter]], SetParametersResult]:
+    """An on-set-parameters check by the declarations of ``classes``: a parameter not declared
+    there as dynamic is refused (``use_sim_time`` and the read-only ones), a dynamic one whose
+    value its declaration refuses too, with the reason."""
+    specs = {s.name: s for cls in classes for s in cls.specs()}
+
+    def check(parameters: list[Parameter]) -> SetParametersResult:
+        for p in parameters:
+            spec = specs.get(p.name)
+            if spec is None or not spec.field.dynamic:
+                return SetParametersResult(False, f"parameter {p.name!r} cannot change while "
+                                                  "the node runs")
+            if problem := spec.problem(p.value):
+                return SetParametersResult(False, f"{p.name}: {problem}")
+        return SetParametersResult(True)
+
+    return check
+
+
+def reference(nodes: dict[str, tuple[type[NodeParameters], ...]]) -> str:
+    """The parameter reference (Markdown): one table of every declared parameter, with the
+    nodes that declare it (one row per name and meaning)."""
+    rows: dict[tuple[str, str], tuple[ParamSpec, list[str]]] = {}
+    for node, classes in nodes.items():
+        for cls in classes:
+            for spec in cls.specs():
+                rows.setdefault((spec.name, spec.field.doc), (spec, []))[1].append(node)
+    lines = ["| parameter | nodes | type | default | range or choices | unit | set at run time "
+             "| what it is |", "|---|---|---|---|---|---|---|---|"]
+    for (name, _), (spec, where) in rows.items():
+        default = (spec.default.doc if isinstance(spec.default, FromScene)
+                   else _shown(spec.default))
+        limits = " \\| ".join(f"`{c}`" for c in spec.choices) if spec.choices else (
+            spec.field.limits)
+        nodes_text = "all" if len(where) == len(nodes) else ", ".join(where)
+        lines.append(f"| `{name}` | {nodes_text} | {spec.type_text} | {default} | {limits} | "
+                     f"{spec.field.unit} | {'yes' if spec.field.dynamic else ''} | "
+                     f"{spec.field.doc} |")
+    return "\n".join(lines) + "\n"
+
+
+def _shown(value: Any) -> str:
+    return f"`{json.dumps(list(value) if isinstance(value, tuple) else value)}`"
