@@ -32,6 +32,7 @@ from typing import Any
 import yaml
 
 from stillframe.app import running_graph
+from stillframe.app.tracking import TRACKER, read_tracked, tracker_command
 from stillframe.config.scene import Scene, load_scene
 from stillframe.contract import messages
 from stillframe.contract.topics import DEFAULT_NAMESPACE, STATUS_KEYS
@@ -49,7 +50,7 @@ COMPOSE = ("", "pair", "all")
 #: the loop's node processes that take real-time parameters besides the simulator's
 LOOP = ("estimator_node", "controller_node")
 #: the children whose middleware backend ``--backend NAME=BACKEND`` can choose
-BACKEND_TARGETS: tuple[str, ...] = (*NODES, "recorder", "monitor")
+BACKEND_TARGETS: tuple[str, ...] = (*NODES, "recorder", "monitor", TRACKER)
 #: the node processes that are managed (lifecycle) nodes: the launch configures and activates
 #: them (the container brings its nodes up itself)
 MANAGED: tuple[str, ...] = tuple(n for n, declared in NODE_PARAMETERS.items()
@@ -292,6 +293,8 @@ class LaunchResult:
     result_file: Path
     history_file: Path
     diagnostics: dict[str, dict[str, str]] = field(default_factory=dict)
+    #: the modal tracker's updates with ``track`` (:mod:`stillframe.app.tracking`)
+    tracked_modes: list[dict[str, Any]] = field(default_factory=list)
 
 
 @dataclass
@@ -321,6 +324,12 @@ class LaunchOptions:
     #: :mod:`stillframe.app.netns_lab`; the container on the estimator's); a node not named
     #: runs here
     hosts: dict[str, list[str]] = field(default_factory=dict)
+    #: run the modal tracker beside the nodes (:mod:`stillframe.app.tracking`)
+    track: bool = False
+
+    @property
+    def tracked_file(self) -> Path:
+        return self.result_file.with_name("tracked_modes.jsonl")
 
 
 class Launcher:
@@ -372,6 +381,9 @@ class Launcher:
             children.append(("monitor", [sys.executable, "-m", "stillframe", "monitor",
                                          "--dashboard", "--use-sim-time", "--scene", str(scene),
                                          *o.monitor_args]))
+        if o.track:
+            o.tracked_file.unlink(missing_ok=True)
+            children.append((TRACKER, tracker_command(self.scene, o.tracked_file)))
         nodes = self.nodes()
         # the pair's container takes no real-time parameters (it composes two nodes' loops);
         # with the simulator in it, the simulator's practices are the process's
@@ -560,7 +572,8 @@ class Launcher:
             evaluation = json.loads(path.read_text())
         except (OSError, ValueError) as exc:
             raise InputError(f"sim_node's result file {path}: cannot read it ({exc})") from None
-        return LaunchResult(evaluation, path, path.with_suffix(".npz"), dict(self.statuses))
+        return LaunchResult(evaluation, path, path.with_suffix(".npz"), dict(self.statuses),
+                            read_tracked(self.options.tracked_file) if self.options.track else [])
 
 
 def _how_stopped(code: int | None) -> str:
@@ -588,7 +601,7 @@ def run_scene(scene: Path, overrides: Sequence[str] = (), *, out: Path,
               monitor_args: Sequence[str] | None = None, compose: str = "",
               rt: str = "", rt_cpus: Sequence[int] = (),
               hosts: dict[str, list[str]] | None = None,
-              resolved: Scene | None = None) -> LaunchResult:
+              resolved: Scene | None = None, track: bool = False) -> LaunchResult:
     """Launch ``scene`` with ``overrides`` through the three nodes to its end; sim_node's
     results go to ``out`` (``result.json``, ``result.npz``, beside the resolved scene the nodes
     read); ``record`` records ``record_topics`` (default all) into a bag; ``backends`` are
@@ -598,15 +611,15 @@ def run_scene(scene: Path, overrides: Sequence[str] = (), *, out: Path,
     ``rt_cpus`` are the loop nodes' real-time practices and CPUs
     (:mod:`stillframe.node_runtime.realtime`); ``hosts`` runs nodes on other hosts
     (:attr:`LaunchOptions.hosts`); ``resolved``: the scene already loaded and resolved (else it
-    is done here, once). ``prepare(node)`` may subscribe the launcher's hidden node to more
-    topics before the children start."""
+    is done here, once); ``track`` adds the modal tracker. ``prepare(node)`` may subscribe the
+    launcher's hidden node to more topics before the children start."""
     out.mkdir(parents=True, exist_ok=True)
     launcher = Launcher(LaunchOptions(
         scene, list(overrides), resolved, mode=mode, result_file=out / "result.json",
         record_dir=record, lockstep_timeout_s=lockstep_timeout_s,
         record_topics=list(record_topics), backends=list(backends),
         monitor_args=None if monitor_args is None else list(monitor_args), compose=compose,
-        rt=rt, rt_cpus=list(rt_cpus), hosts=dict(hosts or {})))
+        rt=rt, rt_cpus=list(rt_cpus), hosts=dict(hosts or {}), track=track))
     if prepare is not None:
         prepare(launcher.node)
     return launcher.run()

@@ -4,23 +4,26 @@ A channel is ``TOPIC[:FIELD]``: FIELD is a dotted path into the message, with ``
 element of an array (``wrench.force.x``, ``position[0]``). Without FIELD the topic contract's
 quantity for the topic's type is taken (docs/architecture.md, topic contract). Bags are read with
 ``rosbags.highlevel.AnyReader``, so sqlite3 and MCAP bags, including ones written by
-``ros2 bag record``, are read alike. Each sample is placed at its header stamp (the measurement
-time in the contract), or at its log time when the message has no header or all its stamps are
-zero. Channels must be uniformly sampled at one rate without gaps; they are aligned sample by
-sample on their common time span. Preprocessing applies the same linear filter to inputs and
-outputs, so the input-output relation that identification estimates is kept.
+``ros2 bag record``, are read alike; a lone ``.mcap`` file with :mod:`stillframe.bags.lone_mcap`.
+Each sample is placed at its header stamp (the measurement time in the contract), or at its log
+time when the message has no header or all its stamps are zero. Channels must be uniformly
+sampled at one rate without gaps; they are aligned sample by sample on their common time span.
+Preprocessing applies the same linear filter to inputs and outputs, so the input-output relation
+that identification estimates is kept.
 """
 
 from __future__ import annotations
 
+import functools
 import re
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 from scipy import signal
 
+from stillframe.bags.lone_mcap import is_lone_mcap, open_lone_mcap
 from stillframe.bags.storage import open_bag
 from stillframe.contract.messages import TYPESTORE
 from stillframe.contract.topics import CONDITIONAL, CONTRACT
@@ -32,6 +35,11 @@ DEFAULT_FIELDS: dict[str, str] = {"std_msgs/msg/Float64": "data"} | {
     spec.type_name: spec.field for spec in reversed(CONTRACT) if spec.field}
 #: Largest deviation of one sampling step from the median step, relative to the median step.
 DEFAULT_JITTER = 0.05
+
+#: SI unit of a field by its message member (REP 103; JointState of a revolute joint: rad)
+FIELD_UNITS: dict[str, str] = {
+    "linear_acceleration": "m/s²", "angular_velocity": "rad/s", "force": "N", "torque": "N m",
+    "position": "rad", "velocity": "rad/s", "effort": "N m"}
 
 _PATH_ITEM = re.compile(r"^([A-Za-z_]\w*)((?:\[\d+\])*)$")
 
@@ -53,6 +61,14 @@ class Channel:
         if path:
             _split_path(path, spec)
         return cls(topic, path or None)
+
+    @property
+    def unit(self) -> str | None:
+        """The SI unit of the field (:data:`FIELD_UNITS`), None when unknown."""
+        for part in (self.field or "").split("."):
+            if (unit := FIELD_UNITS.get(part.split("[")[0])) is not None:
+                return unit
+        return None
 
     def __str__(self) -> str:
         return f"{self.topic}:{self.field}" if self.field else self.topic
@@ -130,7 +146,21 @@ def _extract(msg: object, path: list[tuple[str, list[int]]], channel: Channel,
     return float(value)
 
 
-def _stamp_ns(msg: object) -> int | None:
+def field_reader(channel: Channel, msgtype: str) -> tuple[Channel, Callable[[object], float]]:
+    """The channel with its field resolved (the contract's default when none is given) and a
+    function reading that field's value from a deserialised message (for live subscribers such
+    as the modal tracker)."""
+    full = Channel(channel.topic, channel.field or _default_field(channel.topic, msgtype))
+    path = _split_path(full.field, str(full))
+    return full, functools.partial(_read_field, path=path, channel=full, msgtype=msgtype)
+
+
+def _read_field(msg: object, *, path: list[tuple[str, list[int]]], channel: Channel,
+                msgtype: str) -> float:
+    return _extract(msg, path, channel, msgtype)
+
+
+def stamp_ns(msg: object) -> int | None:
     header = getattr(msg, "header", None)
     stamp = getattr(header, "stamp", None)
     if stamp is None:
@@ -140,7 +170,8 @@ def _stamp_ns(msg: object) -> int | None:
 
 def read_series(bag: str | Path, channels: Sequence[Channel]) -> list[Series]:
     """Read each channel's samples from the bag (one pass over the needed topics)."""
-    with open_bag(bag, TYPESTORE) as reader:
+    opener = open_lone_mcap if is_lone_mcap(bag) else open_bag
+    with opener(bag, TYPESTORE) as reader:
         types: dict[str, set[str]] = {}
         for c in reader.connections:
             types.setdefault(c.topic, set()).add(c.msgtype)
@@ -169,7 +200,7 @@ def read_series(bag: str | Path, channels: Sequence[Channel]) -> list[Series]:
                 seen = corrupt.setdefault(connection.topic, [0, logtime, type(exc).__name__])
                 seen[0] += 1
                 continue
-            stamps[connection.topic].append(_stamp_ns(msg))
+            stamps[connection.topic].append(stamp_ns(msg))
             logtimes[connection.topic].append(logtime)
             for i, (full, items, msgtype) in enumerate(resolved):
                 if full.topic == connection.topic:
@@ -286,9 +317,12 @@ def preprocess(data: np.ndarray, dt: float, *, detrend: bool = False,
 
 def read_record(bag: str | Path, inputs: Sequence[Channel], outputs: Sequence[Channel], *,
                 detrend: bool = False, lowpass_hz: float | None = None, decimate: int = 1,
-                max_jitter: float = DEFAULT_JITTER) -> Record:
-    """Read, check, align and preprocess the input and output channels of a bag."""
-    if not inputs:
+                max_jitter: float = DEFAULT_JITTER, output_only: bool = False) -> Record:
+    """Read, check, align and preprocess the input and output channels of a bag (no inputs with
+    ``output_only``, which refuses any)."""
+    if output_only and inputs:
+        raise InputError("output-only identification takes no --input channel")
+    if not inputs and not output_only:
         raise InputError("give at least one --input channel")
     if not outputs:
         raise InputError("give at least one --output channel")

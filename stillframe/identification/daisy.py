@@ -112,7 +112,7 @@ def mean_fit(model: Model, u: np.ndarray, y: np.ndarray) -> float:
 
 def okid_model(u: np.ndarray, y: np.ndarray, method: str, observer_order: int) -> Model:
     start = time.perf_counter()
-    ident = identify(u, y, DT, method, ORDER, observer_order=observer_order)
+    ident = identify(u, y, DT, method, ORDER, observer_order=observer_order, refine=False)
     return Model(method, ident.A, ident.B, ident.C, ident.D, time.perf_counter() - start,
                  observer_order, ident.warnings)
 

@@ -72,8 +72,7 @@ class HankelFactorization:
 
     @property
     def numerical_rank(self) -> int:
-        s = self.singular_values
-        return int(np.sum(s > RANK_TOLERANCE * s[0])) if s.size and s[0] > 0 else 0
+        return numerical_rank(self.singular_values)
 
     def realize(self, order: int) -> Realization:
         """Balanced realization of the given order (eq. 3.137, or 3.164 when correlated)."""
@@ -138,6 +137,12 @@ def factorize(markov: Array, dims: EraDimensions, correlated: bool) -> HankelFac
         D=markov[0].copy(), n_outputs=m, n_columns=q, alpha=dims.alpha, beta=dims.beta,
         correlated=correlated,
     )
+
+
+def numerical_rank(singular_values: Array) -> int:
+    """Singular values above :data:`RANK_TOLERANCE` of the largest (descending order)."""
+    s = singular_values
+    return int(np.sum(s > RANK_TOLERANCE * s[0])) if s.size and s[0] > 0 else 0
 
 
 def auto_order(singular_values: Array, max_order: int) -> tuple[int, float]:

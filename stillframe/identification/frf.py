@@ -23,11 +23,32 @@ Array = NDArray[np.float64]
 
 @dataclass(frozen=True)
 class Frf:
-    """``frequency_hz (F,)``, ``H (F, m, r)`` complex and ``coherence (F, m)``."""
+    """``frequency_hz (F,)``, ``H (F, m, r)`` complex, ``coherence (F, m)`` and the number of
+    Welch segments averaged (with one, the coherence is 1 identically and says nothing)."""
 
     frequency_hz: Array
     H: NDArray[np.complex128]
     coherence: Array
+    segments: int = 0
+
+
+MIN_SEGMENTS = 8
+"""Welch segments :func:`segment_length` aims at, so that the coherence is an estimate."""
+
+
+def welch_segments(samples: int, nperseg: int) -> int:
+    """Segments scipy's Welch estimate averages with its default half overlap."""
+    step = nperseg - nperseg // 2
+    return (samples - nperseg) // step + 1
+
+
+def segment_length(samples: int, longest: int = 256) -> int:
+    """The largest power of two up to ``longest`` giving at least :data:`MIN_SEGMENTS` segments
+    (at least 8 samples; fewer segments for records too short for that)."""
+    n = 8
+    while 2 * n <= longest and welch_segments(samples, 2 * n) >= MIN_SEGMENTS:
+        n *= 2
+    return min(n, samples)
 
 
 def h1_frf(u: Array, y: Array, dt: float, nperseg: int = 256, window: str = "hann") -> Frf:
@@ -69,7 +90,8 @@ def h1_frf(u: Array, y: Array, dt: float, nperseg: int = 256, window: str = "han
     H = np.linalg.solve(g_uu.transpose(0, 2, 1), g_yu.transpose(0, 2, 1)).transpose(0, 2, 1)
     explained = np.einsum("fij,fjk,fik->fi", H, g_uu, H.conj()).real
     coherence = np.divide(explained, g_yy, out=np.zeros_like(g_yy), where=g_yy > 0)
-    return Frf(frequency_hz=freq, H=H, coherence=np.clip(coherence, 0.0, 1.0))
+    return Frf(frequency_hz=freq, H=H, coherence=np.clip(coherence, 0.0, 1.0),
+               segments=welch_segments(u.shape[0], nperseg))
 
 
 def model_frf(A: Array, B: Array, C: Array, D: Array, dt: float, frequency_hz: Array,

@@ -78,7 +78,8 @@ def main(argv: list[str] | None = None) -> int:
     for seed in range(args.seeds):
         rec = hammer_test(lin, seed)
         for method, combined in variants:
-            ident = identify(rec.u, rec.y, rec.dt, method, args.order, combined=combined)
+            ident = identify(rec.u, rec.y, rec.dt, method, args.order, combined=combined,
+                             refine=False)
             name = method + (" combined" if combined else "")
             for f, z in zip(ident.modes.frequency_hz, ident.modes.damping_ratio, strict=True):
                 k = int(np.argmin(np.abs(rec.frequency_hz - f)))

@@ -79,6 +79,32 @@ def _check_layout(sensor_dofs: Sequence[int], actuator_dofs: Sequence[int], orde
     return n_dof
 
 
+def mass_diagnosis(mass: Array, lam: NDArray[np.complex128], t2: NDArray[np.complex128]) -> str:
+    """Why MKR's mass matrix is not positive definite, from what it shows (one line).
+
+    All eigenvalues negative: the inputs have the opposite sign to the outputs (a force measured
+    with the opposite sign negates M, K and R; eq. 3.236's T_j² then all change sign). Some
+    negative: at least one identified mode's co-located residue (T_j², eq. 3.236) has the sign
+    no passive structure gives, i.e. the identified modes are not those of a mechanical system
+    seen from the co-located pair: typically modes fitted to noise (too little signal against
+    the noise) or a mode of something else in the record.
+    """
+    eig = np.linalg.eigvalsh(mass)
+    if np.all(eig < 0):
+        return ("MKR gave a negative definite mass matrix: the inputs have the opposite sign to "
+                "the outputs (a force measured with the opposite sign negates M, K and R)")
+    half = lam.size // 2
+    majority = np.sign(np.median(t2[:half].real))
+    odd = [k for k in range(half) if np.sign(t2[k].real) != majority]
+    freqs = np.abs(lam[:half]) / (2 * np.pi)
+    named = ", ".join(f"{freqs[k]:.4g} Hz" for k in odd) or "none alone"
+    return (f"MKR gave a mass matrix with {int(np.sum(eig <= 0))} of {eig.size} eigenvalues not "
+            f"positive: the identified modes are not a mechanical system seen from the "
+            f"co-located sensor and actuator (modes whose co-located residue has the wrong sign: "
+            f"{named}); such modes are usually fitted to noise: too little signal against the "
+            f"noise, or a mode of something other than the structure")
+
+
 def mkr(A: Array, B: Array, C: Array, dt: float, sensor_dofs: Sequence[int],
         actuator_dofs: Sequence[int], output: str = "acceleration") -> PhysicalModel:
     """M, K, R from the discrete model ``(A, B, C)`` sampled at ``dt`` (eqs. 3.232–3.241).
@@ -132,8 +158,5 @@ def mkr(A: Array, B: Array, C: Array, dt: float, sensor_dofs: Sequence[int],
                              "conditions (check sensor/actuator DOFs and output type)")
         out.append(0.5 * (mat.real + mat.real.T))
     if np.any(np.linalg.eigvalsh(out[0]) <= 0):
-        raise IdentificationError(
-            "MKR gave a mass matrix that is not positive definite: check the sign of "
-                         "the inputs against the outputs (a force measured with the opposite "
-                         "sign negates M, K and R)")
+        raise IdentificationError(mass_diagnosis(out[0], lam, t2))
     return PhysicalModel(M=out[0], K=out[1], R=out[2])

@@ -11,8 +11,10 @@ With ``combined=True`` the OKID methods realize the combined parameters ``[Y_k, 
 (eqs. 3.165–3.203, the thesis's variant for the rig in §5.5), which gives B and G together; on the
 simulated hammer test its damping ratios are worse (docs/identification.md), so it is not the
 default.
-With ``refine=True`` the OKID model is then refined by prediction-error least squares in
-innovation form (:mod:`stillframe.identification.pem`), which also gives each mode a 95 % interval.
+By default the OKID model is then refined by prediction-error least squares in innovation form
+(:mod:`stillframe.identification.pem`), which also gives each mode a 95 % interval and the
+residual checks; ``refine=False`` is the faster path without it, which still runs every other
+check and says in a warning that the model is not refined.
 - ``era-impulse``: the record is the response to one pulse on a single input at the first
   sample; ``Y_k = y(k) / u(0)`` and ERA. No observer gain.
 """
@@ -20,7 +22,8 @@ innovation form (:mod:`stillframe.identification.pem`), which also gives each mo
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
 from numbers import Integral, Real
 from typing import Literal
 
@@ -28,6 +31,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from stillframe.errors import IdentificationError, InputError
+from stillframe.identification.data_checks import (
+    channel_names,
+    channel_scales,
+    check_excitation,
+    check_length,
+    check_values,
+)
 from stillframe.identification.era import (
     EraDimensions,
     HankelFactorization,
@@ -47,6 +57,12 @@ from stillframe.identification.quality import (
     uncertain_modes,
 )
 from stillframe.identification.residual_tests import residual_warnings
+
+NOT_REFINED = ("not refined: the model is OKID/ERA's without the prediction-error refinement "
+               "(no 95 % intervals, no residual checks); its damping ratios are biased at low "
+               "SNR")
+"""The warning of every identification that skips the refinement (``refine=False`` or a method
+the refinement does not apply to)."""
 
 Array = NDArray[np.float64]
 Method = Literal["okid-era", "okid-eradc", "era-impulse"]
@@ -86,8 +102,9 @@ class Identification:
     """The quality checks that failed (weak order gap, inconsistent, unstable, left-out or
     uncertain modes)."""
     refinement: Refinement | None = None
-    """The prediction-error refinement (``refine=True``): A, B, C, D and the modes above are
-    its; it holds the modes' 95 % intervals."""
+    """The prediction-error refinement (the default): A, B, C, D and the modes above are its; it
+    holds the modes' 95 % intervals. None when not refined (``refine=False``, era-impulse,
+    combined)."""
 
 
 def _as_record(name: str, values: Array) -> Array:
@@ -96,8 +113,6 @@ def _as_record(name: str, values: Array) -> Array:
         arr = arr[:, None]
     if arr.ndim != 2 or arr.shape[0] == 0 or arr.shape[1] == 0:
         raise InputError(f"{name} must be a non-empty (samples, channels) array, got {arr.shape}")
-    if not np.all(np.isfinite(arr)):
-        raise InputError(f"{name} contains NaN or inf")
     return arr
 
 
@@ -130,7 +145,8 @@ def _impulse_factorization(u: Array, y: Array, order: int, alpha: int | None, be
     return markov, dims, factorize(markov, dims, correlated=False)
 
 
-def _observer_order(n_samples: int, r: int, m: int, order: int, requested: int | None) -> int:
+def _observer_order(n_samples: int, r: int, m: int, order: int, requested: int | None,
+                    names: list[str]) -> int:
     """OKID's p: as requested, or the default lowered to what the record allows; checked."""
     if requested is None:
         p = DEFAULT_OBSERVER_ORDER
@@ -141,11 +157,8 @@ def _observer_order(n_samples: int, r: int, m: int, order: int, requested: int |
     if p * m < order:
         raise InputError(f"observer order {p} with {m} outputs bounds the model order by "
                          f"{p * m} < {order} (thesis: m p >= n)")
-    if n_samples < minimum_samples(r, m, p):
-        raise IdentificationError(
-            f"record of {n_samples} samples too short for order {order}: OKID with observer "
-            f"order {p} needs at least {minimum_samples(r, m, p)} samples"
-        )
+    check_length(n_samples, minimum_samples(r, m, p), order, names,
+                 f"OKID with observer order {p}")
     return p
 
 
@@ -182,7 +195,9 @@ def identify(
     tau: int = 1,
     reference_sensor: int | None = None,
     combined: bool = False,
-    refine: bool = False,
+    refine: bool | None = None,
+    input_names: Sequence[str] | None = None,
+    output_names: Sequence[str] | None = None,
 ) -> Identification:
     """Identify a discrete state-space model of order ``order`` (or the largest singular-value
     gap up to ``max_order`` when ``"auto"``; default: half the Hankel matrix's rank bound)
@@ -193,26 +208,42 @@ def identify(
     as the record allows up to 50 and 200); ``gamma``, ``delta``, ``tau`` are the ERA/DC
     correlation sizes (eq. 3.141). ``reference_sensor`` normalises the mode shapes (default: the
     largest component). ``combined`` realizes ``[Y_k, Y^0_k]`` (eq. 3.165) for the OKID methods.
-    ``refine`` (OKID methods, not combined) refines the model by prediction-error least squares
-    (:func:`stillframe.identification.pem.refine_prediction_error`) and checks its modes' intervals.
-    Raises :class:`InputError` on bad input or a record too short.
+    ``refine`` (default: wherever it applies, i.e. the OKID methods without ``combined``) refines
+    the model by prediction-error least squares
+    (:func:`stillframe.identification.pem.refine_prediction_error`) and checks its modes'
+    intervals and its prediction errors; a model that is not refined carries :data:`NOT_REFINED`
+    among its warnings. ``input_names`` and ``output_names`` name the channels in the messages
+    of :mod:`stillframe.identification.data_checks`, whose checks run first. Each channel is
+    divided by its RMS before identifying and the model scaled back (the modes do not depend on
+    the units; the Hankel singular values and Markov parameters' SVD are of the normalised data).
+    Raises :class:`InputError` on a bad request, :class:`IdentificationError` on data that cannot
+    be identified.
     """
     u = _as_record("input", u)
     y = _as_record("output", y)
     _check_request(u, y, dt, method, order, max_order, combined)
-    if refine and (combined or method == "era-impulse"):
+    refinable = not combined and method != "era-impulse"
+    if refine and not refinable:
         raise InputError("the refinement needs OKID's observer gain of the plain realization: "
                          "not with era-impulse or combined")
+    refine = refinable if refine is None else bool(refine)
     n_samples, r = u.shape
     m = y.shape[1]
+    inputs = channel_names("input", r, input_names)
+    outputs = channel_names("output", m, output_names)
+    check_values(u, inputs)
+    check_values(y, outputs)
     needed_order = 2 if order == "auto" else int(order)
+    u_scale, y_scale = channel_scales(u), channel_scales(y)
+    u, y = u / u_scale, y / y_scale
 
     if method == "era-impulse":
         markov, dims, fac = _impulse_factorization(u, y, needed_order, alpha, beta)
         p = None
     else:
         correlated = method == "okid-eradc"
-        p = _observer_order(n_samples, r, m, needed_order, observer_order)
+        p = _observer_order(n_samples, r, m, needed_order, observer_order, [*inputs, *outputs])
+        check_excitation(u, needed_order, inputs)
         fit = okid(u, y, p)
         dims = EraDimensions(alpha=alpha or p, beta=beta or 4 * p,
                              gamma=gamma if correlated else 0, delta=delta if correlated else 0,
@@ -226,6 +257,8 @@ def identify(
     s = fac.singular_values
     if order == "auto":
         chosen, gap = auto_order(s, max_order or fac.max_rank // 2)
+        if method != "era-impulse":
+            check_excitation(u, chosen, inputs)
     else:
         chosen, gap = needed_order, order_gap(s, needed_order)
     real = fac.realize(chosen)
@@ -240,11 +273,12 @@ def identify(
     consistent = mode_consistency(fac, modes, chosen, float(dt))
     left_out = left_out_modes(fac, modes, chosen, float(dt))
     refinement, uncertain = None, None
-    order_note, residual_notes = None, []
+    notes: list[str] = [] if refine else [NOT_REFINED]
     if refine:
         if order == "auto":
             choice = refine_candidates(fac, gain_markov[: p + 1], r, u, y, float(dt), chosen)
-            chosen, refinement, order_note = choice.order, choice.refinement, choice.note
+            chosen, refinement = choice.order, choice.refinement
+            notes += [choice.note] if choice.note else []
         else:
             refinement = refine_prediction_error(A, B, C, D, G, u, y, float(dt))
         A, B, C, D, G = refinement.A, refinement.B, refinement.C, refinement.D, -refinement.K
@@ -255,12 +289,48 @@ def identify(
             consistent = mode_consistency(fac, modes, chosen, float(dt))
         left_out = left_out_modes(fac, modes, chosen, float(dt))
         uncertain = uncertain_modes(modes, refinement.frequency_ci_hz, refinement.damping_ci)
-        residual_notes = residual_warnings(y, refinement.errors)
+        notes += residual_warnings(y, refinement.errors)
+    units = _Units(u_scale, y_scale)
+    B, C, D = units.input_matrix(B), units.output_matrix(C), units.feedthrough(D)
+    G = None if G is None else units.gain(G)
     return Identification(
         A=A, B=B, C=C, D=D, G=G, dt=float(dt), order=chosen, order_gap=gap,
-        hankel_singular_values=s, markov=markov, method=method, observer_order=p,
-        dimensions=dims, factorization=fac, modes=modes, consistent=consistent,
-        warnings=tuple(([order_note] if order_note else []) + residual_notes
-                       + quality_warnings(modes, consistent, chosen, gap, left_out, uncertain)),
-        refinement=refinement,
+        hankel_singular_values=s, markov=units.feedthrough(markov), method=method, observer_order=p,
+        dimensions=dims, factorization=fac,
+        modes=modal_parameters(A, C, float(dt), reference=reference_sensor),
+        consistent=consistent,
+        warnings=tuple(notes + quality_warnings(modes, consistent, chosen, gap, left_out,
+                                                uncertain)),
+        refinement=None if refinement is None else units.refinement(refinement, A, C, dt,
+                                                                    reference_sensor),
     )
+
+
+@dataclass(frozen=True)
+class _Units:
+    """Maps a model identified on the normalised records ``u / u_scale``, ``y / y_scale`` back to
+    the records' units: ``B Su⁻¹``, ``Sy C``, ``Sy D Su⁻¹``, ``G Sy⁻¹`` (the state and A are
+    unchanged, so are the eigenvalues)."""
+
+    u_scale: Array
+    y_scale: Array
+
+    def input_matrix(self, B: Array) -> Array:
+        return B / self.u_scale[None, :]
+
+    def output_matrix(self, C: Array) -> Array:
+        return self.y_scale[:, None] * C
+
+    def feedthrough(self, D: Array) -> Array:
+        """``D`` or a stack of Markov parameters ``(..., m, r)``."""
+        return self.y_scale[:, None] * D / self.u_scale[None, :]
+
+    def gain(self, G: Array) -> Array:
+        return G / self.y_scale[None, :]
+
+    def refinement(self, ref: Refinement, A: Array, C: Array, dt: float,
+                   reference: int | None) -> Refinement:
+        return replace(ref, B=self.input_matrix(ref.B), C=self.output_matrix(ref.C),
+                       D=self.feedthrough(ref.D), K=self.gain(ref.K),
+                       errors=ref.errors * self.y_scale[None, :],
+                       modes=modal_parameters(A, C, float(dt), reference=reference))

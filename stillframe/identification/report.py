@@ -10,11 +10,15 @@ import numpy as np
 from stillframe.identification.modal import ModalTable
 from stillframe.identification.pem import Refinement
 from stillframe.identification.pipeline import Identification
+from stillframe.identification.ssi_cov import OutputOnlyIdentification
 from stillframe.text_table import format_table
+
+WithIntervals = Refinement | OutputOnlyIdentification
+"""What carries the modes' 95 % intervals (``frequency_ci_hz``, ``damping_ci``)."""
 
 
 def modes_document(modes: ModalTable, consistent: Sequence[bool],
-                   refinement: Refinement | None = None) -> list[dict[str, Any]]:
+                   refinement: WithIntervals | None = None) -> list[dict[str, Any]]:
     """Modes sorted by frequency: frequency, damping ratio, shape as [magnitude, phase],
     whether the mode persists at higher orders (:mod:`stillframe.identification.quality`) and, with
     the
@@ -30,15 +34,11 @@ def modes_document(modes: ModalTable, consistent: Sequence[bool],
     return docs
 
 
-def identification_document(ident: Identification, order_auto: bool) -> dict[str, Any]:
-    """``{"order", "dt", "modes", "hankel_singular_values", "method", ...}``."""
+def _document(ident: Identification | OutputOnlyIdentification, intervals: WithIntervals | None,
+              order_auto: bool, extra: dict[str, Any]) -> dict[str, Any]:
     doc: dict[str, Any] = {
-        "order": ident.order,
-        "dt": ident.dt,
-        "method": ident.method,
-        "modes": modes_document(ident.modes, ident.consistent, ident.refinement),
-        "hankel_singular_values": [float(s) for s in ident.hankel_singular_values],
-        "observer_order": ident.observer_order,
+        "order": ident.order, "dt": ident.dt, "method": ident.method,
+        "modes": modes_document(ident.modes, ident.consistent, intervals), **extra,
         "order_gap": ident.order_gap if np.isfinite(ident.order_gap) else None,
         "warnings": list(ident.warnings),
     }
@@ -48,8 +48,24 @@ def identification_document(ident: Identification, order_auto: bool) -> dict[str
     return doc
 
 
+def identification_document(ident: Identification, order_auto: bool) -> dict[str, Any]:
+    """``{"order", "dt", "modes", "hankel_singular_values", "method", ...}``."""
+    return _document(ident, ident.refinement, order_auto, {
+        "hankel_singular_values": [float(s) for s in ident.hankel_singular_values],
+        "observer_order": ident.observer_order})
+
+
+def output_only_document(ident: OutputOnlyIdentification, order_auto: bool) -> dict[str, Any]:
+    """The SSI-COV result: ``{"order", "dt", "method", "modes" (with intervals), "auto_mac",
+    "singular_values", "block_rows", "order_gap", "warnings"}``."""
+    return _document(ident, ident, order_auto, {
+        "auto_mac": ident.auto_mac.tolist(),
+        "singular_values": [float(s) for s in ident.singular_values],
+        "block_rows": ident.block_rows})
+
+
 def modes_table(modes: ModalTable, consistent: Sequence[bool], output_names: list[str],
-                refinement: Refinement | None = None) -> str:
+                refinement: WithIntervals | None = None) -> str:
     """One row per mode: frequency, damping ratio (with the refinement: their 95 % intervals),
     consistency, shape magnitude/phase per output."""
     intervals = ["f 95 % CI [Hz]", "zeta 95 % CI"] if refinement is not None else []

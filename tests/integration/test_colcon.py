@@ -20,10 +20,11 @@ from tests.support.nodes import stop
 
 pytestmark = pytest.mark.slow
 
-PACKAGES = ("sim_node", "estimator_node", "controller_node")
+PACKAGES = ("sim_node", "estimator_node", "controller_node", "identification")
 #: the executables each package installs into lib/PKG (where ``ros2 run`` looks)
 EXECUTABLES = {"sim_node": ["sim_node"], "estimator_node": ["estimator_node"],
-               "controller_node": ["controller_node"]}
+               "controller_node": ["controller_node"],
+               "identification": ["identify_bag", "modal_tracker"]}
 PARAMS = REPO_ROOT / "ros_ws" / "config" / "closed_loop.params.yaml"
 SCENE = REPO_ROOT / "scenes" / "thesis_lqg.yaml"
 #: ``ros2 run``'s lookup (ros2pkg's get_executable_paths): the package's prefix from the ament

@@ -118,8 +118,6 @@ def test_identify_warns_about_the_hammer_bags_scale(capsys: pytest.CaptureFixtur
 
 @pytest.mark.parametrize(("extra", "message"), [
     (["--test-force", "-1"], "--test-force"),
-    (["--set", "controller.type=euk_pendulum", "--set", "estimator.type=ekf",
-      "--set", "controller.start=25", "--set", "evaluation.window=10"], "controller.type"),
     (["--set", "excitation.type=none"], "excitation.type"),
 ])
 def test_bad_input_is_refused_before_anything_runs(tmp_path: Path, extra: list[str],
@@ -181,3 +179,48 @@ def test_held_noise_is_read_at_each_sample_time_as_the_value_it_holds(rate_hz: f
     held = np.array([force(k * period) for k in range(int(64 * rate_hz))])
     mid = np.array([force((k + 0.5) * period) for k in range(int(64 * rate_hz))])
     np.testing.assert_array_equal(held, mid)
+
+
+def test_a_test_force_too_weak_for_the_process_noise_is_refused_at_start(
+        tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    """thesis_lqg's plant has process noise 1e-3 on every state each sample: 0.1 N lies about
+    38 dB below it (the linearised model's closed form, experiment_test_force) and is refused
+    before anything runs, naming the cause and the force that would do."""
+    out = tmp_path / "out"
+    assert main(["experiment", str(REPO_ROOT / "scenes" / "thesis_lqg.yaml"), "--out", str(out),
+                 "--test-force", "0.1"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "process noise" in err and "at least 7.99 N" in err
+    assert not out.exists()
+
+
+def test_required_force_against_a_simulated_process_noise_response() -> None:
+    """The closed-form variance ratio of experiment_test_force against a simulation of the same
+    linear model (ZOH, noise added once per period): within 10 % of the force."""
+    from scipy import signal
+
+    from stillframe.app.experiment_test_force import TEST_SNR_DB, required_force
+    from stillframe.design.identified import frame_for
+
+    scene = load_scene(REPO_ROOT / "scenes" / "thesis_lqg.yaml")
+    model = frame_for(scene.plant.model, scene.plant.file, scene, "plant.file")
+    lin = model.linearized()
+    a_c, b_c = lin.state_space()
+    n = lin.mass.shape[0]
+    rows = n + model.floor_index
+    period = 1.0 / scene.sensors.rate_hz
+    a, b, *_ = signal.cont2discrete((a_c, b_c[:, :1], a_c[rows], b_c[rows][:, :1]), period)
+    rng = np.random.default_rng(0)
+    steps = 100_000
+    sigma = np.asarray(scene.plant.process_noise_std)
+    x_f, x_w = np.zeros(2 * n), np.zeros(2 * n)
+    y_f, y_w = np.empty((steps, 3)), np.empty((steps, 3))
+    for k in range(steps):
+        f = rng.standard_normal()
+        y_f[k] = a_c[rows] @ x_f + b_c[rows][:, 0] * f
+        y_w[k] = a_c[rows] @ x_w
+        x_f = a @ x_f + b[:, 0] * f
+        x_w = a @ x_w + sigma * rng.standard_normal(2 * n)
+    ratio = np.max(y_w.var(axis=0) / y_f.var(axis=0))
+    expected = np.sqrt(10 ** (TEST_SNR_DB / 10) * ratio)
+    assert required_force(scene) == pytest.approx(expected, rel=0.1)

@@ -15,7 +15,7 @@ from catkin_pkg.package import parse_package
 from stillframe.locations import REPO_ROOT
 
 ROOT = REPO_ROOT
-PACKAGES = ("sim_node", "estimator_node", "controller_node")
+PACKAGES = ("sim_node", "estimator_node", "controller_node", "identification")
 NODES = ("sim_node", "estimator_node", "controller_node")
 
 
@@ -39,6 +39,16 @@ def test_ros2_run_finds_the_console_script(name: str) -> None:
     assert cfg["install"]["install_scripts"] == f"$base/lib/{name}"
     scripts = cfg["options.entry_points"]["console_scripts"].split()
     assert scripts == [name, "=", f"{name}.node:main"]
+
+
+def test_identification_installs_identify_bag_and_modal_tracker() -> None:
+    """The identification package's two executables, where `ros2 run` looks (lib/PKG)."""
+    cfg = configparser.ConfigParser()
+    cfg.read(ROOT / "identification" / "setup.cfg")
+    assert cfg["install"]["install_scripts"] == "$base/lib/identification"
+    scripts = cfg["options.entry_points"]["console_scripts"].split()
+    assert scripts == ["identify_bag", "=", "identification.identify_bag:main",
+                       "modal_tracker", "=", "identification.node:main"]
 
 
 #: rosdep keys of the third-party libraries the packages import

@@ -73,7 +73,7 @@ def run(args: argparse.Namespace) -> int:
     freq, zeta = record.frequency_hz[1:], record.damping_ratio[1:]
 
     def ours() -> tuple[np.ndarray, np.ndarray]:
-        ident = identify(u, y, dt, "okid-eradc", ORDER)
+        ident = identify(u, y, dt, "okid-eradc", ORDER, refine=False)
         return ident.A, ident.C
 
     def theirs() -> tuple[np.ndarray, np.ndarray]:

@@ -26,8 +26,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     parser.add_argument("--out", type=Path, default=Path("out/experiment"), metavar="DIR",
                         help="output directory (default out/experiment; an earlier run's files "
                              "are replaced)")
-    parser.add_argument("--test-force", type=float, default=0.1, metavar="N",
-                        help="std of the test's white-noise force on floor 1 (default 0.1 N)")
+    parser.add_argument("--test-force", type=float, default=None, metavar="N",
+                        help="std of the test's white-noise force on floor 1 (default 0.1 N, or "
+                        "10 dB above the response to the plant's process noise)")
     parser.add_argument("--test-duration", type=float, default=64.0, metavar="S",
                         help="length of the identification test (default 64 s)")
     parser.add_argument("--test-seed", type=int, default=0, metavar="SEED",

@@ -17,8 +17,10 @@ from stillframe.app.commands.common import add_json_argument, check_output, emit
 from stillframe.errors import InputError
 
 if TYPE_CHECKING:
+    from stillframe.bags.channels import Record
     from stillframe.identification.mkr import PhysicalModel
     from stillframe.identification.pipeline import Identification
+    from stillframe.identification.ssi_cov import OutputOnlyIdentification
 
 
 def _order(text: str) -> int | str:
@@ -36,6 +38,7 @@ def _order(text: str) -> int | str:
 
 def register(sub: argparse._SubParsersAction) -> None:
     from stillframe.identification.pipeline import METHODS
+    from stillframe.identification.ssi_cov import OUTPUT_ONLY_METHODS
 
     parser = sub.add_parser(
         "identify", help="identify a state-space model and its modes from a rosbag2 bag",
@@ -48,7 +51,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     parser.add_argument("--output", dest="outputs", action="append", default=[],
                         metavar="TOPIC[:FIELD]", help="output channel (repeatable), e.g. "
                         "/frame/floor1/imu:linear_acceleration.x")
-    parser.add_argument("--method", choices=METHODS, default="okid-eradc")
+    parser.add_argument("--method", choices=(*METHODS, *OUTPUT_ONLY_METHODS),
+                        default="okid-eradc",
+                        help="input-output methods (default okid-eradc), or ssi-cov: output-only "
+                        "(operational modal analysis, no --input)")
     parser.add_argument("--order", type=_order, default="auto", metavar="N|auto",
                         help="model order, or auto: the largest Hankel singular-value gap")
     parser.add_argument("--max-order", type=int, default=None, metavar="N",
@@ -58,9 +64,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     parser.add_argument("--combined", action="store_true",
                         help="OKID methods: realize [Y_k, Y0_k] together, giving B and the "
                         "observer gain at once (thesis eqs. 3.165-3.203)")
+    parser.add_argument("--fast", action="store_true",
+                        help="skip the prediction-error refinement (the default refines the OKID "
+                        "model and gives each mode a 95 %% interval); every other check still "
+                        "runs and the result warns that it is not refined")
     parser.add_argument("--refine", action="store_true",
-                        help="refine the OKID model by prediction-error least squares (innovation "
-                        "form) and give each mode a 95 %% interval")
+                        help="the default for the OKID methods; kept for older scripts")
     parser.add_argument("--detrend", action="store_true", help="remove a linear trend first")
     parser.add_argument("--lowpass", type=float, default=None, metavar="HZ",
                         help="zero-phase Butterworth low-pass on inputs and outputs")
@@ -121,6 +130,47 @@ def _physical(args: argparse.Namespace, ident: Identification
                       "R": physical.R.tolist(), "rayleigh_alpha": alpha, "rayleigh_beta": beta}
 
 
+def _report_progress(ident: Identification | OutputOnlyIdentification, args: argparse.Namespace,
+                     record: Record, progress: Progress) -> None:
+    """Order and modes on the progress line, each warning on stderr, the figures with --plots."""
+    from stillframe.identification.plots import identification_plots, output_only_plots
+    from stillframe.identification.ssi_cov import OutputOnlyIdentification
+
+    progress(f"order {ident.order}, {len(ident.modes)} modes")
+    for warning in ident.warnings:
+        print(f"stillframe identify: warning: {warning}", file=sys.stderr)
+    if args.plots:
+        progress(f"writing plots to {args.plots}")
+        if isinstance(ident, OutputOnlyIdentification):
+            output_only_plots(ident, record, args.plots)
+        else:
+            identification_plots(ident, record, args.plots)
+
+
+def run_output_only(args: argparse.Namespace, record: Record, progress: Progress) -> int:
+    """``--method ssi-cov``: SSI-COV on the outputs (:mod:`stillframe.identification.ssi_cov`)."""
+    from stillframe.identification.report import modes_table, output_only_document
+    from stillframe.identification.ssi_cov import identify_output_only
+
+    for option, given in (("--mkr", args.mkr), ("--save-model", args.save_model),
+                          ("--fast", args.fast), ("--combined", args.combined)):
+        if given:
+            raise InputError(f"{option} needs an input-output model: not with --method ssi-cov")
+    ident = identify_output_only(record.y, record.dt, args.order, max_order=args.max_order,
+                                 output_names=[str(c) for c in record.outputs])
+    _report_progress(ident, args, record, progress)
+    if args.json:
+        emit_json(output_only_document(ident, args.order == "auto"))
+        return 0
+    names = [str(c) for c in record.outputs]
+    print(f"{args.bag}: {record.samples} samples, dt = {record.dt:g} s; method ssi-cov "
+          f"(output-only, {ident.block_rows} block rows), order {ident.order}")
+    print("outputs: " + ", ".join(f"y{i + 1} = {n}" for i, n in enumerate(names)))
+    print(modes_table(ident.modes, ident.consistent, [f"y{i + 1}" for i in range(len(names))],
+                      ident))
+    return 0
+
+
 def run(args: argparse.Namespace) -> int:
     from stillframe.bags.channels import DEFAULT_JITTER, Channel, read_record
     from stillframe.identification.pipeline import identify
@@ -136,20 +186,21 @@ def run(args: argparse.Namespace) -> int:
     if not 0 < jitter < 0.5:
         raise InputError(f"--max-jitter {jitter}: must lie between 0 and 0.5")
     progress(f"reading {args.bag}")
+    output_only = args.method == "ssi-cov"
     record = read_record(args.bag, inputs, outputs, detrend=args.detrend,
-                         lowpass_hz=args.lowpass, decimate=args.decimate, max_jitter=jitter)
+                         lowpass_hz=args.lowpass, decimate=args.decimate, max_jitter=jitter,
+                         output_only=output_only)
+    if output_only:
+        return run_output_only(args, record, progress)
     progress(f"{record.samples} samples at {1 / record.dt:g} Hz; identifying ({args.method})")
+    if args.fast and args.refine:
+        raise InputError("--fast skips the refinement that --refine asks for: give one")
     ident = identify(record.u, record.y, record.dt, args.method, args.order,
                      observer_order=args.observer_order, max_order=args.max_order,
-                     combined=args.combined, refine=args.refine)
-    progress(f"order {ident.order}, {len(ident.modes)} modes")
-    for warning in ident.warnings:
-        print(f"stillframe identify: warning: {warning}", file=sys.stderr)
-    if args.plots:
-        from stillframe.identification.plots import identification_plots
-
-        progress(f"writing plots to {args.plots}")
-        identification_plots(ident, record, args.plots)
+                     combined=args.combined, refine=False if args.fast else None,
+                     input_names=[str(c) for c in record.inputs],
+                     output_names=[str(c) for c in record.outputs])
+    _report_progress(ident, args, record, progress)
     physical, physical_doc = _physical(args, ident)
     if physical is not None:
         from stillframe.identification.structure_model import unresolved_pulse

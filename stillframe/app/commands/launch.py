@@ -61,6 +61,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "show their status, stop cleanly on Ctrl-C, print the evaluation.")
     add_scene_arguments(parser)
     add_launch_arguments(parser)
+    parser.add_argument("--track", action="store_true",
+                        help="run the modal tracker beside the nodes (identification's "
+                        "modal_tracker); --json then has tracked_modes")
     parser.add_argument("--record", type=Path, default=None, metavar="DIR",
                         help="also record every topic into this rosbag2 directory (MCAP)")
     parser.add_argument("--record-topic", dest="record_topics", action="append", default=[],
@@ -244,7 +247,8 @@ def run(args: argparse.Namespace) -> int:
                                    lockstep_timeout_s=args.lockstep_timeout, resolved=scene,
                                    record_topics=args.record_topics, backends=args.backends,
                                    monitor_args=monitor_args(args) if args.monitor else None,
-                                   compose=args.compose, rt=rt, rt_cpus=rt_cpus, hosts=hosts)
+                                   compose=args.compose, rt=rt, rt_cpus=rt_cpus, hosts=hosts,
+                                   track=args.track)
         except NodeDiedError as exc:
             code = report_death("launch", exc)
             if exc.partial is not None:
@@ -256,7 +260,8 @@ def run(args: argparse.Namespace) -> int:
     reasons = verdict(result.evaluation, result.diagnostics)
     if args.json:
         emit_json({"scene": scene.name, **result.evaluation, "degraded": bool(reasons),
-                   "degraded_reasons": reasons, "diagnostics": result.diagnostics})
+                   "degraded_reasons": reasons, "diagnostics": result.diagnostics,
+                   **({"tracked_modes": result.tracked_modes} if args.track else {})})
     elif "reduction_pct" in result.evaluation:
         print_evaluation(result.evaluation, scene)
     else:

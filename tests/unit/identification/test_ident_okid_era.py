@@ -169,7 +169,8 @@ def test_refuses_records_too_short_and_bad_requests(system):
         identify(u, y, DT, "n4sid", 6)
     with pytest.raises(InputError, match="samples"):
         identify(u[:-1], y, DT, "okid-era", 6)
-    with pytest.raises(InputError, match="NaN"):
+    with pytest.raises(IdentificationError, match="channel input 1: non-finite value nan in "
+                       "sample 5"):
         identify(np.where(np.arange(1000)[:, None] == 5, np.nan, u), y, DT)
     with pytest.raises(InputError, match="dt"):
         identify(u, y, 0.0)

@@ -1,0 +1,4 @@
+"""The identification package (ROS 2, ament_python): ``identify_bag`` (the ``stillframe identify``
+command, started as ``ros2 run identification identify_bag BAG …``) and ``modal_tracker``, the
+live modal tracker node. A thin shell: the algorithms are in :mod:`stillframe.identification`
+(docs/identification-tool.md, "Live modal tracking")."""

@@ -1,0 +1,158 @@
+"""modal_tracker: the structure's modes, identified again every few seconds from a sliding window
+of live samples (issue 27; docs/identification-tool.md, "Live modal tracking").
+
+A thin shell around :class:`stillframe.identification.tracker.ModalTracker`. Parameters:
+
+- ``inputs``, ``outputs``: channels ``TOPIC[:FIELD]`` as for ``stillframe identify`` (no inputs:
+  output-only SSI-COV); the message type of each topic comes from the topic contract;
+- ``rate_hz`` (32.0): the sample rate of the channels; ``window_s`` (60.0): the window;
+  ``update_period_s`` (5.0): how often the window is identified; ``order`` ("auto");
+  ``record_file`` (""): append each update as a JSON line there (``launch --track``).
+
+Samples are aligned by header stamp, and an update is due every ``update_period_s`` of sample
+time (the stamps: sim time in lock-step, which runs faster than the wall clock). Each due window
+is copied and identified on a worker thread of this process, in order, so the callbacks keep
+taking samples; more than :data:`MAX_PENDING` windows waiting are skipped (counted), and on
+shutdown the waiting ones are finished first. This process is not in the loop's path: it only
+subscribes.
+Each update publishes ``identification/modes`` (``std_msgs/msg/Float64MultiArray``, layout in
+:mod:`stillframe.identification.tracker`) and a status on ``/diagnostics`` (modes, window,
+updates, skipped updates, last error).
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from concurrent.futures import Future, ThreadPoolExecutor
+from pathlib import Path
+
+import numpy as np
+
+from stillframe.bags.channels import Channel, field_reader, stamp_ns
+from stillframe.contract import messages, topics
+from stillframe.errors import InputError
+from stillframe.identification.tracker import (
+    ModalTracker,
+    TrackedModes,
+    identify_window,
+    modes_array,
+)
+from stillframe.middleware import api
+from stillframe.node_runtime.support import OK, WARN, Diagnostics
+
+MODES_TOPIC = "identification/modes"
+MAX_PENDING = 4
+"""Windows waiting for the worker beyond which a due update is skipped."""
+
+
+def contract_type(topic: str) -> str:
+    """The message type the topic contract gives ``topic`` (absolute or in the namespace)."""
+    for spec in topics.CONTRACT:
+        if topic in (spec.name, f"{topics.DEFAULT_NAMESPACE}/{spec.name}"):
+            return spec.type_name
+    raise InputError(f"modal_tracker: {topic} is not a topic of the contract")
+
+
+class ModalTrackerNode:
+    def __init__(self, node: api.Node) -> None:
+        self.node = node
+        inputs = [Channel.parse(s) for s in node.declare_parameter("inputs", [""]).value if s]
+        outputs = [Channel.parse(s) for s in node.declare_parameter("outputs", [""]).value if s]
+        if not outputs:
+            raise InputError("modal_tracker: give at least one output channel (outputs)")
+        rate = float(node.declare_parameter("rate_hz", 32.0).value)
+        window = float(node.declare_parameter("window_s", 60.0).value)
+        period = float(node.declare_parameter("update_period_s", 5.0).value)
+        order = node.declare_parameter("order", "auto").value
+        record = node.declare_parameter("record_file", "").value
+        self.record_file = Path(record) if record else None
+        if not (rate > 0 and window > 0 and period > 0):
+            raise InputError("modal_tracker: rate_hz, window_s and update_period_s must be > 0")
+        self.tracker = ModalTracker(1.0 / rate, window, order if order == "auto" else int(order))
+        self.channels = [*inputs, *outputs]
+        self.n_inputs = len(inputs)
+        self.pending: dict[int, list[float | None]] = {}
+        self.start_ns: int | None = None
+        self.readers = []
+        for k, channel in enumerate(self.channels):
+            msgtype = contract_type(channel.topic)
+            _, read = field_reader(channel, msgtype)
+            node.create_subscription(msgtype, channel.topic,
+                                     lambda msg, k=k, read=read: self.on_sample(k, msg, read),
+                                     "sensor_data")
+        self.modes_pub = node.create_publisher("std_msgs/msg/Float64MultiArray", MODES_TOPIC, 10)
+        self.diagnostics = Diagnostics(node, period)
+        self.pool = ThreadPoolExecutor(max_workers=1)
+        self.pending_updates: list[Future] = []
+        self.period = period
+        self.next_update: float | None = None
+        self.updates = self.skipped = 0
+
+    def on_sample(self, k: int, msg: object, read) -> None:
+        stamp = stamp_ns(msg)
+        if stamp is None:
+            return
+        row = self.pending.setdefault(stamp, [None] * len(self.channels))
+        row[k] = read(msg)
+        if all(v is not None for v in row):
+            del self.pending[stamp]
+            self.start_ns = stamp if self.start_ns is None else self.start_ns
+            self.tracker.add(stamp * 1e-9, row[: self.n_inputs],
+                             row[self.n_inputs:])
+            for old in [s for s in self.pending if s < stamp]:
+                del self.pending[old]
+            self.maybe_update(stamp * 1e-9)
+
+    def maybe_update(self, t: float) -> None:
+        """Submit the window when an update is due (sample time) and the window half full."""
+        if self.next_update is None:
+            self.next_update = t + self.period
+        if t < self.next_update or self.tracker.samples < 0.5 * self.tracker.capacity:
+            return
+        self.next_update = t + self.period
+        self.pending_updates = [f for f in self.pending_updates if not f.done()]
+        if len(self.pending_updates) >= MAX_PENDING:
+            self.skipped += 1
+            return
+        future = self.pool.submit(identify_window, self.tracker.window())
+        future.add_done_callback(lambda f: self.publish(f.result()))
+        self.pending_updates.append(future)
+
+    def publish(self, tracked: TrackedModes) -> None:
+        self.updates += 1
+        if self.record_file is not None:
+            with self.record_file.open("a") as stream:
+                stream.write(json.dumps(tracked.record()) + "\n")
+        dims, data = modes_array(tracked)
+        msg = messages.new("std_msgs/msg/Float64MultiArray")
+        msg.layout.dim = [messages.new("std_msgs/msg/MultiArrayDimension", label=label,
+                                       size=size, stride=stride) for label, size, stride in dims]
+        msg.data = np.asarray(data, dtype=float)
+        self.modes_pub.publish(msg)
+        values = {"modes": len(tracked.frequency_hz), "window_samples": self.tracker.samples,
+                  "updates": self.updates, "skipped_updates": self.skipped}
+        for i, row in enumerate(tracked.rows()):
+            values[f"mode{i + 1}"] = f"{row[0]:.4g} Hz, zeta {row[1]:.3g}"
+        level = OK if tracked.error is None and not tracked.warnings else WARN
+        self.diagnostics.publish(self.start_ns or 0, values, level,
+                                 tracked.error or "; ".join(tracked.warnings))
+
+
+@api.node_main
+def main() -> int:
+    """Run the node (console script ``modal_tracker``); bad parameters exit 2 with one line."""
+    node = api.create_node("modal_tracker", namespace=topics.DEFAULT_NAMESPACE)
+    tracker = None
+    try:
+        tracker = ModalTrackerNode(node)
+        api.spin(node)
+    finally:
+        if tracker is not None:
+            tracker.pool.shutdown(wait=True)  # the windows already due are finished
+        node.destroy_node()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

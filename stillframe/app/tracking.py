@@ -1,0 +1,53 @@
+"""``stillframe launch SCENE --track``: the modal tracker beside the loop (issue 27).
+
+The tracker (``identification``'s ``modal_tracker``) subscribes to the excitation's load cell
+and the three floor accelerometers, identifies its window every few seconds and appends each
+update, as one JSON line, to a file the launcher reads at the end: the launch JSON's
+``tracked_modes``, a list of ``{"t": …, "modes": [{"frequency_hz", "damping_ratio",
+"frequency_ci", "damping_ci"}], "warnings": […], "error": …}`` with ``t`` the window's last sample
+time [s] (sim time). It only subscribes, in its own process: it cannot hold the loop up.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+from stillframe.config.scene import Scene
+from stillframe.contract import topics
+
+TRACKER = "modal_tracker"
+TRACKER_MODULE = "identification.node"
+#: the tracker's window and update period, as fractions of the scene's duration (at most 60 s
+#: and 5 s)
+WINDOW_S, UPDATE_S = 60.0, 5.0
+
+
+def tracker_command(scene: Scene, record_file: Path) -> list[str]:
+    """``python -m identification.node --ros-args -p …`` for the scene's rate and channels."""
+    ns = topics.DEFAULT_NAMESPACE
+    inputs = [f"{ns}/{topics.EXCITATION_WRENCH.name}"]
+    outputs = [f"{ns}/{spec.name}" for spec in topics.FLOOR_IMU]
+    window = min(WINDOW_S, scene.duration / 2)
+    params = {"inputs": inputs, "outputs": outputs, "rate_hz": float(scene.sensors.rate_hz),
+              "window_s": window, "update_period_s": min(UPDATE_S, window / 2),
+              "record_file": str(record_file)}
+    argv = [sys.executable, "-m", TRACKER_MODULE, "--ros-args"]
+    for name, value in params.items():
+        argv += ["-p", f"{name}:={value if isinstance(value, str) else json.dumps(value)}"]
+    return argv
+
+
+def read_tracked(record_file: Path) -> list[dict[str, Any]]:
+    """The tracker's updates (JSON lines; a last line cut by the tracker's stop is dropped)."""
+    if not record_file.is_file():
+        return []
+    out = []
+    for line in record_file.read_text().splitlines():
+        try:
+            out.append(json.loads(line))
+        except ValueError:
+            continue
+    return out
