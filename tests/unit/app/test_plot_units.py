@@ -155,3 +155,20 @@ def test_the_dashboard_axes_have_units() -> None:
         for label in (left, right, TIME_AXIS):
             assert label is None or UNIT.search(label), (title, label)
     assert CHARTS["command"][1] == "torque [N·m]"
+
+
+def test_identification_plots(figures: dict, tmp_path: Path) -> None:
+    """The plots of ``identify --plots`` (its helpers, on synthetic data)."""
+    from stillframe.identification import plots
+
+    f = np.linspace(0.1, 10.0, 20)
+    plots.hankel_singular_values(np.array([1.0, 0.5, 0.1, 0.01]), 2, tmp_path / "h.png")
+    plots.stabilization_diagram([2, 4], [np.array([1.0]), np.array([1.0, 2.0])],
+                                [np.array([True]), np.array([True, False])], 2,
+                                tmp_path / "s.png", nyquist_hz=5.0)
+    h = np.ones((20, 2, 1), dtype=complex)
+    plots.frf(f, h, np.ones((20, 2, 1)), h, ["u"], ["y1", "y2"], tmp_path / "frf.png",
+              input_units=["N"], output_units=["m/s^2", "m/s^2"], segments=4)
+    plots.mode_shapes(np.array([1.0, 2.0]), np.array([0.02, 0.03]), np.ones((2, 2), complex),
+                      ["y1", "y2"], tmp_path / "m.png")
+    assert_units(figures, 4)
