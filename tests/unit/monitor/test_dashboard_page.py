@@ -95,7 +95,7 @@ def test_no_start_marker_without_a_scene() -> None:
 def test_the_tracked_modes_table_shows_each_mode_with_its_intervals() -> None:
     """Two modes of an ``identification/modes`` message's data: one row each, frequency and
     damping with their 95 % intervals; before the tracker's first update no table at all."""
-    data = snapshot(Limits(), with_torque=True)
+    data = snapshot(Limits())
     assert run_page(data, "modes") == ""
     data["tracked_modes"] = {"updates": 3, "modes": mode_records(
         [1.6512, 0.0213, 1.6401, 1.6623, 0.0151, 0.0275,
