@@ -368,6 +368,12 @@ def test_every_sample_with_max_rate_zero(imu_source: ImuSource) -> None:
     assert periods == list(range(periods[0], periods[0] + len(periods)))
 
 
+def dashboard_data(page: str) -> dict:
+    """The dashboard's ``/data`` answer."""
+    with urllib.request.urlopen(page + "data", timeout=5) as response:
+        return json.loads(response.read())
+
+
 def test_tracked_modes_reach_the_dashboard_and_foxglove(ros_domain: int) -> None:
     """A publisher of ``identification/modes`` (the modal tracker's message, built by its own
     :func:`modes_array`): the dashboard's ``/data`` serves the published modes with their
@@ -399,9 +405,7 @@ def test_tracked_modes_reach_the_dashboard_and_foxglove(ros_domain: int) -> None
         while not (board.get("updates") and seen.messages.get(topic)):
             assert time.monotonic() < deadline, (board, seen.channels)
             await asyncio.sleep(0.3)
-            board = await asyncio.to_thread(
-                lambda: json.loads(urllib.request.urlopen(page + "data", timeout=5).read()))
-            board = board["tracked_modes"]
+            board = (await asyncio.to_thread(dashboard_data, page))["tracked_modes"]
         done.set()
         await task
         return seen, board
