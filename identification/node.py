@@ -152,7 +152,12 @@ def main() -> int:
         api.spin(node)
     finally:
         if tracker is not None:
-            tracker.pool.shutdown(wait=True)  # the windows already due are finished
+            try:
+                tracker.pool.shutdown(wait=True)  # the windows already due are finished
+            except KeyboardInterrupt:             # asked again to stop: give the rest up
+                tracker.pool.shutdown(wait=False, cancel_futures=True)
+                print("modal_tracker: stopped again while identifying; the windows still due "
+                      "are given up", file=sys.stderr)
         node.destroy_node()
     return 0
 
