@@ -20,6 +20,7 @@ import signal
 import subprocess
 import sys
 import threading
+import time
 from pathlib import Path
 from typing import Any
 
@@ -154,17 +155,24 @@ def test_two_launches_on_one_domain_never_both_stall(ros_domain: int) -> None:
     one (exit 2), before starting any node when discovery shows it within ``LOOK_S``, at once
     when it shows it later (a loaded machine); the earlier one runs to its end, undisturbed in
     the first case. A third one, started while the first runs, refuses too."""
-    first, second = launch("--json"), launch("--json")
-    _out, err = second.communicate(timeout=120)
-    if second.returncode == 0:          # the other one started later: swap
+    # real time, so that the first still runs when the third starts however loaded the machine
+    # is (a lock-step run of a few seconds can end first); the third starts seconds later
+    held = ["--mode", "realtime", *[a for o in ("duration=30", "controller.start=15",
+                                                "evaluation.window=10") for a in ("--set", o)]]
+    first, second = launch("--json", *held), launch("--json", *held)
+    deadline = time.monotonic() + 120
+    while first.poll() is None and second.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.1)
+    if first.poll() is not None:        # the one that ended is the later one: swap
         first, second = second, first
-        _out, err = second.communicate(timeout=120)
+    _out, err = second.communicate(timeout=120)
     assert second.returncode == 2, err[-2000:]
     lines = [line for line in err.splitlines() if line.startswith("stillframe launch")]
     assert len(lines) == 1 and "another stillframe loop is running on ROS_DOMAIN_ID=" \
         f"{ros_domain}: /_stillframe_launch_{first.pid}_" in lines[0], err
     third = launch()
     err3 = third.communicate(timeout=120)[1]
+    assert first.poll() is None, "the first launch ended before the third looked"
     result = json.loads(first.communicate(timeout=300)[0])
     assert first.returncode == 0
     if "started sim_node" not in err:   # refused before its nodes ran
