@@ -58,7 +58,7 @@ MANAGED: tuple[str, ...] = tuple(n for n, declared in NODE_PARAMETERS.items()
 #: how long a managed node may take to serve its lifecycle services (its imports and the scene)
 #: [s]
 LIFECYCLE_TIMEOUT_S = 60.0
-#: how long one look for a managed node's ``get_state`` waits [s]
+#: how long one call of a managed node's ``get_state`` waits once the graph shows it [s]
 PROBE_S = 1.0
 #: how long a managed node may take to answer one transition (configure builds its estimator
 #: or controller: well under a second here) [s]
@@ -493,9 +493,13 @@ class Launcher:
         child = next(c for c in self.processes.children if c.name == name)
         caller = self._caller(self.backend(name))
         prefix = f"{DEFAULT_NAMESPACE}/{name}"
-        if caller.call_service("lifecycle_msgs/srv/GetState", f"{prefix}/get_state",
-                               messages.new("lifecycle_msgs/srv/GetState_Request"),
-                               PROBE_S) is None:
+        # the graph first (no wait): a node that serves no lifecycle services yet must not hold
+        # the launcher's loop, which watches the children and takes the statuses meanwhile
+        served = {service for service, _ in caller.get_service_names_and_types_by_node(
+            name, DEFAULT_NAMESPACE)}
+        if f"{prefix}/get_state" not in served or caller.call_service(
+                "lifecycle_msgs/srv/GetState", f"{prefix}/get_state",
+                messages.new("lifecycle_msgs/srv/GetState_Request"), PROBE_S) is None:
             if time.monotonic() > deadline:
                 raise NodeDiedError(name, f"no lifecycle services after "
                                           f"{LIFECYCLE_TIMEOUT_S:g} s", child.tail)
