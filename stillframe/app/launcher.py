@@ -38,6 +38,7 @@ from stillframe.contract import messages
 from stillframe.contract.topics import DEFAULT_NAMESPACE, STATUS_KEYS
 from stillframe.errors import InputError
 from stillframe.fidelity.auto_model import resolve_model
+from stillframe.identification.tracker import TRACKER_READY
 from stillframe.locations import REPO_ROOT
 from stillframe.middleware import api, discovery, names
 from stillframe.node_runtime.declarations import MODES, NODE_PARAMETERS, ManagedParameterValues
@@ -68,7 +69,8 @@ RESOLVED_SCENE = "scene.resolved.yaml"
 #: seconds a child gets to exit after SIGINT, then after SIGTERM, before SIGKILL
 STOP_GRACE_S = 10.0
 #: the log line by which a helper child says it is ready (the nodes start after it)
-READY_LINES: dict[str, str] = {"recorder": "Recording to", "monitor": "Monitor ready"}
+READY_LINES: dict[str, str] = {"recorder": "Recording to", "monitor": "Monitor ready",
+                               TRACKER: TRACKER_READY}
 #: lines of a child's output kept to explain its death
 TAIL_LINES = 15
 _PR_SET_PDEATHSIG = 1
