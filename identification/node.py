@@ -33,6 +33,7 @@ from stillframe.bags.channels import Channel, field_reader, stamp_ns
 from stillframe.contract import messages, topics
 from stillframe.errors import InputError
 from stillframe.identification.tracker import (
+    MODES_TOPIC,
     TRACKER_READY,
     ModalTracker,
     TrackedModes,
@@ -40,9 +41,9 @@ from stillframe.identification.tracker import (
     modes_array,
 )
 from stillframe.middleware import api
+from stillframe.node_runtime.realtime import run_idle
 from stillframe.node_runtime.support import OK, WARN, Diagnostics
 
-MODES_TOPIC = "identification/modes"
 MAX_PENDING = 4
 """Windows waiting for the worker beyond which a due update is skipped."""
 
@@ -67,6 +68,8 @@ class ModalTrackerNode:
         period = float(node.declare_parameter("update_period_s", 5.0).value)
         order = node.declare_parameter("order", "auto").value
         record = node.declare_parameter("record_file", "").value
+        if node.declare_parameter("idle", False).value:
+            run_idle()  # SCHED_IDLE: only CPU time the loop leaves (the worker thread inherits)
         self.record_file = Path(record) if record else None
         if not (rate > 0 and window > 0 and period > 0):
             raise InputError("modal_tracker: rate_hz, window_s and update_period_s must be > 0")
@@ -152,7 +155,12 @@ def main() -> int:
         api.spin(node)
     finally:
         if tracker is not None:
-            tracker.pool.shutdown(wait=True)  # the windows already due are finished
+            try:
+                tracker.pool.shutdown(wait=True)  # the windows already due are finished
+            except KeyboardInterrupt:             # asked again to stop: give the rest up
+                tracker.pool.shutdown(wait=False, cancel_futures=True)
+                print("modal_tracker: stopped again while identifying; the windows still due "
+                      "are given up", file=sys.stderr)
         node.destroy_node()
     return 0
 

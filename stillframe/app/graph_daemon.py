@@ -2,8 +2,8 @@
 tools' graph queries from it, as ros2's daemon does (``ros2 daemon``), so a warm ``stillframe
 topic list`` needs neither DDS nor discovery.
 
-One daemon per user and per graph setting (``ROS_DOMAIN_ID``, the discovery variables, the
-backend): it listens on a Unix socket named by them (:func:`socket_path`), so tools in other
+One daemon per user, installation and graph setting (``ROS_DOMAIN_ID``, the discovery variables,
+the backend): it listens on a Unix socket named by them (:func:`socket_path`), so tools in other
 shells with other settings get their own. A tool asking for the graph starts the daemon when none
 answers (:func:`graph`, ``start=True``), waits until it has settled discovery and asks it; the
 daemon stops after :data:`IDLE_ENV` seconds without a question (two hours by default, as ros2's)
@@ -29,6 +29,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+from stillframe.locations import PACKAGE_DIR
 from stillframe.middleware.backend_choice import backend_name
 from stillframe.middleware.graph import Graph
 
@@ -45,9 +46,11 @@ NODE_PREFIX = "_stillframe_daemon"
 
 
 def socket_path() -> Path:
-    """The daemon's socket for this user, environment and backend."""
+    """The daemon's socket for this user, environment and backend, and this installation (the
+    interpreter and the package: two checkouts never talk to each other's daemon)."""
     setting = {name: os.environ.get(name, "") for name in GRAPH_ENV}
     setting["backend"] = backend_name()
+    setting["installation"] = f"{sys.executable} {PACKAGE_DIR}"
     digest = hashlib.sha1(json.dumps(setting, sort_keys=True).encode()).hexdigest()[:12]
     domain = setting["ROS_DOMAIN_ID"] or "0"
     return (Path(tempfile.gettempdir()) / f"stillframe-daemon-{os.getuid()}"
@@ -159,8 +162,9 @@ def serve(path: Path, idle_s: float) -> None:
                     break
     finally:
         server.close()
-        with contextlib.suppress(FileNotFoundError):
-            path.unlink()
+        for leftover in (path, path.with_suffix(".log")):  # the log is kept only if it failed
+            with contextlib.suppress(FileNotFoundError):
+                leftover.unlink()
         node.destroy_node()
 
 

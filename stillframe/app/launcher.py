@@ -385,7 +385,8 @@ class Launcher:
                                          *o.monitor_args]))
         if o.track:
             o.tracked_file.unlink(missing_ok=True)
-            children.append((TRACKER, tracker_command(self.scene, o.tracked_file)))
+            children.append((TRACKER, tracker_command(self.scene, o.tracked_file,
+                                                      idle=o.mode == "realtime")))
         nodes = self.nodes()
         # the pair's container takes no real-time parameters (it composes two nodes' loops);
         # with the simulator in it, the simulator's practices are the process's

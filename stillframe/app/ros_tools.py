@@ -19,6 +19,15 @@ from stillframe.middleware.graph import SETTLE_LIMIT_S, Graph, did_you_mean
 VERBOSE_ENV = "STILLFRAME_VERBOSE"
 
 
+def add_verbs(sub: argparse._SubParsersAction, command: str, text: str,
+              ) -> argparse._SubParsersAction:
+    """The parser of a command of verbs (``topic list``, ``node info``, ...): its verbs, one
+    required, in ``args.verb``."""
+    verbs = sub.add_parser(command, help=text).add_subparsers(dest="verb", metavar="VERB")
+    verbs.required = True
+    return verbs
+
+
 def add_strategy_arguments(parser: argparse.ArgumentParser) -> None:
     """``--no-daemon`` and ``--spin-time``, as ros2cli's verbs that read the graph have them."""
     parser.add_argument("--no-daemon", action="store_true",

@@ -5,7 +5,10 @@ and the three floor accelerometers, identifies its window every few seconds and 
 update, as one JSON line, to a file the launcher reads at the end: the launch JSON's
 ``tracked_modes``, a list of ``{"t": …, "modes": [{"frequency_hz", "damping_ratio",
 "frequency_ci", "damping_ci"}], "warnings": […], "error": …}`` with ``t`` the window's last sample
-time [s] (sim time). It only subscribes, in its own process: it cannot hold the loop up.
+time [s] (sim time). It only subscribes, in its own process: it cannot hold the loop up; and it
+runs at SCHED_IDLE in a real-time run (``idle``), so its identifications take only CPU time the
+nodes leave. In lock-step there are no deadlines, and an idle tracker could be starved of the
+time it needs to finish its windows when it is stopped.
 """
 
 from __future__ import annotations
@@ -25,15 +28,16 @@ TRACKER_MODULE = "identification.node"
 WINDOW_S, UPDATE_S = 60.0, 5.0
 
 
-def tracker_command(scene: Scene, record_file: Path) -> list[str]:
-    """``python -m identification.node --ros-args -p …`` for the scene's rate and channels."""
+def tracker_command(scene: Scene, record_file: Path, *, idle: bool = False) -> list[str]:
+    """``python -m identification.node --ros-args -p …`` for the scene's rate and channels;
+    ``idle``: at SCHED_IDLE (a real-time run: only CPU time the nodes leave)."""
     ns = topics.DEFAULT_NAMESPACE
     inputs = [f"{ns}/{topics.EXCITATION_WRENCH.name}"]
     outputs = [f"{ns}/{spec.name}" for spec in topics.FLOOR_IMU]
     window = min(WINDOW_S, scene.duration / 2)
     params = {"inputs": inputs, "outputs": outputs, "rate_hz": float(scene.sensors.rate_hz),
               "window_s": window, "update_period_s": min(UPDATE_S, window / 2),
-              "record_file": str(record_file)}
+              "record_file": str(record_file), "idle": idle}
     argv = [sys.executable, "-m", TRACKER_MODULE, "--ros-args"]
     for name, value in params.items():
         argv += ["-p", f"{name}:={value if isinstance(value, str) else json.dumps(value)}"]

@@ -17,6 +17,7 @@ damping_ci_high``. An empty ``data`` means no trustworthy modes in the current w
 from __future__ import annotations
 
 from collections import deque
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -38,6 +39,22 @@ MAX_FILL = 8
 #: after it, so the window before control is whole however long the tracker's imports take
 TRACKER_READY = "Modal tracker ready"
 
+MODES_TOPIC = "identification/modes"
+"""The tracker's topic, in the loop's namespace (``/frame/identification/modes``)."""
+
+
+def mode_record(row: Sequence[float]) -> dict[str, Any]:
+    """One mode's row (:data:`FIELDS`) as ``{"frequency_hz", "damping_ratio", "frequency_ci",
+    "damping_ci"}``."""
+    f, z, f_low, f_high, z_low, z_high = (float(v) for v in row)
+    return {"frequency_hz": f, "damping_ratio": z, "frequency_ci": [f_low, f_high],
+            "damping_ci": [z_low, z_high]}
+
+
+def mode_records(data: Sequence[float]) -> list[dict[str, Any]]:
+    """The modes of an ``identification/modes`` message's ``data`` (module docstring)."""
+    return [mode_record(row) for row in np.asarray(data, dtype=float).reshape(-1, len(FIELDS))]
+
 
 @dataclass(frozen=True)
 class TrackedModes:
@@ -54,11 +71,8 @@ class TrackedModes:
     def record(self) -> dict[str, Any]:
         """``{"t", "modes": [{"frequency_hz", "damping_ratio", "frequency_ci", "damping_ci"}]}``
         (the launch JSON's ``tracked_modes`` entries), plus ``warnings`` and ``error``."""
-        modes = [{"frequency_hz": float(f), "damping_ratio": float(z),
-                  "frequency_ci": [float(v) for v in fc], "damping_ci": [float(v) for v in zc]}
-                 for f, z, fc, zc in zip(self.frequency_hz, self.damping_ratio,
-                                         self.frequency_ci_hz, self.damping_ci, strict=True)]
-        return {"t": self.t, "modes": modes, "warnings": list(self.warnings),
+        return {"t": self.t, "modes": [mode_record(row) for row in self.rows()],
+                "warnings": list(self.warnings),
                 "error": self.error}
 
     def rows(self) -> Array:

@@ -5,13 +5,15 @@ estimated displacement (``state_truth``, ``state_estimate``) with the measured a
 (``floorN/imu``); the pendulum angle; the command (torque in N·m on the left axis, force in N on
 the right) with its limits; on the pH plant its energy balance (``energy_balance``: H and the port
 and dissipated powers); the controller's start marked on every chart; and each node's counters
-from ``/diagnostics``, red when an error counter is non-zero. The page polls ``/data`` twice a
-second. Decimation happens before any work is done on a sample: the loop's topics are read
-from their monitor taps (:mod:`stillframe.middleware.taps`, thinned by the loop's writers) when
-published, else from the topics, by polled subscriptions (KEEP_LAST 1), and every ``1 / rate_hz``
-s of wall time the newest sample of each is taken, decoded and kept; each series keeps its last
-``points`` samples. So a 1 kHz topic costs neither the loop nor this process a send or a
-wake-up per sample, and the page always gets at most ``points`` points per series.
+from ``/diagnostics``, red when an error counter is non-zero; with the modal tracker running
+(``launch --track``), the current tracked modes of ``identification/modes`` (frequency and damping
+ratio, each with its 95 % interval). The page polls ``/data`` twice a second. Decimation happens
+before any work is done on a sample: the loop's topics are read from their monitor taps
+(:mod:`stillframe.middleware.taps`, thinned by the loop's writers) when published, else from the
+topics, by polled subscriptions (KEEP_LAST 1), and every ``1 / rate_hz`` s of wall time the
+newest sample of each is taken, decoded and kept; each series keeps its last ``points`` samples.
+So a 1 kHz topic costs neither the loop nor this process a send or a wake-up per sample, and the
+page always gets at most ``points`` points per series.
 
 Plotly's JavaScript is served from the ``plotly`` Python package (``plotly.min.js``), so the
 page needs no internet.
@@ -43,6 +45,7 @@ from stillframe.contract.topics import (
     TORQUE_CMD,
     TopicSpec,
 )
+from stillframe.identification.tracker import MODES_TOPIC, mode_records
 from stillframe.middleware.qos import QoSProfile, Reliability
 from stillframe.middleware.taps import TAP_RATE_HZ
 from stillframe.middleware.topic_follower import RawCallback, TopicFollower
@@ -134,10 +137,15 @@ class Dashboard(TopicFollower):
         self._by_topic = {f"{namespace}/{spec.name}": (name, values)
                           for name, (spec, values) in SERIES.items()}
         self.diagnostics: dict[str, dict[str, str]] = {}
+        #: the tracker's latest modes (:func:`~stillframe.identification.tracker.mode_records`)
+        self.tracked_modes: list[dict[str, Any]] = []
+        self.tracked_updates = 0
         super().__init__(node, list(self._by_topic), poll_period_s=1.0 / rate_hz,
                          read_taps=rate_hz <= TAP_RATE_HZ)
         node.create_subscription(DIAGNOSTICS.type_name, DIAGNOSTICS.name, self._on_diagnostics,
                                  DIAGNOSTICS_QOS)
+        node.create_subscription("std_msgs/msg/Float64MultiArray", f"{namespace}/{MODES_TOPIC}",
+                                 self._on_modes, WATCH_QOS)
 
     def request(self, offers: list[QoSProfile]) -> QoSProfile:
         return WATCH_QOS
@@ -160,12 +168,20 @@ class Dashboard(TopicFollower):
                 self.diagnostics[status.name] = {kv.key: kv.value for kv in status.values
                                                  if kv.key in STATUS_KEYS}
 
+    def _on_modes(self, msg: Any) -> None:
+        modes = mode_records(msg.data)
+        with self._lock:
+            self.tracked_modes = modes
+            self.tracked_updates += 1
+
     def snapshot(self) -> dict[str, Any]:
         """Everything the page draws, JSON-ready."""
         with self._lock:
             return {"series": {name: s.as_columns() for name, s in self.series.items()},
                     "diagnostics": {k: dict(v) for k, v in self.diagnostics.items()},
                     "error_keys": list(ERROR_KEYS),
+                    "tracked_modes": {"modes": list(self.tracked_modes),
+                                      "updates": self.tracked_updates},
                     "limits": {"command": self.limits.command, "torque": self.limits.torque,
                                "force": self.limits.force},
                     "controller_start": self.limits.controller_start,

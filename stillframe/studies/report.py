@@ -113,6 +113,7 @@ def plot(rows: Sequence[dict[str, Any]], varied: Sequence[str], directory: Path,
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import MaxNLocator
 
     from stillframe.config.labels import key_label
 
@@ -144,6 +145,7 @@ def plot(rows: Sequence[dict[str, Any]], varied: Sequence[str], directory: Path,
         ax.hist([r[column] for r in ok], bins="auto", color="C0")
         ax.set_xlabel(figure_label(column), fontsize=8)
         ax.set_ylabel("runs [-]", fontsize=8)
+        ax.yaxis.set_major_locator(MaxNLocator(integer=True))   # runs are counted
         target(ax, column, vertical=True)
     for ax in list(axes.flat)[len(columns):]:
         ax.set_visible(False)

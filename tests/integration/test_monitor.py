@@ -14,6 +14,7 @@ import subprocess
 import sys
 import threading
 import time
+import urllib.request
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -26,6 +27,7 @@ import pytest
 from stillframe.app.commands.bench_loop import realtime_overrides
 from stillframe.bags.storage import read_bag
 from stillframe.contract import messages
+from stillframe.identification.tracker import MODES_TOPIC, TrackedModes, modes_array
 from stillframe.locations import REPO_ROOT
 from stillframe.middleware import api
 from stillframe.middleware.names import is_hidden
@@ -292,8 +294,9 @@ def imu_source(request: pytest.FixtureRequest, ros_domain: int) -> Iterator[ImuS
     source.destroy_node()
 
 
-def start_monitor(*args: str) -> tuple[subprocess.Popen, str]:
-    """``stillframe monitor ARGS`` on a free port; the process and its Foxglove URL."""
+def start_monitor(*args: str) -> tuple[subprocess.Popen, str, str | None]:
+    """``stillframe monitor ARGS`` on a free port; the process, its Foxglove URL and, with
+    ``--dashboard``, the dashboard's."""
     monitor = subprocess.Popen([sys.executable, "-m", "stillframe", "monitor", "--port", "0",
                                 *args], env=child_env(), cwd=REPO_ROOT,
                                stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
@@ -301,7 +304,7 @@ def start_monitor(*args: str) -> tuple[subprocess.Popen, str]:
     while (found := READY.search(line.rstrip())) is None:
         line = monitor.stderr.readline()
         assert line, "the monitor ended before it was ready"
-    return monitor, found[1]
+    return monitor, found[1], found[2]
 
 
 def stop_monitor(monitor: subprocess.Popen) -> str:
@@ -333,7 +336,7 @@ def test_a_topic_is_subscribed_only_while_a_client_watches_it(imu_source: ImuSou
     200 Hz publisher, the newest sample each time. A tapped topic is read from its tap (the
     hidden twin is never advertised): the publisher sends the monitor none of its samples."""
     probe, read = imu_source.node, tap_topic(IMU) if imu_source.tapped else IMU
-    monitor, url = start_monitor()
+    monitor, url, _ = start_monitor()
     try:
         looked, idle_readers = asyncio.run(watch(url, [], 3.0, probe, read))
         assert IMU in looked.channels and not any(map(is_hidden, looked.channels))
@@ -354,7 +357,7 @@ def test_every_sample_with_max_rate_zero(imu_source: ImuSource) -> None:
     """``--max-rate 0``: every sample of the 200 Hz publisher reaches the client, in order,
     none missing between the first and the last: read from the topic, tapped or not (a tap
     carries at most 50 a second)."""
-    monitor, url = start_monitor("--max-rate", "0")
+    monitor, url, _ = start_monitor("--max-rate", "0")
     try:
         watched, _ = asyncio.run(watch(url, [IMU], 3.0, imu_source.node, IMU))
     finally:
@@ -365,10 +368,68 @@ def test_every_sample_with_max_rate_zero(imu_source: ImuSource) -> None:
     assert periods == list(range(periods[0], periods[0] + len(periods)))
 
 
+def dashboard_data(page: str) -> dict:
+    """The dashboard's ``/data`` answer."""
+    with urllib.request.urlopen(page + "data", timeout=5) as response:
+        return json.loads(response.read())
+
+
+def test_tracked_modes_reach_the_dashboard_and_foxglove(ros_domain: int) -> None:
+    """A publisher of ``identification/modes`` (the modal tracker's message, built by its own
+    :func:`modes_array`): the dashboard's ``/data`` serves the published modes with their
+    intervals, and a foxglove.websocket client decodes the same values from the bridge."""
+    tracked = TrackedModes(10.0, np.array([1.6512, 5.0487]), np.array([0.0213, 0.0104]),
+                           np.array([[1.6401, 1.6623], [5.0312, 5.0662]]),
+                           np.array([[0.0151, 0.0275], [0.0072, 0.0136]]))
+    topic = f"/frame/{MODES_TOPIC}"
+    source = api.create_node("tracker_stand_in")
+    publisher = source.create_publisher("std_msgs/msg/Float64MultiArray", topic, 10)
+    msg = messages.new("std_msgs/msg/Float64MultiArray")
+    dims, data = modes_array(tracked)
+    msg.layout.dim = [messages.new("std_msgs/msg/MultiArrayDimension", label=label, size=size,
+                                   stride=stride) for label, size, stride in dims]
+    msg.data = np.asarray(data, dtype=float)
+    stop = threading.Event()
+
+    def publish() -> None:
+        while not stop.wait(0.2):
+            publisher.publish(msg)
+
+    threading.Thread(target=publish, daemon=True).start()
+    monitor, url, page = start_monitor("--dashboard", "--dashboard-port", "0")
+
+    async def watch_both() -> tuple[Capture, dict]:
+        done, seen, board = asyncio.Event(), Capture(), {}
+        task = asyncio.create_task(capture(url, [topic], done, seen))
+        deadline = time.monotonic() + 30
+        while not (board.get("updates") and seen.messages.get(topic)):
+            assert time.monotonic() < deadline, (board, seen.channels)
+            await asyncio.sleep(0.3)
+            board = (await asyncio.to_thread(dashboard_data, page))["tracked_modes"]
+        done.set()
+        await task
+        return seen, board
+
+    try:
+        seen, board = asyncio.run(watch_both())
+    finally:
+        stop.set()
+        stop_monitor(monitor)
+        source.destroy_node()
+    assert board["modes"] == tracked.record()["modes"]
+    assert board["modes"][1] == {"frequency_hz": 5.0487, "damping_ratio": 0.0104,
+                                 "frequency_ci": [5.0312, 5.0662],
+                                 "damping_ci": [0.0072, 0.0136]}
+    assert seen.channels[topic]["schemaName"] == "std_msgs/msg/Float64MultiArray"
+    got = seen.messages[topic][-1]
+    assert [(d.label, d.size, d.stride) for d in got.layout.dim] == dims
+    assert got.data.tolist() == data
+
+
 def test_idle_monitor_runs_at_sched_idle(ros_domain: int) -> None:
     """``--idle`` (what ``launch --monitor`` passes unless ``--no-monitor-idle``): the process
     is SCHED_IDLE once it is ready, so every thread it started inherited the policy."""
-    monitor, _ = start_monitor("--idle")
+    monitor, _, _ = start_monitor("--idle")
     try:
         threads = list((Path("/proc") / str(monitor.pid) / "task").iterdir())
         policies = {os.sched_getscheduler(int(t.name)) for t in threads}

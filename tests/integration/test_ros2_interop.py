@@ -20,7 +20,7 @@ from stillframe.app.launcher import node_command
 from stillframe.contract.topics import CONTRACT, FORCE_CMD
 from stillframe.errors import InputError
 from stillframe.locations import REPO_ROOT
-from stillframe.middleware import api, discovery
+from stillframe.middleware import api, backend_choice, discovery
 from stillframe.middleware.names import resolve_topic
 from stillframe.middleware.qos import PROFILES, Reliability
 from tests.support.middleware import child_env, run_stillframe, wait_for_line
@@ -124,7 +124,7 @@ def test_bad_backend_or_range_is_one_line_and_starts_nothing(ros_domain: int) ->
 
 
 def test_rclpy_backend_asked_for_where_rclpy_is_missing(monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setattr(api, "has_rclpy", lambda: False)
+    monkeypatch.setattr(backend_choice, "has_rclpy", lambda: False)  # api re-exports its choice
     monkeypatch.setenv("STILLFRAME_RMW", "rclpy")
     with pytest.raises(InputError, match="STILLFRAME_RMW=rclpy: rclpy cannot be imported"):
         api.backend_name()

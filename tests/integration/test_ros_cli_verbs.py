@@ -13,6 +13,7 @@ import json
 import os
 import subprocess
 import sys
+import time
 
 import pytest
 import yaml
@@ -285,3 +286,35 @@ def test_the_backend_banner_only_with_verbose(ros_domain: int) -> None:
 ])
 def test_bad_verb_arguments_are_one_line(ros_domain: int, args: list[str], message: str) -> None:
     assert message in bad(*args)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("tools", ["rclpy"], indirect=True)
+def test_the_daemons_graph_follows_nodes_that_come_and_go(tools: str) -> None:
+    """The cache is the daemon's live view, not a snapshot of its start."""
+    assert "/cli_peer/chatter" not in ok("topic", "list").splitlines()   # starts the daemon
+
+    def listed_within(present: bool, seconds: float = 30.0) -> bool:
+        deadline = time.monotonic() + seconds
+        while time.monotonic() < deadline:
+            if ("/cli_peer/chatter" in ok("topic", "list").splitlines()) == present:
+                return True
+            time.sleep(0.5)
+        return False
+
+    proc, _ = start_peer(PEER)
+    try:
+        assert listed_within(True)
+    finally:
+        proc.terminate()
+        finish(proc)
+    assert listed_within(False)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("tools", ["dds"], indirect=True)
+def test_param_list_names_the_nodes_of_the_other_vendor(peer: tuple, tools: str) -> None:
+    result = run_stillframe("param", "list")
+    assert result.returncode == 0, result.stderr
+    assert "/cli_peer/talker: on Fast DDS, not reachable from Cyclone DDS" in result.stderr
+    assert "/cli_peer/talker:" not in result.stdout.splitlines()

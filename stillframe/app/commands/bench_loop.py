@@ -11,11 +11,13 @@
 Both run once per middleware backend (``dds``: Cyclone; ``rclpy``: real rclpy on Fast DDS), all
 three nodes on it, so the backends are compared in the same run. ``--compose`` /
 ``--compose-all`` run the real-time runs with those nodes in one process and add a composed
-lock-step run; ``--rt`` runs the nodes with the real-time practices of docs/realtime.md. The
-figures are printed beside the goals of issue 10, with the machine's load average during each
-real-time run (the machine may be shared); ``--stall-probe`` runs cyclictest beside each
-real-time run (:mod:`stillframe.bench.stall_probe`) and prints the machine's own stalls, which
-no practice of the loop can remove.
+lock-step run; ``--record`` / ``--track`` repeat each real-time run with the recorder / the
+modal tracker beside the loop, the figures without and with in one table; ``--rt`` runs the
+nodes with the real-time practices of docs/realtime.md. The figures are printed beside the
+goals of issue 10, with the machine's load average during each real-time run (the machine may
+be shared); ``--stall-probe`` runs cyclictest beside each real-time run
+(:mod:`stillframe.bench.stall_probe`) and prints the machine's own stalls, which no practice of
+the loop can remove.
 """
 
 from __future__ import annotations
@@ -79,6 +81,9 @@ def register(benches: argparse._SubParsersAction) -> None:
                              "--all` beside it: the recorder's CPU time per message, its "
                              "messages/s, whether the bag is complete, its write path against "
                              "a bare mcap writer")
+    parser.add_argument("--track", action="store_true",
+                        help="run each real-time run twice, without and with the modal tracker "
+                             "(`launch --track`) beside it: deadline misses and p50/p99 of each")
     parser.add_argument("--stall-probe", action="store_true",
                         help="run cyclictest (rt-tests, root) beside each real-time run: "
                              "the machine's stalls of 1 ms or more, and its worst")
@@ -167,11 +172,12 @@ def observer_realtime(practices: str) -> Iterator[None]:
 def realtime(rate_hz: float, duration: float, out: Path, backend: str,
              rt: tuple[str, list[int]] = ("", []),
              monitor_args: list[str] | None = None, compose: str = "",
-             probe: bool = False, record: bool = False) -> dict[str, Any]:
+             probe: bool = False, record: bool = False, track: bool = False) -> dict[str, Any]:
     """The LQG scene in real time at ``rate_hz`` through the nodes on ``backend`` (composed as
     ``compose`` says): latency and deadline figures seen by an observer here;
     ``monitor_args`` start a monitor beside them; ``probe``: cyclictest beside them;
-    ``record``: ``stillframe record --all`` beside them (:mod:`stillframe.bench.recorder_load`)."""
+    ``record``: ``stillframe record --all`` beside them (:mod:`stillframe.bench.recorder_load`);
+    ``track``: the modal tracker beside them (:mod:`stillframe.app.tracking`)."""
     log = LatencyLog(round(1e9 / rate_hz))
     with (observer_backend(backend), observer_realtime(rt[0]),
           stall_probe() if probe else contextlib.nullcontext() as stalls,
@@ -179,7 +185,7 @@ def realtime(rate_hz: float, duration: float, out: Path, backend: str,
           else contextlib.nullcontext() as recorder):
         result = run_scene(SCENE, realtime_overrides(rate_hz, duration), out=out, mode="realtime",
                            prepare=observe(log), backends=[backend], rt=rt[0], rt_cpus=rt[1],
-                           monitor_args=monitor_args, compose=compose)
+                           monitor_args=monitor_args, compose=compose, track=track)
     e = result.evaluation
     recorded = recorder_figures(recorder, e["steps"], rate_hz) if recorder else {}
     summary = log.summary()
@@ -190,6 +196,7 @@ def realtime(rate_hz: float, duration: float, out: Path, backend: str,
             "sim_overruns": e.get("overruns"), "sim_deadline_misses": e.get("deadline_misses"),
             "steps": e["steps"], "degraded_samples": e.get("degraded_samples"),
             "load_1min": os.getloadavg()[0], "record": record, **recorded,
+            "track": track, "tracker_updates": len(result.tracked_modes),
             **(stalls.summary if stalls else {})}
 
 
@@ -299,6 +306,38 @@ def recorder_table(rows: list[dict[str, Any]]) -> str:
          for r in rows])
 
 
+def tracker_rows(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """Per backend and rate, the run with the modal tracker against the one without: deadline
+    misses (the observer's and sim_node's) and latency p50 / p99 of each, and with / without."""
+    plain = {(r["backend"], r["rate_hz"]): r for r in rows
+             if not r["track"] and not r["record"]}
+    out = []
+    for r in rows:
+        base = plain.get((r["backend"], r["rate_hz"]))
+        if not r["track"] or base is None:
+            continue
+        pair = {key: (base[key], r[key])
+                for key in ("deadline_misses", "sim_deadline_misses", "p50_us", "p99_us")}
+        out.append({"backend": r["backend"], "rate_hz": r["rate_hz"], **pair,
+                    "p99_ratio": r["p99_us"] / base["p99_us"] if base["p99_us"] else float("nan"),
+                    "tracker_updates": r["tracker_updates"]})
+    return out
+
+
+def tracker_table(pairs: list[dict[str, Any]]) -> str:
+    """:func:`tracker_rows` as a table: each figure without / with the tracker."""
+    def both(pair: tuple[Any, Any], form: str = "") -> str:
+        return " / ".join("-" if v is None else format(v, form) for v in pair)
+
+    return format_table(
+        ["backend", "rate [Hz]", "deadline misses (without / with tracker)",
+         "sim deadline misses", "p50 [us]", "p99 [us]", "p99 with / without",
+         "tracker updates"],
+        [[p["backend"], f"{p['rate_hz']:g}", both(p["deadline_misses"]),
+          both(p["sim_deadline_misses"]), both(p["p50_us"], ".0f"), both(p["p99_us"], ".0f"),
+          f"{p['p99_ratio']:.2f}", p["tracker_updates"]] for p in pairs])
+
+
 def run(args: argparse.Namespace) -> int:
     if not args.duration >= 1.0:
         raise InputError("bench loop: --duration must be >= 1 s")
@@ -315,15 +354,17 @@ def run(args: argparse.Namespace) -> int:
     with tempfile.TemporaryDirectory(prefix="stillframe-bench-loop-") as tmp:
         for backend in backends:
             for rate in rates:
-                for record in (False, True) if args.record else (False,):
+                variants = [("", {})] + ([("recorded", {"record": True})] if args.record
+                                          else []) + ([("tracked", {"track": True})]
+                                                      if args.track else [])
+                for name, extra in variants:
                     print(f"{backend}: real time at {rate:g} Hz for {args.duration:g} s"
                           + (f" (--rt {rt[0]})" if rt[0] else "")
-                          + (", recorded" if record else ""), file=sys.stderr)
+                          + (f", {name}" if name else ""), file=sys.stderr)
                     rows.append(realtime(
                         rate, args.duration,
-                        Path(tmp) / f"{backend}{rate:g}{'-recorded' if record else ''}",
-                        backend, rt, compose=args.compose, probe=args.stall_probe,
-                        record=record))
+                        Path(tmp) / f"{backend}{rate:g}{'-' + name if name else ''}",
+                        backend, rt, compose=args.compose, probe=args.stall_probe, **extra))
             if args.lockstep:
                 print(f"{backend}: lock-step, the full LQG scene", file=sys.stderr)
                 speeds.append(lockstep(Path(tmp) / f"{backend}-lockstep", backend, one,
@@ -331,7 +372,7 @@ def run(args: argparse.Namespace) -> int:
     goals = goal_rows(rows, speeds)
     if args.json:
         emit_json({"realtime": rows, "lockstep": speeds, "goals": goals,
-                   "cpus": os.cpu_count()})
+                   "tracker": tracker_rows(rows), "cpus": os.cpu_count()})
         return 0
     print(format_table(
         ["backend", "composed", "rate [Hz]", "samples", "answered", "within period [%]", "p50 [us]",
@@ -346,7 +387,9 @@ def run(args: argparse.Namespace) -> int:
           f"{r['probe_stalls']} ({r['probe_max_us']})" if "probe_stalls" in r else "-",
           f"{r['load_1min']:.2f}"] for r in rows]))
     if args.record:
-        print(recorder_table(rows))
+        print(recorder_table([r for r in rows if not r["track"]]))
+    if args.track:
+        print(tracker_table(tracker_rows(rows)))
     print(format_table(["figure", "backend", "measured", "goal", "met"],
                        [[g["figure"], g["backend"], f"{g['value']:.4g}", g["goal"],
                          "yes" if g["met"] else "NO"] for g in goals]))

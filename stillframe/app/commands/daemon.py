@@ -7,12 +7,12 @@ from __future__ import annotations
 import argparse
 import sys
 
+from stillframe.app.ros_tools import add_verbs
+
 
 def register(sub: argparse._SubParsersAction) -> None:
-    parser = sub.add_parser("daemon", help="the graph cache the topic and node verbs ask "
-                                           "(like ros2 daemon)")
-    verbs = parser.add_subparsers(dest="verb", metavar="VERB")
-    verbs.required = True
+    verbs = add_verbs(sub, "daemon", "the graph cache the topic and node verbs ask (like ros2 "
+                                     "daemon)")
     for verb, text in (("start", "start the daemon if it is not running"),
                        ("stop", "stop the daemon if it is running"),
                        ("status", "whether the daemon is running")):

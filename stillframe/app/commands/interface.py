@@ -13,6 +13,7 @@ from __future__ import annotations
 import argparse
 import re
 
+from stillframe.app.ros_tools import add_verbs
 from stillframe.errors import InputError
 from stillframe.middleware.graph import did_you_mean
 
@@ -22,10 +23,8 @@ FIELD_TYPE = re.compile(r"^(\S+?)(\[[^\]]*\])?\s")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    parser = sub.add_parser("interface", help="show message and service definitions "
-                                              "(like ros2 interface)")
-    verbs = parser.add_subparsers(dest="verb", metavar="VERB")
-    verbs.required = True
+    verbs = add_verbs(sub, "interface", "show message and service definitions (like ros2 "
+                                        "interface)")
     show = verbs.add_parser("show", help="the definition of a message or service type")
     show.add_argument("type", metavar="TYPE", help="e.g. sensor_msgs/msg/Imu")
     show.set_defaults(func=run_show)

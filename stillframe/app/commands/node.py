@@ -10,16 +10,14 @@ from __future__ import annotations
 import argparse
 import sys
 
-from stillframe.app.ros_tools import add_strategy_arguments, existing_node, graph_of
+from stillframe.app.ros_tools import add_strategy_arguments, add_verbs, existing_node, graph_of
 from stillframe.middleware import names
 from stillframe.middleware.graph import Graph
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    parser = sub.add_parser("node", help="list nodes and show a node's topics and services "
-                                         "(like ros2 node)")
-    verbs = parser.add_subparsers(dest="verb", metavar="VERB")
-    verbs.required = True
+    verbs = add_verbs(sub, "node", "list nodes and show a node's topics and services (like ros2 "
+                                   "node)")
     listing = verbs.add_parser("list", help="the nodes in the graph")
     listing.add_argument("-a", "--all", action="store_true", help="also hidden nodes")
     listing.add_argument("-c", "--count-nodes", action="store_true",

@@ -26,7 +26,13 @@ from typing import Any
 import yaml
 
 from stillframe.app.commands.common import add_json_argument, emit_json
-from stillframe.app.ros_tools import add_strategy_arguments, graph_of, node_name, tool_node
+from stillframe.app.ros_tools import (
+    add_strategy_arguments,
+    add_verbs,
+    graph_of,
+    node_name,
+    tool_node,
+)
 from stillframe.contract import messages
 from stillframe.errors import InputError
 from stillframe.middleware import api
@@ -46,10 +52,8 @@ SERVICE_TYPES = {"list": "ListParameters", "get": "GetParameters", "set": "SetPa
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    parser = sub.add_parser("param", help="list, get and set a running node's parameters "
-                            "(like ros2 param)")
-    verbs = parser.add_subparsers(dest="verb", metavar="VERB")
-    verbs.required = True
+    verbs = add_verbs(sub, "param", "list, get and set a running node's parameters (like ros2 "
+                                    "param)")
     for verb, text in (("list", "every parameter with its type, value and read-only flag "
                                 "(without NODE: every node's parameter names)"),
                        ("get", "one parameter's value"), ("set", "set one parameter"),

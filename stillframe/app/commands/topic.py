@@ -13,7 +13,13 @@ from collections import deque
 from typing import Any
 
 from stillframe.app.commands.common import seconds
-from stillframe.app.ros_tools import add_strategy_arguments, existing_topic, graph_of, tool_node
+from stillframe.app.ros_tools import (
+    add_strategy_arguments,
+    add_verbs,
+    existing_topic,
+    graph_of,
+    tool_node,
+)
 from stillframe.errors import InputError
 from stillframe.middleware.graph import did_you_mean
 
@@ -21,10 +27,8 @@ QOS_PROFILES = ("default", "sensor_data", "clock", "parameters")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    parser = sub.add_parser("topic", help="list, inspect, echo, measure and publish ROS 2 topics "
-                                          "(like ros2 topic)")
-    verbs = parser.add_subparsers(dest="verb", metavar="VERB")
-    verbs.required = True
+    verbs = add_verbs(sub, "topic", "list, inspect, echo, measure and publish ROS 2 topics (like "
+                                    "ros2 topic)")
 
     listing = verbs.add_parser("list", help="topics seen on the network")
     listing.add_argument("-t", "--show-types", action="store_true", help="also print types")

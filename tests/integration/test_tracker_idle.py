@@ -1,0 +1,45 @@
+"""``launch --mode realtime --track``'s tracker runs at SCHED_IDLE (issue 27 must show 5: it
+cannot delay the loop): every thread of the process the launcher starts (:func:`tracker_command`;
+the identification worker, started later, inherits the policy), and it stops cleanly on SIGINT."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import time
+from pathlib import Path
+
+from stillframe.app.tracking import tracker_command
+from stillframe.config.scene import load_scene
+from stillframe.locations import REPO_ROOT
+from tests.support.middleware import child_env
+
+
+def policies(pid: int) -> dict[int, int]:
+    """Each thread of ``pid``: its scheduling policy (threads that end meanwhile left out)."""
+    out = {}
+    for task in (Path("/proc") / str(pid) / "task").iterdir():
+        try:
+            out[int(task.name)] = os.sched_getscheduler(int(task.name))
+        except ProcessLookupError:
+            continue
+    return out
+
+
+def test_the_idle_tracker_runs_at_sched_idle(tmp_path: Path, ros_domain: int) -> None:
+    scene = load_scene(REPO_ROOT / "scenes" / "thesis_lqg.yaml")
+    argv = tracker_command(scene, tmp_path / "tracked.jsonl", idle=True)
+    proc = subprocess.Popen(argv, env=child_env(), cwd=REPO_ROOT, stdout=subprocess.DEVNULL,
+                            stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 60
+        # idle once the node has read its parameters (imports and node creation come first)
+        while set((seen := policies(proc.pid)).values()) != {os.SCHED_IDLE}:
+            assert proc.poll() is None and time.monotonic() < deadline, seen
+            time.sleep(0.2)
+        assert len(seen) > 1    # the middleware's threads too, not only the main one
+    finally:
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 0, err[-2000:]
