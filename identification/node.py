@@ -34,6 +34,7 @@ from stillframe.contract import messages, topics
 from stillframe.errors import InputError
 from stillframe.identification.tracker import (
     MODES_TOPIC,
+    TRACKER_READY,
     ModalTracker,
     TrackedModes,
     identify_window,
@@ -134,7 +135,8 @@ class ModalTrackerNode:
         msg.data = np.asarray(data, dtype=float)
         self.modes_pub.publish(msg)
         values = {"modes": len(tracked.frequency_hz), "window_samples": self.tracker.samples,
-                  "updates": self.updates, "skipped_updates": self.skipped}
+                  "updates": self.updates, "skipped_updates": self.skipped,
+                  "filled_samples": self.tracker.filled, "window_restarts": self.tracker.restarts}
         for i, row in enumerate(tracked.rows()):
             values[f"mode{i + 1}"] = f"{row[0]:.4g} Hz, zeta {row[1]:.3g}"
         level = OK if tracked.error is None and not tracked.warnings else WARN
@@ -149,6 +151,7 @@ def main() -> int:
     tracker = None
     try:
         tracker = ModalTrackerNode(node)
+        node.get_logger().info(TRACKER_READY)   # the launcher starts the loop after this
         api.spin(node)
     finally:
         if tracker is not None:

@@ -38,6 +38,7 @@ from stillframe.contract import messages
 from stillframe.contract.topics import DEFAULT_NAMESPACE, STATUS_KEYS
 from stillframe.errors import InputError
 from stillframe.fidelity.auto_model import resolve_model
+from stillframe.identification.tracker import TRACKER_READY
 from stillframe.locations import REPO_ROOT
 from stillframe.middleware import api, discovery, names
 from stillframe.node_runtime.declarations import MODES, NODE_PARAMETERS, ManagedParameterValues
@@ -58,7 +59,7 @@ MANAGED: tuple[str, ...] = tuple(n for n, declared in NODE_PARAMETERS.items()
 #: how long a managed node may take to serve its lifecycle services (its imports and the scene)
 #: [s]
 LIFECYCLE_TIMEOUT_S = 60.0
-#: how long one look for a managed node's ``get_state`` waits [s]
+#: how long one call of a managed node's ``get_state`` waits once the graph shows it [s]
 PROBE_S = 1.0
 #: how long a managed node may take to answer one transition (configure builds its estimator
 #: or controller: well under a second here) [s]
@@ -68,7 +69,8 @@ RESOLVED_SCENE = "scene.resolved.yaml"
 #: seconds a child gets to exit after SIGINT, then after SIGTERM, before SIGKILL
 STOP_GRACE_S = 10.0
 #: the log line by which a helper child says it is ready (the nodes start after it)
-READY_LINES: dict[str, str] = {"recorder": "Recording to", "monitor": "Monitor ready"}
+READY_LINES: dict[str, str] = {"recorder": "Recording to", "monitor": "Monitor ready",
+                               TRACKER: TRACKER_READY}
 #: lines of a child's output kept to explain its death
 TAIL_LINES = 15
 _PR_SET_PDEATHSIG = 1
@@ -494,9 +496,13 @@ class Launcher:
         child = next(c for c in self.processes.children if c.name == name)
         caller = self._caller(self.backend(name))
         prefix = f"{DEFAULT_NAMESPACE}/{name}"
-        if caller.call_service("lifecycle_msgs/srv/GetState", f"{prefix}/get_state",
-                               messages.new("lifecycle_msgs/srv/GetState_Request"),
-                               PROBE_S) is None:
+        # the graph first (no wait): a node that serves no lifecycle services yet must not hold
+        # the launcher's loop, which watches the children and takes the statuses meanwhile
+        served = {service for service, _ in caller.get_service_names_and_types_by_node(
+            name, DEFAULT_NAMESPACE)}
+        if f"{prefix}/get_state" not in served or caller.call_service(
+                "lifecycle_msgs/srv/GetState", f"{prefix}/get_state",
+                messages.new("lifecycle_msgs/srv/GetState_Request"), PROBE_S) is None:
             if time.monotonic() > deadline:
                 raise NodeDiedError(name, f"no lifecycle services after "
                                           f"{LIFECYCLE_TIMEOUT_S:g} s", child.tail)

@@ -33,6 +33,11 @@ Array = NDArray[np.float64]
 FIELDS: tuple[str, ...] = ("frequency_hz", "damping_ratio", "frequency_ci_low",
                            "frequency_ci_high", "damping_ci_low", "damping_ci_high")
 """Columns of one mode's row in ``identification/modes``."""
+#: the most samples in a row :meth:`ModalTracker.add` fills in; a longer gap restarts the window
+MAX_FILL = 8
+#: the line the tracker node logs once it subscribes: ``launch --track`` starts the loop's nodes
+#: after it, so the window before control is whole however long the tracker's imports take
+TRACKER_READY = "Modal tracker ready"
 
 MODES_TOPIC = "identification/modes"
 """The tracker's topic, in the loop's namespace (``/frame/identification/modes``)."""
@@ -94,15 +99,36 @@ class ModalTracker:
     _t: deque = field(default_factory=deque)
     _u: deque = field(default_factory=deque)
     _y: deque = field(default_factory=deque)
+    #: samples filled in for ones missing, and windows started afresh after a longer gap
+    filled: int = 0
+    restarts: int = 0
 
     @property
     def capacity(self) -> int:
         return max(1, round(self.window_s / self.dt))
 
     def add(self, t: float, u: Array, y: Array) -> None:
-        """One aligned sample (``u`` may be empty: output-only)."""
-        for store, value in ((self._t, t), (self._u, np.asarray(u, dtype=float)),
-                             (self._y, np.asarray(y, dtype=float))):
+        """One aligned sample (``u`` may be empty: output-only). Samples missing before it (a
+        subscriber that lost some under load) are filled in linearly and counted (``filled``),
+        up to :data:`MAX_FILL` in a row; a longer gap starts the window afresh (``restarts``):
+        the identification assumes one sample every ``dt``, and a window with samples left out
+        would read every frequency too high."""
+        u, y = np.asarray(u, dtype=float), np.asarray(y, dtype=float)
+        missing = round((t - self._t[-1]) / self.dt) - 1 if self._t else 0
+        if missing > MAX_FILL:
+            self.restarts += 1
+            for store in (self._t, self._u, self._y):
+                store.clear()
+        elif missing > 0:
+            t0, u0, y0 = self._t[-1], self._u[-1], self._y[-1]
+            for k in range(1, missing + 1):
+                w = k / (missing + 1)
+                self._append(t0 + w * (t - t0), u0 + w * (u - u0), y0 + w * (y - y0))
+            self.filled += missing
+        self._append(t, u, y)
+
+    def _append(self, t: float, u: Array, y: Array) -> None:
+        for store, value in ((self._t, t), (self._u, u), (self._y, y)):
             store.append(value)
             if len(store) > self.capacity:
                 store.popleft()

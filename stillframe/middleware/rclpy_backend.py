@@ -19,6 +19,7 @@ from typing import Any
 import rclpy
 from rcl_interfaces.msg import ParameterDescriptor
 from rcl_interfaces.msg import SetParametersResult as RclpySetParametersResult
+from rclpy._rclpy_pybind11 import NodeNameNonExistentError
 from rclpy.clock import ClockType
 from rclpy.duration import Duration
 from rclpy.executors import SingleThreadedExecutor
@@ -413,10 +414,15 @@ class RclpyNode:
     def get_service_names_and_types_by_node(
         self, node_name: str, node_namespace: str, server: bool = True
     ) -> list[tuple[str, list[str]]]:
-        """A node's service servers (``server``) or clients, as rclpy gives them."""
+        """A node's service servers (``server``) or clients, as rclpy gives them; none for a
+        node not in the graph (yet), as the dds backend answers."""
         query = (self._node.get_service_names_and_types_by_node if server
                  else self._node.get_client_names_and_types_by_node)
-        return sorted((name, list(types)) for name, types in query(node_name, node_namespace))
+        try:
+            found = query(node_name, node_namespace)
+        except NodeNameNonExistentError:
+            return []
+        return sorted((name, list(types)) for name, types in found)
 
     def spin_once(self, timeout_sec: float | None = None) -> None:
         if interface.ok():

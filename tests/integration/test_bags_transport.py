@@ -31,6 +31,7 @@ from rosbags.typesys import Stores, get_typestore
 
 from stillframe.errors import BagError
 from stillframe.locations import REPO_ROOT as ROOT
+from stillframe.middleware import api
 from stillframe.middleware.discovery import cyclone_config
 from tests.support.middleware import child_env
 
@@ -317,14 +318,22 @@ def test_play_loop_at_rate_repeats_the_bag_faster(env: dict[str, str], tmp_path:
     source = tmp_path / "A"
     msgs = write_source(source, n_imu=0, n_js=40, period_ns=20_000_000)  # 1.6 s
     recorder, player = record_while_playing(env, source, tmp_path / "B", "--loop", "--rate", "4")
+    # a listener of its own counts what the player sent: the player stops once three passes
+    # went out (forced, not a sleep that a loaded machine may not keep)
+    node = api.create_node("loop_watch", backend="dds")
+    seen: list[bytes] = []
+    node.create_subscription("sensor_msgs/msg/JointState", JS,
+                             lambda cdr, _info: seen.append(bytes(cdr)), "default", raw=True)
     try:
-        time.sleep(2.0 + 3.0)  # the player's delay, then about seven passes of 0.4 s
+        api.spin_until(node, lambda: len(seen) >= 3 * len(msgs), 120)
+        assert len(seen) >= 3 * len(msgs), "\n".join(player.lines)
         assert player.finish(signal.SIGINT) == 0, "\n".join(player.lines)
         time.sleep(0.5)
         assert recorder.finish(signal.SIGINT) == 0, "\n".join(recorder.lines)
     finally:
         player.stop()
         recorder.stop()
+        node.destroy_node()
     got = read_all(tmp_path / "B")
     data = [d for _, _, d in msgs]
     passes, rest = divmod(len(got), len(data))
@@ -394,7 +403,9 @@ def test_records_a_foreign_publisher_and_skips_a_different_type_hash(
         for k in range(20):
             for name, writer in writers.items():
                 writer.write(DdsString(f"{name.rsplit('/', 1)[1]} {k}"))
-        writers["frame/native"].wait_for_acks(10**10)
+            # each sample acknowledged before the next: a recorder slowed by load loses none of
+            # a history of 10 (forced, rather than hoping 20 fit in flight)
+            assert writers["frame/native"].wait_for_acks(10**10), "not acknowledged"
         assert recorder.finish(signal.SIGINT) == 0, "\n".join(recorder.lines)
     finally:
         recorder.stop()

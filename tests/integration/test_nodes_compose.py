@@ -89,16 +89,20 @@ got = []
 sub = reader.create_subscription("std_msgs/msg/Int32", "/intra_test",
                                  lambda cdr, info: got.append((bytes(cdr), info.publisher_gid)),
                                  "default", raw=True)
-deadline = time.monotonic() + 20
+deadline = time.monotonic() + 30
 while pub.get_subscription_count() < 2 and time.monotonic() < deadline:   # + the other process
     writer.spin_once(0.05)
 print("counts", pub.get_subscription_count(), sub.get_publisher_count(), flush=True)
 for i in range(50):
     pub.publish(bytes([0, 1, 0, 0]) + i.to_bytes(4, "little"))
-for _ in range(20):
-    reader.spin_once(0.01)
+deadline = time.monotonic() + 30    # each sample arrives: waited for, not timed
+while len(got) < 50 and time.monotonic() < deadline:
+    reader.spin_once(0.05)
+for _ in range(5):      # a second delivery (through DDS too) would show here
+    reader.spin_once(0.05)
 values = [int.from_bytes(cdr[4:8], "little") for cdr, _ in got]
 print("got", len(got), values == list(range(50)), all(g == pub.gid for _, g in got), flush=True)
+pub.wait_for_all_acked(30)   # the other process has every sample before this one exits
 """
 
 LISTENER = """
@@ -119,7 +123,7 @@ def test_intra_process_hands_each_sample_over_once_and_still_publishes(ros_domai
     listener = start_python(LISTENER)
     try:
         wait_for_line(listener, "ready")
-        out, err = finish(start_python(INTRA), timeout=60)
+        out, err = finish(start_python(INTRA), timeout=90)
         assert "counts 2 1" in out, err[-2000:]
         assert "got 50 True True" in out, err[-2000:]
         out, err = finish(listener, timeout=30)

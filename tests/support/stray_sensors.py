@@ -60,6 +60,8 @@ def main() -> None:
     print("ready", flush=True)
     while not stop:
         node.spin_once(0.05)
+    for pub in pubs.values():   # what it counted has reached the loop before it exits
+        pub.wait_for_all_acked(30.0)
     print("sent", sent, flush=True)
 
 

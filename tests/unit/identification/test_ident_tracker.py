@@ -11,7 +11,7 @@ import pytest
 from scipy import signal
 
 from stillframe.identification.sweep import shear_building
-from stillframe.identification.tracker import FIELDS, ModalTracker, modes_array
+from stillframe.identification.tracker import FIELDS, MAX_FILL, ModalTracker, modes_array
 
 SAMPLES = 4096  # per half
 SNR_DB = 30.0
@@ -111,3 +111,23 @@ def test_a_window_that_cannot_be_identified_reports_instead_of_raising() -> None
         tracker.add(k * 0.01, [0.0], [0.0, 1.0])
     result = tracker.update()
     assert result.frequency_hz.size == 0 and "all zero" in result.error
+
+
+def test_samples_lost_before_the_tracker_are_filled_in_and_counted() -> None:
+    """A subscriber that lost samples under load (forced: stamps left out): the window keeps one
+    sample every ``dt`` (its identification assumes it), the lost ones filled in on the line
+    between their neighbours (a signal linear in time comes back exactly) and counted; a gap
+    longer than :data:`MAX_FILL` starts the window afresh."""
+    dt = 0.5
+    tracker = ModalTracker(dt, 100.0)
+    kept = [k for k in range(20) if k not in (3, 7, 8, 9)]
+    for k in kept:
+        tracker.add(k * dt, [2.0 * k], [-k, 3.0 * k + 1])
+    window = tracker.window()
+    k = np.arange(20)
+    np.testing.assert_allclose(window.u[:, 0], 2.0 * k)
+    np.testing.assert_allclose(window.y, np.column_stack([-k, 3.0 * k + 1]))
+    assert (tracker.samples, tracker.filled, tracker.restarts) == (20, 4, 0)
+    later = 19 + MAX_FILL + 2         # MAX_FILL + 1 lost in a row
+    tracker.add(later * dt, [0.0], [0.0, 0.0])
+    assert (tracker.samples, tracker.filled, tracker.restarts) == (1, 4, 1)
