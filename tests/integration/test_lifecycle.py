@@ -21,7 +21,7 @@ from tests.support.middleware import run_stillframe
 from tests.support.nodes import params_file, start_node, stop
 from tests.support.rclpy_client import RclpyClient, rclpy_client
 
-OVERRIDES = ["duration=100000", "controller.start=1", "evaluation.window=1"]
+OVERRIDES = ["duration=5000", "controller.start=1", "evaluation.window=1"]
 #: commands a client may read on the other side of a transition's reply (lock-step: each is a
 #: round trip of the loop, so at most a few are on the way)
 IN_FLIGHT = 3

@@ -33,7 +33,7 @@ from stillframe.middleware import api, dds_services, dds_types
 from tests.support.middleware import finish, run_stillframe, start_python, wait_for_line
 from tests.support.nodes import SCENES, params_file, start_node, stop
 
-OVERRIDES = ["duration=100000", "controller.start=1", "evaluation.window=1"]
+OVERRIDES = ["duration=5000", "controller.start=1", "evaluation.window=1"]
 NEW_MEASUREMENT_STD = [0.05, 0.05, 0.05, 0.05]
 LIMIT = 0.01
 
