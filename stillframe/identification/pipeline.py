@@ -274,16 +274,23 @@ def identify(
     left_out = left_out_modes(fac, modes, chosen, float(dt))
     refinement, uncertain = None, None
     notes: list[str] = [] if refine else [NOT_REFINED]
+    choice = None
     if refine:
-        if order == "auto":
-            choice = refine_candidates(fac, gain_markov[: p + 1], r, u, y, float(dt), chosen)
-            chosen, refinement = choice.order, choice.refinement
+        try:
+            if order == "auto":
+                choice = refine_candidates(fac, gain_markov[: p + 1], r, u, y, float(dt), chosen)
+                refinement = choice.refinement
+            else:
+                refinement = refine_prediction_error(A, B, C, D, G, u, y, float(dt))
+        except IdentificationError as exc:  # e.g. noise-free data: OKID's predictor diverges
+            notes.append(f"{NOT_REFINED}; the refinement could not start ({exc})")
+    if refinement is not None:
+        if choice is not None:
+            chosen = choice.order
             notes += [choice.note] if choice.note else []
-        else:
-            refinement = refine_prediction_error(A, B, C, D, G, u, y, float(dt))
         A, B, C, D, G = refinement.A, refinement.B, refinement.C, refinement.D, -refinement.K
         modes = modal_parameters(A, C, float(dt), reference=reference_sensor)
-        if order == "auto" and choice.larger is not None:
+        if choice is not None and choice.larger is not None:
             consistent = persists(modes, choice.larger.modes)
         else:
             consistent = mode_consistency(fac, modes, chosen, float(dt))
