@@ -117,6 +117,7 @@ def test_kill_and_restart_estimator_then_kill_controller(ros_domain: int, tmp_pa
         watch.until(lambda: watch.clock_ns >= killed + 10 * PERIOD_NS)
     finally:
         watch.node.destroy_node()
+        sim.send_signal(signal.SIGCONT)      # a failure while the loop was frozen: let it stop
         for proc in (sim, estimator, controller):
             if proc.poll() is None:
                 stop(proc)

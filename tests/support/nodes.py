@@ -3,11 +3,10 @@
 from __future__ import annotations
 
 import json
-import select
 import signal
 import subprocess
 import sys
-import time
+import threading
 from pathlib import Path
 from typing import Any
 
@@ -43,17 +42,24 @@ def start_node(package: str, params: Path, *args: str) -> subprocess.Popen:
 
 
 def wait_for_log(proc: subprocess.Popen, text: str, timeout: float = 30) -> str:
-    """Read the node's log (stderr) until a line containing ``text``."""
-    deadline = time.monotonic() + timeout
-    while (remaining := deadline - time.monotonic()) > 0:
-        if not select.select([proc.stderr], [], [], remaining)[0]:
-            break
-        line = proc.stderr.readline()
-        if text in line:
-            return line
-        if not line and proc.poll() is not None:
-            break
+    """Read the node's log (stderr) until a line containing ``text``. The lines are read in a
+    thread, not by ``select`` on the pipe: a burst of lines sits in the text stream's buffer
+    after the first ``readline``, where ``select`` on the empty pipe cannot see it."""
+    found: list[str] = []
+
+    def scan() -> None:
+        for line in proc.stderr:
+            if text in line:
+                found.append(line)
+                return
+
+    reader = threading.Thread(target=scan, daemon=True)
+    reader.start()
+    reader.join(timeout)
+    if found:
+        return found[0]
     proc.kill()
+    reader.join(5)
     raise AssertionError(f"no log line with {text!r}")
 
 
