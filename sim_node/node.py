@@ -216,13 +216,14 @@ class SimNode(base.LoopNode):
             del self.published_at[old]
 
     def wait_command(self, deadline_ns: int) -> bool:
-        """Spin until the command stamped now arrives (True) or the monotonic ``deadline_ns``."""
+        """Spin until the command stamped now arrives (True), the monotonic ``deadline_ns`` or
+        shutdown passes (False: a sample interrupted while it waits is not run)."""
         if self.active is None:
             self.spin(0.0)
             return True
-        while api.ok() and self.command_ns[self.active] != self.now_ns:
+        while self.command_ns[self.active] != self.now_ns:
             remaining = (deadline_ns - time.monotonic_ns()) * 1e-9
-            if remaining <= 0:
+            if remaining <= 0 or not api.ok():
                 return False
             self.spin(remaining)
         return True

@@ -34,7 +34,7 @@ from stillframe.loop.closed_loop import run_closed_loop
 from stillframe.loop.writer_gate import REASONS
 from stillframe.monitor.foxglove_client import Capture, capture
 from tests.support.middleware import child_env, finish, start_python
-from tests.support.nodes import SCENES, SHORT_LQG, run_loop_beside
+from tests.support.nodes import SCENES, SHORT_LQG, read_lines, run_loop_beside, run_loop_until
 from tests.support.scenes import thesis_scene
 
 BACKENDS = ("rclpy", "dds") if importlib.util.find_spec("rclpy") else ("dds",)
@@ -55,11 +55,15 @@ while not stop:
 print("sent", 0, flush=True)
 """
 
-#: ``ros2 topic pub -r 5 /frame/pendulum/torque_cmd``, started during the run (once the loop's
-#: ``/clock`` passed 0.5 s): a fixed 5 N m at 5 Hz, stamped 0
+#: ``ros2 topic pub -r 5 /frame/pendulum/torque_cmd``, started during the run: a fixed 5 N m at
+#: 5 Hz, stamped 0, from the moment its writer has matched every reader of the topic, the
+#: simulator's among them, and the loop's ``/clock`` has passed 0.5 s. It prints ``wrote N WALL_NS
+#: CLOCK_NS`` for each sample it writes, and ``named VALUE WALL_NS`` when the simulator's
+#: ``/diagnostics`` first gives a new ``pendulum_torque_cmd_ignored_writers``.
 PUB_PEER = """
 import signal, time
 import rclpy
+from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import WrenchStamped
 from rosgraph_msgs.msg import Clock
 rclpy.init()
@@ -67,18 +71,35 @@ node = rclpy.create_node("topic_pub", namespace="/frame")
 clock = [0]
 node.create_subscription(Clock, "/clock", lambda m: clock.__setitem__(0, m.clock.sec * 10**9
                          + m.clock.nanosec), rclpy.qos.qos_profile_sensor_data)
+named = []
+def on_status(msg):
+    for status in msg.status:
+        value = {kv.key: kv.value for kv in status.values}.get(
+            "pendulum_torque_cmd_ignored_writers", "")
+        if status.name.endswith("/sim_node") and value and value not in named:
+            named.append(value)
+            print("named", value, time.time_ns(), flush=True)
+node.create_subscription(DiagnosticArray, "/diagnostics", on_status, 100)
 pub = node.create_publisher(WrenchStamped, "pendulum/torque_cmd", 10)
 cmd = WrenchStamped()
 cmd.wrench.torque.z = 5.0
 stop = []
 signal.signal(signal.SIGTERM, lambda *a: stop.append(1))
+
+def reaches_sim():
+    readers = node.get_subscriptions_info_by_topic(pub.topic_name)
+    return (any(r.node_name == "sim_node" for r in readers)
+            and pub.get_subscription_count() >= len(readers))
+
 print("ready", flush=True)
-sent, due = 0, time.monotonic()
+sent, due = 0, 0.0
 while not stop:
-    rclpy.spin_once(node, timeout_sec=0.05)
-    if clock[0] >= 5 * 10**8 and pub.get_subscription_count() and time.monotonic() >= due:
+    rclpy.spin_once(node, timeout_sec=0.02)
+    if clock[0] >= 5 * 10**8 and time.monotonic() >= due and reaches_sim():
+        wall = time.time_ns()
         pub.publish(cmd)
-        sent, due = sent + 1, due + 0.2
+        sent, due = sent + 1, time.monotonic() + 0.2
+        print("wrote", sent, wall, clock[0], flush=True)
 print("sent", sent, flush=True)
 """
 
@@ -88,9 +109,9 @@ def writer_refusals(gate: dict) -> int:
 
 
 @functools.cache
-def reference() -> Any:
-    """The one-process loop of the scene the tests launch."""
-    return run_closed_loop(thesis_scene("thesis_lqg", SHORT_LQG))
+def reference(overrides: tuple[str, ...] = tuple(SHORT_LQG)) -> Any:
+    """The one-process loop of the scene the tests launch (with ``overrides``)."""
+    return run_closed_loop(thesis_scene("thesis_lqg", list(overrides)))
 
 
 def loop_beside(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, backend: str, peer: str,
@@ -132,18 +153,83 @@ def test_an_idle_publisher_changes_nothing_in_real_time(
     assert result["commands_in_time"] > 0 and result["peak_command"] > 0
 
 
-# long (out of the default run) until it forces its condition: the peer writes only once it has
-# matched the simulator, and a lock-step run can end before that (seen once: the peer sent 0)
-@pytest.mark.long
+#: a lock-step run far longer than the test lets it run: it is stopped once what the test checks
+#: has happened, however long that takes on a loaded machine
+LONG_LQG = ["duration=600", "controller.start=3", "evaluation.window=2"]
+
+#: how long [s] of sim time the run goes on at least: one second of control
+CONTROLLED_UNTIL_S = 4.0
+
+#: the simulator's log line that names a writer it refuses
+REFUSING = "pendulum/torque_cmd: refusing the samples of another writer: "
+
+
+def log_stamp_ns(line: str) -> int:
+    """The wall time of a log line ``[LEVEL] [SEC.NSEC] [name]: …`` (rcutils' console format)."""
+    sec, nsec = line.split("] [", 2)[1].split(".")
+    return int(sec) * 10**9 + int(nsec)
+
+
+@pytest.mark.slow
 @pytest.mark.parametrize("backend", BACKENDS)
 def test_a_writing_peer_is_refused_counted_and_named(
         ros_domain: int, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, backend: str) -> None:
-    _, hist, sent, gate = loop_beside(tmp_path, monkeypatch, backend, PUB_PEER)
+    """The peer writes once its writer has matched the simulator's reader, into a lock-step run
+    that the test stops (SIGINT) only when the simulator's log and ``/diagnostics`` (as the peer
+    receives it) name the peer, the peer has written 3 samples and the run has controlled for
+    a second. Its samples are refused and counted, the names came within one second of the first
+    refused sample, and the run is the one-process loop's to the last bit."""
+    monkeypatch.setenv("STILLFRAME_RMW", backend)
+    peer = start_python(PUB_PEER)
+    assert peer.stdout.readline().strip() == "ready"
+    said = read_lines(peer.stdout)
+
+    def done(sim_log: list[str]) -> bool:
+        wrote = [line.split() for line in said.lines if line.startswith("wrote")]
+        return (len(wrote) >= 3 and int(wrote[-1][3]) >= CONTROLLED_UNTIL_S * 1e9
+                and any(REFUSING + "/frame/topic_pub" in line for line in sim_log)
+                and any(line.startswith("named /frame/topic_pub") for line in said.lines))
+    peer_err = read_lines(peer.stderr)
+    try:
+        result, hist, sim_log = run_loop_until(tmp_path, "thesis_lqg", LONG_LQG, done,
+                                               command_writer="controller_node")
+    finally:
+        peer.send_signal(signal.SIGTERM)
+        peer.wait(20)
+        said.reader.join(10)
+        peer_err.reader.join(10)
+    assert peer.returncode == 0 and said.lines[-1].startswith("sent"), peer_err.text()[-2000:]
+    sent = int(said.lines[-1].split()[-1])
+    gate = result["command_gates"]["pendulum/torque_cmd"]
+    # refused and counted; nothing else refused
     assert 0 < writer_refusals(gate) <= sent, (gate, sent)
+    assert result["rejected_commands"] == writer_refusals(gate)
     assert gate["writer"] == "/frame/controller_node"
-    assert gate["ignored_writers"] == "/frame/topic_pub" or (
-        backend == "dds" and gate["ignored_writers"].startswith("010f")), gate
-    np.testing.assert_array_equal(hist["command"], reference().command)
+    assert gate["ignored_writers"] == "/frame/topic_pub", gate
+    # named within one second of the first refused sample. The first line refusing the peer
+    # counts the N samples refused so far: the peer's last writes before the line (one more may
+    # have been on its way), so the first of them was written no earlier than the (N+1)-th last
+    # write before the line. It names the node, on dds by its GID while the graph has not named
+    # the Fast DDS participant yet (the only eProsima writer, vendor 01.0f); so does
+    # /diagnostics, as the peer received it
+    first = next(line for line in sim_log if REFUSING in line)
+    assert REFUSING + "/frame/topic_pub (" in first or (
+        backend == "dds" and REFUSING + "010f" in first), first
+    logged_ns, refused = log_stamp_ns(first), int(first.rsplit("(", 1)[1].split()[0])
+    writes = [int(line.split()[2]) for line in said.lines if line.startswith("wrote")]
+    before = [t for t in writes if t <= logged_ns]
+    first_ns = before[max(0, len(before) - refused - 1)]
+    assert logged_ns - first_ns <= 10**9, (first, writes)
+    diagnosed = next(line.split() for line in said.lines if line.startswith("named"))
+    assert diagnosed[1] == "/frame/topic_pub" or (
+        backend == "dds" and diagnosed[1].startswith("010f")), diagnosed
+    assert int(diagnosed[2]) - first_ns <= 10**9, (diagnosed, writes)
+    # control unaffected: the samples run equal the one-process loop's, a second of control in
+    steps = result["steps"]
+    assert result["complete"] is False and hist["t"][-1] >= CONTROLLED_UNTIL_S
+    np.testing.assert_array_equal(hist["command"], reference(tuple(LONG_LQG)).command[:steps])
+    np.testing.assert_array_equal(hist["truth"], reference(tuple(LONG_LQG)).truth[:steps])
+    assert result["lockstep_timeouts"] == 0
 
 
 def launch(*args: str) -> subprocess.Popen:

@@ -7,8 +7,11 @@ import signal
 import subprocess
 import sys
 import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import IO, Any
 
 import numpy as np
 import yaml
@@ -75,20 +78,67 @@ def run_loop(tmp_path: Path, scene: str, overrides: list[str],
              **params: Any) -> tuple[dict, dict[str, np.ndarray]]:
     """The three nodes as processes; the sim's result JSON and histories. Fails unless every
     node exits 0 (the estimator and controller on SIGINT after the sim finished)."""
+    result, histories, _ = run_loop_until(tmp_path, scene, overrides, None, **params)
+    return result, histories
+
+
+def run_loop_until(tmp_path: Path, scene: str, overrides: list[str],
+                   until: Callable[[list[str]], bool] | None, *, timeout: float = 300,
+                   **params: Any) -> tuple[dict, dict[str, np.ndarray], list[str]]:
+    """:func:`run_loop`, with the simulator stopped by SIGINT as soon as ``until(its log lines
+    so far)`` holds (None: the scene runs to its end); also the simulator's log lines. Fails if
+    the simulator ends before ``until`` holds, or ``timeout`` seconds pass. Stopped, the
+    simulator writes the samples run so far (``"complete": false``)."""
     result = tmp_path / "result.json"
     pfile = params_file(tmp_path, scene, overrides, result_file=str(result), **params)
     peers = [start_node(name, pfile) for name in ("estimator_node", "controller_node")]
     sim = start_node("sim_node", pfile)
+    log, _out = read_lines(sim.stderr), read_lines(sim.stdout)   # both drained
     try:
-        _out, sim_err = finish(sim, timeout=300)
+        if until is not None:
+            deadline = time.monotonic() + timeout
+            while not until(log.lines):
+                assert sim.poll() is None, f"the simulator ended first: {log.text()[-3000:]}"
+                assert time.monotonic() < deadline, f"not seen in {timeout:g} s: " \
+                    f"{log.text()[-3000:]}"
+                time.sleep(0.05)
+            sim.send_signal(signal.SIGINT)
+        sim.wait(timeout=300)
     finally:
+        if sim.poll() is None:
+            sim.kill()
         codes = [stop(p) for p in peers]
-    assert sim.returncode == 0, sim_err[-2000:]
+    log.reader.join(10)
+    assert sim.returncode == 0, log.text()[-2000:]
     for code, err in codes:
         assert code == 0, err[-2000:]
     with np.load(result.with_suffix(".npz")) as data:
         histories = dict(data)
-    return json.loads(result.read_text()), histories
+    return json.loads(result.read_text()), histories, log.lines
+
+
+@dataclass
+class Lines:
+    """The lines of a process's stream, read by a thread as they come."""
+
+    reader: threading.Thread
+    lines: list[str] = field(default_factory=list)
+
+    def text(self) -> str:
+        return "".join(self.lines)
+
+
+def read_lines(stream: IO[str]) -> Lines:
+    """Read ``stream`` line by line in a daemon thread into :attr:`Lines.lines`."""
+    lines: list[str] = []
+
+    def read() -> None:
+        for line in stream:
+            lines.append(line)
+
+    reader = threading.Thread(target=read, daemon=True)
+    reader.start()
+    return Lines(reader, lines)
 
 
 def run_loop_beside(tmp_path: Path, writer_code: str, scene: str, overrides: list[str],
