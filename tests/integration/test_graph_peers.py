@@ -26,9 +26,8 @@ from typing import Any
 
 import numpy as np
 import pytest
+from rosbags.highlevel import AnyReader
 
-from stillframe.bags.storage import bag_summary
-from stillframe.contract import messages
 from stillframe.locations import REPO_ROOT
 from stillframe.loop.closed_loop import run_closed_loop
 from stillframe.loop.writer_gate import REASONS
@@ -297,15 +296,39 @@ def stillframe_cli(*args: str) -> subprocess.Popen:
                             text=True)
 
 
-# long (out of the default run) until its cause is found: it failed once in a fresh-clone run
-# on a quiet machine and passed alone
-@pytest.mark.long
+def imu_stamps(bag: Path) -> list[int]:
+    """The header stamps [ns] of ``/frame/floor1/imu`` in ``bag``, read with rosbags."""
+    with AnyReader([bag]) as reader:
+        imu = [c for c in reader.connections if c.topic == "/frame/floor1/imu"]
+        return [(m := reader.deserialize(raw, c.msgtype)).header.stamp.sec * 10**9
+                + m.header.stamp.nanosec for c, _, raw in reader.messages(connections=imu)]
+
+
+def stop_all(procs: list[subprocess.Popen], sig: int = signal.SIGINT) -> None:
+    """Send ``sig`` to each process still running, then wait for each (killed after 30 s)."""
+    for proc in procs:
+        if proc.poll() is None:
+            proc.send_signal(sig)
+    for proc in procs:
+        try:
+            proc.wait(30)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+
+
+@pytest.mark.slow
 @pytest.mark.skipif("rclpy" not in BACKENDS, reason="rclpy not installed")
 def test_the_loop_keeps_controlling_beside_tools(ros_domain: int, tmp_path: Path) -> None:
     """Beside a lock-step launch with its recorder: ``stillframe topic echo`` and ``topic hz``,
-    a second recorder of every topic, ``stillframe monitor`` with a Foxglove client subscribed
-    to every topic, and a real rclpy talker on ``/chatter``. The run is the one-process loop's
-    to the last bit, and every tool got what it asked for."""
+    a second recorder of every topic (named apart: a launch waits for its own recorder, found
+    by the name ``stillframe_recorder``), ``stillframe monitor`` with a Foxglove client
+    subscribed to every topic, and a real rclpy talker on ``/chatter``. The launch runs until
+    every tool has shown what it got (echo the IMU's stamps past a second of control, hz a rate,
+    the Foxglove client IMU messages), however long that takes, and is then stopped with
+    SIGINT (Ctrl-C). The samples run are the one-process loop's to the last bit without a
+    lock-step timeout; the launch's bag holds every one, the second recorder's every one from
+    its first."""
     monitor = stillframe_cli("monitor", "--port", "0", "--max-rate", "0")
     ready = ""
     while "Monitor ready" not in ready:
@@ -318,37 +341,64 @@ def test_the_loop_keeps_controlling_beside_tools(ros_domain: int, tmp_path: Path
     client.start()
     tools = [stillframe_cli("topic", "echo", "/frame/floor1/imu", "--field", "header.stamp.sec"),
              stillframe_cli("topic", "hz", "/frame/state_estimate"),
-             stillframe_cli("record", "-o", str(tmp_path / "second"), "--all"),
+             stillframe_cli("record", "-o", str(tmp_path / "second"), "--all",
+                            "--node-name", "second_recorder"),
              start_python(CHATTER)]
     assert tools[-1].stdout.readline().strip() == "ready"
+    said = [read_lines(proc.stdout) for proc in (*tools, monitor)]
+    logs = [read_lines(proc.stderr) for proc in (*tools, monitor)]
+    echo, hz = said[0], said[1]
+    out = tmp_path / "out"
+    run = subprocess.Popen(
+        [sys.executable, "-m", "stillframe", "launch", str(SCENES / "thesis_lqg.yaml"),
+         *[a for o in LONG_LQG for a in ("--set", o)], "--record", str(tmp_path / "bag"),
+         "--out", str(out),
+         # eight processes on the machine: a late sample is waited for, not held over
+         "--lockstep-timeout", "10"],
+        env=child_env(), cwd=REPO_ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+        text=True)
+    run_log = read_lines(run.stderr)
+    read_lines(run.stdout)
+
+    def everyone_got_theirs() -> bool:
+        secs = [int(line) for line in echo.lines if line.strip().isdigit()]
+        return (bool(secs) and max(secs) >= CONTROLLED_UNTIL_S
+                and any("average rate" in line for line in hz.lines)
+                and bool(seen.messages.get("/frame/floor1/imu")))
     try:
-        done_launch = subprocess.run(
-            [sys.executable, "-m", "stillframe", "launch", str(SCENES / "thesis_lqg.yaml"),
-             *[a for o in SHORT_LQG for a in ("--set", o)], "--record", str(tmp_path / "bag"),
-             "--out", str(tmp_path / "out"), "--json",
-             # eight processes on the machine: a late sample is waited for, not held over
-             "--lockstep-timeout", "10"],
-            env=child_env(), cwd=REPO_ROOT, capture_output=True, text=True, timeout=300)
+        deadline = time.monotonic() + 300
+        while not everyone_got_theirs():
+            assert run.poll() is None, f"the launch ended first: {run_log.text()[-3000:]}"
+            assert time.monotonic() < deadline, (echo.lines[-5:], hz.lines, run_log.text()[-3000:])
+            time.sleep(0.05)
     finally:
-        for proc in (*tools, monitor):
-            proc.send_signal(signal.SIGINT if proc is not tools[-1] else signal.SIGTERM)
-        outputs = [finish(proc, timeout=30) for proc in (*tools, monitor)]
+        stop_all([run])
+        stop_all(tools[:-1])
+        stop_all(tools[-1:], signal.SIGTERM)
+        stop_all([monitor])
         client.join(10)
-    assert done_launch.returncode == 0, done_launch.stderr[-3000:]
-    result = json.loads(done_launch.stdout)
-    with np.load(tmp_path / "out" / "result.npz") as data:
-        np.testing.assert_array_equal(data["command"], reference().command)
-        np.testing.assert_array_equal(data["truth"], reference().truth)
-    assert result["lockstep_timeouts"] == 0
-    echo, hz, _, chatter, _ = outputs
-    assert echo[0].split().count("0") >= 5             # stamps of the first second echoed
-    assert "average rate" in hz[0], hz
+        for lines in (*said, *logs, run_log):
+            lines.reader.join(10)
+    assert run.returncode == 130, run_log.text()[-3000:]    # Ctrl-C, every node stopped
+    result = json.loads((out / "result.json").read_text())
     steps = result["steps"]
-    for bag in ("bag", "second"):
-        counts = {t.name: t.count for t in bag_summary(tmp_path / bag, messages.TYPESTORE).topics}
-        assert counts["/frame/floor1/imu"] == steps, (bag, counts)
-    assert int(chatter[0].split()[-1]) > 0
-    assert len(seen.messages.get("/frame/floor1/imu", [])) > 0, "the Foxglove client got none"
+    assert result["complete"] is False and result["lockstep_timeouts"] == 0
+    with np.load(out / "result.npz") as data:
+        assert data["t"][-1] >= CONTROLLED_UNTIL_S
+        np.testing.assert_array_equal(data["command"], reference(tuple(LONG_LQG)).command[:steps])
+        np.testing.assert_array_equal(data["truth"], reference(tuple(LONG_LQG)).truth[:steps])
+    # every sample the loop ran (the one it was stopped in too, published before it waited)
+    period = round(1e9 / 32)
+    grid = [k * period for k in range(steps + 1)]
+    recorded = imu_stamps(tmp_path / "bag")
+    assert recorded in (grid[:-1], grid), (len(recorded), steps)
+    second = imu_stamps(tmp_path / "second")
+    first = round(second[0] / period) if second else len(grid)
+    assert second == grid[first:first + len(second)] and first + len(second) >= steps, (
+        second[:3], len(second), steps)
+    assert sum(line.strip() == "---" for line in echo.lines) >= 5
+    assert int(said[3].lines[-1].split()[-1]) > 0      # the talker wrote all along
+    assert all(proc.returncode == 0 for proc in tools[:-1]), [lg.text()[-500:] for lg in logs]
 
 
 @pytest.mark.slow

@@ -18,6 +18,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     parser.add_argument("topics", nargs="*", metavar="TOPIC", help="topics to record")
     parser.add_argument("--use-sim-time", action="store_true",
                         help="stamp messages with the time on /clock instead of the system time")
+    parser.add_argument("--node-name", default=None, metavar="NAME",
+                        help="the recorder's node name, as ros2 bag record's (default: "
+                             "stillframe_recorder, the name a launch's simulator waits for)")
     parser.set_defaults(func=run)
 
 
@@ -26,7 +29,7 @@ def run(args: argparse.Namespace) -> int:
     from stillframe.contract import messages
     from stillframe.errors import InputError
     from stillframe.middleware.api import create_node, spin
-    from stillframe.middleware.names import resolve_topic
+    from stillframe.middleware.names import resolve_topic, validate_node_name
     from stillframe.node_runtime.support import RECORDER_NODE
     from stillframe.recording.recorder import Recorder
 
@@ -35,8 +38,9 @@ def run(args: argparse.Namespace) -> int:
     if args.all == bool(args.topics):
         raise InputError("give either --all or one or more TOPICs")
     topics = [resolve_topic(t) for t in args.topics]
+    name = RECORDER_NODE if args.node_name is None else validate_node_name(args.node_name)
     # the node stays on system time: the recorder stamps on /clock itself (recording.recorder)
-    node = create_node(RECORDER_NODE, argv=sys.argv[:1])
+    node = create_node(name, argv=sys.argv[:1])
     try:
         with BagWriter(args.output, messages.TYPESTORE) as bag:
             recorder = Recorder(node, bag, topics, sim_time=args.use_sim_time)
