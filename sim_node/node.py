@@ -302,6 +302,10 @@ class SimNode(base.LoopNode):
                 pacer.deadline_ns(k, time.monotonic_ns())):
             if not api.ok():
                 return None
+            if pacer.lockstep:
+                self.node.get_logger().warning(
+                    f"lock-step timeout: no command for sample {k} (t = {sample.t:g} s) within "
+                    f"{self.params.lockstep_timeout_s:g} s; holding the previous one", once=True)
             pacer.missed()
             missed = True
         if self.delay.periods:
