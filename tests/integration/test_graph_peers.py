@@ -113,13 +113,14 @@ def reference(overrides: tuple[str, ...] = tuple(SHORT_LQG)) -> Any:
     return run_closed_loop(thesis_scene("thesis_lqg", list(overrides)))
 
 
-def loop_beside(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, backend: str, peer: str,
+def loop_beside(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, backend: str, peer: str, *,
+                log: list[str] | None = None,
                 **params: Any) -> tuple[dict, dict[str, np.ndarray], int, dict]:
     """The three nodes on ``backend`` (sim_node pinned to controller_node, as a launch pins it)
     beside the ``peer`` script: the result, the histories, what the peer sent, and the torque
-    command's gate report."""
+    command's gate report (the simulator's log lines appended to ``log``)."""
     monkeypatch.setenv("STILLFRAME_RMW", backend)
-    result, hist, sent = run_loop_beside(tmp_path, peer, "thesis_lqg", SHORT_LQG,
+    result, hist, sent = run_loop_beside(tmp_path, peer, "thesis_lqg", SHORT_LQG, log=log,
                                          command_writer="controller_node", **params)
     return result, hist, sent, result["command_gates"]["pendulum/torque_cmd"]
 
@@ -128,14 +129,15 @@ def loop_beside(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, backend: str, p
 @pytest.mark.parametrize("backend", BACKENDS)
 def test_an_idle_publisher_on_the_command_topic_changes_nothing(
         ros_domain: int, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, backend: str) -> None:
-    result, hist, _, gate = loop_beside(tmp_path, monkeypatch, backend, IDLE_PEER)
+    sim_log: list[str] = []
+    result, hist, _, gate = loop_beside(tmp_path, monkeypatch, backend, IDLE_PEER, log=sim_log)
     np.testing.assert_array_equal(hist["command"], reference().command)
     np.testing.assert_array_equal(hist["truth"], reference().truth)
     assert writer_refusals(gate) == 0 and gate["ignored_writers"] == ""
     # the issue's stall was hundreds of lock-step timeouts from refused commands; the one at the
     # first sample seen before on rclpy was the controller's volatile estimate reader matching
     # after the first estimate (now handed it on matching: docs/nodes.md, QoS in each mode)
-    assert result["lockstep_timeouts"] == 0
+    assert result["lockstep_timeouts"] == 0, [line for line in sim_log if "timeout" in line]
 
 
 @pytest.mark.slow
@@ -228,7 +230,7 @@ def test_a_writing_peer_is_refused_counted_and_named(
     assert result["complete"] is False and hist["t"][-1] >= CONTROLLED_UNTIL_S
     np.testing.assert_array_equal(hist["command"], reference(tuple(LONG_LQG)).command[:steps])
     np.testing.assert_array_equal(hist["truth"], reference(tuple(LONG_LQG)).truth[:steps])
-    assert result["lockstep_timeouts"] == 0
+    assert result["lockstep_timeouts"] == 0, [line for line in sim_log if "timeout" in line]
 
 
 def launch(*args: str) -> subprocess.Popen:
@@ -382,7 +384,8 @@ def test_the_loop_keeps_controlling_beside_tools(ros_domain: int, tmp_path: Path
     assert run.returncode == 130, run_log.text()[-3000:]    # Ctrl-C, every node stopped
     result = json.loads((out / "result.json").read_text())
     steps = result["steps"]
-    assert result["complete"] is False and result["lockstep_timeouts"] == 0
+    assert result["complete"] is False and result["lockstep_timeouts"] == 0, [
+        line for line in run_log.lines if "timeout" in line]
     with np.load(out / "result.npz") as data:
         assert data["t"][-1] >= CONTROLLED_UNTIL_S
         np.testing.assert_array_equal(data["command"], reference(tuple(LONG_LQG)).command[:steps])

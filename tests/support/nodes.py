@@ -74,11 +74,14 @@ def stop(proc: subprocess.Popen, sig: int = signal.SIGINT) -> tuple[int, str]:
     return proc.returncode, err
 
 
-def run_loop(tmp_path: Path, scene: str, overrides: list[str],
+def run_loop(tmp_path: Path, scene: str, overrides: list[str], *, log: list[str] | None = None,
              **params: Any) -> tuple[dict, dict[str, np.ndarray]]:
-    """The three nodes as processes; the sim's result JSON and histories. Fails unless every
-    node exits 0 (the estimator and controller on SIGINT after the sim finished)."""
-    result, histories, _ = run_loop_until(tmp_path, scene, overrides, None, **params)
+    """The three nodes as processes; the sim's result JSON and histories (and its log lines
+    appended to ``log``). Fails unless every node exits 0 (the estimator and controller on
+    SIGINT after the sim finished)."""
+    result, histories, lines = run_loop_until(tmp_path, scene, overrides, None, **params)
+    if log is not None:
+        log.extend(lines)
     return result, histories
 
 
@@ -141,14 +144,15 @@ def read_lines(stream: IO[str]) -> Lines:
     return Lines(reader, lines)
 
 
-def run_loop_beside(tmp_path: Path, writer_code: str, scene: str, overrides: list[str],
+def run_loop_beside(tmp_path: Path, writer_code: str, scene: str, overrides: list[str], *,
+                    log: list[str] | None = None,
                     **params: Any) -> tuple[dict, dict[str, np.ndarray], int]:
     """:func:`run_loop` while another process runs ``writer_code`` (a Python script that prints
     ``ready``, writes until SIGTERM and then prints ``sent N``); also returns N."""
     writer = start_python(writer_code)
     assert writer.stdout.readline().strip() == "ready"
     try:
-        result, hist = run_loop(tmp_path, scene, overrides, **params)
+        result, hist = run_loop(tmp_path, scene, overrides, log=log, **params)
     finally:
         writer.send_signal(signal.SIGTERM)
         out, err = finish(writer, timeout=20)
