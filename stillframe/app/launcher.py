@@ -115,11 +115,14 @@ def node_command(package: str, scene: Path, overrides: Sequence[str], mode: str,
 RECORDED_DDS_ABOVE_HZ = 200.0
 
 
-def recorded_default(*, record: bool, mode: str, rate_hz: float) -> str | None:
-    """The backend for the children ``--backend`` leaves unset, when it is not the process's
-    default: ``dds`` for a recorded real-time run above :data:`RECORDED_DDS_ABOVE_HZ` when
-    neither ``STILLFRAME_RMW`` nor ``--backend`` chose one; None otherwise."""
+def recorded_default(specs: Sequence[str], *, record: bool, mode: str,
+                     rate_hz: float) -> str | None:
+    """The backend for the children the ``--backend`` values ``specs`` leave unset, when it is
+    not the process's default: ``dds`` for a recorded real-time run above
+    :data:`RECORDED_DDS_ABOVE_HZ` when neither ``STILLFRAME_RMW`` nor a ``--backend`` for every
+    child chose one; None otherwise."""
     if (not record or mode != "realtime" or rate_hz <= RECORDED_DDS_ABOVE_HZ
+            or any("=" not in spec for spec in specs)
             or os.environ.get(api.BACKEND_ENV, "").strip() or api.backend_name() == "dds"):
         return None
     return "dds"
@@ -365,7 +368,8 @@ class Launcher:
         self.scene = options.resolved or resolve_model(
             load_scene(options.scene.resolve(), options.overrides))[0]
         self.status = StatusLine()
-        default = recorded_default(record=options.record_dir is not None, mode=options.mode,
+        default = recorded_default(options.backends, record=options.record_dir is not None,
+                                   mode=options.mode,
                                    rate_hz=self.scene.sensors.rate_hz)
         self.backends = parse_backends(options.backends, default)
         if default:
