@@ -12,7 +12,10 @@ Both run once per middleware backend (``dds``: Cyclone; ``rclpy``: real rclpy on
 three nodes on it, so the backends are compared in the same run. ``--compose`` /
 ``--compose-all`` run the real-time runs with those nodes in one process and add a composed
 lock-step run; ``--record`` / ``--track`` repeat each real-time run with the recorder / the
-modal tracker beside the loop, the figures without and with in one table; ``--rt`` runs the
+modal tracker beside the loop, the figures without and with in one table (``--repeat N``: N such
+pairs); each real-time run starts on a settled machine (:mod:`stillframe.bench.settle`: the last
+run's children reaped, its pages flushed, an idle check printed), and its table says how much CPU
+other jobs took during it; ``--rt`` runs the
 nodes with the real-time practices of docs/realtime.md. The figures are printed beside the
 goals of issue 10, with the machine's load average during each real-time run (the machine may
 be shared); ``--stall-probe`` runs cyclictest beside each real-time run
