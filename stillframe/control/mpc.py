@@ -35,9 +35,9 @@ the thesis's cheap input weight makes hopeless for an ADMM solver. The states ar
 not change from sample to sample: OSQP (Stellato et al. 2020, ``osqp`` on PyPI) is set up once,
 and each sample updates q, l, u and warm-starts from the previous solution moved on by one
 sample (by 1/h of a grid step, linearly between the grid's points). The first move u_0 is
-applied (receding horizon). OSQP's own tolerances (10⁻³) end the iterations; the polished
-solution is then exact where the active set was found (docs/controllers.md gives the measured
-difference to a 10⁻⁸ solve).
+applied (receding horizon). OSQP's own default tolerances (10⁻³) end the iterations; the
+polished solution is then exact where the active set was found (the tests compare it with
+independent solvers to 10⁻⁵).
 
 A solve that does not end *solved* (iteration limit ``controller.max_iter``, numerical trouble,
 primal infeasibility, which the hard limits cannot cause while the previous command is within
