@@ -113,14 +113,16 @@ def prediction(A: np.ndarray, B: np.ndarray, horizon: int) -> tuple[np.ndarray, 
 
 
 class MPCLaw:
-    """The receding-horizon command (module docstring); called like the other laws."""
+    """The receding-horizon command (module docstring); called like the other laws. ``design``
+    is the LQR of the grid's model (:func:`~stillframe.control.lqg.design_lqr` at the grid's
+    step), ``limits`` are those of one sample."""
 
     def __init__(self, design: LQRDesign, input_weight: float, *, limits: CommandLimits,
                  grid: PredictionGrid, angle_index: int, rate_weight: float = 0.0,
                  angle_penalty: float = 1e6, max_iter: int = 200) -> None:
         n = design.A.shape[0]
         N = grid.steps
-        self.design, self.limits, self.grid, self.horizon = design, limits, grid, N
+        self.design, self.limits, self.grid = design, limits, grid
         self.fallback_law = ConditionedLQGLaw(design, False, limits, angle_index)
         K = design.gain
         B = design.B
@@ -178,11 +180,11 @@ class MPCLaw:
 
     def inputs(self, z: np.ndarray, solution: np.ndarray) -> np.ndarray:
         """The planned commands u_0 … u_{N−1} of a QP solution [V, s] at the estimate z."""
-        return self._u_x @ z + self._u_v @ solution[:self.horizon]
+        return self._u_x @ z + self._u_v @ solution[:self.grid.steps]
 
     def bounds(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """q, l, u of the QP at the estimate ``z`` and the previous command."""
-        N = self.horizon
+        N = self.grid.steps
         q = self._q.copy()
         free_u = self._u_x @ z                                  # the LQR's plan: U at V = 0
         steps = self._difference @ free_u
@@ -203,7 +205,7 @@ class MPCLaw:
         q, lo, hi = self.bounds(z)
         self.solver.update(q=q, l=lo, u=hi)
         if self.last is not None:
-            v = self.last[:self.horizon]
+            v = self.last[:self.grid.steps]
             ahead = np.append(v[1:], 0.0)                       # the plan one grid step later
             f = 1.0 / self.grid.samples                         # … one sample later
             self.solver.warm_start(x=np.append((1.0 - f) * v + f * ahead, self.last[-1]))
