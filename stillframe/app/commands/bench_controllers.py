@@ -114,7 +114,11 @@ def measure(quick: bool) -> dict:
                        "fallbacks": history.evaluation["controller"]["fallback"],
                        "reduction_pct": history.evaluation["reduction_pct"]["displacement"],
                        "peak_torque": history.evaluation["peak_command"]})
-    return {"rows": rows, "mpc_timing": timing}
+    label, _, overrides = RATES[-1]                # the anti-windup LQG beside it at 1 kHz
+    beside = _row(f"torque-limited {label}", "LQG anti-windup",
+                  [*CASES["torque-limited"], *LAWS["LQG anti-windup"], *overrides,
+                   *(QUICK_TIMING if quick else [])])
+    return {"rows": rows, "mpc_timing": timing, "anti_windup_1khz": beside}
 
 
 def _us(seconds: float) -> str:
@@ -155,8 +159,13 @@ def run(args: argparse.Namespace) -> int:
           "(the solve plus its Python set-up); wall adds what other processes on this shared "
           "machine took meanwhile (4 ms scheduler ticks); OSQP: the solver's own wall time. "
           "Times in us.")
+    print("\nThe same runs: steady-state peak displacement reduction per floor (%), with the "
+          "anti-windup LQG at 1 kHz beside them")
+    beside = result["anti_windup_1khz"]
     print(format_table(
-        ["rate", "floor 1", "floor 2", "floor 3", "peak torque [N m]", "max |phi| [rad]"],
-        [[t["rate"], *(f"{x:.1f}" for x in t["reduction_pct"]), f"{t['peak_torque']:.3g}",
-          f"{t['max_angle']:.3g}"] for t in result["mpc_timing"]]))
+        ["law", "rate", "floor 1", "floor 2", "floor 3", "peak torque [N m]", "max |phi| [rad]"],
+        [[law, rate, *(f"{x:.1f}" for x in r["reduction_pct"]), f"{r['peak_torque']:.3g}",
+          f"{r['max_angle']:.3g}"]
+         for law, rate, r in [*(("MPC", t["rate"], t) for t in result["mpc_timing"]),
+                              ("LQG anti-windup", RATES[-1][0], beside)]]))
     return 0
