@@ -424,7 +424,8 @@ def run(args: argparse.Namespace) -> int:
                                        args.compose, rt))
     for r in rows:
         if r["record"]:
-            r["misses_over_unrecorded"], r["holds_issue_32"] = recorder_verdict(r, twin(rows, r))
+            ratio, r["holds_issue_32"] = recorder_verdict(r, twin(rows, r))
+            r["misses_over_unrecorded"] = ratio if math.isfinite(ratio) else None
     goals = goal_rows(rows, speeds)
     if args.json:
         emit_json({"realtime": rows, "lockstep": speeds, "goals": goals,
