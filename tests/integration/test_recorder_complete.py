@@ -82,6 +82,7 @@ def test_launch_record_at_1khz_holds_every_sample_of_every_loop_topic(
     assert own >= 0.9 * steps
 
 
+@pytest.mark.long
 @pytest.mark.parametrize("backend", BACKENDS)
 def test_separate_record_all_beside_a_realtime_1khz_run_misses_no_sample(
         tmp_path: Path, ros_domain: int, backend: str) -> None:
@@ -89,7 +90,14 @@ def test_separate_record_all_beside_a_realtime_1khz_run_misses_no_sample(
     the first sample it holds, every per-step topic has every sample time up to the last step
     (none lost while recording), stamps on ``/clock`` in order. The simulator does not wait for
     a separate recorder, so when the recorder subscribes (discovery takes up to seconds on a
-    loaded machine) decides where each topic begins, as with ``ros2 bag record``."""
+    loaded machine) decides where each topic begins, as with ``ros2 bag record``.
+
+    In the long set: in real time nothing waits for a separate recorder, so whether it keeps
+    every sample depends on the CPU the machine gives it (a recorder stopped for 1.8 s during a
+    1 kHz run lost 27 samples, for 2.5 s 2028; one fresh-clone run at load 20 lost 31 in a
+    row). That is a speed figure: ``stillframe bench loop --record`` prints it (the bag's
+    per-step samples and holes). The default run keeps the lock-step completeness test above,
+    whose condition no machine can break."""
     bag = tmp_path / "bag"
     recorder = subprocess.Popen(
         [sys.executable, "-m", "stillframe", "record", "-o", str(bag), "--all",
