@@ -68,6 +68,10 @@ TRANSITION_TIMEOUT_S = 20.0
 RESOLVED_SCENE = "scene.resolved.yaml"
 #: seconds a child gets to exit after SIGINT, then after SIGTERM, before SIGKILL
 STOP_GRACE_S = 10.0
+#: seconds a child that is still running gets to log its ready line: a guard against a hung
+#: child, not a start-up time (a recorder took more than 20 s to import and open its bag on a
+#: loaded 2-core machine, and the launch then called it dead)
+READY_TIMEOUT_S = 120.0
 #: the log line by which a helper child says it is ready (the nodes start after it)
 READY_LINES: dict[str, str] = {"recorder": "Recording to", "monitor": "Monitor ready",
                                TRACKER: TRACKER_READY}
@@ -561,7 +565,7 @@ class Launcher:
                 backend=backend)
         return self.callers[backend]
 
-    def _wait_for_line(self, child: Child, text: str, timeout_s: float = 20.0) -> None:
+    def _wait_for_line(self, child: Child, text: str, timeout_s: float = READY_TIMEOUT_S) -> None:
         """Wait for ``child`` to log ``text`` before starting the next: nodes start once the
         recorder is recording and the monitor serving (:data:`READY_LINES`); with mixed vendors,
         a node starts once the previous one has its participant ('middleware backend'), because
