@@ -56,8 +56,8 @@ BACKEND_TARGETS: tuple[str, ...] = (*NODES, "recorder", "monitor", TRACKER)
 #: them (the container brings its nodes up itself)
 MANAGED: tuple[str, ...] = tuple(n for n, declared in NODE_PARAMETERS.items()
                                  if ManagedParameterValues in declared)
-#: how long a managed node may take to serve its lifecycle services (its imports and the scene)
-#: [s]
+#: how long a managed node may take to serve its lifecycle services (its imports and the scene),
+#: counted in the time the machine gave it (:meth:`Child.time_given_s`) [s]
 LIFECYCLE_TIMEOUT_S = 60.0
 #: how long one call of a managed node's ``get_state`` waits once the graph shows it [s]
 PROBE_S = 1.0
@@ -176,10 +176,25 @@ class Child:
     proc: subprocess.Popen
     tail: deque[str] = field(default_factory=lambda: deque(maxlen=TAIL_LINES))
     stop_requested: bool = False
+    started_ns: int = field(default_factory=time.monotonic_ns)
 
     @property
     def pid(self) -> int:
         return self.proc.pid
+
+    def time_given_s(self) -> float:
+        """Seconds since the start that the machine gave this child: the wall time less the
+        time its main thread waited on a run queue (``/proc/PID/schedstat``). A timeout counted
+        in it cannot be run out by a loaded machine that does not run the child (one fresh-clone
+        run under load waited 60 s of wall time for a controller still importing), yet a child
+        that sleeps or hangs uses it up as wall time. The wall time where the kernel keeps no
+        schedstat."""
+        wall = (time.monotonic_ns() - self.started_ns) * 1e-9
+        try:
+            waited_ns = int(Path(f"/proc/{self.pid}/schedstat").read_text().split()[1])
+        except (OSError, IndexError, ValueError):
+            waited_ns = 0
+        return wall - waited_ns * 1e-9
 
 
 class ProcessSet:
@@ -480,13 +495,12 @@ class Launcher:
                 elif mixed:
                     self._wait_for_line(child, "middleware backend")
             managed = [name for name, _ in commands if name in MANAGED]
-            deadline = time.monotonic() + LIFECYCLE_TIMEOUT_S
             simulator = self.simulator()
             sim = next(c for c in self.processes.children if c.name == simulator)
             watch = time.monotonic()
             while api.ok():
                 self.node.spin_once(0.1)
-                managed = [name for name in managed if not self.bring_up(name, deadline)]
+                managed = [name for name in managed if not self.bring_up(name)]
                 if time.monotonic() >= watch + running_graph.WATCH_S:
                     running_graph.check(self.node)
                     watch = time.monotonic()
@@ -515,13 +529,13 @@ class Launcher:
             self.node.destroy_node()
         return self._result()
 
-    def bring_up(self, name: str, deadline: float) -> bool:
+    def bring_up(self, name: str) -> bool:
         """``configure``, then ``activate`` the managed node ``name`` through its
         ``change_state`` service once its ``get_state`` answers, as a lifecycle-aware ``ros2
         launch`` emits the transitions; False while it does not answer yet (the launch goes on
-        meanwhile), NodeDiedError when it refuses, or answers nothing by ``deadline``
-        (monotonic). The calls go through a node of the target's backend (services do not cross
-        DDS vendors)."""
+        meanwhile), NodeDiedError when it refuses, or answers nothing within
+        :data:`LIFECYCLE_TIMEOUT_S` of the time the machine gave it. The calls go through a
+        node of the target's backend (services do not cross DDS vendors)."""
         child = next(c for c in self.processes.children if c.name == name)
         caller = self._caller(self.backend(name))
         prefix = f"{DEFAULT_NAMESPACE}/{name}"
@@ -532,7 +546,7 @@ class Launcher:
         if f"{prefix}/get_state" not in served or caller.call_service(
                 "lifecycle_msgs/srv/GetState", f"{prefix}/get_state",
                 messages.new("lifecycle_msgs/srv/GetState_Request"), PROBE_S) is None:
-            if time.monotonic() > deadline:
+            if child.time_given_s() > LIFECYCLE_TIMEOUT_S:
                 raise NodeDiedError(name, f"no lifecycle services after "
                                           f"{LIFECYCLE_TIMEOUT_S:g} s", child.tail)
             return False
