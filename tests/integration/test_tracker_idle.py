@@ -29,7 +29,7 @@ def policies(pid: int) -> dict[int, int]:
 
 def test_the_idle_tracker_runs_at_sched_idle(tmp_path: Path, ros_domain: int) -> None:
     scene = load_scene(REPO_ROOT / "scenes" / "thesis_lqg.yaml")
-    argv = tracker_command(scene, tmp_path / "tracked.jsonl", idle=True)
+    argv = tracker_command(scene, tmp_path / "tracked.jsonl", lockstep=False)
     proc = subprocess.Popen(argv, env=child_env(), cwd=REPO_ROOT, stdout=subprocess.DEVNULL,
                             stderr=subprocess.PIPE, text=True)
     try:
