@@ -32,7 +32,7 @@ import json
 import os
 import sys
 from concurrent.futures import Future, ThreadPoolExecutor
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -51,6 +51,7 @@ from stillframe.identification.tracker import (
 from stillframe.loop.decimated_taps import undecimated
 from stillframe.middleware import api
 from stillframe.middleware.qos import SENSOR_DATA, Durability, Reliability
+from stillframe.node_runtime.parameters import NodeParameters, declare, limited, param, positive
 from stillframe.node_runtime.realtime import run_idle
 from stillframe.node_runtime.support import OK, WARN, Diagnostics
 
@@ -72,26 +73,47 @@ def contract_type(topic: str) -> str:
     raise InputError(f"modal_tracker: {topic} is not a topic of the contract")
 
 
+def _some(value: list[str]) -> str | None:
+    return None if any(value) else "give at least one output channel"
+
+
+def _order(value: str) -> str | None:
+    return None if value == "auto" or (value.isdigit() and int(value) >= 1) else \
+        "expected auto or a whole number >= 1"
+
+
+@dataclass(frozen=True)
+class TrackerParameterValues(NodeParameters):
+    """modal_tracker (module docstring)."""
+
+    inputs: list[str] = param([""], doc=(
+        "input channels `TOPIC[:FIELD]` (empty strings ignored); none: output-only SSI-COV"))
+    outputs: list[str] = param([""], limited(_some, "at least one"), doc=(
+        "output channels `TOPIC[:FIELD]`"))
+    rate_hz: float = param(32.0, positive, unit="Hz", doc="sample rate of the channels")
+    window_s: float = param(60.0, positive, unit="s", doc="the sliding window")
+    update_period_s: float = param(5.0, positive, unit="s", doc=(
+        "sample time between identifications of the window"))
+    order: str = param("auto", limited(_order, "auto or >= 1"), doc="model order")
+    record_file: str = param("", doc="append each update as a JSON line here; empty: none")
+    idle: bool = param(False, doc="the whole process at SCHED_IDLE")
+    reliable: bool = param(False, doc=(
+        "read RELIABLE and TRANSIENT_LOCAL, READ_DEPTH deep (a lock-step loop's writers)"))
+
+
 class ModalTrackerNode:
     def __init__(self, node: api.Node) -> None:
         self.node = node
-        inputs = [Channel.parse(s) for s in node.declare_parameter("inputs", [""]).value if s]
-        outputs = [Channel.parse(s) for s in node.declare_parameter("outputs", [""]).value if s]
-        if not outputs:
-            raise InputError("modal_tracker: give at least one output channel (outputs)")
-        rate = float(node.declare_parameter("rate_hz", 32.0).value)
-        window = float(node.declare_parameter("window_s", 60.0).value)
-        period = float(node.declare_parameter("update_period_s", 5.0).value)
-        order = node.declare_parameter("order", "auto").value
-        record = node.declare_parameter("record_file", "").value
-        reliable = node.declare_parameter("reliable", False).value
-        self.idle = bool(node.declare_parameter("idle", False).value)
+        values = declare(node, TrackerParameterValues)
+        inputs = [Channel.parse(s) for s in values.inputs if s]
+        outputs = [Channel.parse(s) for s in values.outputs if s]
+        period = values.update_period_s
+        self.idle = values.idle
         if self.idle:
             run_idle()  # SCHED_IDLE: only CPU time the loop leaves (the worker thread inherits)
-        self.record_file = Path(record) if record else None
-        if not (rate > 0 and window > 0 and period > 0):
-            raise InputError("modal_tracker: rate_hz, window_s and update_period_s must be > 0")
-        self.tracker = ModalTracker(1.0 / rate, window, order if order == "auto" else int(order))
+        self.record_file = Path(values.record_file) if values.record_file else None
+        self.tracker = ModalTracker(1.0 / values.rate_hz, values.window_s,
+                                    "auto" if values.order == "auto" else int(values.order))
         self.channels = [*inputs, *outputs]
         self.n_inputs = len(inputs)
         self.pending: dict[int, list[float | None]] = {}
@@ -100,7 +122,7 @@ class ModalTrackerNode:
         # lock-step (``reliable``): every sample, as the loop's own readers take them
         qos = (replace(SENSOR_DATA, reliability=Reliability.RELIABLE,
                        durability=Durability.TRANSIENT_LOCAL, depth=READ_DEPTH)
-               if reliable else "sensor_data")
+               if values.reliable else "sensor_data")
         for k, channel in enumerate(self.channels):
             msgtype = contract_type(channel.topic)
             _, read = field_reader(channel, msgtype)
