@@ -30,8 +30,10 @@ THESIS_STATE_WEIGHTS: Floats8 = (1e2, 1e2, 1e2, 1e-2, 1e2, 1e2, 1e2, 1e-2)  # Q_
 MAX_DELAY_PERIODS = 1000
 #: LQG weights within twelve decades of 1 (the Riccati solution stays finite in doubles)
 MAX_WEIGHT = 1e12
-#: the longest MPC prediction horizon, in samples (the QP grows with it)
-MAX_HORIZON = 1000
+#: the longest MPC prediction horizon [s] (a minute: far beyond the frame's slowest mode)
+MAX_HORIZON_S = 60.0
+#: the most MPC prediction steps (the QP grows with them)
+MAX_PREDICTION_STEPS = 1000
 
 
 def _limit(doc: str) -> Any:
@@ -129,16 +131,20 @@ class Controller(Section):
     angle_limit: float | None = key(0.5, up_to(10.0), doc=(
         "LQG anti-windup and MPC: largest pendulum angle [rad] the command may lead to (the "
         "design model's linear range; null: none); a soft constraint in MPC"))
-    horizon: int = key(20, up_to(MAX_HORIZON), doc="MPC: prediction horizon [samples]")
+    horizon_s: float = key(0.625, up_to(MAX_HORIZON_S), doc=(
+        "MPC: prediction horizon [s], at least one sample period (20 samples at 32 Hz)"))
+    prediction_steps: int = key(20, up_to(MAX_PREDICTION_STEPS), doc=(
+        "MPC: most steps of the prediction grid over controller.horizon_s; each step holds the "
+        "torque for a whole number of samples, so the QP does not grow with sensors.rate_hz"))
     rate_weight: float = key(0.0, in_range(0.0, MAX_WEIGHT),
-                             doc="MPC: weight of the torque step (Δu)^2")
+                             doc="MPC: weight of the torque step (Δu)^2 per prediction step")
     angle_penalty: float = key(1e6, up_to(MAX_WEIGHT), doc=(
         "MPC: weight of the squared excess of |phi| over controller.angle_limit (and 1e-3 of "
         "it on the excess itself), relative to the weight R + B'PB of the torque's deviation "
         "from the LQR's plan"))
     max_iter: int | None = key(None, up_to(1_000_000), doc=(
         "MPC: OSQP iteration limit per sample (null: one per 5 us of the period, 50 to 4000: "
-        "200 at 1 kHz); a solve that does not finish falls back to the anti-windup LQG "
+        "195 at 1024 Hz); a solve that does not finish falls back to the anti-windup LQG "
         "command (counted, in /diagnostics)"))
     hold_stiffness: float = key(0.0, in_range(0.0, 1e9), doc=(
         "EUK: kp [1/s^2] of the virtual constraint x3'' = -kd x3' - kp x3 (0: eq. 5.240)"))

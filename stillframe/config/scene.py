@@ -259,6 +259,10 @@ def _check_loop(scene: Scene) -> None:
             f"evaluation.window: {window:g} s does not fit before controller.start ({c.start:g} s) "
             f"and after it within duration {scene.duration:g} s"
         )
+    if c.type == "mpc" and c.horizon_s < period * (1.0 - 1e-9):
+        raise InputError(
+            f"controller.horizon_s: {c.horizon_s:g} s is shorter than one sample period "
+            f"({period:g} s, 1/sensors.rate_hz)")
     if c.type == "lqg" and scene.estimator.type == "ekf":
         raise InputError("estimator.type: LQG works on a linear model; use kf, tvkf or truth")
     if scene.estimator.type == "none":

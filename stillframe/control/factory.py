@@ -39,10 +39,18 @@ def make_controller(scene: Scene, design: FrameModel) -> Controller:
         lqr = design_lqr(design, period, c.state_weights, c.input_weight, TORQUE_INPUT, floor)
         limits = CommandLimits.of(scene)
         if c.type == "mpc":
-            from stillframe.control.mpc import MPCLaw, iteration_limit  # OSQP where MPC runs
+            from stillframe.control.mpc import (  # OSQP where MPC runs
+                MPCLaw,
+                PredictionGrid,
+                iteration_limit,
+            )
 
-            law = MPCLaw(lqr, c.input_weight,
-                         limits=limits, horizon=c.horizon, angle_index=design.phi_index,
+            grid = PredictionGrid.of(c.horizon_s, c.prediction_steps, period)
+            coarse = lqr if grid.samples == 1 else design_lqr(
+                design, grid.samples * period, c.state_weights, c.input_weight, TORQUE_INPUT,
+                floor)
+            law = MPCLaw(coarse, c.input_weight,
+                         limits=limits, grid=grid, angle_index=design.phi_index,
                          rate_weight=c.rate_weight, angle_penalty=c.angle_penalty,
                          max_iter=iteration_limit(c.max_iter, period))
         elif c.anti_windup:

@@ -1,19 +1,30 @@
 """Linear model predictive control of the pendulum torque (``controller.type: mpc``).
 
-On the discrete design model of the LQG (x⁺ = A x + B u, zero-order hold at the control period,
-:func:`~stillframe.control.lqg.design_lqr`), each sample solves
+The prediction grid (:class:`PredictionGrid`) spans ``controller.horizon_s`` in N steps of h
+samples each (at most ``controller.prediction_steps`` steps; h = 1 while the horizon has no more
+samples than that, so at 32 Hz with the defaults N = 20, h = 1). On the LQG's design model
+discretised with a zero-order hold at the grid step hT (x⁺ = A x + B u, the torque held over the
+step, :func:`~stillframe.control.lqg.design_lqr`), each sample solves
 
     min  Σ_{k=1}^{N−1} x_kᵀ Q x_k + x_Nᵀ P x_N + Σ_{k=0}^{N−1} (R u_k² + R_Δ (u_k − u_{k−1})²)
          + (R + BᵀPB)(ρ s² + 10⁻³ ρ s)
-    s.t. x_0 = ẑ,  |u_k| ≤ u_max,  |u_k − u_{k−1}| ≤ Δ_max (u_{−1}: the previous command),
+    s.t. x_0 = ẑ,  |u_k| ≤ u_max,  |u_0 − u_prev| ≤ Δ_max,  |u_k − u_{k−1}| ≤ h Δ_max (k ≥ 1),
          |φ_k| ≤ φ_max + s (k = 1 … N),  s ≥ 0,
 
-with Q, R the LQG's weights (``controller.state_weights``, ``input_weight``), P the LQR's Riccati
-solution as terminal cost (so that without active limits the first move is the LQR's −K ẑ for
-every horizon N), u_max, Δ_max and φ_max from :class:`~stillframe.control.limits.CommandLimits`,
-N = ``controller.horizon``, R_Δ = ``controller.rate_weight``, ρ = ``controller.angle_penalty``:
-the angle limit is soft (a disturbance may push the pendulum past it; then the slack s pays
-for the excess instead of the problem being infeasible), the torque and its rate are hard.
+with Q, R the LQG's weights (``controller.state_weights``, ``input_weight``), P the grid's LQR
+Riccati solution as terminal cost (so that without active limits the first move is that LQR's
+−K ẑ for every N), u_max, Δ_max (per sample) and φ_max from
+:class:`~stillframe.control.limits.CommandLimits`, R_Δ = ``controller.rate_weight``, ρ =
+``controller.angle_penalty``. The first move is applied for one sample, so it may step by Δ_max;
+a later one is a plan over h samples, in which the actuator may ramp by h Δ_max. The angle limit
+is soft (a disturbance may push the pendulum past it; then the slack s pays for the excess
+instead of the problem being infeasible), the torque and its rate are hard.
+
+Why a grid coarser than the sample: the QP's size is that of the grid, not of the rate, and a
+horizon long enough to stop the pendulum inside the angle limit (a fraction of a second) would
+be hundreds of samples at 1 kHz. With the horizon in samples (20 at 1 kHz: 20 ms) every solve
+at 1 kHz needed about 2000 iterations and fell back; on the grid it is the QP of 32 Hz again,
+re-solved every sample from the previous solution (docs/controllers.md).
 
 The unknowns are the deviations from the LQR's own plan, u_k = −K x_k + v_k (closed-loop
 prediction, Rossiter, *Model-Based Predictive Control*, ch. 6): with the terminal cost P the cost
@@ -21,19 +32,25 @@ is x_0ᵀ P x_0 + (R + BᵀPB) Σ v_k² exactly, so the Hessian in v is a multip
 (R_Δ = 0) whatever the weights; in u it would have the condition number of the prediction, which
 the thesis's cheap input weight makes hopeless for an ADMM solver. The states are eliminated
 (N + 1 unknowns [v, s], a dense QP of 4N + 1 rows), and the constraint matrix and the Hessian do
-not change from sample to sample: OSQP (Stellato et al. 2020,
-``osqp`` on PyPI) is set up once, and each sample updates q, l, u and warm-starts from the
-previous solution shifted by one sample. The first move u_0 is applied (receding horizon).
+not change from sample to sample: OSQP (Stellato et al. 2020, ``osqp`` on PyPI) is set up once,
+and each sample updates q, l, u and warm-starts from the previous solution moved on by one
+sample (by 1/h of a grid step, linearly between the grid's points). The first move u_0 is
+applied (receding horizon). OSQP's own default tolerances (10⁻³) end the iterations; the
+polished solution is then exact where the active set was found (the tests compare it with
+independent solvers to 10⁻⁵).
 
 A solve that does not end *solved* (iteration limit ``controller.max_iter``, numerical trouble,
 primal infeasibility, which the hard limits cannot cause while the previous command is within
-them) falls back to the anti-windup LQG command (:class:`~stillframe.control.lqg.ConditionedLQGLaw`,
-within the torque and rate limits by construction); ``fallbacks`` counts them, and
+them) falls back to the anti-windup LQG command of the grid's model
+(:class:`~stillframe.control.lqg.ConditionedLQGLaw`, within the torque and rate limits by
+construction; the unconstrained MPC's own first move); ``fallbacks`` counts them, and
 controller_node reports the count in ``/diagnostics``. ``solve_s`` keeps the solver's own time of
 every solve (``stillframe bench controllers`` prints its p50 and p99 against the period).
 """
 
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import numpy as np
 import osqp
@@ -44,7 +61,6 @@ from stillframe.control.lqg import ConditionedLQGLaw, LQRDesign
 from stillframe.errors import InputError
 
 SOLVED = osqp.SolverStatus.OSQP_SOLVED
-#: OSQP settings: tolerances fine enough for the KKT check of the tests, polished solutions
 #: iterations per second of period when ``controller.max_iter`` is null (about 1.3 us each here
 #: for N = 20: a quarter of the period at most), and the bounds of that default
 ITERATIONS_PER_S, MIN_ITER, MAX_ITER = 2e5, 50, 4000
@@ -58,8 +74,28 @@ def iteration_limit(max_iter: int | None, period: float) -> int:
     return int(min(MAX_ITER, max(MIN_ITER, round(period * ITERATIONS_PER_S))))
 
 
-SETTINGS = {"eps_abs": 1e-5, "eps_rel": 1e-5, "polishing": True, "verbose": False,
-            "warm_starting": True}
+#: OSQP settings: its default tolerances, checked every 10 iterations (not 25: a warm-started
+#: solve at 1 kHz ends after 30 to 40), polished solutions
+SETTINGS = {"eps_abs": 1e-3, "eps_rel": 1e-3, "check_termination": 10, "polishing": True,
+            "verbose": False, "warm_starting": True}
+
+
+@dataclass(frozen=True)
+class PredictionGrid:
+    """The prediction grid: ``steps`` steps of ``samples`` sample periods each, the torque held
+    over each step."""
+
+    samples: int
+    steps: int
+
+    @classmethod
+    def of(cls, horizon_s: float, steps: int, period: float) -> PredictionGrid:
+        """The grid of ``controller.horizon_s`` in at most ``controller.prediction_steps`` steps
+        at the sample period ``period``: the horizon rounded to whole samples (at least one),
+        then to whole steps of ⌈horizon samples / steps⌉ samples each."""
+        horizon = max(1, round(horizon_s / period))
+        samples = -(-horizon // steps)
+        return cls(samples, -(-horizon // samples))
 
 
 def prediction(A: np.ndarray, B: np.ndarray, horizon: int) -> tuple[np.ndarray, np.ndarray]:
@@ -77,14 +113,16 @@ def prediction(A: np.ndarray, B: np.ndarray, horizon: int) -> tuple[np.ndarray, 
 
 
 class MPCLaw:
-    """The receding-horizon command (module docstring); called like the other laws."""
+    """The receding-horizon command (module docstring); called like the other laws. ``design``
+    is the LQR of the grid's model (:func:`~stillframe.control.lqg.design_lqr` at the grid's
+    step), ``limits`` are those of one sample."""
 
     def __init__(self, design: LQRDesign, input_weight: float, *, limits: CommandLimits,
-                 horizon: int, angle_index: int, rate_weight: float = 0.0,
+                 grid: PredictionGrid, angle_index: int, rate_weight: float = 0.0,
                  angle_penalty: float = 1e6, max_iter: int = 200) -> None:
         n = design.A.shape[0]
-        N = horizon
-        self.design, self.limits, self.horizon = design, limits, N
+        N = grid.steps
+        self.design, self.limits, self.grid = design, limits, grid
         self.fallback_law = ConditionedLQGLaw(design, False, limits, angle_index)
         K = design.gain
         B = design.B
@@ -125,7 +163,9 @@ class MPCLaw:
         if limits.torque is not None:
             self._l[:N], self._u[:N] = -limits.torque, limits.torque
         if limits.step is not None:
-            self._l[N:2 * N], self._u[N:2 * N] = -limits.step, limits.step
+            steps = np.full(N, limits.step * grid.samples)     # a ramp over one grid step …
+            steps[0] = limits.step                              # … but u_0 within one sample
+            self._l[N:2 * N], self._u[N:2 * N] = -steps, steps
         #: the QP ½ xᵀ P x + qᵀ x, l ≤ A x ≤ u as given to OSQP (q, l, u: :meth:`bounds`)
         self.qp_hessian, self.qp_matrix = P, A
         self.solver = osqp.OSQP()
@@ -140,11 +180,11 @@ class MPCLaw:
 
     def inputs(self, z: np.ndarray, solution: np.ndarray) -> np.ndarray:
         """The planned commands u_0 … u_{N−1} of a QP solution [V, s] at the estimate z."""
-        return self._u_x @ z + self._u_v @ solution[:self.horizon]
+        return self._u_x @ z + self._u_v @ solution[:self.grid.steps]
 
     def bounds(self, z: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """q, l, u of the QP at the estimate ``z`` and the previous command."""
-        N = self.horizon
+        N = self.grid.steps
         q = self._q.copy()
         free_u = self._u_x @ z                                  # the LQR's plan: U at V = 0
         steps = self._difference @ free_u
@@ -165,8 +205,10 @@ class MPCLaw:
         q, lo, hi = self.bounds(z)
         self.solver.update(q=q, l=lo, u=hi)
         if self.last is not None:
-            shifted = np.concatenate([self.last[1:self.horizon], [0.0, self.last[-1]]])
-            self.solver.warm_start(x=shifted)
+            v = self.last[:self.grid.steps]
+            ahead = np.append(v[1:], 0.0)                       # the plan one grid step later
+            f = 1.0 / self.grid.samples                         # … one sample later
+            self.solver.warm_start(x=np.append((1.0 - f) * v + f * ahead, self.last[-1]))
         result = self.solver.solve(raise_error=False)
         self.solve_s.append(result.info.solve_time)
         self.iterations.append(result.info.iter)

@@ -13,9 +13,10 @@ the limit, which the supervisor then clipped), the largest pendulum angle after 
 π: it went over the top), and the law's CPU time per sample (p50, and its ratio to LQG's in
 the same run).
 
-Then the MPC's solve time at 32 Hz and at 1 kHz on the torque-limited case (the solver's own
-time, OSQP ``info.solve_time``, and the whole law call), p50 and p99 against the period, with
-the fallbacks. Times are wall times on a shared machine: noisy, compare within a run.
+Then the MPC at 32 Hz and at 1 kHz on the torque-limited case (the scene's whole run; --quick:
+8 s), each on its prediction grid: the solve time (the solver's own, OSQP ``info.solve_time``,
+and the whole law call), p50 and p99 against the period, the fallbacks, and the reductions.
+Times are measured on a shared machine: noisy, compare within a run.
 """
 
 from __future__ import annotations
@@ -45,10 +46,9 @@ LAWS = {
     "passivity": ["controller.type=passivity"],
     "EUK": ["controller.type=euk_pendulum"],
 }
-#: the MPC's timing runs: (label, rate [Hz], overrides)
-RATES = (("32 Hz", 32.0, []),
-         ("1 kHz", 1024.0, ["sensors.rate_hz=1024", "duration=8", "controller.start=4",
-                            "evaluation.window=2"]))
+#: the MPC's timing runs: (label, rate [Hz], overrides); the scene's duration (--quick: 8 s)
+RATES = (("32 Hz", 32.0, []), ("1 kHz", 1024.0, ["sensors.rate_hz=1024"]))
+QUICK_TIMING = ["duration=8", "controller.start=4", "evaluation.window=2"]
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -93,19 +93,32 @@ def measure(quick: bool) -> dict:
         for r in rows:
             if r["case"] == case and "error" not in r and "error" not in base:
                 r["compute_vs_lqg"] = r["compute_p50_s"] / base["compute_p50_s"]
+    from stillframe.control.mpc import PredictionGrid  # OSQP only where the MPC runs
+
     timing = []
     for label, rate, overrides in RATES:
-        scene = load_scene(SCENE, [*CASES["torque-limited"], "controller.type=mpc", *overrides])
+        scene = load_scene(SCENE, [*CASES["torque-limited"], "controller.type=mpc", *overrides,
+                                   *(QUICK_TIMING if quick else [])])
         history = run_closed_loop(scene)
         stats = history.evaluation["controller_compute_s"]
         period = 1.0 / rate
+        c = scene.controller
+        grid = PredictionGrid.of(c.horizon_s, c.prediction_steps, period)
+        after = history.t >= c.start
         timing.append({"rate": label, "period_s": period, **stats,
+                       "grid": {"steps": grid.steps, "samples_per_step": grid.samples},
+                       "max_angle": float(np.max(np.abs(history.truth[after, 3]))),
                        "cpu_p99_over_period": stats["cpu_p99"] / period,
                        "wall_p99_over_period": stats["p99"] / period,
-                       "samples": history.evaluation["steps"],
+                       "samples": int(np.count_nonzero(after)),   # controlled ones
                        "fallbacks": history.evaluation["controller"]["fallback"],
-                       "reduction_pct": history.evaluation["reduction_pct"]["displacement"]})
-    return {"rows": rows, "mpc_timing": timing}
+                       "reduction_pct": history.evaluation["reduction_pct"]["displacement"],
+                       "peak_torque": history.evaluation["peak_command"]})
+    label, _, overrides = RATES[-1]                # the anti-windup LQG beside it at 1 kHz
+    beside = _row(f"torque-limited {label}", "LQG anti-windup",
+                  [*CASES["torque-limited"], *LAWS["LQG anti-windup"], *overrides,
+                   *(QUICK_TIMING if quick else [])])
+    return {"rows": rows, "mpc_timing": timing, "anti_windup_1khz": beside}
 
 
 def _us(seconds: float) -> str:
@@ -133,15 +146,26 @@ def run(args: argparse.Namespace) -> int:
                             "limit violations", "max |phi| [rad]", "CPU us/sample p50 (vs LQG)"],
                            table))
     print("\nMPC on the torque-limited case: time per sample against the period "
-          "(wall time, shared machine)")
+          "(shared machine)")
     print(format_table(
-        ["rate", "period [us]", "CPU p50", "CPU p99", "CPU p99/period", "wall p50", "wall p99",
-         "wall p99/period", "OSQP p50", "fallbacks / samples"],
-        [[t["rate"], _us(t["period_s"]), _us(t["cpu_p50"]), _us(t["cpu_p99"]),
+        ["rate", "grid", "period [us]", "CPU p50", "CPU p99", "CPU p99/period", "wall p50",
+         "wall p99", "wall p99/period", "OSQP p50", "OSQP p99", "fallbacks / controlled samples"],
+        [[t["rate"], f"{t['grid']['steps']} x {t['grid']['samples_per_step']}",
+          _us(t["period_s"]), _us(t["cpu_p50"]), _us(t["cpu_p99"]),
           f"{t['cpu_p99_over_period']:.2f}", _us(t["p50"]), _us(t["p99"]),
-          f"{t['wall_p99_over_period']:.2f}", _us(t["solve_p50"]),
+          f"{t['wall_p99_over_period']:.2f}", _us(t["solve_p50"]), _us(t["solve_p99"]),
           f"{t['fallbacks']} / {t['samples']}"] for t in result["mpc_timing"]]))
-    print("CPU: the law's thread CPU time per sample (the solve plus its Python set-up); wall "
-          "adds what other processes on this shared machine took meanwhile (4 ms scheduler "
-          "ticks); OSQP: the solver's own wall time. Times in us.")
+    print("grid: prediction steps x samples per step. CPU: the law's thread CPU time per sample "
+          "(the solve plus its Python set-up); wall adds what other processes on this shared "
+          "machine took meanwhile (4 ms scheduler ticks); OSQP: the solver's own wall time. "
+          "Times in us.")
+    print("\nThe same runs: steady-state peak displacement reduction per floor (%), with the "
+          "anti-windup LQG at 1 kHz beside them")
+    beside = result["anti_windup_1khz"]
+    print(format_table(
+        ["law", "rate", "floor 1", "floor 2", "floor 3", "peak torque [N m]", "max |phi| [rad]"],
+        [[law, rate, *(f"{x:.1f}" for x in r["reduction_pct"]), f"{r['peak_torque']:.3g}",
+          f"{r['max_angle']:.3g}"]
+         for law, rate, r in [*(("MPC", t["rate"], t) for t in result["mpc_timing"]),
+                              ("LQG anti-windup", RATES[-1][0], beside)]]))
     return 0

@@ -16,7 +16,7 @@ from stillframe.contract.signals import Estimate
 from stillframe.control.factory import make_controller
 from stillframe.control.limits import CommandLimits
 from stillframe.control.lqg import ConditionedLQGLaw, design_lqr, state_weight
-from stillframe.control.mpc import MPCLaw
+from stillframe.control.mpc import MPCLaw, PredictionGrid
 from stillframe.locations import SCENES_DIR
 from stillframe.loop.closed_loop import run_closed_loop
 from stillframe.loop.wiring import design_model
@@ -62,8 +62,8 @@ def test_mpc_without_active_limits_is_python_controls_lqr_for_every_horizon() ->
     free = CommandLimits(None, None, None)
     rng = np.random.default_rng(3)
     for horizon in (1, 5, 30):
-        law = MPCLaw(lqr, scene.controller.input_weight, limits=free, horizon=horizon,
-                     angle_index=design.phi_index)
+        law = MPCLaw(lqr, scene.controller.input_weight, limits=free,
+                     grid=PredictionGrid(1, horizon), angle_index=design.phi_index)
         for _ in range(5):
             z = 1e-3 * rng.standard_normal(lqr.A.shape[0])
             u, _ = law(z, 0.0)
@@ -75,7 +75,7 @@ def test_the_qp_solution_meets_its_kkt_conditions_and_matches_scipy() -> None:
     scene, design, lqr = _lumped()
     limits = CommandLimits(torque=0.5, step=0.3, angle=0.2)
     N = 10
-    law = MPCLaw(lqr, scene.controller.input_weight, limits=limits, horizon=N,
+    law = MPCLaw(lqr, scene.controller.input_weight, limits=limits, grid=PredictionGrid(1, N),
                  angle_index=design.phi_index)
     z = np.zeros(lqr.A.shape[0])
     z[design.phi_index] = 0.15
@@ -126,7 +126,10 @@ def test_a_failed_solve_falls_back_to_the_anti_windup_command_and_is_counted() -
 @pytest.mark.parametrize(("setting", "named"), [
     ("actuators.torque_limit=-1", "actuators.torque_limit"),
     ("controller.angle_limit=-0.1", "controller.angle_limit"),
-    ("controller.horizon=0", "controller.horizon"),
+    ("controller.horizon_s=0", "controller.horizon_s"),
+    ("controller.horizon_s=-0.5", "controller.horizon_s"),
+    ("controller.horizon_s=0.03", "controller.horizon_s"),     # shorter than 1/32 s
+    ("controller.prediction_steps=0", "controller.prediction_steps"),
     ("controller.input_weight=0", "controller.input_weight"),
     ("controller.state_weights=[1,1,1,-1,1,1,1,1]", "controller.state_weights"),
 ])
