@@ -111,13 +111,33 @@ def node_command(package: str, scene: Path, overrides: Sequence[str], mode: str,
     return argv
 
 
-def parse_backends(specs: Sequence[str]) -> dict[str, str]:
-    """The backend of every child from ``--backend`` values: ``BACKEND`` for all, then
-    ``NAME=BACKEND`` for one (later values win); unset children use the process's default
-    (``STILLFRAME_RMW``, else rclpy where importable). InputError names a bad value or a
-    backend this machine lacks, before any process starts."""
+#: a real-time run recorded above this rate goes on ``dds`` unless the user chose the backend
+#: (issue 32, docs/realtime.md "Recording beside a 1 kHz loop"): recorded at 1 kHz on a quiet
+#: 2-core machine, the loop on ``rclpy`` went degraded (most samples zeroed), on ``dds`` not;
+#: at the thesis's 32 Hz both hold. Between the two it was not measured.
+RECORDED_DDS_ABOVE_HZ = 200.0
 
-    chosen = dict.fromkeys(BACKEND_TARGETS, api.backend_name())
+
+def recorded_default(specs: Sequence[str], *, record: bool, mode: str,
+                     rate_hz: float) -> str | None:
+    """The backend for the children the ``--backend`` values ``specs`` leave unset, when it is
+    not the process's default: ``dds`` for a recorded real-time run above
+    :data:`RECORDED_DDS_ABOVE_HZ` when neither ``STILLFRAME_RMW`` nor a ``--backend`` for every
+    child chose one; None otherwise."""
+    if (not record or mode != "realtime" or rate_hz <= RECORDED_DDS_ABOVE_HZ
+            or any("=" not in spec for spec in specs)
+            or os.environ.get(api.BACKEND_ENV, "").strip() or api.backend_name() == "dds"):
+        return None
+    return "dds"
+
+
+def parse_backends(specs: Sequence[str], default: str | None = None) -> dict[str, str]:
+    """The backend of every child from ``--backend`` values: ``BACKEND`` for all, then
+    ``NAME=BACKEND`` for one (later values win); unset children use ``default``, else the
+    process's default (``STILLFRAME_RMW``, else rclpy where importable). InputError names a bad
+    value or a backend this machine lacks, before any process starts."""
+
+    chosen = dict.fromkeys(BACKEND_TARGETS, default or api.backend_name())
     for spec in specs:
         name, _, backend = spec.rpartition("=")
         if name and name not in BACKEND_TARGETS:
@@ -350,12 +370,21 @@ class Launcher:
             raise InputError(f"--mode {options.mode}: expected one of {', '.join(MODES)}")
         if options.record_dir is not None and options.record_dir.exists():
             raise InputError(f"--record {options.record_dir}: already exists")
-        self.backends = parse_backends(options.backends)
         self.discovery = launch_discovery()
         self.options = options
         self.scene = options.resolved or resolve_model(
             load_scene(options.scene.resolve(), options.overrides))[0]
         self.status = StatusLine()
+        default = recorded_default(options.backends, record=options.record_dir is not None,
+                                   mode=options.mode,
+                                   rate_hz=self.scene.sensors.rate_hz)
+        self.backends = parse_backends(options.backends, default)
+        if default:
+            self.status.echo(
+                f"backend {default} for every child --backend does not name: a recorded "
+                f"real-time loop at {self.scene.sensors.rate_hz:g} Hz misses far fewer deadlines "
+                f"on {default} than on {api.backend_name()} (docs/realtime.md); "
+                f"--backend {api.backend_name()} keeps {api.backend_name()}")
         self.processes = ProcessSet(self.status.echo)
         self.node = api.create_node(running_graph.launcher_name(), argv=["stillframe"])
         self.created = time.monotonic()

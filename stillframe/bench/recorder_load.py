@@ -63,6 +63,8 @@ class RecorderRun:
     lines: deque[str] = field(default_factory=lambda: deque(maxlen=50))
     #: CPU time from ready (subscribed to discovery) to exit (the bag closed)
     cpu_s: float = math.nan
+    #: CPU time of its whole life, start-up included
+    total_cpu_s: float = math.nan
 
 
 @contextlib.contextmanager
@@ -111,7 +113,7 @@ def _stop(run: RecorderRun) -> None:
             deadline = math.inf
         time.sleep(0.02)
     run.proc.returncode = os.waitstatus_to_exitcode(status)
-    run.cpu_s = usage.ru_utime + usage.ru_stime
+    run.cpu_s = run.total_cpu_s = usage.ru_utime + usage.ru_stime
 
 
 def completeness(bag: Path, steps: int, rate_hz: float) -> dict[str, Any]:

@@ -129,3 +129,5 @@ def test_bench_loop_rejects_a_bad_rate_and_rt_practice() -> None:
     assert done.returncode == 2 and "--rate must be 1..10000 Hz" in done.stderr
     done = run_stillframe("bench", "loop", "--rt", "turbo", "--backend", "dds")
     assert done.returncode == 2 and "unknown practice(s) turbo" in done.stderr
+    done = run_stillframe("bench", "loop", "--repeat", "0", "--backend", "dds")
+    assert done.returncode == 2 and "--repeat must be 1..100, got 0" in done.stderr

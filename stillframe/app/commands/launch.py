@@ -30,7 +30,7 @@ from stillframe.app.commands.common import (
     seconds,
     whole,
 )
-from stillframe.app.launcher import MODES
+from stillframe.app.launcher import MODES, RECORDED_DDS_ABOVE_HZ
 from stillframe.app.net_faults import FAULTS
 from stillframe.app.run_verdict import verdict
 from stillframe.config.scene import Scene
@@ -50,7 +50,9 @@ def add_launch_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--backend", dest="backends", action="append", default=[],
                         metavar="[NODE=]BACKEND",
                         help="middleware of every node (dds or rclpy; default: STILLFRAME_RMW, "
-                             "else rclpy where installed), or of one node: sim_node=dds "
+                             "else rclpy where installed, but dds for a --record'ed real-time "
+                             f"run above {RECORDED_DDS_ABOVE_HZ:g} Hz), or of one node: "
+                             "sim_node=dds "
                              "(repeatable; also estimator_node, controller_node, recorder)")
 
 

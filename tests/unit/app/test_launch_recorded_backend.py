@@ -1,0 +1,54 @@
+"""Issue 32 item 4: a recorded real-time run above ``RECORDED_DDS_ABOVE_HZ`` puts every child
+``--backend`` does not name on ``dds`` when the process's default is ``rclpy``; the user's
+``--backend`` for all, or ``STILLFRAME_RMW``, keeps the choice; lock-step, unrecorded and slow
+runs keep the default."""
+
+from __future__ import annotations
+
+import pytest
+
+from stillframe.app import launcher
+from stillframe.app.launcher import (
+    BACKEND_TARGETS,
+    RECORDED_DDS_ABOVE_HZ,
+    parse_backends,
+    recorded_default,
+)
+from stillframe.middleware import api
+
+FAST = RECORDED_DDS_ABOVE_HZ * 5
+
+
+@pytest.fixture
+def rclpy_default(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.delenv(api.BACKEND_ENV, raising=False)
+    monkeypatch.setattr(launcher.api, "backend_name", lambda: "rclpy")
+    monkeypatch.setattr(launcher.api, "check_backend", lambda backend, what: backend)
+
+
+@pytest.mark.usefixtures("rclpy_default")
+def test_a_recorded_fast_realtime_run_goes_on_dds_except_where_the_user_said() -> None:
+    assert recorded_default([], record=True, mode="realtime", rate_hz=FAST) == "dds"
+    chosen = parse_backends(["recorder=rclpy"], recorded_default(
+        ["recorder=rclpy"], record=True, mode="realtime", rate_hz=FAST))
+    assert chosen["recorder"] == "rclpy"
+    assert {chosen[n] for n in BACKEND_TARGETS if n != "recorder"} == {"dds"}
+
+
+@pytest.mark.usefixtures("rclpy_default")
+@pytest.mark.parametrize(("specs", "record", "mode", "rate_hz"), [
+    (["rclpy"], True, "realtime", FAST),                  # the user chose for every child
+    ([], False, "realtime", FAST),                        # not recorded
+    ([], True, "lockstep", FAST),                         # not paced by the clock
+    ([], True, "realtime", RECORDED_DDS_ABOVE_HZ),        # slow enough for rclpy
+])
+def test_the_default_stays_otherwise(specs: list[str], record: bool, mode: str,
+                                     rate_hz: float) -> None:
+    assert recorded_default(specs, record=record, mode=mode, rate_hz=rate_hz) is None
+    assert set(parse_backends(specs).values()) == {"rclpy"}
+
+
+def test_stillframe_rmw_keeps_the_users_backend(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv(api.BACKEND_ENV, "rclpy")
+    monkeypatch.setattr(launcher.api, "backend_name", lambda: "rclpy")
+    assert recorded_default([], record=True, mode="realtime", rate_hz=FAST) is None
