@@ -32,7 +32,7 @@ from typing import Any
 import yaml
 
 from stillframe.app import running_graph
-from stillframe.app.tracking import TRACKER, read_tracked, tracker_command
+from stillframe.app.tracking import TRACKER, TRACKER_STOP_S, read_tracked, tracker_command
 from stillframe.config.scene import Scene, load_scene
 from stillframe.contract import messages
 from stillframe.contract.topics import DEFAULT_NAMESPACE, STATUS_KEYS
@@ -68,6 +68,8 @@ TRANSITION_TIMEOUT_S = 20.0
 RESOLVED_SCENE = "scene.resolved.yaml"
 #: seconds a child gets to exit after SIGINT, then after SIGTERM, before SIGKILL
 STOP_GRACE_S = 10.0
+#: children that get longer to exit after SIGINT: the tracker finishes the windows due
+STOP_GRACES_S: dict[str, float] = {TRACKER: TRACKER_STOP_S}
 #: the log line by which a helper child says it is ready (the nodes start after it)
 READY_LINES: dict[str, str] = {"recorder": "Recording to", "monitor": "Monitor ready",
                                TRACKER: TRACKER_READY}
@@ -177,6 +179,8 @@ class Child:
     tail: deque[str] = field(default_factory=lambda: deque(maxlen=TAIL_LINES))
     stop_requested: bool = False
     started_ns: int = field(default_factory=time.monotonic_ns)
+    #: seconds it gets to exit after SIGINT
+    grace_s: float = STOP_GRACE_S
 
     @property
     def pid(self) -> int:
@@ -205,7 +209,8 @@ class ProcessSet:
         self.children: list[Child] = []
         self.echo = echo
 
-    def start(self, name: str, argv: list[str], env_extra: dict[str, str] | None = None) -> Child:
+    def start(self, name: str, argv: list[str], env_extra: dict[str, str] | None = None,
+              grace_s: float = STOP_GRACE_S) -> Child:
         env = dict(os.environ, PYTHONUNBUFFERED="1", **(env_extra or {}))
         env["PYTHONPATH"] = os.pathsep.join(
             p for p in (env.get("PYTHONPATH", ""), str(REPO_ROOT)) if p)
@@ -213,7 +218,7 @@ class ProcessSet:
             argv, env=env, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
             stderr=subprocess.STDOUT, text=True, errors="replace", process_group=0,
             preexec_fn=_die_with_parent if sys.platform == "linux" else None)
-        child = Child(name, proc)
+        child = Child(name, proc, grace_s=grace_s)
         self.children.append(child)
         self.echo(f"started {name} (pid {proc.pid})")
         threading.Thread(target=self._pump, args=(child,), daemon=True).start()
@@ -237,15 +242,16 @@ class ProcessSet:
         return None
 
     def stop(self, child: Child) -> None:
-        """SIGINT, wait; SIGTERM, wait; SIGKILL. Always reaps the process."""
+        """SIGINT, wait (the child's grace); SIGTERM, wait; SIGKILL. Always reaps the process."""
         child.stop_requested = True
-        for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGKILL):
+        for sig, grace in ((signal.SIGINT, child.grace_s), (signal.SIGTERM, STOP_GRACE_S),
+                           (signal.SIGKILL, STOP_GRACE_S)):
             if child.proc.poll() is not None:
                 break
             with contextlib.suppress(ProcessLookupError):
                 child.proc.send_signal(sig)
             with contextlib.suppress(subprocess.TimeoutExpired):
-                child.proc.wait(STOP_GRACE_S)
+                child.proc.wait(grace)
         child.proc.wait()
 
     def stop_all(self) -> None:
@@ -430,7 +436,7 @@ class Launcher:
         if o.track:
             o.tracked_file.unlink(missing_ok=True)
             children.append((TRACKER, tracker_command(self.scene, o.tracked_file,
-                                                      idle=o.mode == "realtime")))
+                                                      lockstep=o.mode != "realtime")))
         nodes = self.nodes()
         # the pair's container takes no real-time parameters (it composes two nodes' loops);
         # with the simulator in it, the simulator's practices are the process's
@@ -489,7 +495,8 @@ class Launcher:
                 f"{name} {self.backend(name)}" for name, _ in commands))
             mixed = len({self.backend(name) for name, _ in commands}) > 1
             for name, argv in commands:
-                child = self.processes.start(name, argv, {"STILLFRAME_RMW": self.backend(name)})
+                child = self.processes.start(name, argv, {"STILLFRAME_RMW": self.backend(name)},
+                                             STOP_GRACES_S.get(name, STOP_GRACE_S))
                 if name in READY_LINES:
                     self._wait_for_line(child, READY_LINES[name])
                 elif mixed:
