@@ -7,7 +7,13 @@ A thin shell around :class:`stillframe.identification.tracker.ModalTracker`. Par
   output-only SSI-COV); the message type of each topic comes from the topic contract;
 - ``rate_hz`` (32.0): the sample rate of the channels; ``window_s`` (60.0): the window;
   ``update_period_s`` (5.0): how often the window is identified; ``order`` ("auto");
-  ``record_file`` (""): append each update as a JSON line there (``launch --track``).
+  ``record_file`` (""): append each update as a JSON line there (``launch --track``);
+  ``idle`` (false): the process at SCHED_IDLE; ``reliable`` (false): read RELIABLE and
+  TRANSIENT_LOCAL, :data:`READ_DEPTH` deep (a lock-step loop's writers: every sample).
+
+At a high sensor rate, read the simulator's decimated taps (``/_decimated<topic>``, anti-alias
+filtered and thinned at the writer, :mod:`stillframe.loop.decimated_taps`) at their rate
+(``launch --track`` does): a reader of the topics themselves costs their writer a send per sample.
 
 Samples are aligned by header stamp, and an update is due every ``update_period_s`` of sample
 time (the stamps: sim time in lock-step, which runs faster than the wall clock). Each due window
@@ -23,8 +29,10 @@ updates, skipped updates, last error).
 from __future__ import annotations
 
 import json
+import os
 import sys
 from concurrent.futures import Future, ThreadPoolExecutor
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -40,51 +48,87 @@ from stillframe.identification.tracker import (
     identify_window,
     modes_array,
 )
+from stillframe.loop.decimated_taps import undecimated
 from stillframe.middleware import api
+from stillframe.middleware.qos import SENSOR_DATA, Durability, Reliability
+from stillframe.node_runtime.parameters import NodeParameters, declare, limited, param, positive
 from stillframe.node_runtime.realtime import run_idle
 from stillframe.node_runtime.support import OK, WARN, Diagnostics
 
 MAX_PENDING = 4
 """Windows waiting for the worker beyond which a due update is skipped."""
+READ_DEPTH = 1000
+"""Samples a ``reliable`` subscription holds for a callback that falls behind."""
+EXIT_GIVEN_UP = 1
+"""Exit code when stopped twice with windows still due (they are lost: not a clean stop)."""
 
 
 def contract_type(topic: str) -> str:
-    """The message type the topic contract gives ``topic`` (absolute or in the namespace)."""
+    """The message type the topic contract gives ``topic`` (absolute or in the namespace), or
+    the topic a decimated tap thins (:mod:`stillframe.loop.decimated_taps`)."""
+    topic = undecimated(topic)
     for spec in topics.CONTRACT:
         if topic in (spec.name, f"{topics.DEFAULT_NAMESPACE}/{spec.name}"):
             return spec.type_name
     raise InputError(f"modal_tracker: {topic} is not a topic of the contract")
 
 
+def _some(value: list[str]) -> str | None:
+    return None if any(value) else "give at least one output channel"
+
+
+def _order(value: str) -> str | None:
+    return None if value == "auto" or (value.isdigit() and int(value) >= 1) else \
+        "expected auto or a whole number >= 1"
+
+
+@dataclass(frozen=True)
+class TrackerParameterValues(NodeParameters):
+    """modal_tracker (module docstring)."""
+
+    inputs: list[str] = param([""], doc=(
+        "input channels `TOPIC[:FIELD]` (empty strings ignored); none: output-only SSI-COV"))
+    outputs: list[str] = param([""], limited(_some, "at least one"), doc=(
+        "output channels `TOPIC[:FIELD]`"))
+    rate_hz: float = param(32.0, positive, unit="Hz", doc="sample rate of the channels")
+    window_s: float = param(60.0, positive, unit="s", doc="the sliding window")
+    update_period_s: float = param(5.0, positive, unit="s", doc=(
+        "sample time between identifications of the window"))
+    order: str = param("auto", limited(_order, "auto or >= 1"), doc="model order")
+    record_file: str = param("", doc="append each update as a JSON line here; empty: none")
+    idle: bool = param(False, doc="the whole process at SCHED_IDLE")
+    reliable: bool = param(False, doc=(
+        "read RELIABLE and TRANSIENT_LOCAL, READ_DEPTH deep (a lock-step loop's writers)"))
+
+
 class ModalTrackerNode:
     def __init__(self, node: api.Node) -> None:
         self.node = node
-        inputs = [Channel.parse(s) for s in node.declare_parameter("inputs", [""]).value if s]
-        outputs = [Channel.parse(s) for s in node.declare_parameter("outputs", [""]).value if s]
-        if not outputs:
-            raise InputError("modal_tracker: give at least one output channel (outputs)")
-        rate = float(node.declare_parameter("rate_hz", 32.0).value)
-        window = float(node.declare_parameter("window_s", 60.0).value)
-        period = float(node.declare_parameter("update_period_s", 5.0).value)
-        order = node.declare_parameter("order", "auto").value
-        record = node.declare_parameter("record_file", "").value
-        if node.declare_parameter("idle", False).value:
+        values = declare(node, TrackerParameterValues)
+        inputs = [Channel.parse(s) for s in values.inputs if s]
+        outputs = [Channel.parse(s) for s in values.outputs if s]
+        period = values.update_period_s
+        self.idle = values.idle
+        if self.idle:
             run_idle()  # SCHED_IDLE: only CPU time the loop leaves (the worker thread inherits)
-        self.record_file = Path(record) if record else None
-        if not (rate > 0 and window > 0 and period > 0):
-            raise InputError("modal_tracker: rate_hz, window_s and update_period_s must be > 0")
-        self.tracker = ModalTracker(1.0 / rate, window, order if order == "auto" else int(order))
+        self.record_file = Path(values.record_file) if values.record_file else None
+        self.tracker = ModalTracker(1.0 / values.rate_hz, values.window_s,
+                                    "auto" if values.order == "auto" else int(values.order))
         self.channels = [*inputs, *outputs]
         self.n_inputs = len(inputs)
         self.pending: dict[int, list[float | None]] = {}
         self.start_ns: int | None = None
         self.readers = []
+        # lock-step (``reliable``): every sample, as the loop's own readers take them
+        qos = (replace(SENSOR_DATA, reliability=Reliability.RELIABLE,
+                       durability=Durability.TRANSIENT_LOCAL, depth=READ_DEPTH)
+               if values.reliable else "sensor_data")
         for k, channel in enumerate(self.channels):
             msgtype = contract_type(channel.topic)
             _, read = field_reader(channel, msgtype)
             node.create_subscription(msgtype, channel.topic,
                                      lambda msg, k=k, read=read: self.on_sample(k, msg, read),
-                                     "sensor_data")
+                                     qos)
         self.modes_pub = node.create_publisher("std_msgs/msg/Float64MultiArray", MODES_TOPIC, 10)
         self.diagnostics = Diagnostics(node, period)
         self.pool = ThreadPoolExecutor(max_workers=1)
@@ -123,6 +167,22 @@ class ModalTrackerNode:
         future.add_done_callback(lambda f: self.publish(f.result()))
         self.pending_updates.append(future)
 
+    def finish(self) -> None:
+        """On stop: identify the windows already due, then return. The loop is gone by now
+        (a launch stops the tracker after the nodes), so an idle tracker leaves SCHED_IDLE: on
+        a busy machine it would otherwise wait for CPU time nobody leaves. Asked again to stop
+        meanwhile: the windows still due are given up and the process ends at once (the
+        worker's identification cannot be interrupted, and its thread would hold the exit)."""
+        if self.idle:
+            run_idle(False)
+        try:
+            self.pool.shutdown(wait=True)
+        except KeyboardInterrupt:
+            print(f"modal_tracker: stopped again while identifying; "
+                  f"{sum(not f.done() for f in self.pending_updates)} windows still due are "
+                  "given up", file=sys.stderr, flush=True)
+            os._exit(EXIT_GIVEN_UP)
+
     def publish(self, tracked: TrackedModes) -> None:
         self.updates += 1
         if self.record_file is not None:
@@ -155,12 +215,7 @@ def main() -> int:
         api.spin(node)
     finally:
         if tracker is not None:
-            try:
-                tracker.pool.shutdown(wait=True)  # the windows already due are finished
-            except KeyboardInterrupt:             # asked again to stop: give the rest up
-                tracker.pool.shutdown(wait=False, cancel_futures=True)
-                print("modal_tracker: stopped again while identifying; the windows still due "
-                      "are given up", file=sys.stderr)
+            tracker.finish()
         node.destroy_node()
     return 0
 

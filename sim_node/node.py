@@ -13,6 +13,10 @@ with it:
   in by the next sample's due time is a deadline miss (previous command held), and a sample
   that starts more than a period late is an overrun.
 
+At sensor rates of 100 Hz and more it also publishes each sample topic's decimated tap
+(``/_decimated<topic>``, hidden: anti-alias filtered and thinned to 50 Hz or more,
+:mod:`stillframe.loop.decimated_taps`) once the sample's command is taken, for the modal tracker.
+
 With ``actuators.delay_periods`` = d ≥ 1 the command stamped t_k is applied from t_k+d on
 (:class:`stillframe.plant.actuation_delay.ActuationDelay`): in real time the sim does not wait
 for it, and a command not in when its period starts is the deadline miss; the safe state below
@@ -61,6 +65,7 @@ from stillframe.contract.codecs import (
 from stillframe.contract.signals import Sample, actuator_of
 from stillframe.loop.closed_loop import LoopHistory, evaluate, plant_report
 from stillframe.loop.command_gate import CommandGate
+from stillframe.loop.decimated_taps import DecimatedTaps
 from stillframe.loop.energy_balance import EnergyTopic
 from stillframe.loop.pacing import Pacer, wait_until
 from stillframe.loop.watchdog import MissRateGuard, command_expired
@@ -118,6 +123,9 @@ class SimNode(base.LoopNode):
         self.publishers = {s.name: TappedPublisher(node, s.type_name, s.name, params.qos(s))
                            for s in (*SAMPLE_TOPICS, topics.STATE_TRUTH)}
         self.messages = SensorMessages(scene.sensors)
+        #: the sample topics anti-alias filtered and thinned (None at low rates): the tracker's
+        self.taps = DecimatedTaps.of(node, SensorMessages(scene.sensors), scene.sensors.rate_hz,
+                                     params.qos)
         #: pH plant: energy_balance and the live passivity check (None for the other plants)
         self.energy = EnergyTopic.of(node, self.plant, scene, params.qos(topics.ENERGY_BALANCE))
         limits = (scene.actuators.torque_limit, scene.actuators.force_limit)
@@ -323,6 +331,8 @@ class SimNode(base.LoopNode):
             control[self.active] = 0.0
             self.counts["degraded_samples"] += 1
         plant.advance(control)
+        if self.taps is not None:      # after the command is taken: off its path
+            self.taps.publish(sample, self.now_ns)
         self.rt.idle()
         if self.inputs.announce(self.node.get_logger()) or self.diagnostics.due():
             self.publish_status()

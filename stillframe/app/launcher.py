@@ -32,7 +32,7 @@ from typing import Any
 import yaml
 
 from stillframe.app import running_graph
-from stillframe.app.tracking import TRACKER, read_tracked, tracker_command
+from stillframe.app.tracking import TRACKER, TRACKER_STOP_S, read_tracked, tracker_command
 from stillframe.config.scene import Scene, load_scene
 from stillframe.contract import messages
 from stillframe.contract.topics import DEFAULT_NAMESPACE, STATUS_KEYS
@@ -56,8 +56,8 @@ BACKEND_TARGETS: tuple[str, ...] = (*NODES, "recorder", "monitor", TRACKER)
 #: them (the container brings its nodes up itself)
 MANAGED: tuple[str, ...] = tuple(n for n, declared in NODE_PARAMETERS.items()
                                  if ManagedParameterValues in declared)
-#: how long a managed node may take to serve its lifecycle services (its imports and the scene)
-#: [s]
+#: how long a managed node may take to serve its lifecycle services (its imports and the scene),
+#: counted in the time the machine gave it (:meth:`Child.time_given_s`) [s]
 LIFECYCLE_TIMEOUT_S = 60.0
 #: how long one call of a managed node's ``get_state`` waits once the graph shows it [s]
 PROBE_S = 1.0
@@ -68,6 +68,8 @@ TRANSITION_TIMEOUT_S = 20.0
 RESOLVED_SCENE = "scene.resolved.yaml"
 #: seconds a child gets to exit after SIGINT, then after SIGTERM, before SIGKILL
 STOP_GRACE_S = 10.0
+#: children that get longer to exit after SIGINT: the tracker finishes the windows due
+STOP_GRACES_S: dict[str, float] = {TRACKER: TRACKER_STOP_S}
 #: seconds a child that is still running gets to log its ready line: a guard against a hung
 #: child, not a start-up time (a recorder took more than 20 s to import and open its bag on a
 #: loaded 2-core machine, and the launch then called it dead)
@@ -180,10 +182,27 @@ class Child:
     proc: subprocess.Popen
     tail: deque[str] = field(default_factory=lambda: deque(maxlen=TAIL_LINES))
     stop_requested: bool = False
+    started_ns: int = field(default_factory=time.monotonic_ns)
+    #: seconds it gets to exit after SIGINT
+    grace_s: float = STOP_GRACE_S
 
     @property
     def pid(self) -> int:
         return self.proc.pid
+
+    def time_given_s(self) -> float:
+        """Seconds since the start that the machine gave this child: the wall time less the
+        time its main thread waited on a run queue (``/proc/PID/schedstat``). A timeout counted
+        in it cannot be run out by a loaded machine that does not run the child (one fresh-clone
+        run under load waited 60 s of wall time for a controller still importing), yet a child
+        that sleeps or hangs uses it up as wall time. The wall time where the kernel keeps no
+        schedstat."""
+        wall = (time.monotonic_ns() - self.started_ns) * 1e-9
+        try:
+            waited_ns = int(Path(f"/proc/{self.pid}/schedstat").read_text().split()[1])
+        except (OSError, IndexError, ValueError):
+            waited_ns = 0
+        return wall - waited_ns * 1e-9
 
 
 class ProcessSet:
@@ -194,7 +213,8 @@ class ProcessSet:
         self.children: list[Child] = []
         self.echo = echo
 
-    def start(self, name: str, argv: list[str], env_extra: dict[str, str] | None = None) -> Child:
+    def start(self, name: str, argv: list[str], env_extra: dict[str, str] | None = None,
+              grace_s: float = STOP_GRACE_S) -> Child:
         env = dict(os.environ, PYTHONUNBUFFERED="1", **(env_extra or {}))
         env["PYTHONPATH"] = os.pathsep.join(
             p for p in (env.get("PYTHONPATH", ""), str(REPO_ROOT)) if p)
@@ -202,7 +222,7 @@ class ProcessSet:
             argv, env=env, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
             stderr=subprocess.STDOUT, text=True, errors="replace", process_group=0,
             preexec_fn=_die_with_parent if sys.platform == "linux" else None)
-        child = Child(name, proc)
+        child = Child(name, proc, grace_s=grace_s)
         self.children.append(child)
         self.echo(f"started {name} (pid {proc.pid})")
         threading.Thread(target=self._pump, args=(child,), daemon=True).start()
@@ -226,15 +246,16 @@ class ProcessSet:
         return None
 
     def stop(self, child: Child) -> None:
-        """SIGINT, wait; SIGTERM, wait; SIGKILL. Always reaps the process."""
+        """SIGINT, wait (the child's grace); SIGTERM, wait; SIGKILL. Always reaps the process."""
         child.stop_requested = True
-        for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGKILL):
+        for sig, grace in ((signal.SIGINT, child.grace_s), (signal.SIGTERM, STOP_GRACE_S),
+                           (signal.SIGKILL, STOP_GRACE_S)):
             if child.proc.poll() is not None:
                 break
             with contextlib.suppress(ProcessLookupError):
                 child.proc.send_signal(sig)
             with contextlib.suppress(subprocess.TimeoutExpired):
-                child.proc.wait(STOP_GRACE_S)
+                child.proc.wait(grace)
         child.proc.wait()
 
     def stop_all(self) -> None:
@@ -419,7 +440,7 @@ class Launcher:
         if o.track:
             o.tracked_file.unlink(missing_ok=True)
             children.append((TRACKER, tracker_command(self.scene, o.tracked_file,
-                                                      idle=o.mode == "realtime")))
+                                                      lockstep=o.mode != "realtime")))
         nodes = self.nodes()
         # the pair's container takes no real-time parameters (it composes two nodes' loops);
         # with the simulator in it, the simulator's practices are the process's
@@ -478,19 +499,19 @@ class Launcher:
                 f"{name} {self.backend(name)}" for name, _ in commands))
             mixed = len({self.backend(name) for name, _ in commands}) > 1
             for name, argv in commands:
-                child = self.processes.start(name, argv, {"STILLFRAME_RMW": self.backend(name)})
+                child = self.processes.start(name, argv, {"STILLFRAME_RMW": self.backend(name)},
+                                             STOP_GRACES_S.get(name, STOP_GRACE_S))
                 if name in READY_LINES:
                     self._wait_for_line(child, READY_LINES[name])
                 elif mixed:
                     self._wait_for_line(child, "middleware backend")
             managed = [name for name, _ in commands if name in MANAGED]
-            deadline = time.monotonic() + LIFECYCLE_TIMEOUT_S
             simulator = self.simulator()
             sim = next(c for c in self.processes.children if c.name == simulator)
             watch = time.monotonic()
             while api.ok():
                 self.node.spin_once(0.1)
-                managed = [name for name in managed if not self.bring_up(name, deadline)]
+                managed = [name for name in managed if not self.bring_up(name)]
                 if time.monotonic() >= watch + running_graph.WATCH_S:
                     running_graph.check(self.node)
                     watch = time.monotonic()
@@ -519,13 +540,13 @@ class Launcher:
             self.node.destroy_node()
         return self._result()
 
-    def bring_up(self, name: str, deadline: float) -> bool:
+    def bring_up(self, name: str) -> bool:
         """``configure``, then ``activate`` the managed node ``name`` through its
         ``change_state`` service once its ``get_state`` answers, as a lifecycle-aware ``ros2
         launch`` emits the transitions; False while it does not answer yet (the launch goes on
-        meanwhile), NodeDiedError when it refuses, or answers nothing by ``deadline``
-        (monotonic). The calls go through a node of the target's backend (services do not cross
-        DDS vendors)."""
+        meanwhile), NodeDiedError when it refuses, or answers nothing within
+        :data:`LIFECYCLE_TIMEOUT_S` of the time the machine gave it. The calls go through a
+        node of the target's backend (services do not cross DDS vendors)."""
         child = next(c for c in self.processes.children if c.name == name)
         caller = self._caller(self.backend(name))
         prefix = f"{DEFAULT_NAMESPACE}/{name}"
@@ -536,7 +557,7 @@ class Launcher:
         if f"{prefix}/get_state" not in served or caller.call_service(
                 "lifecycle_msgs/srv/GetState", f"{prefix}/get_state",
                 messages.new("lifecycle_msgs/srv/GetState_Request"), PROBE_S) is None:
-            if time.monotonic() > deadline:
+            if child.time_given_s() > LIFECYCLE_TIMEOUT_S:
                 raise NodeDiedError(name, f"no lifecycle services after "
                                           f"{LIFECYCLE_TIMEOUT_S:g} s", child.tail)
             return False

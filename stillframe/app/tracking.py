@@ -20,24 +20,36 @@ from typing import Any
 
 from stillframe.config.scene import Scene
 from stillframe.contract import topics
+from stillframe.loop.decimated_taps import decimated_topic, decimation_factor
 
 TRACKER = "modal_tracker"
 TRACKER_MODULE = "identification.node"
 #: the tracker's window and update period, as fractions of the scene's duration (at most 60 s
 #: and 5 s)
 WINDOW_S, UPDATE_S = 60.0, 5.0
+#: how long a launch waits for the tracker to finish the windows due when it stops it [s]: at
+#: most the tracker's queue (identification.node.MAX_PENDING) and the one identifying, however
+#: slow the machine (a second Ctrl-C of the launch ends it at once)
+TRACKER_STOP_S = 300.0
 
 
-def tracker_command(scene: Scene, record_file: Path, *, idle: bool = False) -> list[str]:
-    """``python -m identification.node --ros-args -p …`` for the scene's rate and channels;
-    ``idle``: at SCHED_IDLE (a real-time run: only CPU time the nodes leave)."""
-    ns = topics.DEFAULT_NAMESPACE
-    inputs = [f"{ns}/{topics.EXCITATION_WRENCH.name}"]
-    outputs = [f"{ns}/{spec.name}" for spec in topics.FLOOR_IMU]
+def tracker_command(scene: Scene, record_file: Path, *, lockstep: bool) -> list[str]:
+    """``python -m identification.node --ros-args -p …`` for the scene's rate and channels: the
+    simulator's decimated taps at their rate where it publishes them, else the topics; in real
+    time (not ``lockstep``) at SCHED_IDLE (only CPU time the nodes leave), in lock-step reading
+    reliably (every sample, as the loop's readers)."""
+    factor = decimation_factor(scene.sensors.rate_hz)
+
+    def topic(spec: topics.TopicSpec) -> str:
+        name = f"{topics.DEFAULT_NAMESPACE}/{spec.name}"
+        return decimated_topic(name) if factor > 1 else name
+
     window = min(WINDOW_S, scene.duration / 2)
-    params = {"inputs": inputs, "outputs": outputs, "rate_hz": float(scene.sensors.rate_hz),
+    params = {"inputs": [topic(topics.EXCITATION_WRENCH)],
+              "outputs": [topic(spec) for spec in topics.FLOOR_IMU],
+              "rate_hz": float(scene.sensors.rate_hz) / factor,
               "window_s": window, "update_period_s": min(UPDATE_S, window / 2),
-              "record_file": str(record_file), "idle": idle}
+              "record_file": str(record_file), "idle": not lockstep, "reliable": lockstep}
     argv = [sys.executable, "-m", TRACKER_MODULE, "--ros-args"]
     for name, value in params.items():
         argv += ["-p", f"{name}:={value if isinstance(value, str) else json.dumps(value)}"]

@@ -163,16 +163,23 @@ def mode_shapes(frequency_hz: np.ndarray, damping_ratio: np.ndarray, shapes: np.
 
 
 def validation(t: np.ndarray, measured: np.ndarray, simulated: dict[str, np.ndarray],
-               names: Sequence[str], path: Path, span: float | None = None) -> Path:
-    """Measured outputs beside each model's simulated outputs (first ``span`` seconds)."""
+               names: Sequence[str], path: Path, span: float | None = None,
+               units: Sequence[str] | None = None) -> Path:
+    """Measured outputs beside each model's simulated outputs (first ``span`` seconds), in the
+    outputs' ``units``; without units (a record that does not give them, as DaISy's), each
+    output divided by the standard deviation of its measured values, a unit of its own."""
     count = len(names)
     keep = t <= t[0] + span if span else np.ones(t.size, dtype=bool)
+    scale = np.ones(count) if units else measured.std(axis=0)
+    scale = np.where(scale > 0, scale, 1.0)
+    labels = ([f"{n} [{u}]" for n, u in zip(names, units, strict=True)] if units
+              else [f"{n} / std({n}) [-]" for n in names])
     fig, axes = plt.subplots(count, 1, figsize=(9, 1.8 * count + 1), sharex=True, squeeze=False)
     for i, ax in enumerate(axes[:, 0]):
-        ax.plot(t[keep], measured[keep, i], color="k", lw=1, label="measured")
+        ax.plot(t[keep], measured[keep, i] / scale[i], color="k", lw=1, label="measured")
         for c, (label, y) in enumerate(simulated.items()):
-            ax.plot(t[keep], y[keep, i], color=f"C{c}", lw=0.8, label=label)
-        ax.set_ylabel(names[i], fontsize=8)
+            ax.plot(t[keep], y[keep, i] / scale[i], color=f"C{c}", lw=0.8, label=label)
+        ax.set_ylabel(labels[i], fontsize=8)
         ax.grid(True, alpha=0.3)
     axes[0, 0].legend(fontsize=8, ncols=len(simulated) + 1)
     axes[-1, 0].set_xlabel("time [s]")
@@ -262,7 +269,7 @@ def mode_comparison(models: dict[str, list[dict[str, float]]], path: Path) -> Pa
                    s=sizes, facecolors="none", edgecolors=f"C{c}", label=label)
     ax.set_yscale("log")
     ax.set_xlabel("frequency [Hz]")
-    ax.set_ylabel("damping ratio")
+    ax.set_ylabel("damping ratio [-]")
     ax.set_title("Identified modes (marker size: resonance peak)")
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=8)

@@ -106,13 +106,14 @@ def _threads() -> list[int]:
     return [int(t) for t in os.listdir("/proc/self/task")]
 
 
-def run_idle() -> None:
-    """Put every thread of this process at SCHED_IDLE, and so the threads they start later: a
-    policy is per thread on Linux, and imports start some (OpenBLAS's workers) before a
-    process can ask."""
+def run_idle(idle: bool = True) -> None:
+    """Put every thread of this process at SCHED_IDLE (``idle`` False: back at SCHED_OTHER), and
+    so the threads they start later: a policy is per thread on Linux, and imports start some
+    (OpenBLAS's workers) before a process can ask."""
+    policy = os.SCHED_IDLE if idle else os.SCHED_OTHER
     for tid in _threads():
         with contextlib.suppress(ProcessLookupError):     # ended meanwhile
-            os.sched_setscheduler(tid, os.SCHED_IDLE, os.sched_param(0))
+            os.sched_setscheduler(tid, policy, os.sched_param(0))
 
 
 def _loop_threads() -> list[int]:

@@ -29,7 +29,7 @@ def policies(pid: int) -> dict[int, int]:
 
 def test_the_idle_tracker_runs_at_sched_idle(tmp_path: Path, ros_domain: int) -> None:
     scene = load_scene(REPO_ROOT / "scenes" / "thesis_lqg.yaml")
-    argv = tracker_command(scene, tmp_path / "tracked.jsonl", idle=True)
+    argv = tracker_command(scene, tmp_path / "tracked.jsonl", lockstep=False)
     proc = subprocess.Popen(argv, env=child_env(), cwd=REPO_ROOT, stdout=subprocess.DEVNULL,
                             stderr=subprocess.PIPE, text=True)
     try:
@@ -43,3 +43,16 @@ def test_the_idle_tracker_runs_at_sched_idle(tmp_path: Path, ros_domain: int) ->
         proc.send_signal(signal.SIGINT)
         _, err = proc.communicate(timeout=60)
     assert proc.returncode == 0, err[-2000:]
+
+
+def test_a_wrong_tracker_parameter_is_one_line_and_exit_2(tmp_path: Path, ros_domain: int) -> None:
+    """The tracker's parameters are declared as data (``TrackerParameterValues``): a wrong one
+    is refused with its name and the rule it breaks, exit code 2, as for the loop's nodes."""
+    scene = load_scene(REPO_ROOT / "scenes" / "thesis_lqg.yaml")
+    argv = [*tracker_command(scene, tmp_path / "tracked.jsonl", lockstep=True),
+            "-p", "window_s:=-1.0"]
+    done = subprocess.run(argv, env=child_env(), cwd=REPO_ROOT, capture_output=True, text=True,
+                          timeout=120)
+    assert done.returncode == 2, done.stderr[-2000:]
+    errors = [line for line in done.stderr.splitlines() if "error" in line]
+    assert errors == ["node.py: error: parameter 'window_s': must be > 0 (got -1.0)"], errors

@@ -172,3 +172,21 @@ def test_identification_plots(figures: dict, tmp_path: Path) -> None:
     plots.mode_shapes(np.array([1.0, 2.0]), np.array([0.02, 0.03]), np.ones((2, 2), complex),
                       ["y1", "y2"], tmp_path / "m.png")
     assert_units(figures, 4)
+
+
+def test_identify_daisy_plots(figures: dict, tmp_path: Path) -> None:
+    """The plots of ``identify-daisy --plots`` (the same helpers as the command, on synthetic
+    data): DaISy gives no units for its outputs, so the validation plot shows each output over
+    the standard deviation of its measured values."""
+    from stillframe.identification import plots
+
+    t = np.arange(200) / 1024
+    measured = np.column_stack([np.sin(40 * t), 3 * np.cos(60 * t)])
+    plots.validation(t, measured, {"n4sid": 0.9 * measured}, ["y1", "y14"],
+                     tmp_path / "daisy_validation.png", span=0.1)
+    plots.mode_comparison({"n4sid": [{"frequency_hz": 229.0, "damping_ratio": 0.002,
+                                      "peak": 1.0}]}, tmp_path / "daisy_modes.png")
+    assert_units(figures, 2)
+    lines = figures["daisy_validation.png"].axes[1].lines
+    np.testing.assert_allclose(lines[0].get_ydata(), measured[t <= t[0] + 0.1, 1]
+                               / measured[:, 1].std())
