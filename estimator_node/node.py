@@ -124,7 +124,7 @@ class EstimatorNode(base.LoopNode):
                                        round(wait_s * 1e9), params.lockstep,
                                        scene.actuators.delay_periods)
         spec, cov = topics.STATE_ESTIMATE, topics.STATE_COVARIANCE
-        self.state_pub = TappedPublisher(node, spec.type_name, spec.name, params.qos(spec))
+        self.state_pub = TappedPublisher(node, spec.type_name, spec.name, spec.qos)
         self.cov_pub = TappedPublisher(node, cov.type_name, cov.name, cov.qos)
         self.out = EstimateMessages()
         for i, spec in enumerate(COMMAND_TOPICS):

@@ -31,10 +31,6 @@ from stillframe.node_runtime.parameters import declare
 
 #: the topics from the estimator to the simulator, read best effort in real time
 CONTROL_PATH = (topics.STATE_ESTIMATE, topics.TORQUE_CMD, topics.FORCE_CMD)
-#: besides the sensor topics, what is TRANSIENT_LOCAL in lock-step (:meth:`LoopParameters.qos`):
-#: the estimate and the truth (the truth estimator's input), whose readers no node sees matched from
-#: the reader's side
-HANDED_ON_MATCHING = (topics.STATE_ESTIMATE, topics.STATE_TRUTH)
 #: After the peers are matched, spin this long so that the other side of every match (the
 #: remote writer's view) has caught up before the first sample (docs/nodes.md, start-up).
 SETTLE_S = 0.25
@@ -76,29 +72,20 @@ class LoopParameters:
 
     def qos(self, spec: topics.TopicSpec) -> QoSProfile | str:
         """The contract's QoS, except that sensor topics are RELIABLE and TRANSIENT_LOCAL in
-        lock-step, and ``state_estimate`` and ``state_truth`` TRANSIENT_LOCAL
-        (:data:`HANDED_ON_MATCHING`).
+        lock-step.
 
         Lock-step promises the same numbers as the one-process loop; a best-effort sample lost
         under load would silently turn into a partial update. TRANSIENT_LOCAL closes the start:
         the simulator sees its writers matched before the estimator's reader has matched them
         (discovery is not symmetric), and a volatile Fast DDS reader then skips the first
         sample a Cyclone writer sent (measured: 1 lock-step timeout in 6 mixed-vendor runs); a
-        transient-local reader is handed it on matching. The same holds for the first estimate:
-        the estimator waits until its writer has matched the controller's reader, but nothing
-        waits for the controller's reader to have matched the writer (a volatile reader that
-        matches after the first estimate skips it: the first sample then waits out the
-        simulator's lock-step timeout; the command path is waited for from both sides, the
-        simulator's reader there stays VOLATILE so that any other writer matches it and is
-        refused and counted). A reliable transient-local writer still matches the contract's
-        best-effort volatile readers (``ros2 topic echo``, the recorder), so only the loop's
-        own readers ask for more than the contract.
+        transient-local reader is handed it on matching. A reliable transient-local writer still
+        matches the contract's best-effort volatile readers (``ros2 topic echo``, the recorder),
+        so only the loop's own readers ask for more than the contract.
         """
         if self.lockstep and spec.qos == "sensor_data":
             return replace(PROFILES["sensor_data"], reliability=Reliability.RELIABLE,
                            durability=Durability.TRANSIENT_LOCAL)
-        if self.lockstep and spec in HANDED_ON_MATCHING:
-            return replace(as_profile(spec.qos), durability=Durability.TRANSIENT_LOCAL)
         return spec.qos
 
     def reader_qos(self, spec: topics.TopicSpec) -> QoSProfile | str:

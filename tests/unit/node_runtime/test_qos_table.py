@@ -29,16 +29,3 @@ def test_lockstep_sensors_are_reliable_and_the_realtime_control_path_is_read_bes
     assert cmd[4] == "RELIABLE, VOLATILE, KEEP_LAST 10"                 # rmw default
     assert cmd[5] == "BEST_EFFORT, VOLATILE, KEEP_LAST 10"
     assert by_topic["/diagnostics"][3] == "-"
-
-
-def test_lockstep_readers_no_node_waits_for_are_handed_the_first_sample_on_matching() -> None:
-    """The estimate's and the truth's readers match the writer after it may have written the
-    first sample (only the writers' side is waited for): TRANSIENT_LOCAL on both sides in
-    lock-step, as the sensors; the command's reader, whose side the simulator waits for, stays
-    VOLATILE (any other writer matches it and is refused and counted)."""
-    by_topic = {r[0].strip("`"): r for r in rows()}
-    for topic in ("state_estimate", "state_truth"):
-        assert by_topic[topic][2] == "RELIABLE, TRANSIENT_LOCAL, KEEP_LAST 10", topic
-        assert by_topic[topic][3] == "RELIABLE, TRANSIENT_LOCAL, KEEP_LAST 1000", topic
-        assert by_topic[topic][4] == "RELIABLE, VOLATILE, KEEP_LAST 10", topic     # real time
-    assert by_topic["pendulum/torque_cmd"][3] == "RELIABLE, VOLATILE, KEEP_LAST 1000"
