@@ -561,13 +561,15 @@ class Launcher:
                 raise NodeDiedError(name, f"no lifecycle services after "
                                           f"{LIFECYCLE_TIMEOUT_S:g} s", child.tail)
             return False
-        for transition in ("configure", "activate"):
+        for transition, goal in (("configure", "inactive"), ("activate", "active")):
             request = messages.new("lifecycle_msgs/srv/ChangeState_Request",
                                    transition=messages.new("lifecycle_msgs/msg/Transition",
                                                            label=transition))
             response = caller.call_service("lifecycle_msgs/srv/ChangeState",
                                            f"{prefix}/change_state", request,
                                            TRANSITION_TIMEOUT_S)
+            if response is None and self._state(caller, prefix) == goal:
+                continue    # done, but its reply was lost (seen under 10 % packet loss)
             if response is None or not response.success:
                 if child.proc.poll() is not None:   # died meanwhile: say how
                     raise NodeDiedError.exited(child)
@@ -575,6 +577,15 @@ class Launcher:
                     "failed" if response else "not answered"), child.tail)
         self.status.echo(f"{name}: configured and active")
         return True
+
+    @staticmethod
+    def _state(caller: api.Node, prefix: str) -> str | None:
+        """The managed node's state label from its ``get_state`` (a path already seen to
+        answer), or None when it does not answer."""
+        response = caller.call_service("lifecycle_msgs/srv/GetState", f"{prefix}/get_state",
+                                       messages.new("lifecycle_msgs/srv/GetState_Request"),
+                                       TRANSITION_TIMEOUT_S)
+        return None if response is None else str(response.current_state.label)
 
     def _caller(self, backend: str) -> api.Node:
         """The launcher's node on ``backend`` (made on first use)."""

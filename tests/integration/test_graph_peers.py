@@ -172,8 +172,9 @@ def log_stamp_ns(line: str) -> int:
 
 
 #: the writing peer on rclpy failed at its first run in two fresh-clone suites (15:48, 16:11 UTC)
-#: and passed every rerun, alone or after the suite's earlier integration files; its cause is
-#: not found, so that case waits in the long set (``pytest -m long``)
+#: and passed every rerun: the first refusal's log line came before rclpy's graph knew the peer's
+#: node (``_NODE_NAMESPACE_UNKNOWN_/_NODE_NAME_UNKNOWN_``) and no later line names it, so that case
+#: waits in the long set (``pytest -m long``) until the gate names a writer once the graph does
 WRITING_PEER_BACKENDS = [pytest.param(b, marks=pytest.mark.long) if b == "rclpy" else b
                          for b in BACKENDS]
 
