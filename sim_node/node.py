@@ -8,7 +8,9 @@ t_k, then waits for the command stamped t_k on the scene's actuator topic and ad
 with it:
 
 - ``mode: lockstep``: waits as long as it takes, at most ``lockstep_timeout_s`` of wall time;
-  after that it counts a lock-step timeout and holds the previous command.
+  after that it counts a lock-step timeout and holds the previous command. Once its peers have
+  matched, sample 0 is awaited up to ``discovery_timeout_s``: its round trip ends the start-up
+  (:meth:`stillframe.loop.pacing.Pacer.deadline_ns`).
 - ``mode: realtime``: sample k is due at k·period of wall time after the start; a command not
   in by the next sample's due time is a deadline miss (previous command held), and a sample
   that starts more than a period late is an overrun.
@@ -306,8 +308,9 @@ class SimNode(base.LoopNode):
         self.now_ns = self.grid.ns(sample.t)
         self.publish(sample, self.now_ns)
         missed = False
+        published_ns = time.monotonic_ns()
         if (pacer.lockstep or not self.delay.periods) and not self.wait_command(
-                pacer.deadline_ns(k, time.monotonic_ns())):
+                pacer.deadline_ns(k, published_ns)):
             if not api.ok():
                 return None
             if pacer.lockstep:
@@ -316,6 +319,11 @@ class SimNode(base.LoopNode):
                     f"{self.params.lockstep_timeout_s:g} s; holding the previous one", once=True)
             pacer.missed()
             missed = True
+        elif k == 0 and pacer.lockstep and (waited := (
+                time.monotonic_ns() - published_ns) * 1e-9) > self.params.lockstep_timeout_s:
+            self.node.get_logger().info(
+                f"start-up: sample 0's command came after {waited:.3g} s (a reader that matched "
+                "its writer late got the sample when the writer repaired it); not a timeout")
         if self.delay.periods:
             control, late = self.delay.due(k)
             if late and not pacer.lockstep:
@@ -345,7 +353,10 @@ class SimNode(base.LoopNode):
         p, plant = self.params, self.plant
         log = self.node.get_logger()
         log.info(f"{p.mode}: waiting for the estimator and controller")
-        if not wait_for_peers(self.node, self.peers_ready, self.discovery_timeout_s):
+        if wait_for_peers(self.node, self.peers_ready, self.discovery_timeout_s):
+            # sample 0's round trip ends the start-up (Pacer.deadline_ns)
+            self.pacer.first_timeout_ns = round(self.discovery_timeout_s * 1e9)
+        else:
             if not api.ok():
                 return None
             log.warning(f"estimator/controller not matched after {self.discovery_timeout_s:g} s;"

@@ -55,3 +55,17 @@ def test_lockstep_waits_the_timeout_from_publishing_and_ignores_lateness() -> No
     assert p.deadline_ns(5, 123_456) == 123_456 + TIMEOUT_NS
     p.missed()
     assert p.counts == {"lockstep_timeouts": 1, "deadline_misses": 0, "overruns": 0}
+
+
+def test_lockstep_gives_sample_0_the_start_up_wait_when_set() -> None:
+    p = Pacer(PERIOD_NS, lockstep=True, timeout_ns=TIMEOUT_NS)
+    assert p.deadline_ns(0, 7) == 7 + TIMEOUT_NS       # not set: the peers never matched
+    p.first_timeout_ns = 30 * TIMEOUT_NS
+    assert p.deadline_ns(0, 7) == 7 + 30 * TIMEOUT_NS
+    assert p.deadline_ns(1, 7) == 7 + TIMEOUT_NS
+    p.first_timeout_ns = TIMEOUT_NS // 2                # never shorter than the lock-step wait
+    assert p.deadline_ns(0, 7) == 7 + TIMEOUT_NS
+    real_time = Pacer(PERIOD_NS, lockstep=False, timeout_ns=TIMEOUT_NS)
+    real_time.first_timeout_ns = 30 * TIMEOUT_NS        # real time: the due time rules
+    real_time.start(START)
+    assert real_time.deadline_ns(0, START) == START + PERIOD_NS
