@@ -40,6 +40,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from stillframe.middleware import api
+from stillframe.middleware.graph import UNNAMED_NODES
 
 #: why a sample is refused for its writer
 REASONS = ("second_writer", "unknown_writer", "ambiguous_writer")
@@ -64,9 +65,11 @@ GraphWriters = Callable[[], list[tuple[bytes, str]]]
 
 def graph_writers(node: api.Node, topic: str) -> GraphWriters:
     """The writers of ``topic`` in ``node``'s view of the graph, as (GID, ``/namespace/name``)
-    (the name ``/`` while the graph has not named the writer's node)."""
+    (the name ``/`` while the graph has not named the writer's node: rmw's graph cache calls
+    it ``_NODE_NAMESPACE_UNKNOWN_/_NODE_NAME_UNKNOWN_`` until the participant's node list comes)."""
     def writers() -> list[tuple[bytes, str]]:
-        return [(ep.endpoint_gid, f"{ep.node_namespace.rstrip('/')}/{ep.node_name}")
+        return [(ep.endpoint_gid, "/" if ep.node_name in UNNAMED_NODES
+                 else f"{ep.node_namespace.rstrip('/')}/{ep.node_name}")
                 for ep in node.get_publishers_info_by_topic(topic)]
 
     return writers

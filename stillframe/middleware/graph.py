@@ -200,6 +200,8 @@ def snapshot(node: Any) -> Graph:
 
 #: the node name rmw gives an endpoint whose participant's node list has not arrived yet
 UNKNOWN_NODE = "_NODE_NAME_UNKNOWN_"
+#: names an endpoint's node has before its node is known: ours, and rmw's graph cache
+UNNAMED_NODES = ("", UNKNOWN_NODE)
 
 
 def _signature(node: Any) -> tuple:
@@ -208,7 +210,7 @@ def _signature(node: Any) -> tuple:
     topics = node.get_topic_names_and_types()
     endpoints = [(node.get_publishers_info_by_topic(t), node.get_subscriptions_info_by_topic(t))
                  for t, _ in topics]
-    unknown = sum(e.node_name in ("", UNKNOWN_NODE) for pubs, subs in endpoints
+    unknown = sum(e.node_name in UNNAMED_NODES for pubs, subs in endpoints
                   for e in (*pubs, *subs))
     return (tuple(node.get_node_names_and_namespaces()),
             tuple((t, tuple(types)) for t, types in topics),

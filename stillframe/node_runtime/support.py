@@ -19,6 +19,7 @@ from stillframe.config.scene import Scene, load_scene
 from stillframe.contract import messages, topics
 from stillframe.fidelity.auto_model import resolve_model
 from stillframe.middleware import api
+from stillframe.middleware.graph import UNNAMED_NODES
 from stillframe.middleware.qos import (
     PROFILES,
     Durability,
@@ -41,8 +42,6 @@ SETTLE_S = 0.25
 FLOOD_DEPTH = 1000
 #: the node name of ``stillframe record`` (it subscribes every topic at once)
 RECORDER_NODE = "stillframe_recorder"
-#: names an endpoint's node has before its node is known: ours, and rclpy's graph cache
-UNNAMED_NODES = ("", "_NODE_NAME_UNKNOWN_")
 OK, WARN, ERROR = 0, 1, 2
 
 

@@ -5,8 +5,15 @@ the graph asked only for writers not decided yet."""
 from __future__ import annotations
 
 import unittest.mock
+from types import SimpleNamespace
 
-from stillframe.loop.writer_gate import RECHECK_NS, STREAM_IDLE_NS, InputGates, WriterGate
+from stillframe.loop.writer_gate import (
+    RECHECK_NS,
+    STREAM_IDLE_NS,
+    InputGates,
+    WriterGate,
+    graph_writers,
+)
 
 SIM, SIM2, STRAY, STRAY2 = b"a" * 16, b"b" * 16, b"s" * 16, b"t" * 16
 
@@ -189,6 +196,41 @@ def test_without_writer_ids_a_writing_stranger_is_refused_counted_and_named_at_o
     assert log.lines == ["/cmd: refusing the samples of another writer: /frame/teleop (50 so far)"]
     assert dict(gate.rejected) == {"second_writer": 50}
     assert gate.report()["ignored_writers"] == "/frame/teleop"
+
+
+class RmwGraph:
+    """A node whose graph lists the topic's writers as rmw does: a writer whose participant's node
+    list has not come yet under ``_NODE_NAMESPACE_UNKNOWN_/_NODE_NAME_UNKNOWN_``."""
+
+    def __init__(self, *writers: tuple[bytes, str, str]) -> None:
+        self.writers = list(writers)
+
+    def get_publishers_info_by_topic(self, topic: str) -> list[SimpleNamespace]:
+        return [SimpleNamespace(endpoint_gid=g, node_namespace=ns, node_name=name)
+                for g, ns, name in self.writers]
+
+
+def test_without_writer_ids_a_stranger_rmw_has_not_named_is_named_once_it_is() -> None:
+    """The rclpy writing-peer case: the first refusal comes before rmw knows the stranger's node;
+    the log says "unnamed" (never rmw's placeholder), then names it at the next refusal after
+    the graph does."""
+    graph = RmwGraph((SIM, "/frame", "sim_node"),
+                     (STRAY, "_NODE_NAMESPACE_UNKNOWN_", "_NODE_NAME_UNKNOWN_"))
+    assert graph_writers(graph, "/cmd")()[1] == (STRAY, "/")
+    gates = InputGates(Parameters(), {"command_writer": ""})  # type: ignore[arg-type]
+    gate = gates.gates["/cmd"] = WriterGate("sim_node", graph_writers(graph, "/cmd"),
+                                            clock=lambda: 0)
+    assert all(gate.admits(b"", n) for n in range(1, 101))
+    log = Log()
+    clock = iter(range(0, 100 * RECHECK_NS, RECHECK_NS))
+    with unittest.mock.patch("time.monotonic_ns", lambda: next(clock)):
+        assert not gate.admits(b"", 1) and gates.announce(log)
+        graph.writers[1] = (STRAY, "/frame", "topic_pub")
+        assert not gate.admits(b"", 2) and gates.announce(log)
+        assert not gate.admits(b"", 3) and not gates.announce(log)    # said once
+    said = "/cmd: refusing the samples of another writer: "
+    assert log.lines == [said + "unnamed (1 so far)", said + "/frame/topic_pub (2 so far)"]
+    assert gate.report()["ignored_writers"] == "/frame/topic_pub"
 
 
 def test_without_writer_ids_a_restart_is_taken_and_numbers_side_by_side_refused() -> None:
