@@ -63,7 +63,7 @@ from stillframe.middleware import api
 from stillframe.middleware.params import Parameter, SetParametersResult
 from stillframe.middleware.taps import TappedPublisher
 from stillframe.node_runtime import base
-from stillframe.node_runtime.declarations import ControllerParameterValues
+from stillframe.node_runtime.declarations import SIM, ControllerParameterValues
 from stillframe.node_runtime.parameters import NodeParameters
 from stillframe.node_runtime.support import (
     ERROR,
@@ -230,7 +230,7 @@ class ControllerNode(base.LoopNode):
         return max(self.matching.last_ns, 0)
 
     def peers_ready(self) -> bool:
-        return reaches_peer(self.node, self.pub)
+        return reaches_peer(self.node, self.pub, self.gates.pins["sensor_writer"] or SIM)
 
     def start(self) -> None:
         """Wait for the command's subscribers in lock-step, then take the inputs."""

@@ -87,6 +87,7 @@ from stillframe.middleware.params import Parameter, SetParametersResult
 from stillframe.middleware.taps import TappedPublisher
 from stillframe.node_runtime import base
 from stillframe.node_runtime.declarations import (
+    CONTROLLER,
     EstimatorParameterValues,
     NoiseParameterValues,
 )
@@ -271,8 +272,9 @@ class EstimatorNode(base.LoopNode):
 
     def peers_ready(self) -> bool:
         """The controller reads the estimates and publishes the scene's command topic."""
-        return reaches_peer(self.node, self.state_pub) and has_publisher(
-            self.node, command_topic(self.params.scene).name)
+        controller = self.gates.pins["command_writer"] or CONTROLLER
+        return reaches_peer(self.node, self.state_pub, controller) and has_publisher(
+            self.node, command_topic(self.params.scene).name, controller)
 
     def start(self) -> None:
         """Wait for the controller in lock-step, then take the inputs."""

@@ -77,7 +77,12 @@ from stillframe.middleware.clock import ClockPublisher
 from stillframe.middleware.names import is_hidden
 from stillframe.middleware.taps import TappedPublisher
 from stillframe.node_runtime import base
-from stillframe.node_runtime.declarations import SimParameterValues
+from stillframe.node_runtime.declarations import (
+    CONTROLLER,
+    ESTIMATOR,
+    LOOP_NODES,
+    SimParameterValues,
+)
 from stillframe.node_runtime.parameters import NodeParameters
 from stillframe.node_runtime.support import (
     ERROR,
@@ -92,8 +97,6 @@ from stillframe.node_runtime.support import (
 )
 from stillframe.plant.actuation_delay import ActuationDelay
 from stillframe.plant.frame_plant import make_plant
-
-LOOP_NODES = ("sim_node", "estimator_node", "controller_node")
 
 
 class SimNode(base.LoopNode):
@@ -186,13 +189,15 @@ class SimNode(base.LoopNode):
 
     def peers_ready(self) -> bool:
         """The estimator reads every sensor (and the truth when it is the ``truth`` estimator),
-        and the controller's command is heard (both matched, not only the recorder)."""
+        and the controller's command is heard: matched on both sides, with the peers named by the
+        ``command_writer`` pin or their default names (not only the recorder or a tool)."""
         scene = self.params.scene
         command = command_topic(scene)
-        return (all(reaches_peer(self.node, self.publishers[spec.name])
+        controller = self.inputs.pins["command_writer"] or CONTROLLER
+        return (all(reaches_peer(self.node, self.publishers[spec.name], ESTIMATOR)
                     for spec in estimator_inputs(scene))
                 and (command is None or hears_peer(
-                    self.node, self.subscriptions[self.active]))
+                    self.node, self.subscriptions[self.active], controller))
                 and self.recorder_ready())
 
     def recorder_ready(self) -> bool:

@@ -177,11 +177,15 @@ class ControllerParameterValues(NodeParameters):
 
 _COMMON = (LoopParameterValues, RealtimeParameterValues)
 #: the parameter declarations of each node, in the order they are declared
+#: the loop's nodes by their default names (a node waits for its peers by these names, or by
+#: the writer pins when set: docs/nodes.md, lock-step protocol)
+LOOP_NODES = SIM, ESTIMATOR, CONTROLLER = ("sim_node", "estimator_node", "controller_node")
+
 NODE_PARAMETERS: dict[str, tuple[type[NodeParameters], ...]] = {
-    "sim_node": (*_COMMON, SimParameterValues),
-    "estimator_node": (*_COMMON, ManagedParameterValues, EstimatorParameterValues,
-                       NoiseParameterValues),
-    "controller_node": (*_COMMON, ManagedParameterValues, ControllerParameterValues),
+    SIM: (*_COMMON, SimParameterValues),
+    ESTIMATOR: (*_COMMON, ManagedParameterValues, EstimatorParameterValues,
+                NoiseParameterValues),
+    CONTROLLER: (*_COMMON, ManagedParameterValues, ControllerParameterValues),
 }
 
 #: the lines between which docs/nodes.md holds :func:`.parameters.reference`

@@ -18,8 +18,8 @@ import numpy as np
 from stillframe.config.scene import Scene, load_scene
 from stillframe.contract import messages, topics
 from stillframe.fidelity.auto_model import resolve_model
+from stillframe.loop.writer_gate import same_node
 from stillframe.middleware import api
-from stillframe.middleware.graph import UNNAMED_NODES
 from stillframe.middleware.qos import (
     PROFILES,
     Durability,
@@ -220,29 +220,36 @@ def wait_for_peers(node: api.Node, ready: Callable[[], bool],
     return api.ok()
 
 
-def has_publisher(node: api.Node, topic: str) -> bool:
-    """A publisher of ``topic`` is in the graph (the reader side of a match)."""
-    return bool(node.get_publishers_info_by_topic(topic))
+def has_publisher(node: api.Node, topic: str, peer: str) -> bool:
+    """The graph shows a publisher of ``topic`` in node ``peer`` (the reader side of a match)."""
+    return any(same_node(endpoint_node(ep), peer)
+               for ep in node.get_publishers_info_by_topic(topic))
 
 
-def reaches_peer(node: api.Node, publisher: api.Publisher) -> bool:
+def reaches_peer(node: api.Node, publisher: api.Publisher, peer: str) -> bool:
     """``publisher`` has matched every subscription of its topic the graph shows, and one of them
-    belongs to a named node other than the launch's recorder.
+    belongs to node ``peer`` (``name`` or ``/namespace/name``).
 
-    A matched count alone is not enough in lock-step: the recorder subscribes every topic at
-    once, it can match before the peer does, and the first sample sent then is lost to the peer
-    (a lock-step timeout)."""
+    A matched count alone is not enough in lock-step, nor is any named node: the recorder
+    subscribes every topic at once and can match before the peer does; a tool's idle publisher
+    on the command topic did the same for the simulator's reader (CI, and 2 of 25 runs beside a
+    writing peer under load). The loop then started before the peer's side had matched, and
+    the first command was lost (a lock-step timeout)."""
     return _matched_with_peer(node.get_subscriptions_info_by_topic(publisher.topic_name),
-                              publisher.get_subscription_count())
+                              publisher.get_subscription_count(), peer)
 
 
-def hears_peer(node: api.Node, subscription: api.Subscription) -> bool:
-    """``subscription`` has matched every publisher of its topic the graph shows, one of them a
-    named node's (the reader's side of :func:`reaches_peer`)."""
+def hears_peer(node: api.Node, subscription: api.Subscription, peer: str) -> bool:
+    """``subscription`` has matched every publisher of its topic the graph shows, one of them in
+    node ``peer`` (the reader's side of :func:`reaches_peer`)."""
     return _matched_with_peer(node.get_publishers_info_by_topic(subscription.topic_name),
-                              subscription.get_publisher_count())
+                              subscription.get_publisher_count(), peer)
 
 
-def _matched_with_peer(remote: list[api.TopicEndpointInfo], matched: int) -> bool:
-    return matched >= len(remote) and any(
-        ep.node_name not in (RECORDER_NODE, *UNNAMED_NODES) for ep in remote)
+def endpoint_node(ep: api.TopicEndpointInfo) -> str:
+    """The ``/namespace/name`` of an endpoint's node."""
+    return f"{ep.node_namespace.rstrip('/')}/{ep.node_name}"
+
+
+def _matched_with_peer(remote: list[api.TopicEndpointInfo], matched: int, peer: str) -> bool:
+    return matched >= len(remote) and any(same_node(endpoint_node(ep), peer) for ep in remote)

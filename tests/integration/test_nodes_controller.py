@@ -37,9 +37,11 @@ def test_commands_and_watchdog(ros_domain: int, tmp_path: Path, time_source: str
     rng = np.random.default_rng(3)
     states = 1e-3 * rng.standard_normal((ESTIMATED, 8))
     forces = 0.1 * rng.standard_normal(STEPS)
+    # the probe stands in for the simulator, so the pin names it (the start-up waits for it)
     proc = start_node("controller_node", params_file(tmp_path, "thesis_lqg", OVERRIDES,
                                                      use_sim_time=time_source == "clock",
-                                                     diagnostics_period_s=0.2))
+                                                     diagnostics_period_s=0.2,
+                                                     sensor_writer="probe"))
     probe = create_node("probe", namespace=topics.DEFAULT_NAMESPACE, argv=["test"])
     try:
         clock = ClockPublisher(probe)

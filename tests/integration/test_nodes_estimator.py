@@ -48,9 +48,11 @@ def test_estimates_nan_stale_and_missing_channels(ros_domain: int, tmp_path: Pat
     applied = [0.0, *np.minimum(commands[:-1], TORQUE_LIMIT)]   # over the period before k
     for s, torque in zip(samples, applied, strict=True):
         s.applied = np.array([torque, 0.0])
+    # the probe stands in for the controller, so the pin names it (the start-up waits for it)
     proc = start_node("estimator_node", params_file(tmp_path, "thesis_lqg", SHORT_LQG,
                                                     lockstep_timeout_s=1.0,
-                                                    diagnostics_period_s=0.2))
+                                                    diagnostics_period_s=0.2,
+                                                    command_writer="probe"))
     probe = create_node("probe", namespace=topics.DEFAULT_NAMESPACE, argv=["test"])
     try:
         loop = LoopParameters(scene, "lockstep", 1.0, 0.2)   # the sim's sensor QoS

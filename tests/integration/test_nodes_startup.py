@@ -1,6 +1,7 @@
 """The lock-step start-up check on both backends: a writer is ready for its peer only when the
-peer's subscription is matched, not when the launch's recorder alone is (it subscribes every
-topic at once and used to start the loop early: a lost first sample, a lock-step timeout)."""
+named peer's subscription is matched, not when the launch's recorder or another tool alone is
+(the recorder subscribes every topic at once and used to start the loop early: a lost first
+sample, a lock-step timeout)."""
 
 from __future__ import annotations
 
@@ -30,13 +31,21 @@ def test_the_recorder_alone_is_not_a_peer(backend: str, ros_domain: int,
         assert api.spin_until(writer, lambda: pub.get_subscription_count() == 1 and any(
             ep.node_name == RECORDER_NODE
             for ep in writer.get_subscriptions_info_by_topic("/t/x")), 10)
-        assert not reaches_peer(writer, pub)
+        assert not reaches_peer(writer, pub, "estimator_node")
+        # nor is another node: a tool subscribed beside the loop (the idle-publisher case of
+        # docs/nodes.md's start-up, on the reader side)
+        tool = api.create_node("topic_echo")
+        nodes.append(tool)
+        tool.create_subscription(TYPE, "/t/x", lambda _: None, DEFAULT)
+        assert api.spin_until(writer, lambda: pub.get_subscription_count() == 2, 10)
+        assert not reaches_peer(writer, pub, "estimator_node")
         peer = api.create_node("estimator_node")
         nodes.append(peer)
         sub = peer.create_subscription(TYPE, "/t/x", lambda _: None, DEFAULT)
-        assert api.spin_until(writer, lambda: reaches_peer(writer, pub), 10)
-        assert pub.get_subscription_count() == 2           # both matched when it says ready
-        assert api.spin_until(peer, lambda: hears_peer(peer, sub), 10)
+        assert api.spin_until(writer, lambda: reaches_peer(writer, pub, "estimator_node"), 10)
+        assert pub.get_subscription_count() == 3           # all matched when it says ready
+        assert api.spin_until(peer, lambda: hears_peer(peer, sub, "/writer"), 10)
+        assert not hears_peer(peer, sub, "controller_node")
     finally:
         for node in nodes:
             node.destroy_node()
