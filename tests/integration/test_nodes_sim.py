@@ -11,6 +11,7 @@ import numpy as np
 
 from stillframe.contract import messages, topics
 from stillframe.middleware.api import create_node, spin_until
+from stillframe.node_runtime.declarations import ESTIMATOR
 from stillframe.node_runtime.support import diagnostic_values
 from stillframe.plant.frame_plant import Plant
 from tests.support.middleware import finish
@@ -29,12 +30,18 @@ def torque(k: int) -> float:
     return 0.02 * np.sin(0.7 * k) + 0.01
 
 
+#: the probe's node name
+NAME = ESTIMATOR
+
+
 class Probe:
     """Raw subscriptions to everything sim_node publishes (decoded with rosbags' typestore
-    directly) and a torque publisher answering the first ``answers`` samples."""
+    directly) and a torque publisher answering the first ``answers`` samples. It stands in for
+    the estimator and the controller, so it has the estimator's name and the simulator's
+    ``command_writer`` pin names it (the simulator starts once its peers, by name, matched)."""
 
     def __init__(self, answers: int) -> None:
-        self.node = create_node("probe", namespace=topics.DEFAULT_NAMESPACE, argv=["test"])
+        self.node = create_node(NAME, namespace=topics.DEFAULT_NAMESPACE, argv=["test"])
         self.received: dict[str, list] = {spec.name: [] for spec in SENSORS}
         for spec in SENSORS:
             self.node.create_subscription(
@@ -66,7 +73,8 @@ def _run_sim(tmp_path: Path, answers: int, **params: object) -> tuple[Probe, dic
     probe = Probe(answers)
     try:
         sim = start_node("sim_node", params_file(tmp_path, "thesis_lqg", OVERRIDES,
-                                                 result_file=str(result), **params))
+                                                 result_file=str(result), command_writer=NAME,
+                                                 **params))
         probe.run(sim)
         _out, err = finish(sim)
         assert sim.returncode == 0, err[-2000:]
