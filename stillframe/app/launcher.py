@@ -190,6 +190,10 @@ class Child:
     def pid(self) -> int:
         return self.proc.pid
 
+    def exited(self) -> bool:
+        """The child has ended (reaped: its exit code is known)."""
+        return self.proc.poll() is not None
+
     def time_given_s(self) -> float:
         """Seconds since the start that the machine gave this child: the wall time less the
         time its main thread waited on a run queue (``/proc/PID/schedstat``). A timeout counted
@@ -565,10 +569,11 @@ class Launcher:
             request = messages.new("lifecycle_msgs/srv/ChangeState_Request",
                                    transition=messages.new("lifecycle_msgs/msg/Transition",
                                                            label=transition))
+            # a node killed mid-transition ends the wait at once (it cost 2 x 20 s before)
             response = caller.call_service("lifecycle_msgs/srv/ChangeState",
                                            f"{prefix}/change_state", request,
-                                           TRANSITION_TIMEOUT_S)
-            if response is None and self._state(caller, prefix) == goal:
+                                           TRANSITION_TIMEOUT_S, give_up=child.exited)
+            if response is None and not child.exited() and self._state(caller, prefix) == goal:
                 continue    # done, but its reply was lost (seen under 10 % packet loss)
             if response is None or not response.success:
                 if child.proc.poll() is not None:   # died meanwhile: say how

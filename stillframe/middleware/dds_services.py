@@ -32,7 +32,7 @@ from cyclonedds.sub import DataReader
 
 from stillframe.contract import messages
 from stillframe.errors import InputError
-from stillframe.middleware import lifecycle, names, param_messages
+from stillframe.middleware import interface, lifecycle, names, param_messages
 from stillframe.middleware.cyclone_raw import ANY_SAMPLES, take_raw, write_raw
 from stillframe.middleware.dds_backend import DdsNode, dds_qos, delete, user_data_field
 from stillframe.middleware.qos import QoSProfile
@@ -194,13 +194,15 @@ class DdsClient(_Endpoints):
             time.sleep(0.02)
         return True
 
-    def call(self, request: Any, timeout_sec: float) -> Any | None:
-        """Send ``request`` and wait for its reply (None after ``timeout_sec``)."""
+    def call(self, request: Any, timeout_sec: float, *,
+             give_up: Callable[[], bool] | None = None) -> Any | None:
+        """Send ``request`` and wait for its reply (None after ``timeout_sec``, or once
+        ``give_up()`` holds, checked every :data:`.interface.GIVE_UP_CHECK_S`)."""
         self.seq += 1
         write_raw(self.writer, wrap(messages.serialize(request), self.guid, self.seq))
         deadline = time.monotonic() + timeout_sec
-        while (remaining := deadline - time.monotonic()) > 0:
-            self.waitset.wait(int(remaining * 1e9))
+        while (remaining := deadline - time.monotonic()) > 0 and not (give_up and give_up()):
+            self.waitset.wait(int(min(remaining, interface.GIVE_UP_CHECK_S) * 1e9))
             for data, _info in self.take():
                 guid, seq, cdr = unwrap(data)
                 if guid == self.guid and seq == self.seq:
@@ -265,16 +267,18 @@ class ServiceNode(DdsNode):
         return client
 
     def call_service(self, srv_type: str, service: str, request: Any,
-                     timeout_sec: float) -> Any | None:
+                     timeout_sec: float, *, give_up: Callable[[], bool] | None = None,
+                     ) -> Any | None:
         """Wait for ``service`` and call it once (a client made on first use); the response,
-        or None if the service did not appear or answer within ``timeout_sec``."""
+        or None if the service did not appear or answer within ``timeout_sec``, or once
+        ``give_up()`` holds while the reply is awaited."""
         name = self.resolve_service_name(service)
         client = next((c for c in self._clients if c.service_name == name), None)
         client = client or self.create_client(srv_type, name)
         deadline = time.monotonic() + timeout_sec
         if not client.wait_for_service(timeout_sec):
             return None
-        return client.call(request, max(deadline - time.monotonic(), 0.0))
+        return client.call(request, max(deadline - time.monotonic(), 0.0), give_up=give_up)
 
     def reader_gids(self) -> list[bytes]:
         return [*super().reader_gids(), *(s.reader.guid.bytes for s in self._endpoints())]

@@ -22,6 +22,8 @@ from stillframe.middleware.logger import Logger
 from stillframe.middleware.params import Parameter, SetCallback
 from stillframe.middleware.qos import QoSProfile
 
+#: how often a service call that may give up (``call_service(..., give_up=...)``) asks [s]
+GIVE_UP_CHECK_S = 0.1
 
 class MessageInfo(NamedTuple):
     """What a raw subscription learns about a sample besides its bytes (ns since the epoch;
@@ -104,7 +106,8 @@ class Node(Protocol):
     def get_parameter(self, name: str) -> Parameter: ...
     def add_on_set_parameters_callback(self, callback: SetCallback) -> None: ...
     def call_service(
-        self, srv_type: str, service: str, request: Any, timeout_sec: float
+        self, srv_type: str, service: str, request: Any, timeout_sec: float, *,
+        give_up: Callable[[], bool] | None = None,
     ) -> Any | None: ...
     def get_topic_names_and_types(self) -> list[tuple[str, list[str]]]: ...
     def get_publishers_info_by_topic(self, topic: str) -> list[TopicEndpointInfo]: ...

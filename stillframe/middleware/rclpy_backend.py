@@ -322,9 +322,12 @@ class RclpyNode:
         self._node.add_on_set_parameters_callback(on_set)
 
     def call_service(self, srv_type: str, service: str, request: Any,
-                     timeout_sec: float) -> Any | None:
+                     timeout_sec: float, *, give_up: Callable[[], bool] | None = None,
+                     ) -> Any | None:
         """Call ``service`` with rclpy's own client; the ``rosbags`` request and response
-        cross as CDR. None if the service did not appear or answer within ``timeout_sec``."""
+        cross as CDR. None if the service did not appear or answer within ``timeout_sec``, or
+        once ``give_up()`` holds while the reply is awaited (checked every
+        :data:`.interface.GIVE_UP_CHECK_S`)."""
         srv_class = ros_message_class(srv_type)
         client = self._node.create_client(srv_class, service)
         try:
@@ -332,7 +335,11 @@ class RclpyNode:
                 return None
             future = client.call_async(
                 deserialize_message(messages.serialize(request), srv_class.Request))
-            RclpyNode._wait.executor.spin_until_future_complete(future, timeout_sec=timeout_sec)
+            deadline = time.monotonic() + timeout_sec
+            while not future.done() and (remaining := deadline - time.monotonic()) > 0 and not (
+                    give_up and give_up()):
+                RclpyNode._wait.executor.spin_until_future_complete(
+                    future, timeout_sec=min(remaining, interface.GIVE_UP_CHECK_S))
             if not future.done():
                 return None
             return rosbags_message(future.result(), f"{srv_type}_Response")
