@@ -327,8 +327,8 @@ class SimNode(base.LoopNode):
         elif k == 0 and pacer.lockstep and (waited := (
                 time.monotonic_ns() - published_ns) * 1e-9) > self.params.lockstep_timeout_s:
             self.node.get_logger().info(
-                f"start-up: sample 0's command came after {waited:.3g} s (a reader that matched "
-                "its writer late got the sample when the writer repaired it); not a timeout")
+                f"start-up: sample 0's command came after {waited:.3g} s (a sample sent before "
+                "its reader matched comes when the writer repairs it); not a timeout")
         if self.delay.periods:
             control, late = self.delay.due(k)
             if late and not pacer.lockstep:

@@ -49,10 +49,10 @@ class Pacer:
 
         In lock-step, sample 0's round trip is the last step of the start-up handshake: DDS
         matches each side on its own, and no node sees from its side whether the remote reader
-        has matched its writer yet. A sample written before that is not lost on a reliable
-        topic, but it comes late, when the writer repairs it: 100–150 ms on Fast DDS on this
-        machine, and more than 2 s once in a CI run (two lock-step timeouts, numbers still
-        bit-identical). So sample 0 is awaited up to ``first_timeout_ns`` when it is set."""
+        has matched its writer yet. A sample the writer sent before that is not lost on a
+        reliable topic, but it comes late, when the writer repairs it: 100–150 ms on Fast DDS on
+        this machine, measured with a writer that publishes the moment it matches. So sample 0
+        is awaited up to ``first_timeout_ns`` when it is set."""
         if not self.lockstep:
             return self.due_ns(k + 1)
         first = self.first_timeout_ns if k == 0 else None

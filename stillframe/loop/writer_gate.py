@@ -40,7 +40,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from stillframe.middleware import api
-from stillframe.middleware.graph import UNNAMED_NODES
+from stillframe.middleware.graph import UNNAMED_NODES, fqn
 
 #: why a sample is refused for its writer
 REASONS = ("second_writer", "unknown_writer", "ambiguous_writer")
@@ -69,7 +69,7 @@ def graph_writers(node: api.Node, topic: str) -> GraphWriters:
     it ``_NODE_NAMESPACE_UNKNOWN_/_NODE_NAME_UNKNOWN_`` until the participant's node list comes)."""
     def writers() -> list[tuple[bytes, str]]:
         return [(ep.endpoint_gid, "/" if ep.node_name in UNNAMED_NODES
-                 else f"{ep.node_namespace.rstrip('/')}/{ep.node_name}")
+                 else fqn(ep.node_namespace, ep.node_name))
                 for ep in node.get_publishers_info_by_topic(topic)]
 
     return writers

@@ -20,6 +20,7 @@ from stillframe.contract import messages, topics
 from stillframe.fidelity.auto_model import resolve_model
 from stillframe.loop.writer_gate import same_node
 from stillframe.middleware import api
+from stillframe.middleware.graph import fqn
 from stillframe.middleware.qos import (
     PROFILES,
     Durability,
@@ -222,7 +223,7 @@ def wait_for_peers(node: api.Node, ready: Callable[[], bool],
 
 def has_publisher(node: api.Node, topic: str, peer: str) -> bool:
     """The graph shows a publisher of ``topic`` in node ``peer`` (the reader side of a match)."""
-    return any(same_node(endpoint_node(ep), peer)
+    return any(same_node(fqn(ep.node_namespace, ep.node_name), peer)
                for ep in node.get_publishers_info_by_topic(topic))
 
 
@@ -246,10 +247,6 @@ def hears_peer(node: api.Node, subscription: api.Subscription, peer: str) -> boo
                               subscription.get_publisher_count(), peer)
 
 
-def endpoint_node(ep: api.TopicEndpointInfo) -> str:
-    """The ``/namespace/name`` of an endpoint's node."""
-    return f"{ep.node_namespace.rstrip('/')}/{ep.node_name}"
-
-
 def _matched_with_peer(remote: list[api.TopicEndpointInfo], matched: int, peer: str) -> bool:
-    return matched >= len(remote) and any(same_node(endpoint_node(ep), peer) for ep in remote)
+    return matched >= len(remote) and any(
+        same_node(fqn(ep.node_namespace, ep.node_name), peer) for ep in remote)
