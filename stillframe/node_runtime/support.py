@@ -233,7 +233,7 @@ def reaches_peer(node: api.Node, publisher: api.Publisher, peer: str) -> bool:
 
     A matched count alone is not enough in lock-step, nor is any named node: the recorder
     subscribes every topic at once and can match before the peer does; a tool's idle publisher
-    on the command topic did the same for the simulator's reader (CI, and 2 of 25 runs beside a
+    on the command topic did the same for the simulator's reader (CI, and 3 of 30 runs beside a
     writing peer under load). The loop then started before the peer's side had matched, and
     the first command was lost (a lock-step timeout)."""
     return _matched_with_peer(node.get_subscriptions_info_by_topic(publisher.topic_name),
