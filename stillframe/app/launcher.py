@@ -254,7 +254,7 @@ class ProcessSet:
         child.stop_requested = True
         for sig, grace in ((signal.SIGINT, child.grace_s), (signal.SIGTERM, STOP_GRACE_S),
                            (signal.SIGKILL, STOP_GRACE_S)):
-            if child.proc.poll() is not None:
+            if child.exited():
                 break
             with contextlib.suppress(ProcessLookupError):
                 child.proc.send_signal(sig)
@@ -576,7 +576,7 @@ class Launcher:
             if response is None and not child.exited() and self._state(caller, prefix) == goal:
                 continue    # done, but its reply was lost (seen under 10 % packet loss)
             if response is None or not response.success:
-                if child.proc.poll() is not None:   # died meanwhile: say how
+                if child.exited():   # died meanwhile: say how
                     raise NodeDiedError.exited(child)
                 raise NodeDiedError(name, f"{transition} " + (
                     "failed" if response else "not answered"), child.tail)
@@ -612,7 +612,7 @@ class Launcher:
 
         deadline = time.monotonic() + timeout_s
         while not any(text in line for line in child.tail):
-            if child.proc.poll() is not None:
+            if child.exited():
                 raise NodeDiedError.exited(child)
             if not api.ok():
                 raise KeyboardInterrupt
