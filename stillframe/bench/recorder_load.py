@@ -23,7 +23,7 @@ import tempfile
 import threading
 import time
 from collections import deque
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -68,11 +68,11 @@ class RecorderRun:
 
 
 @contextlib.contextmanager
-def recorder_process(bag: Path, backend: str) -> Iterator[RecorderRun]:
-    """``stillframe record -o BAG --all --use-sim-time`` on ``backend``, ready (subscribed to
-    discovery) when entered; stopped with SIGINT on exit, its CPU time taken."""
+def recorder_process(bag: Path, backend: str, args: Sequence[str] = ()) -> Iterator[RecorderRun]:
+    """``stillframe record -o BAG --all --use-sim-time ARGS`` on ``backend``, ready (subscribed
+    to discovery) when entered; stopped with SIGINT on exit, its CPU time taken."""
     argv = [sys.executable, "-m", "stillframe", "record", "-o", str(bag), "--all",
-            "--use-sim-time"]
+            "--use-sim-time", *args]
     env = dict(os.environ, STILLFRAME_RMW=backend, PYTHONUNBUFFERED="1")
     proc = subprocess.Popen(argv, env=env, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
                             stderr=subprocess.STDOUT, text=True, errors="replace")

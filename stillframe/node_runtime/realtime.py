@@ -116,6 +116,16 @@ def run_idle(idle: bool = True) -> None:
             os.sched_setscheduler(tid, policy, os.sched_param(0))
 
 
+def run_nicer(increment: int) -> None:
+    """Lower every thread of this process by ``increment`` nice levels (0..19; a process may do so
+    without privilege), and so the threads they start later: ``os.nice`` changes only the calling
+    thread on Linux, and imports start some (OpenBLAS's workers) before a process can ask."""
+    for tid in _threads():
+        with contextlib.suppress(ProcessLookupError):     # ended meanwhile
+            os.setpriority(os.PRIO_PROCESS, tid,
+                           min(19, os.getpriority(os.PRIO_PROCESS, tid) + increment))
+
+
 def _loop_threads() -> list[int]:
     """The main thread and the DDS threads a sample passes through (:data:`RECEIVE_THREADS`).
     Cyclone's housekeeping threads (``gc``, ``tev``) stay SCHED_OTHER: with every thread at

@@ -34,7 +34,7 @@ from stillframe.middleware.names import is_hidden
 from stillframe.middleware.taps import TappedPublisher, tap_topic
 from stillframe.monitor.dashboard import ERROR_KEYS
 from stillframe.monitor.foxglove_client import Capture, capture, churn, stall
-from tests.support.middleware import child_env, isolate_domain
+from tests.support.middleware import child_env, isolate_domain, scheduling
 
 pytestmark = pytest.mark.slow
 
@@ -431,14 +431,15 @@ def test_tracked_modes_reach_the_dashboard_and_foxglove(ros_domain: int) -> None
 
 def test_idle_monitor_runs_at_sched_idle(ros_domain: int) -> None:
     """``--idle`` (what ``launch --monitor`` passes unless ``--no-monitor-idle``): the process
-    is SCHED_IDLE once it is ready, so every thread it started inherited the policy."""
+    is SCHED_IDLE once it is ready, so every thread it started inherited the policy (and the
+    default niceness, 10)."""
     monitor, _, _ = start_monitor("--idle")
     try:
-        threads = list((Path("/proc") / str(monitor.pid) / "task").iterdir())
-        policies = {os.sched_getscheduler(int(t.name)) for t in threads}
+        threads = os.listdir(f"/proc/{monitor.pid}/task")
+        seen = scheduling(monitor.pid)
     finally:
         stop_monitor(monitor)
-    assert len(threads) > 1 and policies == {os.SCHED_IDLE}
+    assert len(threads) > 1 and seen == {(os.SCHED_IDLE, 10)}    # and its default --nice 10
 
 
 @pytest.mark.parametrize(("args", "message"), [

@@ -69,3 +69,15 @@ def finish(proc: subprocess.Popen, timeout: float = 30) -> tuple[str, str]:
         proc.kill()
         _out, err = proc.communicate()
         raise AssertionError(f"process did not finish; stderr: {err[-2000:]}") from None
+
+
+def scheduling(pid: int) -> set[tuple[int, int]]:
+    """(policy, niceness) of each thread of ``pid`` (threads that end meanwhile left out)."""
+    out = set()
+    for task in os.listdir(f"/proc/{pid}/task"):
+        try:
+            tid = int(task)
+            out.add((os.sched_getscheduler(tid), os.getpriority(os.PRIO_PROCESS, tid)))
+        except (ProcessLookupError, FileNotFoundError):
+            continue
+    return out

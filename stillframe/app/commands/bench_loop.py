@@ -34,11 +34,11 @@ import struct
 import sys
 import tempfile
 import time
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
-from stillframe.app.commands.common import add_json_argument, emit_json, seconds
+from stillframe.app.commands.common import NICE_RANGE, add_json_argument, emit_json, seconds, whole
 from stillframe.app.commands.launch import (
     add_compose_arguments,
     add_realtime_arguments,
@@ -87,6 +87,11 @@ def register(benches: argparse._SubParsersAction) -> None:
                              "--all` beside it: the recorder's CPU time per message, its "
                              "messages/s, whether the bag is complete, its write path against "
                              "a bare mcap writer")
+    parser.add_argument("--recorder-nice", type=whole(*NICE_RANGE), default=0, metavar="N",
+                        help="with --record: the recorder's `--nice N` (default 0, as ros2 bag "
+                             "record runs)")
+    parser.add_argument("--recorder-idle", action="store_true",
+                        help="with --record: the recorder at SCHED_IDLE (its `--idle`)")
     parser.add_argument("--repeat", type=int, default=1, metavar="N",
                         help="run each real-time run (and its recorded / tracked twin) N times, "
                              "the twins one after the other (default 1)")
@@ -100,6 +105,12 @@ def register(benches: argparse._SubParsersAction) -> None:
     add_realtime_arguments(parser)
     add_json_argument(parser)
     parser.set_defaults(func=run)
+
+
+def recorder_priority(args: argparse.Namespace) -> list[str]:
+    """The recorder's priority arguments from ``--recorder-nice`` and ``--recorder-idle``."""
+    return (["--nice", str(args.recorder_nice)] if args.recorder_nice else []) + (
+        ["--idle"] if args.recorder_idle else [])
 
 
 def realtime_overrides(rate_hz: float, duration: float) -> list[str]:
@@ -181,18 +192,20 @@ def observer_realtime(practices: str) -> Iterator[None]:
 def realtime(rate_hz: float, duration: float, out: Path, backend: str,
              rt: tuple[str, list[int]] = ("", []),
              monitor_args: list[str] | None = None, compose: str = "",
-             probe: bool = False, record: bool = False, track: bool = False) -> dict[str, Any]:
+             probe: bool = False, record: Sequence[str] | None = None,
+             track: bool = False) -> dict[str, Any]:
     """The LQG scene in real time at ``rate_hz`` through the nodes on ``backend`` (composed as
     ``compose`` says): latency and deadline figures seen by an observer here;
     ``monitor_args`` start a monitor beside them; ``probe``: cyclictest beside them;
-    ``record``: ``stillframe record --all`` beside them (:mod:`stillframe.bench.recorder_load`);
+    ``record``: ``stillframe record --all`` beside them with these further arguments
+    (:mod:`stillframe.bench.recorder_load`; None: no recorder);
     ``track``: the modal tracker beside them (:mod:`stillframe.app.tracking`)."""
     log = LatencyLog(round(1e9 / rate_hz))
     others = CpuShare()
     children_before = children_cpu_s()
     with (observer_backend(backend), observer_realtime(rt[0]),
           stall_probe() if probe else contextlib.nullcontext() as stalls,
-          recorder_process(out / "bag", backend) if record
+          recorder_process(out / "bag", backend, record) if record is not None
           else contextlib.nullcontext() as recorder):
         result = run_scene(SCENE, realtime_overrides(rate_hz, duration), out=out, mode="realtime",
                            prepare=observe(log), backends=[backend], rt=rt[0], rt_cpus=rt[1],
@@ -211,7 +224,7 @@ def realtime(rate_hz: float, duration: float, out: Path, backend: str,
             "sim_overruns": e.get("overruns"), "sim_deadline_misses": e.get("deadline_misses"),
             "steps": e["steps"], "degraded_samples": e.get("degraded_samples"),
             "load_1min": os.getloadavg()[0], **share, "nodes_cpu_s": nodes_cpu_s,
-            "record": record, **recorded,
+            "record": record is not None, "recorder_args": " ".join(record or []), **recorded,
             "track": track, "tracker_updates": len(result.tracked_modes),
             **(stalls.summary if stalls else {})}
 
@@ -345,7 +358,7 @@ def recorder_table(rows: list[dict[str, Any]]) -> str:
          "p99 [us]", "recorder CPU [us/msg]", "recorded [msg/s]", "per-step in bag / steps",
          "holes", "write path [msg/CPU s]", "bare mcap [msg/CPU s]", "nodes' CPU [s]",
          "misses / unrecorded", "holds"],
-        [[r["backend"], f"{r['rate_hz']:g}", "yes" if r["record"] else "no",
+        [[r["backend"], f"{r['rate_hz']:g}", (r["recorder_args"] or "yes") if r["record"] else "no",
           r["sim_deadline_misses"], "-" if r["degraded_samples"] is None else r["degraded_samples"],
           f"{r['p50_us']:.0f}", f"{r['p99_us']:.0f}",
           recorded(r, "recorder_cpu_us_per_msg", ".1f"), recorded(r, "recorder_msgs_per_s", ".0f"),
@@ -404,7 +417,8 @@ def run(args: argparse.Namespace) -> int:
     with tempfile.TemporaryDirectory(prefix="stillframe-bench-loop-") as tmp:
         for backend in backends:
             for rate, repeat in ((rate, i) for rate in rates for i in range(args.repeat)):
-                variants = [("", {})] + ([("recorded", {"record": True})] if args.record
+                variants = [("", {})] + ([("recorded", {"record": recorder_priority(args)})]
+                                          if args.record
                                           else []) + ([("tracked", {"track": True})]
                                                       if args.track else [])
                 for name, extra in variants:

@@ -78,6 +78,33 @@ def whole(low: int, high: int) -> Any:
     return parse
 
 
+#: the niceness values a process may take without privilege (``nice(1)``)
+NICE_RANGE = (0, 19)
+
+
+def add_priority_arguments(parser: argparse.ArgumentParser, *, nice: int, who: str) -> None:
+    """``--nice N`` (default ``nice``) and ``--idle``: how far ``who`` (a process beside the loop:
+    the monitor, the recorder) steps back from the loop's nodes for CPU time; neither needs
+    privilege (:func:`apply_priority`)."""
+    parser.add_argument("--nice", type=whole(*NICE_RANGE), default=nice, metavar="N",
+                        help=f"lower the {who}'s CPU priority by N, 0..19 (default {nice}), so "
+                             "that under load the loop's nodes come first")
+    parser.add_argument("--idle", action="store_true",
+                        help=f"run the {who} at SCHED_IDLE: only on CPU time the loop leaves "
+                             f"unused (on a busy machine the {who} then falls behind, never the "
+                             "loop)")
+
+
+def apply_priority(args: argparse.Namespace) -> None:
+    """Apply ``--nice`` and ``--idle`` to this process; call it before the middleware starts
+    its threads, which inherit both."""
+    from stillframe.node_runtime.realtime import run_idle, run_nicer
+
+    run_nicer(args.nice)
+    if args.idle:
+        run_idle()
+
+
 def check_output(option: str, path: str | Path | None) -> None:
     """Before any work: InputError when ``path`` (a file or directory to write) cannot be made:
     an ancestor that is a file, or a directory that cannot be written (read-only)."""

@@ -10,10 +10,10 @@ from __future__ import annotations
 
 import argparse
 import math
-import os
 import sys
 from pathlib import Path
 
+from stillframe.app.commands.common import add_priority_arguments, apply_priority
 from stillframe.errors import InputError
 
 READY_LINE = "Monitor ready"
@@ -45,12 +45,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                         help="scene whose command limits the dashboard draws")
     parser.add_argument("--set", dest="overrides", action="append", default=[],
                         metavar="KEY=VALUE", help="with --scene: override a scene value")
-    parser.add_argument("--nice", type=int, default=10, metavar="N",
-                        help="lower the monitor's CPU priority by N (default 10), so that under "
-                             "load the loop's nodes come first")
-    parser.add_argument("--idle", action="store_true",
-                        help="run at SCHED_IDLE: only on CPU time the loop leaves unused (the "
-                             "monitor then gives up data, never loop time, on a busy machine)")
+    add_priority_arguments(parser, nice=10, who="monitor")
     parser.add_argument("--use-sim-time", action="store_true",
                         help="follow /clock: stamps and the Foxglove time cursor in sim time")
     parser.set_defaults(func=run)
@@ -67,18 +62,13 @@ def run(args: argparse.Namespace) -> int:
     from stillframe.middleware.names import resolve_topic
     from stillframe.monitor.dashboard import Dashboard, Limits, serve
     from stillframe.monitor.foxglove_bridge import FoxgloveBridge
-    from stillframe.node_runtime.realtime import run_idle
 
     _check_port("--port", args.port)
     _check_port("--dashboard-port", args.dashboard_port)
     if not (args.max_rate >= 0 and math.isfinite(args.max_rate)):
         raise InputError(f"--max-rate {args.max_rate:g}: expected a rate >= 0 Hz (0: every "
                          "sample)")
-    if not 0 <= args.nice <= 19:
-        raise InputError(f"--nice {args.nice}: expected 0..19")
-    os.nice(args.nice)
-    if args.idle:   # before the middleware's and the SDK's threads start: they inherit it
-        run_idle()
+    apply_priority(args)    # before the middleware's and the SDK's threads start
     limits = Limits()
     if args.scene is not None:
         scene = load_scene(args.scene, args.overrides)

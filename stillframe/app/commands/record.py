@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from stillframe.app.commands.common import check_output
+from stillframe.app.commands.common import add_priority_arguments, apply_priority, check_output
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -21,6 +21,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     parser.add_argument("--node-name", default=None, metavar="NAME",
                         help="the recorder's node name, as ros2 bag record's (default: "
                              "stillframe_recorder, the name a launch's simulator waits for)")
+    add_priority_arguments(parser, nice=0, who="recorder")
     parser.set_defaults(func=run)
 
 
@@ -39,6 +40,7 @@ def run(args: argparse.Namespace) -> int:
         raise InputError("give either --all or one or more TOPICs")
     topics = [resolve_topic(t) for t in args.topics]
     name = RECORDER_NODE if args.node_name is None else validate_node_name(args.node_name)
+    apply_priority(args)    # before the middleware starts its threads: they inherit it
     # the node stays on system time: the recorder stamps on /clock itself (recording.recorder)
     node = create_node(name, argv=sys.argv[:1])
     try:
