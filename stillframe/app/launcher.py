@@ -135,6 +135,22 @@ def recorded_default(specs: Sequence[str], *, record: bool, mode: str,
     return "dds"
 
 
+#: the recorder's priority arguments beside a recorded real-time run above
+#: :data:`RECORDED_DDS_ABOVE_HZ` when ``--recorder-nice`` / ``--recorder-idle`` are not given
+RECORDED_RECORDER_ARGS: tuple[str, ...] = ()
+
+
+def recorder_priority(given: Sequence[str] | None, *, mode: str, rate_hz: float) -> list[str]:
+    """The recorder's ``stillframe record`` priority arguments: ``given`` when the user gave
+    any, else :data:`RECORDED_RECORDER_ARGS` for a real-time run above
+    :data:`RECORDED_DDS_ABOVE_HZ`, else none (``ros2 bag record``'s priority)."""
+    if given is not None:
+        return list(given)
+    if mode == "realtime" and rate_hz > RECORDED_DDS_ABOVE_HZ:
+        return list(RECORDED_RECORDER_ARGS)
+    return []
+
+
 def parse_backends(specs: Sequence[str], default: str | None = None) -> dict[str, str]:
     """The backend of every child from ``--backend`` values: ``BACKEND`` for all, then
     ``NAME=BACKEND`` for one (later values win); unset children use ``default``, else the
@@ -362,6 +378,9 @@ class LaunchOptions:
     record_dir: Path | None = None
     lockstep_timeout_s: float | None = None
     record_topics: list[str] = field(default_factory=list)
+    #: the recorder's priority arguments (``stillframe record --nice N --idle``); None: the
+    #: launch's default (:func:`recorder_priority`)
+    recorder_args: list[str] | None = None
     backends: list[str] = field(default_factory=list)
     #: ``stillframe monitor`` arguments (ports) to run the monitor beside the nodes; None: none
     monitor_args: list[str] | None = None
@@ -408,6 +427,14 @@ class Launcher:
                 f"real-time loop at {self.scene.sensors.rate_hz:g} Hz misses far fewer deadlines "
                 f"on {default} than on {api.backend_name()} (docs/realtime.md); "
                 f"--backend {api.backend_name()} keeps {api.backend_name()}")
+        self.recorder_args = recorder_priority(options.recorder_args, mode=options.mode,
+                                               rate_hz=self.scene.sensors.rate_hz)
+        if options.record_dir is not None and options.recorder_args is None \
+                and self.recorder_args:
+            self.status.echo(
+                f"recorder at {' '.join(self.recorder_args)}: a recorded real-time loop at "
+                f"{self.scene.sensors.rate_hz:g} Hz keeps its deadlines with the recorder below "
+                "it (docs/realtime.md); --recorder-nice 0 runs it as ros2 bag record does")
         self.processes = ProcessSet(self.status.echo)
         self.node = api.create_node(running_graph.launcher_name(), argv=["stillframe"])
         self.created = time.monotonic()
@@ -436,6 +463,7 @@ class Launcher:
         if o.record_dir is not None:
             children.append(("recorder", [sys.executable, "-m", "stillframe", "record", "-o",
                                           str(o.record_dir), "--use-sim-time",
+                                          *self.recorder_args,
                                           *(o.record_topics or ["--all"])]))
         if o.monitor_args is not None:
             children.append(("monitor", [sys.executable, "-m", "stillframe", "monitor",
@@ -678,7 +706,8 @@ def run_scene(scene: Path, overrides: Sequence[str] = (), *, out: Path,
               monitor_args: Sequence[str] | None = None, compose: str = "",
               rt: str = "", rt_cpus: Sequence[int] = (),
               hosts: dict[str, list[str]] | None = None,
-              resolved: Scene | None = None, track: bool = False) -> LaunchResult:
+              resolved: Scene | None = None, track: bool = False,
+              recorder_args: Sequence[str] | None = None) -> LaunchResult:
     """Launch ``scene`` with ``overrides`` through the three nodes to its end; sim_node's
     results go to ``out`` (``result.json``, ``result.npz``, beside the resolved scene the nodes
     read); ``record`` records ``record_topics`` (default all) into a bag; ``backends`` are
@@ -688,15 +717,17 @@ def run_scene(scene: Path, overrides: Sequence[str] = (), *, out: Path,
     ``rt_cpus`` are the loop nodes' real-time practices and CPUs
     (:mod:`stillframe.node_runtime.realtime`); ``hosts`` runs nodes on other hosts
     (:attr:`LaunchOptions.hosts`); ``resolved``: the scene already loaded and resolved (else it
-    is done here, once); ``track`` adds the modal tracker. ``prepare(node)`` may subscribe the
-    launcher's hidden node to more topics before the children start."""
+    is done here, once); ``track`` adds the modal tracker; ``recorder_args``: the recorder's
+    priority (:func:`recorder_priority`). ``prepare(node)`` may subscribe the launcher's hidden
+    node to more topics before the children start."""
     out.mkdir(parents=True, exist_ok=True)
     launcher = Launcher(LaunchOptions(
         scene, list(overrides), resolved, mode=mode, result_file=out / "result.json",
         record_dir=record, lockstep_timeout_s=lockstep_timeout_s,
         record_topics=list(record_topics), backends=list(backends),
         monitor_args=None if monitor_args is None else list(monitor_args), compose=compose,
-        rt=rt, rt_cpus=list(rt_cpus), hosts=dict(hosts or {}), track=track))
+        rt=rt, rt_cpus=list(rt_cpus), hosts=dict(hosts or {}), track=track,
+        recorder_args=None if recorder_args is None else list(recorder_args)))
     if prepare is not None:
         prepare(launcher.node)
     return launcher.run()

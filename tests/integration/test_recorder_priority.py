@@ -51,3 +51,42 @@ def test_a_niceness_out_of_range_is_one_line_and_exit_2(tmp_path: Path) -> None:
     assert done.stderr.strip().splitlines() == [
         "stillframe record: error: argument --nice: 20: must lie in [0, 19] "
         "(see stillframe record -h)"]
+
+
+def recorder_pid(bag: Path) -> int | None:
+    """The process recording into ``bag`` (``stillframe record -o BAG``), if one runs."""
+    for entry in os.listdir("/proc"):
+        try:
+            argv = Path(f"/proc/{entry}/cmdline").read_bytes().split(b"\0")
+        except (OSError, ValueError):
+            continue
+        if b"record" in argv and str(bag).encode() in argv:
+            return int(entry)
+    return None
+
+
+def test_launch_hands_its_recorder_the_priority_asked(tmp_path: Path, ros_domain: int) -> None:
+    """``launch --record DIR --recorder-nice 5 --recorder-idle``: the recorder the launcher
+    starts runs every thread at SCHED_IDLE and nice 5 (the kernel's view), and the run ends
+    with its bag closed."""
+    bag = tmp_path / "bag"
+    launch = subprocess.Popen(
+        [sys.executable, "-m", "stillframe", "launch", "thesis_lqg", "--set", "duration=2",
+         "--set", "controller.start=1", "--set", "evaluation.window=0.5", "--record", str(bag),
+         "--recorder-nice", "5", "--recorder-idle", "--json"],
+        env=child_env(), cwd=REPO_ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+        text=True)
+    seen: set[tuple[int, int]] = set()
+    try:
+        deadline = time.monotonic() + 120
+        while not seen and launch.poll() is None and time.monotonic() < deadline:
+            if (pid := recorder_pid(bag)) is not None and list(bag.glob("*.mcap")):
+                seen = scheduling(pid)
+            time.sleep(0.05)
+        _, err = finish(launch, timeout=300)
+    finally:
+        if launch.poll() is None:
+            launch.kill()
+    assert launch.returncode == 0, err[-2000:]
+    assert seen == {(os.SCHED_IDLE, 5)}, seen
+    assert (bag / "metadata.yaml").is_file()

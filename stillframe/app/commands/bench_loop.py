@@ -38,11 +38,13 @@ from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
-from stillframe.app.commands.common import NICE_RANGE, add_json_argument, emit_json, seconds, whole
+from stillframe.app.commands.common import add_json_argument, emit_json, seconds
 from stillframe.app.commands.launch import (
     add_compose_arguments,
     add_realtime_arguments,
+    add_recorder_arguments,
     realtime_arguments,
+    recorder_args,
 )
 from stillframe.app.launcher import run_scene
 from stillframe.app.run_verdict import watchdog_zeros
@@ -87,11 +89,7 @@ def register(benches: argparse._SubParsersAction) -> None:
                              "--all` beside it: the recorder's CPU time per message, its "
                              "messages/s, whether the bag is complete, its write path against "
                              "a bare mcap writer")
-    parser.add_argument("--recorder-nice", type=whole(*NICE_RANGE), default=0, metavar="N",
-                        help="with --record: the recorder's `--nice N` (default 0, as ros2 bag "
-                             "record runs)")
-    parser.add_argument("--recorder-idle", action="store_true",
-                        help="with --record: the recorder at SCHED_IDLE (its `--idle`)")
+    add_recorder_arguments(parser)
     parser.add_argument("--repeat", type=int, default=1, metavar="N",
                         help="run each real-time run (and its recorded / tracked twin) N times, "
                              "the twins one after the other (default 1)")
@@ -105,12 +103,6 @@ def register(benches: argparse._SubParsersAction) -> None:
     add_realtime_arguments(parser)
     add_json_argument(parser)
     parser.set_defaults(func=run)
-
-
-def recorder_priority(args: argparse.Namespace) -> list[str]:
-    """The recorder's priority arguments from ``--recorder-nice`` and ``--recorder-idle``."""
-    return (["--nice", str(args.recorder_nice)] if args.recorder_nice else []) + (
-        ["--idle"] if args.recorder_idle else [])
 
 
 def realtime_overrides(rate_hz: float, duration: float) -> list[str]:
@@ -417,7 +409,7 @@ def run(args: argparse.Namespace) -> int:
     with tempfile.TemporaryDirectory(prefix="stillframe-bench-loop-") as tmp:
         for backend in backends:
             for rate, repeat in ((rate, i) for rate in rates for i in range(args.repeat)):
-                variants = [("", {})] + ([("recorded", {"record": recorder_priority(args)})]
+                variants = [("", {})] + ([("recorded", {"record": recorder_args(args) or []})]
                                           if args.record
                                           else []) + ([("tracked", {"track": True})]
                                                       if args.track else [])

@@ -23,6 +23,7 @@ from pathlib import Path
 from typing import Any
 
 from stillframe.app.commands.common import (
+    NICE_RANGE,
     add_scene_arguments,
     check_output,
     emit_json,
@@ -71,6 +72,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     parser.add_argument("--record-topic", dest="record_topics", action="append", default=[],
                         metavar="TOPIC", help="with --record: record only this topic "
                                               "(repeatable)")
+    add_recorder_arguments(parser)
     parser.add_argument("--monitor", action="store_true",
                         help="also run `stillframe monitor --dashboard` (Foxglove bridge and "
                              "live dashboard on 127.0.0.1)")
@@ -172,6 +174,17 @@ def add_realtime_arguments(parser: argparse.ArgumentParser) -> None:
                         help="with --rt affinity: pin the loop nodes to these CPUs (e.g. 1)")
 
 
+def add_recorder_arguments(parser: argparse.ArgumentParser) -> None:
+    """``--recorder-nice N`` and ``--recorder-idle`` (shared with ``bench loop``)."""
+    parser.add_argument("--recorder-nice", type=whole(*NICE_RANGE), default=None, metavar="N",
+                        help="with --record: the recorder's CPU priority lowered by N, 0..19 "
+                             "(`stillframe record --nice`; default 0, or what docs/realtime.md "
+                             f"gives a real-time run above {RECORDED_DDS_ABOVE_HZ:g} Hz)")
+    parser.add_argument("--recorder-idle", action="store_true",
+                        help="with --record: the recorder at SCHED_IDLE (`stillframe record "
+                             "--idle`); either option replaces the default")
+
+
 def realtime_arguments(args: argparse.Namespace) -> tuple[str, list[int]]:
     """The checked ``--rt`` practices and ``--rt-cpus`` CPUs."""
     from stillframe.node_runtime.realtime import parse_cpus, parse_practices
@@ -222,6 +235,14 @@ def print_partial(evaluation: dict[str, Any], scene: Scene, args: argparse.Names
     print(f"scene {scene.name}: partial result (complete: false): {'; '.join(kept)}")
 
 
+def recorder_args(args: argparse.Namespace) -> list[str] | None:
+    """The recorder's priority arguments from ``--recorder-nice`` and ``--recorder-idle``; None
+    when neither was given (the launch's default)."""
+    if args.recorder_nice is None and not args.recorder_idle:
+        return None
+    return ["--nice", str(args.recorder_nice or 0)] + (["--idle"] if args.recorder_idle else [])
+
+
 def monitor_args(args: argparse.Namespace) -> list[str]:
     """``stillframe monitor``'s arguments from launch's ``--monitor-*`` options."""
     rate = [] if args.monitor_max_rate is None else ["--max-rate", f"{args.monitor_max_rate:g}"]
@@ -241,6 +262,8 @@ def run(args: argparse.Namespace) -> int:
     rt, rt_cpus = realtime_arguments(args)
     if args.record_topics and args.record is None:
         raise InputError("--record-topic needs --record DIR")
+    if recorder_args(args) is not None and args.record is None:
+        raise InputError("--recorder-nice and --recorder-idle need --record DIR")
     with tempfile.TemporaryDirectory(prefix="stillframe-launch-") as tmp:
         try:
             with hosts_if(args.netns, args.netns_prefix, args.fault) as hosts:
@@ -250,7 +273,7 @@ def run(args: argparse.Namespace) -> int:
                                    record_topics=args.record_topics, backends=args.backends,
                                    monitor_args=monitor_args(args) if args.monitor else None,
                                    compose=args.compose, rt=rt, rt_cpus=rt_cpus, hosts=hosts,
-                                   track=args.track)
+                                   track=args.track, recorder_args=recorder_args(args))
         except NodeDiedError as exc:
             code = report_death("launch", exc)
             if exc.partial is not None:
