@@ -115,20 +115,25 @@ def node_command(package: str, scene: Path, overrides: Sequence[str], mode: str,
     return argv
 
 
-#: a real-time run recorded above this rate goes on ``dds`` unless the user chose the backend
-#: (issue 32, docs/realtime.md "Recording beside a 1 kHz loop"): recorded at 1 kHz on a quiet
-#: 2-core machine, the loop on ``rclpy`` went degraded (most samples zeroed), on ``dds`` not;
-#: at the thesis's 32 Hz both hold. Between the two it was not measured.
-RECORDED_DDS_ABOVE_HZ = 200.0
+#: a real-time run recorded above this rate gets :data:`RECORDED_PRACTICES`,
+#: :data:`RECORDED_RECORDER_ARGS` and ``dds`` where the user did not choose (issue 32,
+#: docs/realtime.md "Recording beside a 1 kHz loop"): measured at 1 kHz on a quiet 2-core
+#: machine; at the thesis's 32 Hz a recorded loop holds without them. Between the two it was not
+#: measured.
+RECORDED_ABOVE_HZ = 200.0
+#: the loop nodes' real-time practices in such a run, unless ``--rt`` says otherwise: with them
+#: and the recorder below the loop, the recorded loop missed fewer deadlines than the unrecorded
+#: one without them, on both backends (docs/realtime.md)
+RECORDED_PRACTICES = "all"
 
 
 def recorded_default(specs: Sequence[str], *, record: bool, mode: str,
                      rate_hz: float) -> str | None:
     """The backend for the children the ``--backend`` values ``specs`` leave unset, when it is
     not the process's default: ``dds`` for a recorded real-time run above
-    :data:`RECORDED_DDS_ABOVE_HZ` when neither ``STILLFRAME_RMW`` nor a ``--backend`` for every
+    :data:`RECORDED_ABOVE_HZ` when neither ``STILLFRAME_RMW`` nor a ``--backend`` for every
     child chose one; None otherwise."""
-    if (not record or mode != "realtime" or rate_hz <= RECORDED_DDS_ABOVE_HZ
+    if (not fast_recorded(record=record, mode=mode, rate_hz=rate_hz)
             or any("=" not in spec for spec in specs)
             or os.environ.get(api.BACKEND_ENV, "").strip() or api.backend_name() == "dds"):
         return None
@@ -136,19 +141,34 @@ def recorded_default(specs: Sequence[str], *, record: bool, mode: str,
 
 
 #: the recorder's priority arguments beside a recorded real-time run above
-#: :data:`RECORDED_DDS_ABOVE_HZ` when ``--recorder-nice`` / ``--recorder-idle`` are not given
-RECORDED_RECORDER_ARGS: tuple[str, ...] = ()
+#: :data:`RECORDED_ABOVE_HZ` when ``--recorder-nice`` / ``--recorder-idle`` are not given: at
+#: SCHED_IDLE it never takes a CPU from the loop's nodes (the loop paced by the clock leaves it
+#: most of the machine: 8 – 17 us of CPU per message)
+RECORDED_RECORDER_ARGS: tuple[str, ...] = ("--idle",)
+
+
+def fast_recorded(*, record: bool, mode: str, rate_hz: float) -> bool:
+    """Whether a run is a recorded real-time run above :data:`RECORDED_ABOVE_HZ`."""
+    return record and mode == "realtime" and rate_hz > RECORDED_ABOVE_HZ
+
+
+def practices_default(given: str | None, *, record: bool, mode: str, rate_hz: float) -> str:
+    """The loop nodes' practices: ``given`` (``--rt``) when the user gave it, else
+    :data:`RECORDED_PRACTICES` for a recorded real-time run above :data:`RECORDED_ABOVE_HZ`,
+    else none (issue 10: opt-in)."""
+    if given is not None:
+        return given
+    return RECORDED_PRACTICES if fast_recorded(record=record, mode=mode, rate_hz=rate_hz) else ""
 
 
 def recorder_priority(given: Sequence[str] | None, *, mode: str, rate_hz: float) -> list[str]:
     """The recorder's ``stillframe record`` priority arguments: ``given`` when the user gave
     any, else :data:`RECORDED_RECORDER_ARGS` for a real-time run above
-    :data:`RECORDED_DDS_ABOVE_HZ`, else none (``ros2 bag record``'s priority)."""
+    :data:`RECORDED_ABOVE_HZ`, else none (``ros2 bag record``'s priority)."""
     if given is not None:
         return list(given)
-    if mode == "realtime" and rate_hz > RECORDED_DDS_ABOVE_HZ:
-        return list(RECORDED_RECORDER_ARGS)
-    return []
+    return list(RECORDED_RECORDER_ARGS) if fast_recorded(
+        record=True, mode=mode, rate_hz=rate_hz) else []
 
 
 def parse_backends(specs: Sequence[str], default: str | None = None) -> dict[str, str]:
@@ -387,8 +407,9 @@ class LaunchOptions:
     #: nodes in one process (``container_node``, intra-process handover): "" none, "pair"
     #: the estimator and the controller, "all" the simulator too
     compose: str = ""
-    #: the loop nodes' real-time practices and CPUs (stillframe.node_runtime.realtime; "": none)
-    rt: str = ""
+    #: the loop nodes' real-time practices and CPUs (stillframe.node_runtime.realtime; "": none;
+    #: None: the launch's default, :func:`practices_default`)
+    rt: str | None = None
     rt_cpus: list[int] = field(default_factory=list)
     #: a command prefix per node that runs it on another host (``ip netns exec``,
     #: :mod:`stillframe.app.netns_lab`; the container on the estimator's); a node not named
@@ -427,14 +448,21 @@ class Launcher:
                 f"real-time loop at {self.scene.sensors.rate_hz:g} Hz misses far fewer deadlines "
                 f"on {default} than on {api.backend_name()} (docs/realtime.md); "
                 f"--backend {api.backend_name()} keeps {api.backend_name()}")
+        rate_hz, record = self.scene.sensors.rate_hz, options.record_dir is not None
         self.recorder_args = recorder_priority(options.recorder_args, mode=options.mode,
-                                               rate_hz=self.scene.sensors.rate_hz)
-        if options.record_dir is not None and options.recorder_args is None \
-                and self.recorder_args:
+                                               rate_hz=rate_hz)
+        self.rt = practices_default(options.rt, record=record, mode=options.mode,
+                                    rate_hz=rate_hz)
+        if options.rt is None and self.rt:
             self.status.echo(
-                f"recorder at {' '.join(self.recorder_args)}: a recorded real-time loop at "
-                f"{self.scene.sensors.rate_hz:g} Hz keeps its deadlines with the recorder below "
-                "it (docs/realtime.md); --recorder-nice 0 runs it as ros2 bag record does")
+                f"real-time practices '{self.rt}' for the loop nodes: a recorded real-time "
+                f"loop at {rate_hz:g} Hz keeps its deadlines with them (docs/realtime.md); "
+                "--rt none runs without them")
+        if record and options.recorder_args is None and self.recorder_args:
+            self.status.echo(
+                f"recorder run as `stillframe record {' '.join(self.recorder_args)}`: below "
+                "the loop's nodes, it takes no CPU they want (docs/realtime.md); "
+                "--recorder-nice 0 runs it as ros2 bag record does")
         self.processes = ProcessSet(self.status.echo)
         self.node = api.create_node(running_graph.launcher_name(), argv=["stillframe"])
         self.created = time.monotonic()
@@ -476,7 +504,8 @@ class Launcher:
         nodes = self.nodes()
         # the pair's container takes no real-time parameters (it composes two nodes' loops);
         # with the simulator in it, the simulator's practices are the process's
-        rt = {"rt": o.rt, **({"rt_cpus": o.rt_cpus} if o.rt_cpus else {})} if o.rt else {}
+        rt = ({"rt": self.rt, **({"rt_cpus": o.rt_cpus} if o.rt_cpus else {})}
+              if self.rt else {})
         sim = self.simulator()
         children += [(name, [*o.hosts.get("estimator_node" if name == CONTAINER else name, []),
                              *node_command(name, scene, [], o.mode, params={
@@ -704,7 +733,7 @@ def run_scene(scene: Path, overrides: Sequence[str] = (), *, out: Path,
               prepare: Callable[[Any], None] | None = None,
               record_topics: Sequence[str] = (), backends: Sequence[str] = (),
               monitor_args: Sequence[str] | None = None, compose: str = "",
-              rt: str = "", rt_cpus: Sequence[int] = (),
+              rt: str | None = None, rt_cpus: Sequence[int] = (),
               hosts: dict[str, list[str]] | None = None,
               resolved: Scene | None = None, track: bool = False,
               recorder_args: Sequence[str] | None = None) -> LaunchResult:
@@ -715,11 +744,11 @@ def run_scene(scene: Path, overrides: Sequence[str] = (), *, out: Path,
     ``stillframe monitor`` beside the nodes; ``compose`` runs nodes in one process
     (``container_node``: "pair" the estimator and controller, "all" every node); ``rt`` and
     ``rt_cpus`` are the loop nodes' real-time practices and CPUs
-    (:mod:`stillframe.node_runtime.realtime`); ``hosts`` runs nodes on other hosts
-    (:attr:`LaunchOptions.hosts`); ``resolved``: the scene already loaded and resolved (else it
-    is done here, once); ``track`` adds the modal tracker; ``recorder_args``: the recorder's
-    priority (:func:`recorder_priority`). ``prepare(node)`` may subscribe the launcher's hidden
-    node to more topics before the children start."""
+    (:mod:`stillframe.node_runtime.realtime`; ``rt`` None: :func:`practices_default`);
+    ``hosts`` runs nodes on other hosts (:attr:`LaunchOptions.hosts`); ``resolved``: the scene
+    already loaded and resolved (else it is done here, once); ``track`` adds the modal tracker;
+    ``recorder_args``: the recorder's priority (:func:`recorder_priority`). ``prepare(node)``
+    may subscribe the launcher's hidden node to more topics before the children start."""
     out.mkdir(parents=True, exist_ok=True)
     launcher = Launcher(LaunchOptions(
         scene, list(overrides), resolved, mode=mode, result_file=out / "result.json",

@@ -65,14 +65,16 @@ class RealtimeOptions:
 
 
 def parse_practices(text: str) -> frozenset[str]:
-    """``all``, a comma list of :data:`PRACTICES`, or empty; InputError otherwise."""
+    """``all``, ``none``, a comma list of :data:`PRACTICES`, or empty; InputError otherwise."""
     words = {w.strip() for w in text.split(",") if w.strip()}
     if words == {"all"}:
         return frozenset(PRACTICES)
+    if words == {"none"}:
+        return frozenset()
     unknown = words - set(PRACTICES)
     if unknown:
         raise InputError(f"parameter 'rt': unknown practice(s) {', '.join(sorted(unknown))} "
-                         f"(expected 'all' or a comma list of {', '.join(PRACTICES)})")
+                         f"(expected 'all', 'none' or a comma list of {', '.join(PRACTICES)})")
     return frozenset(words)
 
 

@@ -158,8 +158,9 @@ def test_launch_record_onto_a_full_disk_ends_in_one_line_with_the_bag_closed(
 def test_launch_record_of_a_1khz_realtime_run_goes_on_dds_and_says_so(
         tmp_path: Path, ros_domain: int) -> None:
     """Issue 32 item 4: with rclpy the process's default and no ``--backend``, a recorded
-    real-time run at 1 kHz puts every child on dds, says so in one line at start, and
-    ``--backend recorder=rclpy`` keeps that one role on rclpy."""
+    real-time run at 1 kHz puts every child on dds, runs the loop nodes with the real-time
+    practices and the recorder at SCHED_IDLE, says each in one line at start, and ``--backend
+    recorder=rclpy`` keeps that one role on rclpy."""
     env = {k: v for k, v in child_env().items() if k != api.BACKEND_ENV}
     bag = tmp_path / "bag"
     done = subprocess.run(
@@ -170,6 +171,12 @@ def test_launch_record_of_a_1khz_realtime_run_goes_on_dds_and_says_so(
     lines = done.stderr.splitlines()
     said = [line for line in lines if line.startswith("backend dds for every child")]
     assert len(said) == 1 and "1024 Hz" in said[0] and "--backend rclpy keeps rclpy" in said[0]
+    practices = [line for line in lines if line.startswith("real-time practices 'all'")]
+    assert len(practices) == 1 and "--rt none runs without them" in practices[0]
+    recorder = [line for line in lines if line.startswith("recorder run as")]
+    assert len(recorder) == 1 and "`stillframe record --idle`" in recorder[0]
+    for node in ("sim_node", "estimator_node", "controller_node"):     # each node applied them
+        assert any(line.startswith(f"[{node}]") and "real-time: " in line for line in lines)
     chosen = next(line for line in lines if "; backends " in line)
     assert "recorder rclpy" in chosen
     for node in ("sim_node", "estimator_node", "controller_node"):

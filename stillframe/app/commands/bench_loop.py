@@ -100,7 +100,7 @@ def register(benches: argparse._SubParsersAction) -> None:
                         help="run cyclictest (rt-tests, root) beside each real-time run: "
                              "the machine's stalls of 1 ms or more, and its worst")
     add_compose_arguments(parser)
-    add_realtime_arguments(parser)
+    add_realtime_arguments(parser, launch=False)
     add_json_argument(parser)
     parser.set_defaults(func=run)
 
@@ -397,7 +397,8 @@ def run(args: argparse.Namespace) -> int:
     backends = args.backends or [b for b in api.BACKENDS if b == "dds" or api.has_rclpy()]
     for backend in backends:
         api.check_backend(backend, f"bench loop --backend {backend}")
-    rt = realtime_arguments(args)
+    practices, cpus = realtime_arguments(args)
+    rt = (practices or "", cpus)     # the bench measures what it is given: no default
     rates = args.rates or list(RATES_HZ)
     if not all(1.0 <= r <= 10_000.0 for r in rates):
         raise InputError(f"bench loop: --rate must be 1..10000 Hz, got {rates}")

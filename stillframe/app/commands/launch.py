@@ -31,7 +31,7 @@ from stillframe.app.commands.common import (
     seconds,
     whole,
 )
-from stillframe.app.launcher import MODES, RECORDED_DDS_ABOVE_HZ
+from stillframe.app.launcher import MODES, RECORDED_ABOVE_HZ
 from stillframe.app.net_faults import FAULTS
 from stillframe.app.run_verdict import verdict
 from stillframe.config.scene import Scene
@@ -52,7 +52,7 @@ def add_launch_arguments(parser: argparse.ArgumentParser) -> None:
                         metavar="[NODE=]BACKEND",
                         help="middleware of every node (dds or rclpy; default: STILLFRAME_RMW, "
                              "else rclpy where installed, but dds for a --record'ed real-time "
-                             f"run above {RECORDED_DDS_ABOVE_HZ:g} Hz), or of one node: "
+                             f"run above {RECORDED_ABOVE_HZ:g} Hz), or of one node: "
                              "sim_node=dds "
                              "(repeatable; also estimator_node, controller_node, recorder)")
 
@@ -164,12 +164,15 @@ def add_compose_arguments(parser: argparse.ArgumentParser) -> None:
                             "one chain of calls, still published on every topic")
 
 
-def add_realtime_arguments(parser: argparse.ArgumentParser) -> None:
-    """``--rt [PRACTICES]`` and ``--rt-cpus`` (shared with ``bench loop``)."""
-    parser.add_argument("--rt", nargs="?", const="all", default="", metavar="PRACTICES",
-                        help="real-time mode for the loop nodes: 'all' (the default with --rt) "
-                             "or a comma list of mlock, gc, fifo, affinity, spin, cpu_latency "
-                             "(docs/realtime.md)")
+def add_realtime_arguments(parser: argparse.ArgumentParser, *, launch: bool = True) -> None:
+    """``--rt [PRACTICES]`` and ``--rt-cpus`` (shared with ``bench loop``, which has no default
+    practices: ``launch`` False)."""
+    default = (f"none, but all for a --record'ed real-time run above {RECORDED_ABOVE_HZ:g} Hz"
+               if launch else "none")
+    parser.add_argument("--rt", nargs="?", const="all", default=None, metavar="PRACTICES",
+                        help="real-time mode for the loop nodes: 'all' (the default with --rt), "
+                             "'none', or a comma list of mlock, gc, fifo, affinity, spin, "
+                             f"cpu_latency (docs/realtime.md; default {default})")
     parser.add_argument("--rt-cpus", default="", metavar="CPUS",
                         help="with --rt affinity: pin the loop nodes to these CPUs (e.g. 1)")
 
@@ -179,17 +182,18 @@ def add_recorder_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--recorder-nice", type=whole(*NICE_RANGE), default=None, metavar="N",
                         help="with --record: the recorder's CPU priority lowered by N, 0..19 "
                              "(`stillframe record --nice`; default 0, or what docs/realtime.md "
-                             f"gives a real-time run above {RECORDED_DDS_ABOVE_HZ:g} Hz)")
+                             f"gives a real-time run above {RECORDED_ABOVE_HZ:g} Hz)")
     parser.add_argument("--recorder-idle", action="store_true",
                         help="with --record: the recorder at SCHED_IDLE (`stillframe record "
                              "--idle`); either option replaces the default")
 
 
-def realtime_arguments(args: argparse.Namespace) -> tuple[str, list[int]]:
-    """The checked ``--rt`` practices and ``--rt-cpus`` CPUs."""
+def realtime_arguments(args: argparse.Namespace) -> tuple[str | None, list[int]]:
+    """The checked ``--rt`` practices (None: not given, the launch's default) and ``--rt-cpus``
+    CPUs."""
     from stillframe.node_runtime.realtime import parse_cpus, parse_practices
 
-    practices = parse_practices(args.rt)
+    practices = None if args.rt is None else parse_practices(args.rt)
     try:
         cpus = [int(c) for c in args.rt_cpus.split(",") if c.strip()]
     except ValueError:
@@ -197,7 +201,8 @@ def realtime_arguments(args: argparse.Namespace) -> tuple[str, list[int]]:
             from None
     if cpus and not practices:
         raise InputError("--rt-cpus needs --rt")
-    return ",".join(sorted(practices)), list(parse_cpus(cpus)) if cpus else []
+    return (None if practices is None else ",".join(sorted(practices)),
+            list(parse_cpus(cpus)) if cpus else [])
 
 
 #: how ``stillframe record`` states a bag failure (a full disk), which ``launch`` passes on

@@ -1,7 +1,9 @@
-"""Issue 32 item 4: a recorded real-time run above ``RECORDED_DDS_ABOVE_HZ`` puts every child
-``--backend`` does not name on ``dds`` when the process's default is ``rclpy``; the user's
-``--backend`` for all, or ``STILLFRAME_RMW``, keeps the choice; lock-step, unrecorded and slow
-runs keep the default."""
+"""Issue 32 item 4: a recorded real-time run above ``RECORDED_ABOVE_HZ`` puts every child
+``--backend`` does not name on ``dds`` when the process's default is ``rclpy``, runs the loop
+nodes with the real-time practices and the recorder at SCHED_IDLE; the user's ``--backend`` for
+all (or ``STILLFRAME_RMW``), ``--rt`` and ``--recorder-nice`` / ``--recorder-idle`` keep their
+choice; lock-step, unrecorded and slow runs keep the defaults (no practices, the recorder as
+``ros2 bag record`` runs it)."""
 
 from __future__ import annotations
 
@@ -10,13 +12,16 @@ import pytest
 from stillframe.app import launcher
 from stillframe.app.launcher import (
     BACKEND_TARGETS,
-    RECORDED_DDS_ABOVE_HZ,
+    RECORDED_ABOVE_HZ,
     parse_backends,
+    practices_default,
     recorded_default,
+    recorder_priority,
 )
 from stillframe.middleware import api
+from stillframe.node_runtime.realtime import PRACTICES, parse_practices
 
-FAST = RECORDED_DDS_ABOVE_HZ * 5
+FAST = RECORDED_ABOVE_HZ * 5
 
 
 @pytest.fixture
@@ -40,7 +45,7 @@ def test_a_recorded_fast_realtime_run_goes_on_dds_except_where_the_user_said() -
     (["rclpy"], True, "realtime", FAST),                  # the user chose for every child
     ([], False, "realtime", FAST),                        # not recorded
     ([], True, "lockstep", FAST),                         # not paced by the clock
-    ([], True, "realtime", RECORDED_DDS_ABOVE_HZ),        # slow enough for rclpy
+    ([], True, "realtime", RECORDED_ABOVE_HZ),        # slow enough for rclpy
 ])
 def test_the_default_stays_otherwise(specs: list[str], record: bool, mode: str,
                                      rate_hz: float) -> None:
@@ -52,3 +57,27 @@ def test_stillframe_rmw_keeps_the_users_backend(monkeypatch: pytest.MonkeyPatch)
     monkeypatch.setenv(api.BACKEND_ENV, "rclpy")
     monkeypatch.setattr(launcher.api, "backend_name", lambda: "rclpy")
     assert recorded_default([], record=True, mode="realtime", rate_hz=FAST) is None
+
+
+def test_a_recorded_fast_realtime_run_gets_the_practices_and_an_idle_recorder() -> None:
+    assert parse_practices(practices_default(None, record=True, mode="realtime",
+                                             rate_hz=FAST)) == frozenset(PRACTICES)
+    assert recorder_priority(None, mode="realtime", rate_hz=FAST) == ["--idle"]
+
+
+@pytest.mark.parametrize(("record", "mode", "rate_hz"), [
+    (False, "realtime", FAST),                  # not recorded
+    (True, "lockstep", FAST),                   # not paced by the clock
+    (True, "realtime", RECORDED_ABOVE_HZ),      # slow enough
+])
+def test_otherwise_no_practices_and_the_recorder_as_ros2_bag_runs_it(
+        record: bool, mode: str, rate_hz: float) -> None:
+    assert practices_default(None, record=record, mode=mode, rate_hz=rate_hz) == ""
+    if record:
+        assert recorder_priority(None, mode=mode, rate_hz=rate_hz) == []
+
+
+def test_the_users_choice_is_kept() -> None:
+    assert practices_default("", record=True, mode="realtime", rate_hz=FAST) == ""  # --rt none
+    assert practices_default("fifo", record=True, mode="realtime", rate_hz=FAST) == "fifo"
+    assert recorder_priority(["--nice", "0"], mode="realtime", rate_hz=FAST) == ["--nice", "0"]

@@ -33,6 +33,7 @@ def test_practices_and_cpus_are_parsed_and_bad_ones_refused() -> None:
     assert parse_practices("all") == frozenset(PRACTICES)
     assert parse_practices(" gc, fifo ") == {"gc", "fifo"}
     assert parse_practices("") == frozenset()
+    assert parse_practices("none") == frozenset()
     with pytest.raises(InputError, match=r"unknown practice.*turbo"):
         parse_practices("gc,turbo")
     assert parse_cpus([-1]) == ()
