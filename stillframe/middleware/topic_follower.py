@@ -20,8 +20,12 @@ only when named, as ``ros2 bag record -a`` leaves them out.
 
 A follower made with ``poll_period_s`` reads by polling (the middleware's polled
 subscriptions): nothing runs per sample; every ``poll_period_s`` it takes what waits in each
-reader (at most the request's KEEP_LAST depth) and hands it on. With depth 1 that is the newest
-sample per period, a live view decimated before any work is done on it.
+reader (at most the request's KEEP_LAST depth) and hands it on, taking again until the reader
+is empty (a recorder loses nothing). One made with ``newest_only`` as well (a live view, whose
+request keeps depth 1) takes once per period and hands on only the newest sample taken: a view
+decimated before any work is done on it, at most one sample a period. (Taking until empty let a
+sample that arrived while the one before was handed on through in the same period: 152 of a
+200 Hz topic in 3.0 s at ``--max-rate 50``, measured.)
 """
 
 from __future__ import annotations
@@ -55,11 +59,13 @@ class TopicFollower:
     :meth:`on_new_topic` says where each topic's samples go."""
 
     def __init__(self, node: Any, topics: Sequence[str] = (), on_demand: bool = False,
-                 poll_period_s: float | None = None, read_taps: bool = False) -> None:
+                 poll_period_s: float | None = None, read_taps: bool = False, *,
+                 newest_only: bool = False) -> None:
         self.node = node
         self.topics = set(topics)
         self.on_demand = on_demand
         self.polled = poll_period_s is not None
+        self.newest_only = newest_only
         self.read_taps = read_taps
         #: topic -> (type, publishers' offers, callback) of every topic taken
         self._found: dict[str, tuple[str, list[QoSProfile], RawCallback]] = {}
@@ -126,15 +132,19 @@ class TopicFollower:
                 for info in self.node.get_publishers_info_by_topic(tap_topic(topic))]
 
     def poll(self) -> int:
-        """Hand on what waits in each polled subscription (taking until it is empty); the
-        number of samples handed on."""
+        """Hand on what waits in each polled subscription (taking until it is empty; with
+        ``newest_only`` the newest sample of one take); the number of samples handed on."""
         handed = 0
         for topic, (_, sub) in list(self._subscriptions.items()):
             callback = self._found[topic][2]
             while taken := sub.take():
+                if self.newest_only:
+                    taken = taken[-1:]
                 handed += len(taken)
                 for data, info in taken:
                     callback(data, info)
+                if self.newest_only:
+                    break
         return handed
 
     def _usable(self, topic: str, types: list[str], publishers: list[Any]) -> bool:

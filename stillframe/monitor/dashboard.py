@@ -141,7 +141,7 @@ class Dashboard(TopicFollower):
         self.tracked_modes: list[dict[str, Any]] = []
         self.tracked_updates = 0
         super().__init__(node, list(self._by_topic), poll_period_s=1.0 / rate_hz,
-                         read_taps=rate_hz <= TAP_RATE_HZ)
+                         read_taps=rate_hz <= TAP_RATE_HZ, newest_only=True)
         node.create_subscription(DIAGNOSTICS.type_name, DIAGNOSTICS.name, self._on_diagnostics,
                                  DIAGNOSTICS_QOS)
         node.create_subscription("std_msgs/msg/Float64MultiArray", f"{namespace}/{MODES_TOPIC}",

@@ -71,7 +71,8 @@ class FoxgloveBridge(TopicFollower):
         self.every_sample = max_rate_hz == 0
         super().__init__(node, topics, on_demand=True, poll_period_s=(
             EVERY_SAMPLE_POLL_S if self.every_sample else 1.0 / max_rate_hz),
-            read_taps=not self.every_sample and max_rate_hz <= TAP_RATE_HZ)
+            read_taps=not self.every_sample and max_rate_hz <= TAP_RATE_HZ,
+            newest_only=not self.every_sample)
         self.server = foxglove.start_server(
             name="stillframe monitor", host=host, port=port, context=self.context,
             server_listener=self, capabilities=[foxglove.Capability.Time],
