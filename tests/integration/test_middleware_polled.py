@@ -76,9 +76,9 @@ def test_a_live_view_hands_on_the_newest_sample_once_a_poll(
         assert api.spin_until(node, lambda: pub.get_subscription_count() == 2, 10)
         for i in range(20):
             pub.publish(messages.new("std_msgs/msg/UInt32", data=i))
-        # both readers are the one node's: what one has received, the other has
 
         def all_handed() -> bool:
+            """Both readers are the one node's: what one has received, the other has."""
             every.poll()
             return sum(map(len, every.polls)) >= 20
 
