@@ -4,8 +4,8 @@ refined models' fit decides, and a disagreement between criteria is reported.
 The Hankel gap (largest σ_n / σ_{n+1}, :func:`stillframe.identification.era.auto_order`) gives n.
 The ERA
 realizations of orders n - 2, n and n + 2 (those within the Hankel matrix's numerical rank) are
-each refined (:func:`stillframe.identification.pem.refine_prediction_error`), and the order of
-least BIC
+each refined as output-error models (:func:`stillframe.identification.pem.refine_prediction_error`),
+and among those whose refinement converged (all, if none did) the order of least BIC
 (Ljung §16.4, eq. 16.33 with penalty ``d ln N``) is kept: a spurious mode that the gap let in
 costs more parameters than it gains in fit, a weak physical mode that the gap left out gains more.
 Where AIC (penalty ``2 d``) prefers a larger candidate whose model holds a well-determined mode the
@@ -78,12 +78,13 @@ def refine_candidates(factorization: HankelFactorization, gain_markov: Array, r:
         gain = observer_gain(real.A, real.C, gain_markov)
         try:
             fits[n] = refine_prediction_error(real.A, real.B[:, :r], real.C, real.D[:, :r],
-                                              gain, u, y, dt)
+                                              gain, u, y, dt, innovations=False)
         except InputError:
             if n == hankel_order:
                 raise
     scores = {n: bic(fit, samples) for n, fit in fits.items()}
-    order = min(scores, key=scores.__getitem__)
+    converged = [n for n, fit in fits.items() if fit.converged] or list(fits)
+    order = min(converged, key=scores.__getitem__)
     while order > hankel_order and order - 2 in fits and only_uncertain_added(
             fits[order - 2], fits[order]):
         order -= 2

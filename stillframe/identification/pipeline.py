@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from numbers import Integral, Real
 from typing import Literal
 
@@ -48,11 +48,12 @@ from stillframe.identification.era import (
 from stillframe.identification.modal import ModalTable, modal_parameters
 from stillframe.identification.okid import minimum_samples, observer_gain, okid
 from stillframe.identification.order_selection import refine_candidates
-from stillframe.identification.pem import Refinement, refine_prediction_error
+from stillframe.identification.pem import Refinement, in_units, refine_prediction_error
 from stillframe.identification.quality import (
     left_out_modes,
     mode_consistency,
     persists,
+    phase_warnings,
     quality_warnings,
     uncertain_modes,
 )
@@ -281,7 +282,8 @@ def identify(
                 choice = refine_candidates(fac, gain_markov[: p + 1], r, u, y, float(dt), chosen)
                 refinement = choice.refinement
             else:
-                refinement = refine_prediction_error(A, B, C, D, G, u, y, float(dt))
+                refinement = refine_prediction_error(A, B, C, D, G, u, y, float(dt),
+                                                     innovations=False)
         except IdentificationError as exc:  # e.g. noise-free data: OKID's predictor diverges
             notes.append(f"{NOT_REFINED}; the refinement could not start ({exc})")
     if refinement is not None:
@@ -296,7 +298,8 @@ def identify(
             consistent = mode_consistency(fac, modes, chosen, float(dt))
         left_out = left_out_modes(fac, modes, chosen, float(dt))
         uncertain = uncertain_modes(modes, refinement.frequency_ci_hz, refinement.damping_ci)
-        notes += residual_warnings(y, refinement.errors)
+        notes += list(refinement.notes) + residual_warnings(y, refinement.errors)
+        notes += phase_warnings(modes, refinement.phase_std(reference_sensor), outputs)
     units = _Units(u_scale, y_scale)
     B, C, D = units.input_matrix(B), units.output_matrix(C), units.feedthrough(D)
     G = None if G is None else units.gain(G)
@@ -308,7 +311,7 @@ def identify(
         consistent=consistent,
         warnings=tuple(notes + quality_warnings(modes, consistent, chosen, gap, left_out,
                                                 uncertain)),
-        refinement=None if refinement is None else units.refinement(refinement, A, C, dt,
+        refinement=None if refinement is None else units.refinement(refinement, dt,
                                                                     reference_sensor),
     )
 
@@ -335,9 +338,5 @@ class _Units:
     def gain(self, G: Array) -> Array:
         return G / self.y_scale[None, :]
 
-    def refinement(self, ref: Refinement, A: Array, C: Array, dt: float,
-                   reference: int | None) -> Refinement:
-        return replace(ref, B=self.input_matrix(ref.B), C=self.output_matrix(ref.C),
-                       D=self.feedthrough(ref.D), K=self.gain(ref.K),
-                       errors=ref.errors * self.y_scale[None, :],
-                       modes=modal_parameters(A, C, float(dt), reference=reference))
+    def refinement(self, ref: Refinement, dt: float, reference: int | None) -> Refinement:
+        return in_units(ref, self.u_scale, self.y_scale, dt, reference)

@@ -25,8 +25,8 @@ def _errors(abar: Array, bbar: Array, C: Array, D: Array, x0: Array, u: Array, y
     batch, n = x0.shape
     samples, m = y.shape
     r = u.shape[1]
-    x = np.empty(n)
-    nxt = np.empty(n)
+    x = np.empty(n, dtype=out.dtype)
+    nxt = np.empty(n, dtype=out.dtype)
     for b in range(batch):
         x[:] = x0[b]
         for k in range(samples):
@@ -38,7 +38,7 @@ def _errors(abar: Array, bbar: Array, C: Array, D: Array, x0: Array, u: Array, y
                     s -= D[b, i, j] * u[k, j]
                 out[b, k, i] = s
             for i in range(n):
-                s = 0.0
+                s = abar[b, i, 0] * 0.0
                 for j in range(n):
                     s += abar[b, i, j] * x[j]
                 for j in range(r):
@@ -56,7 +56,8 @@ def prediction_errors(A: Array, B: Array, C: Array, D: Array, K: Array, x0: Arra
     ``y (N, m)``."""
     abar = A - K @ C
     bbar = np.concatenate([B - K @ D, K], axis=2)
-    out = np.empty((x0.shape[0], y.shape[0], y.shape[1]))
+    dtype = np.result_type(abar, bbar, C, D, x0, u, y)
+    out = np.empty((x0.shape[0], y.shape[0], y.shape[1]), dtype=dtype)
     with np.errstate(over="ignore", invalid="ignore"):
         _errors(np.ascontiguousarray(abar), np.ascontiguousarray(bbar), np.ascontiguousarray(C),
                 np.ascontiguousarray(D), np.ascontiguousarray(x0), np.ascontiguousarray(u),

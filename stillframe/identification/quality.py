@@ -35,7 +35,7 @@ from numpy.typing import NDArray
 
 from stillframe.identification.era import HankelFactorization
 from stillframe.identification.modal import ModalTable, modal_parameters
-from stillframe.identification.pem import Refinement, aic
+from stillframe.identification.pem import Z95, Refinement, aic
 from stillframe.identification.stabilization import matching_modes
 
 GAP_WARNING = 15.0
@@ -46,6 +46,9 @@ STABLE_RUN = 3
 FREQUENCY_CI_LIMIT, DAMPING_CI_LIMIT = 0.01, 0.30
 """Relative half-widths of the 95 % intervals beyond which a mode is called uncertain."""
 FREQUENCY_TOL, DAMPING_TOL, MAC_MIN = 0.01, 0.2, 0.9
+PHASE_CI_LIMIT_DEG = 45.0
+"""A mode-shape phase whose 95 % interval is wider than ± this cannot tell an in-phase component
+from one in quadrature: it is reported as not determined."""
 
 
 def mode_consistency(factorization: HankelFactorization, modes: ModalTable, order: int,
@@ -99,8 +102,25 @@ def uncertain_modes(modes: ModalTable, frequency_ci_hz: np.ndarray, damping_ci: 
     """Per mode: is its 95 % interval wider than the limits (module docstring)?"""
     f_half = 0.5 * (frequency_ci_hz[:, 1] - frequency_ci_hz[:, 0])
     z_half = 0.5 * (damping_ci[:, 1] - damping_ci[:, 0])
-    return ((f_half > FREQUENCY_CI_LIMIT * modes.frequency_hz)
+    return (~np.isfinite(f_half) | ~np.isfinite(z_half)
+            | (f_half > FREQUENCY_CI_LIMIT * modes.frequency_hz)
             | (z_half > DAMPING_CI_LIMIT * np.abs(modes.damping_ratio)))
+
+
+def phase_warnings(modes: ModalTable, phase_std: NDArray[np.float64], outputs: list[str]
+                   ) -> list[str]:
+    """The outputs whose mode-shape phase the record does not determine: a 95 % half-width
+    beyond :data:`PHASE_CI_LIMIT_DEG` (``phase_std (m, modes)`` in rad, NaN: no interval)."""
+    half = np.degrees(Z95 * phase_std)
+    listed = [f"mode {k + 1} ({modes.frequency_hz[k]:.4g} Hz) at {outputs[i]} "
+              f"({np.degrees(np.angle(modes.shapes[i, k])):+.0f} ± {half[i, k]:.0f} deg)"
+              for k in range(half.shape[1]) for i in range(half.shape[0])
+              if np.isfinite(half[i, k]) and half[i, k] > PHASE_CI_LIMIT_DEG]
+    if not listed:
+        return []
+    return [f"mode-shape phases the record does not determine (95 % interval wider than "
+            f"± {PHASE_CI_LIMIT_DEG:g} deg; the modal amplitude there is within its noise): "
+            + "; ".join(listed)]
 
 
 def dropped_by_bic(chosen: Refinement, larger: Refinement, samples: int) -> str | None:
