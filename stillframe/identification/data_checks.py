@@ -8,6 +8,10 @@ channel at fault (``TOPIC:FIELD`` when the record came from a bag):
 - a constant channel, all zero included: the peak-to-peak range is at most
   :data:`CONSTANT_TOLERANCE` of the largest magnitude (relative, so a channel in any units passes
   or fails alike);
+- more than one sample in :data:`ABSURD_SHARE` of a channel that no physical signal makes
+  (:func:`absurd_samples`: robust statistics, median and MAD of the channel and of its first
+  difference); fewer are replaced by linear interpolation and named (channel, time, value) in a
+  warning, so the record stays a uniformly sampled series for the state-space methods;
 - a record too short for the order asked (the caller gives the samples the method needs);
 - an input that is not persistently exciting of the model order ``n`` (Ljung 1999, §13.2): the
   sample covariance of ``n`` successive input samples, ``R_n = Φᵀ Φ / N`` with
@@ -37,6 +41,13 @@ Array = NDArray[np.float64]
 
 CONSTANT_TOLERANCE = 1e-12
 """A channel whose peak-to-peak range is at most this share of its largest magnitude is constant."""
+ABSURD_FACTOR = 1e8
+"""A sample this many robust scales from its channel's median, and as many of its first
+difference's from its neighbours, is absurd: beyond the dynamic range of any converter over its
+noise floor (a 24-bit converter spans 2^24 ≈ 1.7e7 steps), so a fault (a flipped bit, a
+corrupt record), not a signal. A hammer blow stands a few thousand noise levels above the rest."""
+ABSURD_SHARE = 1000
+"""At most one sample in this many per channel is replaced by interpolation; more are refused."""
 EXCITATION_TOLERANCE = 1e-10
 """Smallest eigenvalue of the input covariance ``R_n``, relative to its largest, accepted."""
 
@@ -75,6 +86,56 @@ def check_values(data: Array, names: Sequence[str]) -> None:
         if float(np.ptp(column)) <= CONSTANT_TOLERANCE * peak:
             raise IdentificationError(f"channel {name} is constant ({column[0]:.6g}): it carries "
                                       "no information")
+
+
+def absurd_samples(column: Array) -> NDArray[np.int_]:
+    """Indices of samples that no physical signal makes (module docstring): beyond
+    :data:`ABSURD_FACTOR` robust scales (1.4826 · MAD) of the channel from its median, and
+    beyond as many of its first difference's from the neighbouring samples. A channel whose MAD
+    is zero (a pulse on zeros) has no robust scale and is not judged."""
+    dev = np.abs(column - np.median(column))
+    scale = 1.4826 * np.median(dev)
+    diff = np.diff(column)
+    diff_scale = 1.4826 * np.median(np.abs(diff - np.median(diff)))
+    if not (scale > 0 and diff_scale > 0):
+        return np.zeros(0, dtype=int)
+    with np.errstate(over="ignore", invalid="ignore"):
+        jump = np.minimum(np.abs(np.diff(column, prepend=column[1])),
+                          np.abs(np.diff(column[::-1], prepend=column[-2])[::-1]))
+        far = (dev > ABSURD_FACTOR * scale) & (jump > ABSURD_FACTOR * diff_scale)
+    return np.flatnonzero(far)
+
+
+def repair_absurd(data: Array, names: Sequence[str], dt: float) -> tuple[Array, list[str]]:
+    """Replace each absurd sample (:func:`absurd_samples`) by linear interpolation between its
+    channel's nearest sound samples, and say so; refuse a channel with more than
+    :func:`allowed_absurd` of them (the record is then broken, not glitched)."""
+    data = data.copy()
+    notes = []
+    for j, name in enumerate(names):
+        bad = absurd_samples(data[:, j])
+        if not bad.size:
+            continue
+        listed = ", ".join(f"t = {k * dt:.6g} s: {data[k, j]:.6g}" for k in bad[:5])
+        more = f" and {bad.size - 5} more" if bad.size > 5 else ""
+        if bad.size > allowed_absurd(data.shape[0]):
+            raise IdentificationError(
+                f"channel {name}: {bad.size} samples no physical signal makes (more than "
+                f"{ABSURD_FACTOR:.0e} robust scales from the rest: {listed}{more}); more than "
+                f"{allowed_absurd(data.shape[0])} in {data.shape[0]}: the record is broken")
+        good = np.setdiff1d(np.arange(data.shape[0]), bad)
+        data[bad, j] = np.interp(bad, good, data[good, j])
+        notes.append(f"channel {name}: replaced {bad.size} sample(s) no physical signal makes "
+                     f"by linear interpolation ({listed}{more}; more than {ABSURD_FACTOR:.0e} "
+                     "robust scales from the rest)")
+    return data, notes
+
+
+def allowed_absurd(samples: int) -> int:
+    """The most absurd samples per channel that interpolation may replace: one in
+    :data:`ABSURD_SHARE` (at least one). Each replaced sample is a guess of the state-space
+    record the methods need; beyond that share the guesses would shape the model."""
+    return max(1, samples // ABSURD_SHARE)
 
 
 def check_length(samples: int, needed: int, order: int, names: Sequence[str], why: str) -> None:

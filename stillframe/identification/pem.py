@@ -53,6 +53,7 @@ every mode of a search that did not converge.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -74,14 +75,16 @@ predictor is unstable, are set to this: a step the search must refuse."""
 COMPLEX_STEP = 1e-20
 """Imaginary step of the complex-step Jacobian (any value far below ``sqrt(eps)`` gives the
 derivative to round-off; the parameters are of order one after the scaling)."""
-FTOL = 1e-13
+FTOL = 1e-15
 """MINPACK's ftol: stop when the actual and predicted relative reductions of the cost are both
 below this."""
-XTOL = 1e-11
+XTOL = 1e-13
 """MINPACK's xtol: stop when the step is below this share of the scaled parameter vector."""
-GTOL = 1e-11
+GTOL = 1e-13
 """MINPACK's gtol: stop when the cosine between the residual vector and every Jacobian column is
 below this (the gradient vanishes relative to the scales of J and of the residuals)."""
+POLISH_STEPS = 3
+"""Gauss–Newton steps at most after the search has converged (:func:`_polished`)."""
 MAX_EVALUATIONS = 400
 """Safety bound on residual evaluations (MINPACK's maxfev); reaching it means not converged."""
 STOPS = {1: "gradient (gtol)", 2: "cost reduction (ftol)", 3: "step (xtol)",
@@ -282,6 +285,26 @@ def real_modal_form(A: Array, B: Array, C: Array, K: Array
     return np.array(eig), Tinv @ B, Cm, Tinv @ K, free, len(upper), len(real)
 
 
+def _polished(theta: Array, residuals: Callable[[Array], Array],
+              jacobian: Callable[[Array], Array]) -> Array:
+    """Gauss–Newton steps from the point where the search stopped, each kept while it lowers
+    the cost, at most :data:`POLISH_STEPS`: MINPACK's step criterion can stop on a shrunken trust
+    region a little short of the optimum (measured: a remaining Gauss–Newton step of 7e-11 of
+    the eigenvalues), where the full step converges at once."""
+    res = residuals(theta)
+    cost = float(res @ res)
+    for _ in range(POLISH_STEPS):
+        J = jacobian(theta)
+        step = np.linalg.lstsq(J, -res, rcond=RANK_TOLERANCE)[0]
+        trial = theta + step
+        res_t = residuals(trial)
+        cost_t = float(res_t @ res_t)
+        if not cost_t < cost:
+            break
+        theta, res, cost = trial, res_t, cost_t
+    return theta
+
+
 def _spectral_radius(M: Array) -> float:
     return float(np.max(np.abs(np.linalg.eigvals(M)), initial=0.0))
 
@@ -399,7 +422,7 @@ def refine_prediction_error(A: Array, B: Array, C: Array, D: Array, G: Array, u:
 
     fit = optimize.least_squares(residuals, theta0, jac=jacobian, method="lm", x_scale="jac",
                                  ftol=FTOL, xtol=XTOL, gtol=GTOL, max_nfev=MAX_EVALUATIONS)
-    theta = fit.x
+    theta = _polished(fit.x, residuals, jacobian) if fit.status > 0 else fit.x
     res = residuals(theta)
     A1, B1, C1, D1, K1, x01 = (a[0] for a in layout.unpack(theta[None]))
     modes = modal_parameters(A1, C1, dt)

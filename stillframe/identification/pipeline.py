@@ -37,6 +37,7 @@ from stillframe.identification.data_checks import (
     check_excitation,
     check_length,
     check_values,
+    repair_absurd,
 )
 from stillframe.identification.era import (
     EraDimensions,
@@ -234,6 +235,8 @@ def identify(
     outputs = channel_names("output", m, output_names)
     check_values(u, inputs)
     check_values(y, outputs)
+    u, u_repairs = repair_absurd(u, inputs, float(dt))
+    y, y_repairs = repair_absurd(y, outputs, float(dt))
     needed_order = 2 if order == "auto" else int(order)
     u_scale, y_scale = channel_scales(u), channel_scales(y)
     u, y = u / u_scale, y / y_scale
@@ -274,7 +277,7 @@ def identify(
     consistent = mode_consistency(fac, modes, chosen, float(dt))
     left_out = left_out_modes(fac, modes, chosen, float(dt))
     refinement, uncertain = None, None
-    notes: list[str] = [] if refine else [NOT_REFINED]
+    notes: list[str] = u_repairs + y_repairs + ([] if refine else [NOT_REFINED])
     choice = None
     if refine:
         try:
