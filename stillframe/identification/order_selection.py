@@ -4,7 +4,7 @@ refined models' fit decides, and a disagreement between criteria is reported.
 The Hankel gap (largest σ_n / σ_{n+1}, :func:`stillframe.identification.era.auto_order`) gives n.
 The ERA
 realizations of orders n - 2, n and n + 2 (those within the Hankel matrix's numerical rank) are
-each refined as output-error models (:func:`stillframe.identification.pem.refine_prediction_error`),
+each refined (:func:`stillframe.identification.pem.refine_prediction_error`),
 and among those whose refinement converged (all, if none did) the order of least BIC
 (Ljung §16.4, eq. 16.33 with penalty ``d ln N``) is kept: a spurious mode that the gap let in
 costs more parameters than it gains in fit, a weak physical mode that the gap left out gains more.
@@ -20,6 +20,7 @@ interval wider than ± 30 %).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -64,10 +65,14 @@ class OrderChoice:
 
 
 def refine_candidates(factorization: HankelFactorization, gain_markov: Array, r: int, u: Array,
-                      y: Array, dt: float, hankel_order: int) -> OrderChoice:
+                      y: Array, dt: float, hankel_order: int, *,
+                      innovations: bool = True,
+                      feedthrough: Sequence[bool] | None = None) -> OrderChoice:
     """Refine the candidate orders around ``hankel_order`` and keep the one of least BIC
     (module docstring). ``gain_markov`` are OKID's observer-gain Markov parameters ``(p + 1, m,
-    m)`` that give each realization its starting Kalman gain; ``r`` is the number of inputs."""
+    m)`` that give each realization its observer gain; ``r`` is the number of inputs;
+    ``innovations`` and ``feedthrough`` as in
+    :func:`stillframe.identification.pem.refine_prediction_error`."""
     samples = u.shape[0]
     fits: dict[int, Refinement] = {}
     for step in STEPS:
@@ -78,7 +83,8 @@ def refine_candidates(factorization: HankelFactorization, gain_markov: Array, r:
         gain = observer_gain(real.A, real.C, gain_markov)
         try:
             fits[n] = refine_prediction_error(real.A, real.B[:, :r], real.C, real.D[:, :r],
-                                              gain, u, y, dt, innovations=False)
+                                              gain, u, y, dt, innovations=innovations,
+                                              feedthrough=feedthrough)
         except InputError:
             if n == hankel_order:
                 raise

@@ -69,6 +69,8 @@ the refinement does not apply to)."""
 Array = NDArray[np.float64]
 Method = Literal["okid-era", "okid-eradc", "era-impulse"]
 METHODS: tuple[str, ...] = ("okid-era", "okid-eradc", "era-impulse")
+NoiseModel = Literal["innovations", "output-error"]
+NOISE_MODELS: tuple[str, ...] = ("innovations", "output-error")
 
 DEFAULT_OBSERVER_ORDER = 20
 PULSE_TOLERANCE = 1e-9
@@ -165,7 +167,7 @@ def _observer_order(n_samples: int, r: int, m: int, order: int, requested: int |
 
 
 def _check_request(u: Array, y: Array, dt: float, method: str, order: object,
-                   max_order: int | None, combined: bool) -> None:
+                   max_order: int | None, combined: bool, noise_model: str) -> None:
     if u.shape[0] != y.shape[0]:
         raise InputError(f"input has {u.shape[0]} samples but output has {y.shape[0]}")
     if isinstance(dt, bool) or not (isinstance(dt, Real) and math.isfinite(dt) and dt > 0):
@@ -177,6 +179,9 @@ def _check_request(u: Array, y: Array, dt: float, method: str, order: object,
         raise InputError(f"order must be a positive integer or 'auto', got {order!r}")
     if max_order is not None and (not isinstance(max_order, Integral) or max_order < 1):
         raise InputError(f"max order must be a positive integer, got {max_order!r}")
+    if noise_model not in NOISE_MODELS:
+        raise InputError(f"unknown noise model {noise_model!r}; choose one of "
+                         f"{', '.join(NOISE_MODELS)}")
     if combined and method == "era-impulse":
         raise InputError("combined realization needs OKID's observer gain: not with era-impulse")
 
@@ -198,6 +203,8 @@ def identify(
     reference_sensor: int | None = None,
     combined: bool = False,
     refine: bool | None = None,
+    noise_model: NoiseModel = "innovations",
+    feedthrough: Sequence[bool] | None = None,
     input_names: Sequence[str] | None = None,
     output_names: Sequence[str] | None = None,
 ) -> Identification:
@@ -214,7 +221,15 @@ def identify(
     the model by prediction-error least squares
     (:func:`stillframe.identification.pem.refine_prediction_error`) and checks its modes'
     intervals and its prediction errors; a model that is not refined carries :data:`NOT_REFINED`
-    among its warnings. ``input_names`` and ``output_names`` name the channels in the messages
+    among its warnings. ``noise_model`` is the refined model's structure: ``"innovations"``
+    (default) estimates the Kalman gain K with the model and keeps K = 0 where BIC prefers it
+    (white prediction errors); ``"output-error"`` fixes K = 0 (the simulation error from the
+    input alone). Open-loop records may take either; on closed-loop records (the input depends
+    on the noise through a controller) only the innovation form is consistent (Ljung §13.4).
+    ``feedthrough`` (default: every input) names the inputs whose direct term D the refinement
+    estimates; the others' is zero, as it must be for a command computed from the same sample's
+    outputs (closed loop).
+    ``input_names`` and ``output_names`` name the channels in the messages
     of :mod:`stillframe.identification.data_checks`, whose checks run first. Each channel is
     divided by its RMS before identifying and the model scaled back (the modes do not depend on
     the units; the Hankel singular values and Markov parameters' SVD are of the normalised data).
@@ -223,7 +238,7 @@ def identify(
     """
     u = _as_record("input", u)
     y = _as_record("output", y)
-    _check_request(u, y, dt, method, order, max_order, combined)
+    _check_request(u, y, dt, method, order, max_order, combined, noise_model)
     refinable = not combined and method != "era-impulse"
     if refine and not refinable:
         raise InputError("the refinement needs OKID's observer gain of the plain realization: "
@@ -279,21 +294,24 @@ def identify(
     refinement, uncertain = None, None
     notes: list[str] = u_repairs + y_repairs + ([] if refine else [NOT_REFINED])
     choice = None
+    innovations = noise_model == "innovations"
     if refine:
         try:
             if order == "auto":
-                choice = refine_candidates(fac, gain_markov[: p + 1], r, u, y, float(dt), chosen)
+                choice = refine_candidates(fac, gain_markov[: p + 1], r, u, y, float(dt), chosen,
+                                           innovations=innovations, feedthrough=feedthrough)
                 refinement = choice.refinement
             else:
                 refinement = refine_prediction_error(A, B, C, D, G, u, y, float(dt),
-                                                     innovations=False)
+                                                     innovations=innovations,
+                                                     feedthrough=feedthrough)
         except IdentificationError as exc:  # e.g. noise-free data: OKID's predictor diverges
             notes.append(f"{NOT_REFINED}; the refinement could not start ({exc})")
     if refinement is not None:
         if choice is not None:
             chosen = choice.order
             notes += [choice.note] if choice.note else []
-        A, B, C, D, G = refinement.A, refinement.B, refinement.C, refinement.D, -refinement.K
+        A, B, C, D, G = refinement.A, refinement.B, refinement.C, refinement.D, refinement.G
         modes = modal_parameters(A, C, float(dt), reference=reference_sensor)
         if choice is not None and choice.larger is not None:
             consistent = persists(modes, choice.larger.modes)

@@ -49,7 +49,8 @@ def _interval(pair: np.ndarray) -> list[float] | None:
 
 def refinement_document(refinement: Refinement) -> dict[str, Any]:
     """How the refinement's search ended and what its intervals rest on."""
-    return {"converged": refinement.converged, "stop": refinement.stop,
+    return {"noise_model": refinement.noise_model,
+            "converged": refinement.converged, "stop": refinement.stop,
             "iterations": refinement.iterations, "evaluations": refinement.evaluations,
             "covariance": f"sandwich with a Newey-West score covariance over "
                           f"{refinement.hac_lags} lags",
@@ -116,6 +117,16 @@ def _interval_text(pair: np.ndarray, digits: int) -> str:
     if not np.all(np.isfinite(pair)):
         return "none (see warnings)"
     return f"{pair[0]:.{digits}g} .. {pair[1]:.{digits}g}"
+
+
+def refinement_text(refinement: Refinement) -> str:
+    """One line: the model kept, how the search ended and what the intervals rest on."""
+    ended = ("converged" if refinement.converged else "NOT converged") + f" ({refinement.stop})"
+    intervals = (f"95 % intervals from a sandwich covariance (Newey-West, {refinement.hac_lags} "
+                 "lags)" if np.isfinite(refinement.frequency_ci_hz).any()
+                 else "no 95 % intervals (see warnings)")
+    return (f"refinement: {refinement.noise_model} model, {ended} after "
+            f"{refinement.iterations} iterations; {intervals}")
 
 
 def format_matrix(rows: list[list[float]]) -> str:

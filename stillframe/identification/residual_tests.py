@@ -81,8 +81,7 @@ def residual_warnings(y: Array, errors: Array) -> list[str]:
     if not white.white:
         found.append(f"prediction errors are not white (portmanteau test over {white.lags} "
                      f"lags, p = {white.p_value:.2g}): the model leaves dynamics unexplained (a "
-                     "mode may be missing) or the noise is coloured; the 95 % intervals allow "
-                     "for correlated errors")
+                     "mode may be missing) or the noise is coloured")
     best = float(np.max(snr_db(y, errors)))
     if best < LOW_SNR_DB:
         found.append(f"low signal-to-noise ratio: {best:.3g} dB on the best output (below "

@@ -126,6 +126,10 @@ def test_json_schema_and_auto_order(noisy_bag: Path, method: str) -> None:
     assert np.all(np.diff(s) <= 0) and s[-1] >= 0
     assert doc["order_selection"]["gap"] == pytest.approx(s[5] / s[6], rel=1e-9)
     assert doc["warnings"] == []
+    assert set(doc["refinement"]) == {"noise_model", "converged", "stop", "iterations",
+                                      "evaluations", "covariance", "identifiable_parameters"}
+    # white sensor noise on a measured input: the output-error model's errors are white
+    assert doc["refinement"]["noise_model"] == "output-error"
     freqs = [m["frequency_hz"] for m in doc["modes"]]
     assert freqs == sorted(freqs) and len(freqs) == 3
     for mode in doc["modes"]:
@@ -142,6 +146,7 @@ def test_json_schema_and_auto_order(noisy_bag: Path, method: str) -> None:
 def test_table_lists_the_modes(noisy_bag: Path) -> None:
     result = stillframe("identify", str(noisy_bag), *CHANNELS, "--order", "6")
     assert result.returncode == 0, result.stderr
+    assert "refinement: output-error model, converged (" in result.stdout
     rows = [line.split() for line in result.stdout.splitlines() if line.strip()[:1].isdigit()]
     np.testing.assert_allclose([float(r[1]) for r in rows], true_modes()[0], rtol=5e-3)
 
@@ -291,6 +296,16 @@ def test_fast_path_warns_that_it_is_not_refined(noisy_bag: Path) -> None:
     result = stillframe("identify", str(noisy_bag), *CHANNELS, "--order", "6", "--fast")
     assert result.returncode == 0, result.stderr
     assert "stillframe identify: warning: not refined" in result.stderr
+
+
+def test_noise_model_option(noisy_bag: Path) -> None:
+    """``--noise-model output-error`` keeps K = 0 and says so in the JSON; an unknown structure
+    is refused by the parser (exit 2) naming the choices."""
+    doc = identify_json(noisy_bag, "--order", "6", "--noise-model", "output-error")
+    assert doc["refinement"]["noise_model"] == "output-error"
+    result = stillframe("identify", str(noisy_bag), *CHANNELS, "--noise-model", "arx")
+    assert result.returncode == 2
+    assert "innovations" in result.stderr and "output-error" in result.stderr
 
 
 def test_a_lone_mcap_file_gives_the_bags_result(noisy_bag: Path) -> None:

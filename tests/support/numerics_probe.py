@@ -34,6 +34,7 @@ def identification() -> dict:
     return {"frequency_hz": ident.modes.frequency_hz.tolist(),
             "damping_ratio": ident.modes.damping_ratio.tolist(),
             "converged": ref.converged, "condition": ref.condition,
+            "noise_model": ref.noise_model, "parameters": ref.parameter_count,
             "residual_share": float(np.linalg.norm(ref.errors) / np.linalg.norm(rec.y))}
 
 

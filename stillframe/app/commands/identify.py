@@ -37,7 +37,7 @@ def _order(text: str) -> int | str:
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    from stillframe.identification.pipeline import METHODS
+    from stillframe.identification.pipeline import METHODS, NOISE_MODELS
     from stillframe.identification.ssi_cov import OUTPUT_ONLY_METHODS
 
     parser = sub.add_parser(
@@ -70,6 +70,11 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "runs and the result warns that it is not refined")
     parser.add_argument("--refine", action="store_true",
                         help="the default for the OKID methods; kept for older scripts")
+    parser.add_argument("--noise-model", choices=NOISE_MODELS, default=NOISE_MODELS[0],
+                        help="the refined model's structure: innovations (default: the Kalman "
+                        "gain estimated with the model, K = 0 kept where BIC prefers it; the one "
+                        "for closed-loop records) or output-error (K = 0: the simulation error "
+                        "from the input alone)")
     parser.add_argument("--detrend", action="store_true", help="remove a linear trend first")
     parser.add_argument("--lowpass", type=float, default=None, metavar="HZ",
                         help="zero-phase Butterworth low-pass on inputs and outputs")
@@ -174,7 +179,12 @@ def run_output_only(args: argparse.Namespace, record: Record, progress: Progress
 def run(args: argparse.Namespace) -> int:
     from stillframe.bags.channels import DEFAULT_JITTER, Channel, read_record
     from stillframe.identification.pipeline import identify
-    from stillframe.identification.report import format_matrix, identification_document, modes_table
+    from stillframe.identification.report import (
+        format_matrix,
+        identification_document,
+        modes_table,
+        refinement_text,
+    )
 
     check_output("--save-model", args.save_model)
     check_output("--plots", args.plots)
@@ -198,7 +208,7 @@ def run(args: argparse.Namespace) -> int:
     ident = identify(record.u, record.y, record.dt, args.method, args.order,
                      observer_order=args.observer_order, max_order=args.max_order,
                      combined=args.combined, refine=False if args.fast else None,
-                     input_names=[str(c) for c in record.inputs],
+                     noise_model=args.noise_model, input_names=[str(c) for c in record.inputs],
                      output_names=[str(c) for c in record.outputs])
     _report_progress(ident, args, record, progress)
     physical, physical_doc = _physical(args, ident)
@@ -230,6 +240,8 @@ def run(args: argparse.Namespace) -> int:
           + (f" (auto: gap sigma_n/sigma_n+1 = {ident.order_gap:.4g})" if args.order == "auto"
              else ""))
     print("outputs: " + ", ".join(f"y{i + 1} = {n}" for i, n in enumerate(names)))
+    if ident.refinement is not None:
+        print(refinement_text(ident.refinement))
     print(modes_table(ident.modes, ident.consistent, [f"y{i + 1}" for i in range(len(names))],
                       ident.refinement))
     if physical is not None:

@@ -39,29 +39,38 @@ def floor_mode_errors(ident: Identification, rec: HammerRecord,
 
 
 def outcome(rec: HammerRecord, order: int = 6) -> str:
-    """'refused', 'warned', 'accurate' or 'SILENTLY WRONG'."""
+    """'refused', 'warned', 'accurate', 'warned, accurate' (warnings, but the three modes within
+    the accuracy) or 'SILENTLY WRONG'."""
     try:
         ident = identify(rec.u, rec.y, rec.dt, "okid-eradc", order)
     except (InputError, IdentificationError):
         return "refused"
-    if ident.warnings:
-        return "warned"
     worst_f, worst_z = floor_mode_errors(ident, rec)
-    if len(ident.modes) == 3 and worst_f <= FREQUENCY_TOL and worst_z <= DAMPING_TOL:
-        return "accurate"
-    return "SILENTLY WRONG"
+    accurate = len(ident.modes) == 3 and worst_f <= FREQUENCY_TOL and worst_z <= DAMPING_TOL
+    if ident.warnings:
+        return "warned, accurate" if accurate else "warned"
+    return "accurate" if accurate else "SILENTLY WRONG"
 
 
-@pytest.mark.parametrize(("samples", "least_accurate"), [(2048, 9), (128, 8), (96, 0),
-                                                         (64, 0), (48, 0)])
-def test_short_records_are_accurate_or_flagged(lin, samples: int, least_accurate: int) -> None:
-    """4 s (128 samples at 32 Hz, 3 s after the blow) still gives the modes; shorter records
-    are refused or warned about, never silently wrong. (At 2048 samples one seed of ten warns of
-    a noise mode at 6.4 Hz that stabilises at higher orders once the outputs are normalised to
-    unit RMS before identifying.)"""
+@pytest.mark.parametrize(("samples", "least_accurate", "least_resolved"),
+                         [(2048, 9, 9), (128, 0, 8), (96, 0, 0), (64, 0, 0), (48, 0, 0)])
+def test_short_records_are_accurate_or_flagged(lin, samples: int, least_accurate: int,
+                                               least_resolved: int) -> None:
+    """4 s (128 samples at 32 Hz, 3 s after the blow) still gives the modes within the
+    accuracy; shorter records are refused or warned about, never silently wrong. At 128 samples
+    the identification warns all the same: the load cell's noise, which the structure filters
+    into the outputs, leaves the prediction errors coloured, 4 s do not determine the innovation
+    form's noise model (its search ends on the predictor's stability boundary), and the
+    output-error model's intervals are withheld (their sandwich covariance cannot average a
+    correlation as long as the record: 15-75 % of such frequency intervals held the truth over
+    20 seeds).
+    (At 2048 samples one seed of ten may warn of a noise mode at 6.4 Hz that stabilises at
+    higher orders once the outputs are normalised to unit RMS before identifying.)"""
     outcomes = [outcome(hammer_test(lin, seed, samples=samples)) for seed in SEEDS]
     assert "SILENTLY WRONG" not in outcomes, outcomes
     assert outcomes.count("accurate") >= least_accurate, outcomes
+    assert (outcomes.count("accurate") + outcomes.count("warned, accurate")
+            >= least_resolved), outcomes
 
 
 def test_a_record_below_okids_minimum_is_refused_by_name(lin) -> None:
@@ -82,7 +91,8 @@ def test_low_snr_is_accurate_or_flagged(lin, noise: float, least_accurate: int,
                 for seed in SEEDS]
     assert "SILENTLY WRONG" not in outcomes, outcomes
     assert outcomes.count("accurate") >= least_accurate, outcomes
-    assert outcomes.count("warned") + outcomes.count("refused") >= least_flagged, outcomes
+    flagged = [o for o in outcomes if o in ("warned", "warned, accurate", "refused")]
+    assert len(flagged) >= least_flagged, outcomes
 
 
 @pytest.mark.parametrize("order", [10, 16, 24])
