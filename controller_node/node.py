@@ -4,14 +4,14 @@ A thin shell around :func:`stillframe.control.factory.make_controller`. For ever
 ``state_estimate`` stamped t_k it calls ``command(t_k, estimate, load cell at t_k)`` and
 publishes the command stamped t_k on ``pendulum/torque_cmd`` (``torque.z``) or
 ``floor3/force_cmd`` (``force.x``). The load cell comes from ``excitation/wrench``: in
-lock-step the controller waits (at most a quarter of ``lockstep_timeout_s``, so that the command
-still reaches the simulator before its timeout) for the reading stamped t_k;
-in real time it uses the newest one.
+lock-step the controller waits for the reading stamped t_k, as long as it takes (no wall time
+enters a lock-step run); in real time it uses the newest one.
 
 Parameters settable at run time (``stillframe param set`` or ``ros2 param set``; refused with a
 reason, and the loop goes on, when the value is wrong): ``enabled`` (bool; false: zero command
-from the next sample on) and ``command_limit`` (the saturation ±limit [N m or N], finite and
-≥ 0, 0: none; starts at ``controller.limit``). Every other parameter is read-only.
+from the next sample on) and ``command_limit`` (the controller's limit ±limit [N m or N], finite
+and ≥ 0, 0: none; starts at ``controller.limit``; every law takes it at its next sample, the MPC
+and the anti-windup LQG plan with it). Every other parameter is read-only.
 
 Watchdog (``/diagnostics`` level ERROR while it holds the command at zero): once armed by a
 first estimate, when the newest estimate is ``watchdog_periods``
@@ -30,8 +30,8 @@ and named in ``/diagnostics``.
 When the loop's time goes back (a restarted simulator: an estimate stamped before the last one,
 with a load-cell reading of that stamp; :mod:`stillframe.loop.matching`) the watchdog is disarmed
 until the next estimate, and counted (``time_jumps``). With no load-cell reading for
-``5 · lockstep_timeout_s`` (at least 1 s) after one came (simulator gone) ``/diagnostics`` says
-ERROR; the node idles.
+``stale_input_s`` (:class:`stillframe.node_runtime.support.LoopParameters`) after one came
+(simulator gone) ``/diagnostics`` says ERROR; the node idles.
 """
 
 from __future__ import annotations
@@ -97,7 +97,7 @@ class ControllerNode(base.LoopNode):
         self.out = CommandMessage(self.controller.actuator)
         self.sim_time = bool(node.get_parameter("use_sim_time").value)
         self.clock_ns = 0                   # the newest /clock of the simulator (sim time)
-        self.matching = ForceMatching(round(params.lockstep_timeout_s / 4 * 1e9), params.lockstep)
+        self.matching = ForceMatching(None, params.lockstep)
         self.watchdog = EstimateWatchdog(self.controller, self.grid)
         self.last_command = Command(0.0)
         self.input_at: float | None = None   # when the last load-cell reading arrived
@@ -105,7 +105,7 @@ class ControllerNode(base.LoopNode):
         self.rate = RateMeter()
         settings = self.setting(ControllerParameterValues)
         self.enabled = settings.enabled
-        self.controller.limit = settings.command_limit or None
+        self.controller.set_limit(settings.command_limit)
 
     def apply(self, parameters: list[Parameter]) -> SetParametersResult:
         """``enabled`` and ``command_limit`` (checked by their declarations) in effect from the
@@ -115,7 +115,7 @@ class ControllerNode(base.LoopNode):
                 self.enabled = p.value
                 self.controller.enabled = self.enabled and self.activated
             elif p.name == "command_limit":
-                self.controller.limit = p.value or None
+                self.controller.set_limit(p.value)
         return SetParametersResult(True)
 
     def activate(self) -> None:
@@ -133,7 +133,8 @@ class ControllerNode(base.LoopNode):
         """A new controller from the scene (``cleanup``), its settings kept."""
         limit, enabled = self.controller.limit, self.controller.enabled
         self.controller = make_controller(self.params.scene, design_model(self.params.scene))
-        self.controller.limit, self.controller.enabled = limit, enabled
+        self.controller.set_limit(limit)
+        self.controller.enabled = enabled
         self.watchdog = EstimateWatchdog(self.controller, self.grid)
 
     def subscribe_inputs(self) -> None:

@@ -17,9 +17,10 @@ actuator the scene's controller does not drive is taken as zero (the sim refuses
 whatever arrives on its topics.
 
 - ``mode: lockstep``: a stamp is used once all its channels arrived and the command stamped
-  t_k−1 did (the previous step's answer); after half of ``lockstep_timeout_s`` without them
-  (so that the loop still answers before the simulator's own timeout), or when a
-  newer stamp arrives first, it is used with what arrived (a partial update).
+  t_k−1 did (the previous step's answer), as long as that takes: no wall time enters a
+  lock-step run (the simulator publishes the next stamp only once this one is answered). Only
+  when a newer stamp arrives first (a restarted simulator) is it used with what arrived (a
+  partial update).
 - ``mode: realtime``: a stamp is used when complete, when a newer one arrives, or
   ``partial_after_s`` after its first message, with what arrived.
 
@@ -47,8 +48,9 @@ stamp used (``stale_messages``) or more than a second after it (``future_stamps`
 and held apart; if every input of such a stamp arrives, the loop's time jumped (a simulator
 restarted at t = 0, counted in ``time_jumps``) and the estimator starts again as above
 (:mod:`stillframe.loop.assembly`). NaN or Inf readings are dropped by the filter and counted
-(``non_finite``). With no input for ``5 · lockstep_timeout_s`` (at least 1 s) after one came
-(simulator gone) ``/diagnostics`` says ERROR; the node idles.
+(``non_finite``). With no input for ``stale_input_s``
+(:class:`stillframe.node_runtime.support.LoopParameters`) after one came (simulator gone)
+``/diagnostics`` says ERROR; the node idles.
 """
 
 from __future__ import annotations
@@ -120,10 +122,10 @@ class EstimatorNode(base.LoopNode):
         self.inputs = estimator_inputs(scene)
         self.active = actuator_of(scene)
         partial_after_s = self.setting(EstimatorParameterValues).partial_after_s
-        wait_s = params.lockstep_timeout_s / 2 if params.lockstep else partial_after_s
+        # lock-step waits for the whole sample, as long as it takes: no wall time enters it
+        wait_ns = None if params.lockstep else round(partial_after_s * 1e9)
         self.assembly = SampleAssembly(self.inputs, self.active, SampleGrid(params.period),
-                                       round(wait_s * 1e9), params.lockstep,
-                                       scene.actuators.delay_periods)
+                                       wait_ns, params.lockstep, scene.actuators.delay_periods)
         spec, cov = topics.STATE_ESTIMATE, topics.STATE_COVARIANCE
         self.state_pub = TappedPublisher(node, spec.type_name, spec.name, spec.qos)
         self.cov_pub = TappedPublisher(node, cov.type_name, cov.name, cov.qos)

@@ -8,7 +8,9 @@
 - :class:`IdentificationError` (5): data that cannot identify a model (too short, unusable,
   rank-deficient);
 - :class:`DegradedRunError` (6): a real-time run whose control path was degraded, with
-  ``--strict`` (without it, a warning line).
+  ``--strict`` (without it, a warning line);
+- :class:`LoopError` (7): a lock-step run that could not go on: a peer of the loop left the
+  graph, or did not answer one sample within ``lockstep_timeout_s``.
 
 The message names what is wrong (the key, the file, the time) and is printed without a traceback
 by :func:`stillframe.app.cli.main` and by the node executables.
@@ -52,3 +54,12 @@ class DegradedRunError(StillframeError):
     reasons (:mod:`stillframe.app.run_verdict`)."""
 
     exit_code = 6
+
+
+class LoopError(StillframeError):
+    """A lock-step run ended before its end: the simulator never advances without the command of
+    the current sample, and the peer that owes it left the graph or did not answer within
+    ``lockstep_timeout_s``. The message names the peer and the sample; the result written is
+    partial (``"complete": false``)."""
+
+    exit_code = 7

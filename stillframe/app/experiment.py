@@ -38,7 +38,7 @@ import numpy as np
 from stillframe.app.experiment_test_force import test_force
 from stillframe.app.launcher import run_scene
 from stillframe.bags.channels import Channel, read_record
-from stillframe.config.scene import load_scene
+from stillframe.config.scene import load_scene, steps_in
 from stillframe.config.schema import Section
 from stillframe.contract import topics
 from stillframe.design.identified import load_identified_structure, resolve_model_file
@@ -105,10 +105,9 @@ class ExperimentResult:
 def integrator_override(scene: Section) -> list[str]:
     """``integrator.dt`` lowered to divide the sample period, when it does not already."""
     period = 1.0 / scene.sensors.rate_hz
-    ratio = period / scene.integrator.dt
-    if abs(ratio - round(ratio)) <= 1e-6 * ratio:
+    if steps_in(period, scene.integrator.dt) is not None:
         return []
-    return [f"integrator.dt={period / math.ceil(ratio):.17g}"]
+    return [f"integrator.dt={period / math.ceil(period / scene.integrator.dt):.17g}"]
 
 
 def identification_test_overrides(scene: Section, user: Sequence[str],

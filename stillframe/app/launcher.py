@@ -40,8 +40,9 @@ from stillframe.errors import InputError
 from stillframe.fidelity.auto_model import resolve_model
 from stillframe.identification.tracker import TRACKER_READY
 from stillframe.locations import REPO_ROOT
+from stillframe.loop.spec import MODES
 from stillframe.middleware import api, discovery, names
-from stillframe.node_runtime.declarations import MODES, NODE_PARAMETERS, ManagedParameterValues
+from stillframe.node_runtime.declarations import NODE_PARAMETERS, ManagedParameterValues
 
 NODES: tuple[str, ...] = tuple(NODE_PARAMETERS)
 #: the process that hosts the estimator and the controller with ``--compose``
@@ -483,9 +484,8 @@ class Launcher:
         if o.record_dir is not None:     # in real time too: the bag misses no first sample
             sim_params["await_recorder"] = [
                 names.resolve_topic(t) for t in o.record_topics] or ["*"]
-        # every loop node: the estimator's and controller's lock-step waits are parts of it
-        shared = ({} if o.lockstep_timeout_s is None
-                  else {"lockstep_timeout_s": float(o.lockstep_timeout_s)})
+        if o.lockstep_timeout_s is not None:
+            sim_params["lockstep_timeout_s"] = float(o.lockstep_timeout_s)
         scene = self.scene_file()
         children = []
         if o.record_dir is not None:
@@ -509,7 +509,7 @@ class Launcher:
         sim = self.simulator()
         children += [(name, [*o.hosts.get("estimator_node" if name == CONTAINER else name, []),
                              *node_command(name, scene, [], o.mode, params={
-                                 **shared, **(rt if name in (sim, *LOOP) else {}),
+                                 **(rt if name in (sim, *LOOP) else {}),
                                  **(sim_params if name == sim else {}),
                                  **({"autostart": False} if name in MANAGED else {})},
                                  args=["all"] if name == sim == CONTAINER else [])])

@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 #: float64 values the simulator stores per sample (sim_node's rows) and per integrator step
-#: (:class:`stillframe.plant.frame_plant.Plant` fine history).
+#: (:class:`stillframe.plant.frame_plant.FramePlant` fine history).
 SAMPLE_ROW, STEP_ROW = 12, 7
 
 

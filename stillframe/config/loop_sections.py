@@ -36,8 +36,20 @@ MAX_HORIZON_S = 60.0
 MAX_PREDICTION_STEPS = 1000
 
 
+#: the bound [N m or N] on a command for an actuator without a saturation limit of its own: far
+#: beyond any rig's actuator, it keeps values like 1e308 from reaching the integrator. The
+#: controller clips its commands to it and the simulator refuses commands beyond it
+#: (:attr:`Actuators.bounds`); no saturation limit of a scene may exceed it.
+COMMAND_BOUND = 1e6
+
+
 def _limit(doc: str) -> Any:
     return key(None, up_to(1e12), doc=doc)
+
+
+def _saturation(doc: str) -> Any:
+    return key(None, up_to(COMMAND_BOUND), doc=f"{doc}; null: none (commands bounded by "
+                                                 f"{COMMAND_BOUND:g})")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -77,10 +89,17 @@ class Actuators(Section):
     delay_periods: int = key(0, in_range(0, MAX_DELAY_PERIODS), doc=(
         "the command stamped t_k is applied from t_k+d on (a playout buffer: network delay and "
         "jitter up to d periods cost nothing more; LQG predicts d periods ahead)"))
-    torque_limit: float | None = _limit("pendulum torque saturation [N m]")
+    torque_limit: float | None = _saturation("pendulum torque saturation [N m]")
     torque_rate_limit: float | None = _limit("pendulum torque slew limit [N m/s]")
-    force_limit: float | None = _limit("floor-3 force saturation [N]")
+    force_limit: float | None = _saturation("floor-3 force saturation [N]")
     force_rate_limit: float | None = _limit("floor-3 force slew limit [N/s]")
+
+    @property
+    def bounds(self) -> tuple[float, float]:
+        """The largest command [torque, floor-3 force] the loop passes on: each actuator's
+        saturation limit, or :data:`COMMAND_BOUND` without one."""
+        return (COMMAND_BOUND if self.torque_limit is None else self.torque_limit,
+                COMMAND_BOUND if self.force_limit is None else self.force_limit)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -156,7 +175,7 @@ class Controller(Section):
     singular_margin: float = key(0.02, in_range(1e-6, 1.0), doc=(
         "EUK pendulum: damping of the singularity-robust inverse, as a fraction of the "
         "gain at rest"))
-    limit: float | None = _limit("command saturation [N m or N]")
+    limit: float | None = _saturation("command saturation [N m or N]")
     watchdog_periods: int = key(3, up_to(1_000_000), doc="periods without a fresh estimate")
 
 

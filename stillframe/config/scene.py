@@ -240,6 +240,31 @@ def _check_consistency(scene: Scene) -> None:
     _check_loop(scene)
 
 
+#: how far ``period / integrator.dt`` may lie from a whole number, relative: the two are decimal
+#: values in a scene, so a step that divides the period gives a ratio within rounding of one
+DIVIDES_TOLERANCE = 1e-6
+
+
+def steps_in(period: float, dt: float) -> int | None:
+    """How many steps of ``dt`` make ``period``; None when ``dt`` does not divide it (within
+    :data:`DIVIDES_TOLERANCE`)."""
+    ratio = period / dt
+    steps = round(ratio)
+    return steps if steps >= 1 and abs(ratio - steps) <= DIVIDES_TOLERANCE * ratio else None
+
+
+def sample_grid(scene: Scene) -> tuple[float, int]:
+    """The loop's sample period 1/``sensors.rate_hz`` and the integrator steps in one period;
+    InputError naming ``integrator.dt`` when it does not divide the period."""
+    period = 1.0 / scene.sensors.rate_hz
+    steps = steps_in(period, scene.integrator.dt)
+    if steps is None:
+        raise InputError(
+            f"integrator.dt: {scene.integrator.dt:g} s does not divide the sample period "
+            f"{period:g} s (1/sensors.rate_hz)")
+    return period, steps
+
+
 def _check_loop(scene: Scene) -> None:
     """Cross-field checks of the closed-loop sections (only for scenes with a controller)."""
     c, window = scene.controller, scene.evaluation.window
@@ -248,12 +273,7 @@ def _check_loop(scene: Scene) -> None:
     period = 1.0 / scene.sensors.rate_hz
     if period > scene.duration:
         raise InputError(f"sensors.rate_hz: one period ({period:g} s) is longer than duration")
-    ratio = period / scene.integrator.dt
-    if abs(ratio - round(ratio)) > 1e-6 * ratio:
-        raise InputError(
-            f"integrator.dt: {scene.integrator.dt:g} s does not divide the sample period "
-            f"{period:g} s (1/sensors.rate_hz)"
-        )
+    sample_grid(scene)
     if c.start - window < -1e-9 or c.start + window > scene.duration + 1e-9:
         raise InputError(
             f"evaluation.window: {window:g} s does not fit before controller.start ({c.start:g} s) "

@@ -35,9 +35,9 @@ def make_controller(scene: Scene, design: FrameModel) -> Controller:
     floor = scene.excitation.floor
     delay = scene.actuators.delay_periods
     predictor = None
+    limits = CommandLimits.of(scene)
     if c.type in ("lqg", "mpc"):
         lqr = design_lqr(design, period, c.state_weights, c.input_weight, TORQUE_INPUT, floor)
-        limits = CommandLimits.of(scene)
         if c.type == "mpc":
             from stillframe.control.mpc import (  # OSQP where MPC runs
                 MPCLaw,
@@ -68,7 +68,5 @@ def make_controller(scene: Scene, design: FrameModel) -> Controller:
         check_sampled_injection(c.injection_damping, period, design.pendulum_inertia)
     else:
         raise InputError(f"controller.type: {c.type!r} computes no command")
-    actuators = scene.actuators
-    actuator_limit = (actuators.torque_limit, actuators.force_limit)[ACTUATOR[c.type]]
-    return Controller(law, ACTUATOR[c.type], period, c.start, c.limit, c.watchdog_periods,
-                      actuator_limit, predictor)
+    return Controller(law, actuator=ACTUATOR[c.type], period=period, limits=limits,
+                      start=c.start, watchdog_periods=c.watchdog_periods, predictor=predictor)

@@ -160,8 +160,7 @@ class MPCLaw:
         self._l = np.full(A.shape[0], -np.inf)
         self._u = np.full(A.shape[0], np.inf)
         self._l[-1] = 0.0
-        if limits.torque is not None:
-            self._l[:N], self._u[:N] = -limits.torque, limits.torque
+        self._bound_inputs(limits)
         if limits.step is not None:
             steps = np.full(N, limits.step * grid.samples)     # a ramp over one grid step …
             steps[0] = limits.step                              # … but u_0 within one sample
@@ -177,6 +176,19 @@ class MPCLaw:
         self.iterations: list[int] = []
         self.last: np.ndarray | None = None                     # the last solution (N + 1)
         self.dual: np.ndarray | None = None                     # … and its multipliers
+
+    def _bound_inputs(self, limits: CommandLimits) -> None:
+        """The QP's rows of u_0 … u_{N−1} bounded by ``limits.magnitude`` (unbounded: None)."""
+        N = self.grid.steps
+        bound = np.inf if limits.magnitude is None else limits.magnitude
+        self._l[:N], self._u[:N] = -bound, bound
+
+    def set_limits(self, limits: CommandLimits) -> None:
+        """Plan with ``limits`` from the next call on (the controller's limit changed): the
+        QP's input bounds, the clip of its answer and the fallback law's."""
+        self.limits = limits
+        self._bound_inputs(limits)
+        self.fallback_law.set_limits(limits)
 
     def inputs(self, z: np.ndarray, solution: np.ndarray) -> np.ndarray:
         """The planned commands u_0 … u_{N−1} of a QP solution [V, s] at the estimate z."""

@@ -4,12 +4,15 @@ Called once per control period with the newest estimate (or None when none arriv
 command before ``start`` and while ``enabled`` is False (switched at run time); zero command
 and the ``watchdog`` flag when the newest estimate is ``watchdog_periods`` periods old or more;
 a non-finite law output also gives zero (flagged ``singular``); otherwise the law's command
-clipped to ±``limit`` and to ±``actuator_limit`` (the scene's actuator saturation: a command the
-actuator cannot apply is never sent). A law output more than :data:`RUNAWAY_FACTOR` times the
-tighter of the two limits is flagged ``runaway`` (counted, and ``/diagnostics`` warns): the sign of
-an estimate or a design that no longer matches the plant. A law that can fall back to a safe
-command (MPC: a solve that did not finish) keeps its count in ``fallbacks``; ``fallback`` here
-follows it (``/diagnostics`` warns).
+clipped to ±:attr:`~stillframe.control.limits.CommandLimits.magnitude` (the tighter of the
+controller's limit and the actuator's saturation: a command the actuator cannot apply is never
+sent), or to ±:data:`~stillframe.config.loop_sections.COMMAND_BOUND` without either (a command
+the simulator would refuse is never sent). A law output more than :data:`RUNAWAY_FACTOR` times
+that bound is flagged ``runaway`` (counted, and ``/diagnostics`` warns): the sign of an estimate
+or a design that no longer matches the plant. The controller's limit can change while it runs
+(:meth:`Controller.set_limit`): the law takes the new limits at its next sample. A law that can
+fall back to a safe command (MPC: a solve that did not finish) keeps its count in ``fallbacks``;
+``fallback`` here follows it (``/diagnostics`` warns).
 """
 
 from __future__ import annotations
@@ -17,16 +20,33 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Protocol, runtime_checkable
 
 import numpy as np
 
+from stillframe.config.loop_sections import COMMAND_BOUND
 from stillframe.contract.signals import Command, Estimate
+from stillframe.control.limits import CommandLimits
 from stillframe.control.prediction import DelayPredictor
 
 #: A law output beyond this multiple of the command's limit is flagged ``runaway``.
 RUNAWAY_FACTOR = 10.0
 
 Law = Callable[[np.ndarray, float], tuple[float, bool]]
+"""A control law: ``law(z, force) -> (command, singular)`` on the design model's state z."""
+
+#: no limit of the controller's nor of an actuator's
+NO_LIMITS = CommandLimits()
+
+
+@runtime_checkable
+class LimitedLaw(Protocol):
+    """A law that plans with the command's limits (the anti-windup LQG, the MPC): told when the
+    controller's limit changes, it takes the new limits at its next call."""
+
+    def __call__(self, z: np.ndarray, force: float) -> tuple[float, bool]: ...
+
+    def set_limits(self, limits: CommandLimits) -> None: ...
 
 
 @dataclass
@@ -42,23 +62,33 @@ class ControllerCounters:
 class Controller:
     """A law acting on one actuator (0: pendulum torque, 1: floor-3 force)."""
 
-    def __init__(self, law: Law, actuator: int, period: float, start: float = 0.0,
-                 limit: float | None = None, watchdog_periods: int = 3,
-                 actuator_limit: float | None = None,
-                 predictor: DelayPredictor | None = None) -> None:
+    def __init__(self, law: Law, *, actuator: int, period: float,
+                 limits: CommandLimits = NO_LIMITS, start: float = 0.0,
+                 watchdog_periods: int = 3, predictor: DelayPredictor | None = None) -> None:
         self.law = law
         self.predictor = predictor
         self.actuator = actuator
         self.period = period
         self.start = start
-        self.limit = limit
-        self.actuator_limit = actuator_limit
+        self.limits = limits
         self.watchdog_periods = watchdog_periods
         self.enabled = True
         self.latest: Estimate | None = None
         self.counters = ControllerCounters()
         self.law_s: list[float] = []       # wall time of every law evaluation (compute_stats)
         self.law_cpu_s: list[float] = []   # … and this thread's CPU time for it
+
+    @property
+    def limit(self) -> float | None:
+        """The controller's own limit (None: none), besides the actuator's saturation."""
+        return self.limits.limit
+
+    def set_limit(self, limit: float | None) -> None:
+        """A new controller limit (None or 0: none), for the supervisor's clip and for a law
+        that plans with the limits (:class:`LimitedLaw`) from the next sample on."""
+        self.limits = self.limits.with_limit(limit)
+        if isinstance(self.law, LimitedLaw):
+            self.law.set_limits(self.limits)
 
     def compute_stats(self) -> dict[str, float]:
         """p50, p99 and max of the law's wall time per sample [s], ``cpu_…`` of its CPU time
@@ -109,10 +139,9 @@ class Controller:
         c.fallback = getattr(self.law, "fallbacks", 0)   # laws with a safe fallback count it
         if not np.isfinite(value):
             value, out.singular = 0.0, True
-        bounds = [b for b in (self.limit, self.actuator_limit) if b]
-        bound = min(bounds) if bounds else None
-        out.runaway = out.singular or (bound is not None and abs(value) > RUNAWAY_FACTOR * bound)
-        if bound is not None and abs(value) > bound:
+        bound = self.limits.magnitude or COMMAND_BOUND
+        out.runaway = out.singular or abs(value) > RUNAWAY_FACTOR * bound
+        if abs(value) > bound:
             value, out.saturated = float(np.clip(value, -bound, bound)), True
         c.saturated += out.saturated
         c.runaway += out.runaway

@@ -13,6 +13,11 @@ from pathlib import Path
 from typing import Any, Literal
 
 from stillframe.errors import InputError
+from stillframe.loop.spec import (
+    COMMAND_MISS_LIMIT,
+    COMMAND_TIMEOUT_PERIODS,
+    LOCKSTEP_TIMEOUT_S,
+)
 from stillframe.node_runtime.parameters import (
     FromScene,
     NodeParameters,
@@ -25,9 +30,6 @@ from stillframe.node_runtime.parameters import (
     reference,
 )
 from stillframe.node_runtime.realtime import NO_PINNING, PRACTICES, parse_cpus, parse_practices
-
-#: the modes of the loop, one constant for every process (launch, nodes, benchmarks)
-MODES = ("lockstep", "realtime")
 
 
 def _refusal(parse: Callable[[Any], object], name: str) -> Callable[[Any], str | None]:
@@ -61,9 +63,6 @@ class LoopParameterValues(NodeParameters):
         "parameter cannot be an empty list), e.g. `-p 'overrides:=[\"duration=6\"]'`"))
     mode: Literal["lockstep", "realtime"] = param("lockstep", doc=(
         "lock-step (the one-process numbers, bit for bit) or real time (below)"))
-    lockstep_timeout_s: float = param(1.0, positive, unit="s", doc=(
-        "wall time the simulator waits for a command in lock-step (the estimator waits half of "
-        "it, the controller a quarter; see the protocol)"))
     diagnostics_period_s: float = param(1.0, positive, unit="s", doc=(
         "wall time between `/diagnostics` messages"))
 
@@ -110,11 +109,15 @@ class SimParameterValues(NodeParameters):
     command_writer: str = param("", doc=(
         "the node allowed to command (`controller_node` under `stillframe launch`); empty: the "
         "first writer seen; other writers are ignored and reported"))
-    command_timeout_periods: int = param(3, limited(
+    lockstep_timeout_s: float = param(LOCKSTEP_TIMEOUT_S, positive, unit="s", doc=(
+        "lock-step: the longest wall time one sample waits for its command while the estimator "
+        "and the controller are on the graph; past it (or once one has left the graph) the run "
+        "ends, incomplete, exit code 7 (the simulator never advances without the command)"))
+    command_timeout_periods: int = param(COMMAND_TIMEOUT_PERIODS, limited(
         lambda v: None if v >= 1 else "must be >= 1", ">= 1"), unit="periods", doc=(
         "zero actuation (the safe state, `safe_state_samples`) once the newest command is this "
         "many periods old"))
-    command_miss_limit: float = param(0.25, between(0.0, 1.0, high_open=True), doc=(
+    command_miss_limit: float = param(COMMAND_MISS_LIMIT, between(0.0, 1.0, high_open=True), doc=(
         "real time: zero actuation while more than this share of the last second's samples "
         "missed their command (`degraded_samples`); 0: never"))
 

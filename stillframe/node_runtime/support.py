@@ -44,6 +44,10 @@ FLOOD_DEPTH = 1000
 #: the node name of ``stillframe record`` (it subscribes every topic at once)
 RECORDER_NODE = "stillframe_recorder"
 OK, WARN, ERROR = 0, 1, 2
+#: wall seconds without input after which a loop node reports its input stale (the simulator
+#: stale or gone); a lock-step sample waits on its slowest peer, so it is well above a sample's
+#: round trip on a loaded machine
+STALE_INPUT_S = 2.0
 
 
 @dataclass(frozen=True)
@@ -52,7 +56,6 @@ class LoopParameters:
 
     scene: Scene
     mode: str
-    lockstep_timeout_s: float
     diagnostics_period_s: float
 
     @property
@@ -66,9 +69,8 @@ class LoopParameters:
     @property
     def stale_input_s(self) -> float:
         """Wall seconds without input after which the estimator and controller report the
-        simulator stale or gone: 5 lock-step timeouts (a lock-step sim may wait one per
-        sample), at least 1 s."""
-        return max(1.0, 5 * self.lockstep_timeout_s)
+        simulator stale or gone: :data:`STALE_INPUT_S`, or five sample periods if longer."""
+        return max(STALE_INPUT_S, 5 * self.period)
 
     def qos(self, spec: topics.TopicSpec) -> QoSProfile | str:
         """The contract's QoS, except that sensor topics are RELIABLE and TRANSIENT_LOCAL in
@@ -112,8 +114,7 @@ def declare_loop_parameters(node: api.Node) -> LoopParameters:
     InputError naming a wrong one), with the scene loaded and its model resolved."""
     values = declare(node, LoopParameterValues)
     scene, _ = resolve_model(load_scene(values.scene, [v for v in values.overrides if v]))
-    return LoopParameters(scene, values.mode, values.lockstep_timeout_s,
-                          values.diagnostics_period_s)
+    return LoopParameters(scene, values.mode, values.diagnostics_period_s)
 
 
 class Diagnostics:
@@ -225,6 +226,13 @@ def has_publisher(node: api.Node, topic: str, peer: str) -> bool:
     """The graph shows a publisher of ``topic`` in node ``peer`` (the reader side of a match)."""
     return any(same_node(fqn(ep.node_namespace, ep.node_name), peer)
                for ep in node.get_publishers_info_by_topic(topic))
+
+
+def has_subscriber(node: api.Node, topic: str, peer: str) -> bool:
+    """The graph shows a subscription of ``topic`` in node ``peer`` (the writer side of a
+    match)."""
+    return any(same_node(fqn(ep.node_namespace, ep.node_name), peer)
+               for ep in node.get_subscriptions_info_by_topic(topic))
 
 
 def reaches_peer(node: api.Node, publisher: api.Publisher, peer: str) -> bool:

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from stillframe.config.scene import Scene
+from stillframe.config.scene import Scene, sample_grid
 from stillframe.contract.signals import Sample
 from stillframe.design.identified import frame_for
 from stillframe.dynamics.excitation import floor_load
@@ -31,38 +31,26 @@ from stillframe.errors import InputError, IntegrationError
 from stillframe.plant.actuators import Actuators
 from stillframe.plant.linear_period import LinearPeriod, make_linear_period
 from stillframe.plant.ph_plant import PHPlant
+from stillframe.plant.protocol import Plant
 from stillframe.plant.sensors import Sensors
 
 #: the truth kept at every substep, in the physical state: floor displacements and velocities
 RECORDED = np.array([0, 1, 2, 4, 5, 6])
 
 
-def sample_period(scene: Scene) -> tuple[float, int]:
-    """The sample period 1/sensors.rate_hz and the integrator steps per period."""
-    period = 1.0 / scene.sensors.rate_hz
-    ratio = period / scene.integrator.dt
-    steps = round(ratio)
-    if steps < 1 or abs(ratio - steps) > 1e-6 * ratio:
-        raise InputError(
-            f"integrator.dt: {scene.integrator.dt:g} s does not divide the sample period "
-            f"{period:g} s (1/sensors.rate_hz)"
-        )
-    return period, steps
-
-
-def make_plant(scene: Scene) -> Plant | PHPlant:
+def make_plant(scene: Scene) -> Plant:
     """The scene's plant: the frame pHDAE for ``model.type: ph`` (``plant.model: scene``),
-    else :class:`Plant`."""
+    else :class:`FramePlant`."""
     if scene.model.type == "ph" and scene.plant.model == "scene":
-        return PHPlant(scene, *sample_period(scene))
-    return Plant(scene)
+        return PHPlant(scene, *sample_grid(scene))
+    return FramePlant(scene)
 
 
-class Plant:
+class FramePlant:
     """Scene-driven plant with seeded sensor and process noise."""
 
     def __init__(self, scene: Scene) -> None:
-        self.period, self.substeps = sample_period(scene)
+        self.period, self.substeps = sample_grid(scene)
         self.h = self.period / self.substeps
         model = frame_for(scene.plant.model, scene.plant.file, scene, "plant.file")
         self.model = model

@@ -2,7 +2,7 @@
 :mod:`stillframe.dynamics.ph.scene_model`), stepped by the compiled AVF midpoint rule
 (:class:`~stillframe.dynamics.ph.frame_step.CompiledFramePH`).
 
-Same interface and sample/advance protocol as :class:`stillframe.plant.frame_plant.Plant`: the
+Same interface and sample/advance protocol as :class:`stillframe.plant.frame_plant.FramePlant`: the
 actuators' [torque, floor-3 force] drive the input ports [f3, torque] held over the period; the
 floor accelerations the accelerometers read are those of the index-1 form at t_k.
 
@@ -38,7 +38,7 @@ BALANCE_TERMS = ("stored", *ENERGY_TERMS)
 class PHPlant:
     """The frame pHDAE with seeded sensor and process noise and limited actuators."""
 
-    #: steps halved so far (:attr:`Plant.subdivisions`): the AVF step at integrator.dt never is
+    #: steps halved so far (:attr:`.protocol.Plant.subdivisions`): the AVF step never is
     subdivisions = 0
 
     def __init__(self, scene: Scene, period: float, substeps: int) -> None:

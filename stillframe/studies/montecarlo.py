@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from stillframe.config.scene import scene_from_dict
+from stillframe.config.scene import sample_grid, scene_from_dict
 from stillframe.config.schema import Section, set_dotted, show
 from stillframe.errors import InputError
 from stillframe.studies.executor import Outcome
@@ -156,9 +156,7 @@ def _identify(scene: Section) -> dict[str, Any]:
     if exc.type != "white_noise" or exc.rate_hz != sensors.rate_hz:
         raise InputError("excitation: --what identify needs type white_noise with rate_hz equal "
                          "to sensors.rate_hz (a force held over each sample)")
-    every = round(1.0 / (sensors.rate_hz * scene.integrator.dt))
-    if abs(every * scene.integrator.dt * sensors.rate_hz - 1.0) > 1e-9:
-        raise InputError("integrator.dt: must divide the sample period 1/sensors.rate_hz")
+    every = sample_grid(scene)[1]
     history = simulate(scene)
     u = history.excitation[::every, None]
     y = history.floor_accelerations[::every]

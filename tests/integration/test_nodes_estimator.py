@@ -20,7 +20,7 @@ from stillframe.estimation.factory import make_estimator
 from stillframe.loop.wiring import design_model
 from stillframe.middleware.api import create_node, spin_until
 from stillframe.node_runtime.support import LoopParameters, diagnostic_values
-from stillframe.plant.frame_plant import Plant
+from stillframe.plant.frame_plant import FramePlant
 from tests.support.nodes import SHORT_LQG, params_file, start_node, stop
 from tests.support.scenes import thesis_scene
 
@@ -30,7 +30,7 @@ TORQUE_LIMIT = 0.12
 
 
 def _samples() -> list[Sample]:
-    plant = Plant(thesis_scene("thesis_lqg", SHORT_LQG))
+    plant = FramePlant(thesis_scene("thesis_lqg", SHORT_LQG))
     out = []
     for _ in range(STEPS):
         s = plant.sample()
@@ -55,7 +55,7 @@ def test_estimates_nan_stale_and_missing_channels(ros_domain: int, tmp_path: Pat
                                                     command_writer="probe"))
     probe = create_node("probe", namespace=topics.DEFAULT_NAMESPACE, argv=["test"])
     try:
-        loop = LoopParameters(scene, "lockstep", 1.0, 0.2)   # the sim's sensor QoS
+        loop = LoopParameters(scene, "lockstep", 0.2)   # the sim's sensor QoS
         sensors = [probe.create_publisher(s.type_name, s.name, loop.qos(s)) for s in
                    (*topics.FLOOR_IMU, topics.PENDULUM_JOINT_STATES, topics.EXCITATION_WRENCH)]
         cmd = probe.create_publisher(topics.TORQUE_CMD.type_name, topics.TORQUE_CMD.name,

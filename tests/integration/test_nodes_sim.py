@@ -13,7 +13,7 @@ from stillframe.contract import messages, topics
 from stillframe.middleware.api import create_node, spin_until
 from stillframe.node_runtime.declarations import ESTIMATOR
 from stillframe.node_runtime.support import diagnostic_values
-from stillframe.plant.frame_plant import Plant
+from stillframe.plant.frame_plant import FramePlant
 from tests.support.middleware import finish
 from tests.support.nodes import params_file, start_node
 from tests.support.scenes import thesis_scene
@@ -86,7 +86,7 @@ def _run_sim(tmp_path: Path, answers: int, **params: object) -> tuple[Probe, dic
 
 def _reference(commands: list[float]) -> list:
     """The in-process plant's samples under the given torque commands."""
-    plant = Plant(thesis_scene("thesis_lqg", OVERRIDES))
+    plant = FramePlant(thesis_scene("thesis_lqg", OVERRIDES))
     samples = []
     for u in commands:
         samples.append(plant.sample())
@@ -151,8 +151,8 @@ def test_sensor_topics_are_reliable_in_lockstep_only() -> None:
     from stillframe.node_runtime.support import LoopParameters
 
     scene = thesis_scene("thesis_lqg")
-    lockstep = LoopParameters(scene, "lockstep", 1.0, 1.0)
-    realtime = LoopParameters(scene, "realtime", 1.0, 1.0)
+    lockstep = LoopParameters(scene, "lockstep", 1.0)
+    realtime = LoopParameters(scene, "realtime", 1.0)
     for spec in (*topics.FLOOR_IMU, topics.PENDULUM_JOINT_STATES, topics.EXCITATION_WRENCH):
         qos = lockstep.qos(spec)
         assert qos.reliability == Reliability.RELIABLE

@@ -78,7 +78,7 @@ def test_supervisor_enable_and_limit() -> None:
     controller = Controller(lambda z, f: (0.3, False), actuator=0, period=0.1)
     estimate = type("E", (), {"t": 0.0, "z": np.zeros(8)})()
     assert controller.command(0.0, estimate, 0.0).torque == 0.3
-    controller.limit = LIMIT
+    controller.set_limit(LIMIT)
     assert controller.command(0.0, None, 0.0).torque == LIMIT
     controller.enabled = False
     assert controller.command(0.0, None, 0.0).torque == 0.0

@@ -23,11 +23,10 @@ from typing import Any
 from stillframe.app.commands.common import add_json_argument, emit_json, seconds
 from stillframe.app.launcher import Launcher, LaunchOptions
 from stillframe.bench.soak import RssLog, rss_bytes
-from stillframe.config.scene import load_scene
+from stillframe.config.scene import load_scene, sample_grid
 from stillframe.contract import messages, topics
 from stillframe.errors import InputError
 from stillframe.locations import SCENES_DIR
-from stillframe.plant.frame_plant import sample_period
 from stillframe.text_table import format_table
 
 SCENE = SCENES_DIR / "thesis_lqg.yaml"
@@ -63,7 +62,7 @@ def soak(duration: float, warmup: float, every: float, out: Path,
          lockstep_timeout_s: float = LOCKSTEP_TIMEOUT_S) -> dict[str, Any]:
     """Run the soak; RSS growth per process and the counters."""
     scene = load_scene(SCENE, overrides(duration))
-    period, substeps = sample_period(scene)
+    period, substeps = sample_grid(scene)
     launcher = Launcher(LaunchOptions(SCENE, overrides(duration), "lockstep",
                                       out / "result.json", lockstep_timeout_s=lockstep_timeout_s))
     clock = [0.0]

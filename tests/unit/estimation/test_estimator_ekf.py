@@ -15,7 +15,7 @@ from stillframe.dynamics.models import build_model
 from stillframe.dynamics.systems import MechanicalSystem
 from stillframe.estimation.ekf import ExtendedKalman
 from stillframe.estimation.factory import initial_physical, make_estimator
-from stillframe.plant.frame_plant import Plant
+from stillframe.plant.frame_plant import FramePlant
 from tests.support.scenes import lumped_scene, thesis_scene
 
 PERIOD = 1.0 / 32
@@ -73,7 +73,7 @@ def test_update_matches_filterpy_extended_kalman_filter(ekf: ExtendedKalman,
 
 def _estimates(kind: str, scene_overrides: list[str], n: int) -> tuple[np.ndarray, np.ndarray]:
     scene = lumped_scene([f"estimator.type={kind}", *scene_overrides])
-    plant = Plant(scene)
+    plant = FramePlant(scene)
     estimator = make_estimator(scene, build_model(scene))
     truth, est = [], []
     for _ in range(n):
@@ -96,7 +96,7 @@ def test_small_motion_ekf_agrees_with_the_linear_kalman_filter() -> None:
 
 def test_ekf_recovers_from_the_thesis_one_radian_error_in_phi() -> None:
     scene = thesis_scene("thesis_euk_ekf", ["controller.type=none", "duration=5"])
-    plant = Plant(scene)
+    plant = FramePlant(scene)
     estimator = make_estimator(scene, build_model(scene))
     assert estimator.x[3] == pytest.approx(initial_physical(scene)[3] + 1.0)
     errors = []
