@@ -63,3 +63,10 @@ class LoopError(StillframeError):
     partial (``"complete": false``)."""
 
     exit_code = 7
+
+
+#: the kinds of error by exit code, for a process that reports one of another's (a launch's
+#: node): its one line and its code are passed on
+BY_EXIT_CODE: dict[int, type[StillframeError]] = {
+    kind.exit_code: kind for kind in (InputError, BagError, IntegrationError, IdentificationError,
+                                      DegradedRunError, LoopError)}

@@ -36,7 +36,7 @@ from stillframe.app.tracking import TRACKER, TRACKER_STOP_S, read_tracked, track
 from stillframe.config.scene import Scene, load_scene
 from stillframe.contract import messages
 from stillframe.contract.topics import DEFAULT_NAMESPACE, STATUS_KEYS
-from stillframe.errors import InputError
+from stillframe.errors import BY_EXIT_CODE, InputError, StillframeError
 from stillframe.fidelity.auto_model import resolve_model
 from stillframe.identification.tracker import TRACKER_READY
 from stillframe.locations import REPO_ROOT
@@ -86,9 +86,10 @@ _PR_SET_PDEATHSIG = 1
 class NodeDiedError(RuntimeError):
     """A child process ended before the run was over, or with a failure code."""
 
-    def __init__(self, name: str, how: str, tail: Sequence[str]) -> None:
+    def __init__(self, name: str, how: str, tail: Sequence[str], code: int | None = None
+                 ) -> None:
         super().__init__(f"{name} died ({how})")
-        self.name, self.how, self.tail = name, how, list(tail)
+        self.name, self.how, self.tail, self.code = name, how, list(tail), code
         #: what the run still wrote (:meth:`Launcher.run` fills it in): ``"complete": false``
         self.partial: LaunchResult | None = None
 
@@ -97,7 +98,17 @@ class NodeDiedError(RuntimeError):
         code = child.proc.returncode
         how = (f"killed by {signal.Signals(-code).name}" if code < 0 else f"exit code {code}"
                + (" before the end of the run" if code == 0 else ""))
-        return cls(child.name, how, child.tail)
+        return cls(child.name, how, child.tail, code)
+
+    def reported(self) -> StillframeError | None:
+        """The error the node itself reported as it ended: its one ``error:`` line, of the
+        kind its exit code says (:data:`stillframe.errors.BY_EXIT_CODE`); None when it ended
+        otherwise (a signal, a crash)."""
+        kind = BY_EXIT_CODE.get(self.code or 0)
+        line = next((t for t in reversed(self.tail) if ": error: " in t), None)
+        if kind is None or line is None:
+            return None
+        return kind(f"{self.name}: {line.split(': error: ', 1)[1]}")
 
 
 def node_command(package: str, scene: Path, overrides: Sequence[str], mode: str, *,

@@ -100,6 +100,6 @@ CONDITIONAL: tuple[TopicSpec, ...] = (ENERGY_BALANCE,)
 
 
 #: the ``/diagnostics`` values the status line shows, when a node reports them
-STATUS_KEYS: tuple[str, ...] = ("sim_time_s", "step", "realtime_factor", "lockstep_timeouts",
-                                "deadline_misses", "overruns", "rejected", "partial_updates",
-                                "saturated", "watchdog", "passivity_violations")
+STATUS_KEYS: tuple[str, ...] = ("sim_time_s", "step", "realtime_factor", "deadline_misses",
+                                "overruns", "rejected", "partial_updates", "saturated",
+                                "watchdog", "passivity_violations")

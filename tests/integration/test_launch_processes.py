@@ -65,7 +65,7 @@ diagnostics.publish(0, {{"watchdog": 7}})
 diagnostics.pub.wait_for_all_acked(10.0)
 """
 RESULT = {"reduction_pct": {"displacement": [71.0, 75.0, 57.0], "velocity": [73.0, 80.0, 70.0]},
-          "peak_command": 0.25, "lockstep_timeouts": 0, "steps": 1600, "wall_s": 1.0}
+          "peak_command": 0.25, "complete": True, "steps": 1600, "wall_s": 1.0}
 
 
 def write_stand_ins(root: Path, sim_seconds: float = 1.0, life: float = 3600,
@@ -136,12 +136,12 @@ def test_node_command_passes_overrides_through_the_ros_parameter_parser() -> Non
 
 def test_status_text_orders_nodes_and_cuts_to_width() -> None:
     statuses = {"controller_node: loop": {"saturated": "0", "compute_ms_p50": "0.1"},
-                "/frame/sim_node": {"sim_time_s": "12.5", "step": "400", "lockstep_timeouts": "0",
+                "/frame/sim_node": {"sim_time_s": "12.5", "step": "400", "deadline_misses": "0",
                                     "latency_ms_p50": "0.2"},
                 "/frame/estimator_node": {"rejected": "1"},
                 "other": {"a": "b"}}
     line = status_text(statuses)
-    assert line == ("sim_node: sim_time_s=12.5 step=400 lockstep_timeouts=0 | "
+    assert line == ("sim_node: sim_time_s=12.5 step=400 deadline_misses=0 | "
                     "estimator_node: rejected=1 | loop: saturated=0 | other: a=b")
     short = status_text(statuses, width=20)
     assert len(short) == 20 and short.endswith("…")

@@ -150,7 +150,7 @@ def wait_until(condition: Callable[[], bool], timeout: float) -> bool:
 
 
 def start_loop(tmp_path: Path) -> list[Any]:
-    params = params_file(tmp_path, "thesis_lqg", OVERRIDES, lockstep_timeout_s=5.0,
+    params = params_file(tmp_path, "thesis_lqg", OVERRIDES,
                          result_file=str(tmp_path / "result.json"))
     return [start_node(name, params) for name in ("estimator_node", "controller_node", "sim_node")]
 

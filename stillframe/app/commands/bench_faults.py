@@ -58,13 +58,13 @@ def table(rows: list[dict[str, Any]]) -> str:
             r["fault"],
             f"{ls['wall_s']:.2f}" if ls else "-",
             ("yes" if ls["bit_identical"] else "NO") if ls else "-",
-            ls.get("lockstep_timeouts", "-"),
+            ls.get("complete", "-"),
             rt.get("steps", "-"), rt.get("deadline_misses", "-"), rt.get("overruns", "-"),
             f"{est['rms_floors_m'] * 1e3:.3f}" if est else "-",
             f"{est['rms_phi_rad'] * 1e3:.2f}" if est else "-",
             _pct(rt["reduction_pct"]) if rt else "-"])
     return format_table(
-        ["fault", "lock-step wall [s]", "bit-identical", "timeouts", "RT steps",
+        ["fault", "lock-step wall [s]", "bit-identical", "complete", "RT steps",
          "deadline misses", "overruns", "est. RMS x [mm]", "est. RMS φ [mrad]",
          "RT x red. % (1 2 3)"], lines)
 

@@ -302,7 +302,7 @@ def lockstep(out: Path, backend: str, one: dict[str, Any], compose: str,
         "one_process_wall_s": one["loop_s"],
         "one_process_steps_per_s": one["steps"] / one["loop_s"],
         "nodes_over_one_process": one["loop_s"] / nodes["wall_s"],
-        "lockstep_timeouts": nodes.get("lockstep_timeouts"),
+        "complete": nodes.get("complete"),
         "reduction_pct": nodes["reduction_pct"],
     }
 
@@ -463,10 +463,10 @@ def run(args: argparse.Namespace) -> int:
         return 0
     print(format_table(
         ["lock-step", "steps", "wall [s]", "steps/s", "x real time", "/ one process",
-         "timeouts"],
+         "complete"],
         [[s["backend"], s["steps"], f"{s['nodes_wall_s']:.2f}", f"{s['nodes_steps_per_s']:.0f}",
           f"{s['nodes_realtime_ratio']:.2f}", f"{s['nodes_over_one_process']:.2f}",
-          s["lockstep_timeouts"]] for s in speeds]
+          s["complete"]] for s in speeds]
         + [[f"{s['backend']} composed ({s['compose']})", s["steps"], "",
             f"{s['composed_steps_per_s']:.0f}", "", f"{s['composed_over_one_process']:.2f}", ""]
            for s in speeds if args.compose]

@@ -5,7 +5,7 @@ processes (115,200 samples at 32 Hz), each process's resident set size sampled a
 Reported per process: RSS after warm-up, at the end (the last second of sim time left out: the
 simulator then evaluates the run and writes its results), and the growth between (must stay
 below 5 %; the simulator's net of the histories it keeps by design,
-:mod:`stillframe.bench.soak`), and the loop's counters at the end (lock-step timeouts,
+:mod:`stillframe.bench.soak`), and the loop's counters at the end (whether it completed,
 safe-state samples, rejected commands, malformed samples; the nodes' last ``/diagnostics``).
 Progress (sim time, RSS) goes to stderr.
 """
@@ -31,10 +31,7 @@ from stillframe.text_table import format_table
 
 SCENE = SCENES_DIR / "thesis_lqg.yaml"
 GROWTH_LIMIT_PCT = 5.0
-#: sim_node's wait for a command: a shared machine stalls the loop for a second at times, and the
-#: soak counts lost samples, not stalls (as the lock-step tests wait)
-LOCKSTEP_TIMEOUT_S = 10.0
-COUNTERS = ("lockstep_timeouts", "safe_state_samples", "rejected_commands", "malformed_samples")
+COUNTERS = ("complete", "safe_state_samples", "rejected_commands", "malformed_samples")
 
 
 def register(benches: argparse._SubParsersAction) -> None:
@@ -46,9 +43,6 @@ def register(benches: argparse._SubParsersAction) -> None:
                         help="part of the run before the growth is measured (default 0.1)")
     parser.add_argument("--every", type=float, default=2.0, metavar="S",
                         help="wall seconds between RSS samples (default 2)")
-    parser.add_argument("--lockstep-timeout", type=seconds, default=LOCKSTEP_TIMEOUT_S, metavar="S",
-                        help=f"sim_node's wait for a command (default {LOCKSTEP_TIMEOUT_S:g} s: "
-                             "a timeout is then a lost sample, not a busy machine)")
     add_json_argument(parser)
     parser.set_defaults(func=run)
 
@@ -58,13 +52,12 @@ def overrides(duration: float) -> list[str]:
     return [f"duration={duration:g}", "controller.start=10", "evaluation.window=10"]
 
 
-def soak(duration: float, warmup: float, every: float, out: Path,
-         lockstep_timeout_s: float = LOCKSTEP_TIMEOUT_S) -> dict[str, Any]:
+def soak(duration: float, warmup: float, every: float, out: Path) -> dict[str, Any]:
     """Run the soak; RSS growth per process and the counters."""
     scene = load_scene(SCENE, overrides(duration))
     period, substeps = sample_grid(scene)
-    launcher = Launcher(LaunchOptions(SCENE, overrides(duration), "lockstep",
-                                      out / "result.json", lockstep_timeout_s=lockstep_timeout_s))
+    launcher = Launcher(LaunchOptions(SCENE, overrides(duration), mode="lockstep",
+                                      result_file=out / "result.json"))
     clock = [0.0]
     launcher.node.create_subscription(
         topics.CLOCK.type_name, topics.CLOCK.name,
@@ -115,10 +108,8 @@ def run(args: argparse.Namespace) -> int:
         raise InputError("bench soak: --warmup must be in [0, 1)")
     if not args.every > 0:
         raise InputError("bench soak: --every must be > 0")
-    if not args.lockstep_timeout > 0:
-        raise InputError("bench soak: --lockstep-timeout must be > 0 s")
     with tempfile.TemporaryDirectory(prefix="stillframe-bench-soak-") as tmp:
-        report = soak(args.duration, args.warmup, args.every, Path(tmp), args.lockstep_timeout)
+        report = soak(args.duration, args.warmup, args.every, Path(tmp))
     report["within_limit"] = within_limit(report)
     if args.json:
         emit_json(report)

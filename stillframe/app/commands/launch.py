@@ -4,10 +4,12 @@ Prints the live status from ``/diagnostics`` on stderr and, at the end of the sc
 evaluation sim_node wrote: steady-state peaks per floor with and without control and the
 reductions (thesis eq. 5.233, 5.287); ``--json`` prints it as one document
 ``{"reduction_pct": {"displacement": [...], "velocity": [...]}, "peak_command": ...,
-"lockstep_timeouts": ..., "steps": ..., "wall_s": ..., "degraded": false, "degraded_reasons":
-[], ...}``. A degraded real-time run (:mod:`stillframe.app.run_verdict`) ends with a warning line
-giving the reasons, and with ``--strict`` with exit code 6. Exit code 1 names a node that died
-(how: its exit code or signal) after the others were stopped cleanly; what the run still has (the
+"complete": true, "steps": ..., "wall_s": ..., "degraded": false, "degraded_reasons": [],
+...}``. A degraded real-time run (:mod:`stillframe.app.run_verdict`) ends with a warning line
+giving the reasons, and with ``--strict`` with exit code 6. A node that ended on an error of its
+own passes on its line and exit code (7: a lock-step run whose peer left the graph or stopped
+answering; 4: a plant that diverged). Exit code 1 names a node that died otherwise (how: its exit
+code or signal) after the others were stopped cleanly; what the run still has (the
 samples the simulator ran, the statuses, the closed bag) is printed and written under ``--out``
 as a partial result marked ``"complete": false``. 130 follows Ctrl-C (every child stopped and
 reaped).
@@ -45,9 +47,9 @@ def add_launch_arguments(parser: argparse.ArgumentParser) -> None:
                         help="lockstep: deterministic, as fast as the nodes go (default); "
                              "realtime: paced by the wall clock")
     parser.add_argument("--lockstep-timeout", type=seconds, default=None, metavar="S",
-                        help="sim_node's wait for a command before it holds the previous one "
-                             "(given to every loop node: the estimator waits half, the "
-                             "controller a quarter)")
+                        help="lock-step: the longest sim_node waits for one sample's command "
+                             "while its peers are on the graph; past it the run ends, "
+                             "incomplete, exit code 7 (default: 60 s)")
     parser.add_argument("--backend", dest="backends", action="append", default=[],
                         metavar="[NODE=]BACKEND",
                         help="middleware of every node (dds or rclpy; default: STILLFRAME_RMW, "
@@ -146,8 +148,7 @@ def print_evaluation(evaluation: dict[str, Any], scene: Scene) -> None:
     print(f"scene {scene.name}: steady-state peaks, last {ev.window:g} s with control against "
           f"{baseline}:")
     print(evaluation_table(evaluation, scene))
-    counters = (("deadline_misses", "overruns") if evaluation.get("mode") == "realtime"
-                else ("lockstep_timeouts",))
+    counters = ("deadline_misses", "overruns") if evaluation.get("mode") == "realtime" else ()
     extras = [f"{key} {evaluation[key]}" for key in counters if key in evaluation]
     print(f"peak command {evaluation['peak_command']:.4g}; {evaluation['steps']} steps in "
           f"{evaluation['wall_s']:.2f} s wall" + (f"; {', '.join(extras)}" if extras else ""))
@@ -210,8 +211,13 @@ RECORDER_ERROR = "stillframe record: error: "
 
 
 def report_death(command: str, exc: Exception) -> int:
-    """One line naming the dead node, then the last lines it printed; a recorder that ended on
-    a bag failure (a full disk: the bag closed with what fit) gives its own line and exit 3."""
+    """One line naming the dead node, then the last lines it printed; a node that ended on an
+    error of its own (a lock-step peer gone, a plant that diverged, a scene it refused) gives
+    that line and its exit code; a recorder that ended on a bag failure (a full disk: the bag
+    closed with what fit) gives its own line and exit 3."""
+    if (reported := getattr(exc, "reported", lambda: None)()) is not None:
+        print(f"stillframe {command}: error: {reported}", file=sys.stderr)
+        return reported.exit_code
     if getattr(exc, "name", "") == "recorder" and (line := next(
             (t for t in getattr(exc, "tail", []) if t.startswith(RECORDER_ERROR)), None)):
         print(f"stillframe {command}: error: recorder: {line.removeprefix(RECORDER_ERROR)}",

@@ -23,12 +23,11 @@ PARAMS = ROOT / "ros_ws" / "config" / "closed_loop.params.yaml"
 @pytest.mark.parametrize("node", NODES)
 def test_params_file_gives_each_node_its_parameters(node: str) -> None:
     """Read through the same loader the nodes use (rcl's node-key matching): every node gets
-    the scene and the mode, only sim_node the lock-step timeout and the result file."""
+    the scene and the mode, only sim_node the result file."""
     params = load_param_file(PARAMS, f"/frame/{node}")
     shared = {"scene": "scenes/thesis_lqg.yaml", "mode": "lockstep"}
     if node == "sim_node":
-        assert params == {**shared, "lockstep_timeout_s": 1.0,
-                          "result_file": "closed_loop_result.json"}
+        assert params == {**shared, "result_file": "closed_loop_result.json"}
     else:
         assert params == shared
     load_scene(ROOT / params["scene"])  # the scene named is a valid scene
