@@ -3,8 +3,9 @@ equal the in-process estimator's on the same samples and commands, including a N
 (dropped and counted), a stale message (rejected and counted) and a missing channel (a partial
 update: in lock-step only once the next stamp arrives, never after a wall-clock wait). The
 probe's "simulator" saturates the torque at :data:`TORQUE_LIMIT` and reports the applied torque
-in the encoder's ``effort``: the estimator uses that, not the command (no windup); where no effort is reported, the command in effect
-while the sim's last report matched the commands, else (here: saturated) that report."""
+in the encoder's ``effort``: the estimator uses that, not the command (no windup); where no
+effort is reported, the command in effect while the sim's last report matched the commands, else
+(here: saturated) that report."""
 
 from __future__ import annotations
 
