@@ -59,7 +59,7 @@ from stillframe.loop.decimated_taps import DecimatedTaps
 from stillframe.loop.energy_balance import EnergyTopic
 from stillframe.loop.evaluation import LoopHistory, evaluate, plant_report
 from stillframe.loop.pacing import Pacer, wait_until
-from stillframe.loop.spec import LoopSpec
+from stillframe.loop.parts import simulator_of
 from stillframe.loop.step import LoopStep
 from stillframe.loop.wiring import command_topic, estimator_inputs
 from stillframe.middleware import api
@@ -87,7 +87,6 @@ from stillframe.node_runtime.support import (
     reaches_peer,
     wait_for_peers,
 )
-from stillframe.plant.frame_plant import make_plant
 from stillframe.plant.protocol import Plant
 
 #: lock-step: how often [s] a sample still waiting for its command asks the graph whether the
@@ -115,11 +114,11 @@ class SimNode(base.LoopNode):
         self.discovery_timeout_s = settings.discovery_timeout_s
         self.result_file = settings.result_file
         scene = params.scene
-        self.spec = spec = LoopSpec.of(
+        spec, plant = simulator_of(
             scene, mode=params.mode, lockstep_timeout_s=settings.lockstep_timeout_s,
             command_timeout_periods=settings.command_timeout_periods,
             command_miss_limit=settings.command_miss_limit)
-        plant = make_plant(scene)
+        self.spec = spec
         plant.warm_up()                     # its kernels now, not in the first sample
         self.step = LoopStep(spec, plant, [self.gates.add(topic.name, "command_writer")
                                             for topic in COMMAND_TOPICS])

@@ -40,6 +40,7 @@ from stillframe.errors import BY_EXIT_CODE, InputError, StillframeError
 from stillframe.fidelity.auto_model import resolve_model
 from stillframe.identification.tracker import TRACKER_READY
 from stillframe.locations import REPO_ROOT
+from stillframe.loop.parts import check_loop
 from stillframe.loop.spec import MODES
 from stillframe.middleware import api, discovery, names
 from stillframe.node_runtime.declarations import NODE_PARAMETERS, ManagedParameterValues
@@ -449,6 +450,8 @@ class Launcher:
         self.options = options
         self.scene = options.resolved or resolve_model(
             load_scene(options.scene.resolve(), options.overrides))[0]
+        # what a node would refuse, refused here, before any process starts
+        check_loop(self.scene, mode=options.mode)
         self.status = StatusLine()
         default = recorded_default(options.backends, record=options.record_dir is not None,
                                    mode=options.mode,

@@ -1,19 +1,26 @@
-"""Whether a real-time run's result can be trusted (issue 26): the *degraded* verdict.
+"""Whether a run's result can be trusted: the *degraded* verdict.
 
-A real-time run whose control path failed still ends with its table of reductions; the figures
-are then the held, zeroed or refused commands', not the controller's. :func:`verdict` reads the
-evaluation sim_node wrote and the last ``/diagnostics`` of the nodes and gives the reasons, each
-a short text with its count; an empty list is a run to trust. The reasons:
+A run whose control path failed still ends with its table of reductions; the figures are then
+the held, zeroed, refused or clipped commands', not the controller's. :func:`verdict` reads the
+evaluation (sim_node's, or the one-process loop's) and the controller's counters (its last
+``/diagnostics``, or the one-process loop's ``controller``) and gives the reasons, each a short
+text with its count; an empty list is a run to trust. In every mode:
+
+- the simulator refused commands (another writer, a bad value or stamp);
+- the control law's output went beyond :data:`~stillframe.control.supervisor.RUNAWAY_FACTOR`
+  times the command's bound, and was clipped to it (``runaway``: an estimate or a design that no
+  longer matches the plant, or a plant driven far beyond what the rig can do);
+
+and in real time:
 
 - more than :data:`DEADLINE_MISS_LIMIT` of the samples missed their command's deadline;
 - the controller's watchdog sent zero commands (its estimates fell behind);
-- the simulator refused commands (another writer, a bad value or stamp);
 - the controller never commanded in time (no sample had its command before its deadline);
 - most samples were degraded: the simulator applied zero (the safe state after the command
   timeout, or the miss-rate guard).
 
-``stillframe launch`` prints the reasons on one warning line, adds ``"degraded"`` and
-``"degraded_reasons"`` to its JSON, and with ``--strict`` exits with
+``stillframe launch`` and ``stillframe closed-loop`` print the reasons on one warning line and
+add ``"degraded"`` and ``"degraded_reasons"`` to their JSON; ``launch --strict`` then exits with
 :class:`~stillframe.errors.DegradedRunError`'s code.
 """
 
@@ -21,6 +28,7 @@ from __future__ import annotations
 
 from typing import Any
 
+from stillframe.control.supervisor import RUNAWAY_FACTOR
 from stillframe.loop.writer_gate import same_node
 
 #: the share of a run's samples that may miss their deadline before the run is degraded
@@ -34,21 +42,33 @@ def watchdog_zeros(statuses: dict[str, dict[str, str]]) -> int | None:
                  if same_node(name, "controller_node") and "watchdog" in values), None)
 
 
+def controller_count(evaluation: dict[str, Any], statuses: dict[str, dict[str, str]],
+                     key: str) -> int:
+    """A counter of the controller: the one-process loop's (``evaluation["controller"]``), else
+    controller_node's last ``/diagnostics``; 0 without either."""
+    if isinstance(own := evaluation.get("controller"), dict) and key in own:
+        return int(own[key])
+    return next((int(values[key]) for name, values in statuses.items()
+                 if same_node(name, "controller_node") and key in values), 0)
+
+
 def verdict(evaluation: dict[str, Any], statuses: dict[str, dict[str, str]]) -> list[str]:
-    """The reasons a real-time run is degraded (module docstring); [] for a run to trust or a
-    lock-step run (its figures are the one-process loop's, however long it waited)."""
-    if evaluation.get("mode") != "realtime":
-        return []
+    """The reasons a run is degraded (module docstring); [] for a run to trust."""
     steps = max(int(evaluation.get("steps", 0)), 1)
     reasons = []
+    if refused := int(evaluation.get("rejected_commands", 0)):
+        reasons.append(f"{refused} refused commands")
+    if runaway := controller_count(evaluation, statuses, "runaway"):
+        reasons.append(f"{runaway} commands of the law beyond {RUNAWAY_FACTOR:g} times their "
+                       "bound, clipped to it")
+    if evaluation.get("mode", "lockstep") != "realtime":
+        return reasons
     misses = int(evaluation.get("deadline_misses", 0))
     if misses > DEADLINE_MISS_LIMIT * steps:
         reasons.append(f"{misses} deadline misses ({100 * misses / steps:.1f} % of {steps} "
                        f"samples, over {100 * DEADLINE_MISS_LIMIT:g} %)")
     if zeros := watchdog_zeros(statuses):
         reasons.append(f"{zeros} watchdog zeros")
-    if refused := int(evaluation.get("rejected_commands", 0)):
-        reasons.append(f"{refused} refused commands")
     if "reduction_pct" in evaluation and not evaluation.get("commands_in_time", 1):
         reasons.append("the controller never commanded in time")
     zeroed = int(evaluation.get("degraded_samples", 0)) + int(

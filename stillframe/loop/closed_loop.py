@@ -22,14 +22,11 @@ import numpy as np
 
 from stillframe.config.scene import Scene
 from stillframe.contract.codecs import COMMAND_TOPICS
-from stillframe.control.factory import make_controller
-from stillframe.estimation.factory import make_estimator
 from stillframe.loop.energy_balance import EnergyLedger
 from stillframe.loop.evaluation import LoopHistory, evaluate, open_loop_truth, plant_report
-from stillframe.loop.spec import LoopSpec
+from stillframe.loop.parts import controller_of, estimator_of, simulator_of
 from stillframe.loop.step import LoopStep
 from stillframe.loop.wiring import design_model
-from stillframe.plant.frame_plant import make_plant
 
 __all__ = ["LoopHistory", "evaluate", "open_loop_truth", "run_closed_loop"]
 
@@ -39,12 +36,11 @@ Progress = Callable[[float], None]
 def run_closed_loop(scene: Scene, progress: Progress | None = None) -> LoopHistory:
     """Run the scene's plant, estimator and controller lock-step for ``scene.duration``."""
     started = time.perf_counter()
-    spec = LoopSpec.of(scene)
-    plant = make_plant(scene)
+    spec, plant = simulator_of(scene)
     step = LoopStep(spec, plant)
     design = design_model(scene)
-    estimator = make_estimator(scene, design) if scene.estimator.type != "none" else None
-    controller = make_controller(scene, design) if scene.controller.type != "none" else None
+    estimator = estimator_of(scene, design)
+    controller = controller_of(scene, design)
     n = spec.samples
     rows = np.full((n, 20), np.nan)
     control = np.zeros(2)

@@ -7,7 +7,7 @@ from __future__ import annotations
 from stillframe.config.schema import Section
 from stillframe.contract import topics
 from stillframe.contract.codecs import COMMAND_TOPICS, SENSOR_TOPICS
-from stillframe.contract.signals import actuator_of
+from stillframe.contract.signals import FORCE, actuator_of
 from stillframe.design.identified import frame_for
 from stillframe.dynamics.models.frame import FrameModel
 
@@ -23,7 +23,7 @@ def estimator_inputs(scene: Section) -> tuple[topics.TopicSpec, ...]:
     the ``truth`` estimator."""
     if scene.estimator.type == "none":
         return ()
-    extra = [topics.FLOOR3_LOAD_CELL] if actuator_of(scene) == 1 else []
+    extra = [topics.FLOOR3_LOAD_CELL] if actuator_of(scene) == FORCE else []
     if scene.estimator.type == "truth":
         extra.append(topics.STATE_TRUTH)
     return (*SENSOR_TOPICS, *extra)

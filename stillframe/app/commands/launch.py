@@ -303,7 +303,7 @@ def run(args: argparse.Namespace) -> int:
     else:
         print(f"scene {scene.name}: {result.evaluation.get('steps')} steps, no controller")
     if reasons:
-        degraded = DegradedRunError("degraded real-time run, its figures are not the "
+        degraded = DegradedRunError(f"degraded {args.mode} run, its figures are not the "
                                     f"controller's: {'; '.join(reasons)}")
         if args.strict:
             raise degraded

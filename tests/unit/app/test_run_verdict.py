@@ -1,6 +1,6 @@
-"""The degraded verdict of a real-time run (:mod:`stillframe.app.run_verdict`): each reason
-forced by its counter in a hand-made evaluation and status, none for a clean run or a lock-step
-one."""
+"""The degraded verdict of a run (:mod:`stillframe.app.run_verdict`): each reason forced by its
+counter in a hand-made evaluation and status, none for a clean run; in lock-step and in one
+process only the reasons of every mode (refused commands, a law that ran away)."""
 
 from __future__ import annotations
 
@@ -15,9 +15,8 @@ CLEAN = {"mode": "realtime", "steps": 960, "deadline_misses": 0, "rejected_comma
 STATUS = {"/frame/controller_node": {"watchdog": "0"}, "/frame/sim_node": {"step": "960"}}
 
 
-def test_a_clean_run_and_a_lockstep_run_are_not_degraded() -> None:
+def test_a_clean_run_is_not_degraded() -> None:
     assert verdict(CLEAN, STATUS) == []
-    assert verdict({**CLEAN, "mode": "lockstep", "rejected_commands": 5}, STATUS) == []
     # at the limit, not over it
     at_limit = round(DEADLINE_MISS_LIMIT * 960)
     assert verdict({**CLEAN, "deadline_misses": at_limit - 1}, STATUS) == []
@@ -34,6 +33,19 @@ def test_a_clean_run_and_a_lockstep_run_are_not_degraded() -> None:
 ])
 def test_each_reason_alone(changed: dict, status: dict, reason: str) -> None:
     assert verdict({**CLEAN, **changed}, status) == [reason]
+
+
+def test_lockstep_and_one_process_runs_give_the_reasons_of_every_mode() -> None:
+    """Refused commands and a law that ran away, from controller_node's status or the
+    one-process loop's controller counters; the real-time reasons are not theirs."""
+    lockstep = {**CLEAN, "mode": "lockstep", "deadline_misses": 81, "commands_in_time": 0}
+    assert verdict(lockstep, STATUS) == []
+    assert verdict({**lockstep, "rejected_commands": 5},
+                   {"/frame/controller_node": {"watchdog": "12", "runaway": "192"}}) == [
+        "5 refused commands", "192 commands of the law beyond 10 times their bound, clipped to it"]
+    one_process = {"steps": 384, "controller": {"runaway": 192, "watchdog": 0}}
+    assert verdict(one_process, {}) == [
+        "192 commands of the law beyond 10 times their bound, clipped to it"]
 
 
 def test_the_issues_run_gives_every_reason_it_had() -> None:
