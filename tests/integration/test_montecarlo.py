@@ -74,8 +74,8 @@ def test_run_values_reach_the_scene_and_differ_per_run():
     with pytest.raises(InputError, match="no such key"):
         plan(scene, [], [parse_vary("rig.mass=±10%")], 0, "closed-loop")
     # a listed value a node would refuse (the loop's parts built, as launch builds them)
-    with pytest.raises(InputError, match="--vary plant.file: the value '/nonexistent.yaml'"):
-        plan(scene, [], [parse_vary("plant.file=thesis_mkr,/nonexistent.yaml")], 0,
+    with pytest.raises(InputError, match=r"--vary design\.file: the value '/nonexistent\.yaml'"):
+        plan(scene, [], [parse_vary("design.file=thesis_mkr,/nonexistent.yaml")], 0,
              "closed-loop")
 
 
