@@ -240,6 +240,20 @@ def print_partial(evaluation: dict[str, Any], scene: Scene, args: argparse.Names
     print(f"scene {scene.name}: partial result (complete: false): {'; '.join(kept)}")
 
 
+def bag_incomplete(bag: dict[str, Any] | None) -> str:
+    """One line on what the launch's bag misses (the recorder's counts), "" when nothing."""
+    if not bag or not bag.get("closed"):
+        return ""
+    missing = {t: n for t, n in bag.get("missing_samples", {}).items() if n}
+    stalls = bag.get("recorder_stalls", {}).get("count", 0)
+    if not missing and not stalls:
+        return ""
+    return (f"the bag {bag['path']} is not complete: it misses {sum(missing.values())} samples "
+            f"({', '.join(f'{t} {n}' for t, n in missing.items()) or 'none on a stamp grid'})"
+            + (f"; the recorder stalled {stalls} times, the longest "
+               f"{bag['recorder_stalls'].get('longest_s', 0):g} s" if stalls else ""))
+
+
 def recorder_args(args: argparse.Namespace) -> list[str] | None:
     """The recorder's priority arguments from ``--recorder-nice`` and ``--recorder-idle``; None
     when neither was given (the launch's default)."""
@@ -288,6 +302,8 @@ def run(args: argparse.Namespace) -> int:
             print("stillframe launch: interrupted; every node stopped", file=sys.stderr)
             return 130
     reasons = verdict(result.evaluation, result.diagnostics)
+    if incomplete := bag_incomplete(result.evaluation.get("bag")):
+        print(f"stillframe launch: warning: {incomplete}", file=sys.stderr)
     if args.json:
         emit_json({"scene": scene.name, **result.evaluation, "degraded": bool(reasons),
                    "degraded_reasons": reasons, "diagnostics": result.diagnostics,
