@@ -27,6 +27,7 @@ seeking reader does). The file is memory-mapped, never read whole.
 
 from __future__ import annotations
 
+import contextlib
 import heapq
 import io
 import mmap
@@ -218,10 +219,13 @@ def _decompress(compression: str, raw: memoryview, size: int) -> bytes | memoryv
     raise ValueError(f"unknown compression {compression!r}")
 
 
-def _chunk_layout(data: Any, at: int, size: int) -> tuple[ChunkInfo, memoryview]:
-    """The chunk record at ``at`` by its own fields (not its record length, which a flipped
-    byte may have changed): its header, and its records still compressed; ``ChunkInfo.end`` is
-    where its records end. ValueError (or struct.error) when the fields do not hold together."""
+def _chunk_layout(data: Any, at: int, size: int, end: int | None = None
+                  ) -> tuple[ChunkInfo, memoryview]:
+    """The chunk record at ``at``: its header, and its records still compressed, up to where
+    its own records' length says (``end`` None: not its record length, which a flipped byte may
+    have changed) or up to ``end`` (its record length, when its own is the damaged one);
+    ``ChunkInfo.end`` is where its records end. ValueError (or struct.error) when the fields do
+    not hold together."""
     view = memoryview(data)
     start_ns, end_ns, _, crc, name_length = _CHUNK.unpack_from(data, at + PREFIX)
     pos = at + PREFIX + _CHUNK.size
@@ -232,18 +236,19 @@ def _chunk_layout(data: Any, at: int, size: int) -> tuple[ChunkInfo, memoryview]
         raise ValueError(f"has an unknown compression {compression!r}")
     (length,) = _U64.unpack_from(data, pos + name_length)
     pos += name_length + 8
-    if pos + length > size:
+    stop = pos + length if end is None else end
+    if stop > size or stop < pos:
         raise ValueError("runs past the end of the file")
-    info = ChunkInfo(at, pos + length, start_ns, end_ns, compression, crc, start_ns=start_ns,
+    info = ChunkInfo(at, stop, start_ns, end_ns, compression, crc, start_ns=start_ns,
                      end_ns=end_ns)
-    return info, view[pos:pos + length]
+    return info, view[pos:stop]
 
 
 def _chunk_records(data: Any, chunk: ChunkInfo) -> bytes | memoryview:
     """A good chunk's records, decompressed (its CRC was checked by :func:`check_mcap`)."""
-    _, raw = _chunk_layout(data, chunk.offset, len(data))
+    _, raw = _chunk_layout(data, chunk.offset, len(data), chunk.end)
     size = _CHUNK.unpack_from(data, chunk.offset + PREFIX)[2]
-    return _decompress(chunk.compression, raw, size)
+    return bytes(_decompress(chunk.compression, raw, max(size, 1)))
 
 
 def _messages_in(records: Any) -> Iterator[tuple[int, int, bytes]]:
@@ -293,46 +298,71 @@ def _scan_chunk(found: McapFile, chunk: ChunkInfo, records: Any) -> None:
         chunk.start_ns, chunk.end_ns = first, last
 
 
+def _checked(chunk: ChunkInfo, raw: memoryview, size: int) -> bytes | memoryview | None:
+    """The chunk's records when its CRC holds, else None (no CRC, no decompression, another
+    CRC)."""
+    if not chunk.crc:
+        return None
+    try:
+        records = _decompress(chunk.compression, raw, max(size, 1))
+    except (*PARSE_ERRORS, zstandard.ZstdError, RuntimeError):
+        return None
+    return records if zlib.crc32(records) == chunk.crc else None
+
+
 def _take_chunk(found: McapFile, data: Any, at: int, record_end: int, *,
                 only_if_checked: bool = False) -> ChunkInfo | None:
-    """Check and walk the chunk record at ``at`` (:func:`_chunk_layout`); its ``end`` is where
-    the walk goes on. A chunk whose fields and CRC hold is good even when its record length
-    (``record_end``) disagrees: the length was damaged, not the messages. With
+    """Check and walk the chunk record at ``at``; its ``end`` is where the walk goes on.
+
+    A chunk whose CRC holds is good whichever of its lengths agrees with it: by its records'
+    own length field, or by its record length (:func:`_chunk_layout`); a damaged length, size
+    or opcode around intact records costs a fault phrase, not the messages. With
     ``only_if_checked`` (a record whose opcode is not a chunk's, an offset found by search) it is
     taken only when its CRC holds, else None and nothing is recorded."""
     size = found.size
-    try:
-        chunk, raw = _chunk_layout(data, at, size)
-        expected = _CHUNK.unpack_from(data, at + PREFIX)[2]
-        if only_if_checked and (not chunk.crc or (chunk.compression == ""
-                                                  and len(raw) != expected)):
-            return None     # cheap refusals first: a search tries many offsets
-        records = _decompress(chunk.compression, raw, expected)
-    except (*PARSE_ERRORS, zstandard.ZstdError, RuntimeError) as exc:
+    layouts = []
+    for end in (None, record_end):
+        if end is not None and (end > size or any(c.end == end for c, _ in layouts)):
+            continue
+        try:
+            layouts.append(_chunk_layout(data, at, size, end))
+        except PARSE_ERRORS:
+            continue
+    stated = _CHUNK.unpack_from(data, at + PREFIX)[2] if at + PREFIX + _CHUNK.size <= size \
+        else 0
+    for chunk, raw in layouts:
+        if (records := _checked(chunk, raw, stated)) is not None:
+            break
+    else:
         if only_if_checked:
             return None
-        reason = str(exc) if str(exc).startswith(("has", "runs")) else \
-            "has a damaged header or does not decompress"
-        chunk = ChunkInfo(at, min(record_end, size), 0, 0, "", 0, fault=reason)
-        found.chunks.append(chunk)
-        return chunk
-    if only_if_checked and not (chunk.crc and zlib.crc32(records) == chunk.crc):
-        return None
-    if len(records) != expected:
-        chunk.fault = "holds another size than its header says"
-    elif chunk.crc and zlib.crc32(records) != chunk.crc:
-        chunk.fault = "fails its CRC"
-    else:
+        if not layouts:
+            chunk = ChunkInfo(at, min(record_end, size), 0, 0, "", 0,
+                              fault="has a damaged header")
+            found.chunks.append(chunk)
+            return chunk
+        chunk, raw = layouts[0]
         try:
-            _scan_chunk(found, chunk, records)
-        except PARSE_ERRORS as exc:
-            chunk.fault = str(exc) if str(exc).startswith("has") else \
-                "has a record that does not parse"
-    if chunk.good and chunk.end != record_end:
-        found.faults.append(f"the chunk at byte {at} has a damaged record length or opcode "
+            records = _decompress(chunk.compression, raw, stated)
+        except (*PARSE_ERRORS, zstandard.ZstdError, RuntimeError):
+            chunk.fault = f"does not decompress ({chunk.compression or 'none'})"
+        else:
+            if chunk.crc:
+                chunk.fault = "fails its CRC"
+            elif len(records) != stated:
+                chunk.fault = "holds another size than its header says"
+        if not chunk.good:
+            chunk.end = record_end if record_end <= size else chunk.end
+            found.chunks.append(chunk)
+            return chunk
+    try:
+        _scan_chunk(found, chunk, records)
+    except PARSE_ERRORS as exc:
+        chunk.fault = str(exc) if str(exc).startswith("has") else \
+            "has a record that does not parse"
+    if chunk.good and (chunk.end != record_end or len(records) != stated):
+        found.faults.append(f"the chunk at byte {at} has a damaged length, size or opcode "
                             "(its records are whole and read)")
-    elif not chunk.good and record_end <= size:
-        chunk.end = record_end
     found.chunks.append(chunk)
     return chunk
 
@@ -416,10 +446,10 @@ def _take_record(found: McapFile, data: Any, opcode: int, at: int, end: int) -> 
             found.header = _read(Header, body)
         elif opcode == Opcode.SCHEMA:
             schema = _read(Schema, body)
-            found.schemas[schema.id] = schema
+            found.schemas.setdefault(schema.id, schema)
         elif opcode == Opcode.CHANNEL:
             channel = _read(Channel, body)
-            found.channels[channel.id] = channel
+            found.channels.setdefault(channel.id, channel)
         elif opcode == Opcode.MESSAGE:
             if end - at < PREFIX + _MESSAGE.size:
                 raise ValueError("too short")
@@ -506,8 +536,13 @@ def _mapped(path: Path) -> Iterator[Any]:
         if stream.seek(0, io.SEEK_END) == 0:
             yield b""
             return
-        with mmap.mmap(stream.fileno(), 0, access=mmap.ACCESS_READ) as data:
+        data = mmap.mmap(stream.fileno(), 0, access=mmap.ACCESS_READ)
+        try:
             yield data
+        finally:
+            # a view of it still alive (an exception on its way): closed when it is collected
+            with contextlib.suppress(BufferError):
+                data.close()
 
 
 def check_mcap(path: str | Path) -> McapFile:
@@ -529,6 +564,9 @@ def check_mcap(path: str | Path) -> McapFile:
                     found.data_crc = "ok" if zlib.crc32(
                         memoryview(data)[:data_end]) == crc else "fails"
             _read_summary(found, data)
+            if found.complete and found.cut:    # a whole file: the walk was stopped by damage
+                found.faults.insert(0, found.cut.removesuffix(" (cut short?)"))
+                found.cut, found.cut_at = "", None
             if found.summary_crc in ("ok", "absent"):
                 _indexed_chunks(found, data)
     except OSError as exc:

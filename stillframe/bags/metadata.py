@@ -82,7 +82,7 @@ class _Fields:
     def __init__(self, source: Path, node: Any, path: str) -> None:
         self.source, self.path = source, path
         if not isinstance(node, dict):
-            self.fail(path, "a mapping", node)
+            self.fail(path or "the document", "a mapping", node)
         self.node = node
 
     def fail(self, path: str, expected: str, value: Any) -> None:
@@ -93,8 +93,8 @@ class _Fields:
 
     def get(self, key: str, check: Callable[[str, Any], Any]) -> Any:
         if key not in self.node:
-            raise BagError(f"{self.source}: {self.path}: missing key {key!r}")
-        return check(f"{self.path}.{key}", self.node[key])
+            raise BagError(f"{self.source}: {self.path or 'the document'}: missing key {key!r}")
+        return check(f"{self.path}.{key}" if self.path else key, self.node[key])
 
     def count(self, path: str, value: Any) -> int:
         if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= MAX_INT:
@@ -130,8 +130,6 @@ class _Fields:
 
     def qos(self, path: str, value: Any, version: int) -> list[Qos]:
         if version >= 9:
-            if value is None:
-                return []
             return qos_from_yaml(self.items(path, value), lambda msg: BagError(
                 f"{self.source}: {path}: {msg}"))
         text = self.text(path, value)
@@ -165,7 +163,7 @@ def _file(fields: _Fields, path: str, node: Any) -> FileEntry:
 
 def parse_metadata(document: Any, source: Path) -> BagMetadata:
     """The metadata in ``document`` (parsed YAML), every field checked (module docstring)."""
-    top = _Fields(source, document, "the document")
+    top = _Fields(source, document, "")
     info = top.get(ROOT_KEY, lambda p, v: _Fields(source, v, p))
     version = info.get("version", info.count)
     if not 1 <= version <= METADATA_VERSION:

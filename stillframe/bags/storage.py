@@ -536,11 +536,10 @@ def read_bag(path: str | Path, default_typestore: Typestore, *, topics: Sequence
 
 
 def disagreements(reader: BagReader | _RosbagsReader) -> list[str]:
-    """Where ``metadata.yaml`` disagrees with the storage files: topics, types, counts, times,
-    the files it lists; one phrase each."""
+    """Where ``metadata.yaml`` ("it") disagrees with the storage files ("they"): topics, types,
+    counts, times, the files it lists; one phrase each."""
     meta = reader.metadata
     assert meta is not None
-    where = "metadata.yaml"
     found = []
     held = reader.counts()
     file_topics: dict[str, set[str]] = {}
@@ -550,35 +549,32 @@ def disagreements(reader: BagReader | _RosbagsReader) -> list[str]:
         types = file_topics.get(topic.name)
         count = sum(n for c, n in held.items() if c.topic == topic.name and c.msgtype == topic.type)
         if types is None:
-            found.append(f"{where} lists {topic.name}, which the storage files do not hold")
+            found.append(f"it lists {topic.name}, which they do not hold")
         elif topic.type not in types:
-            found.append(f"{where} gives {topic.name} the type {topic.type}, the storage files "
+            found.append(f"it gives {topic.name} the type {topic.type}, they "
                          f"{', '.join(sorted(types))}")
         elif count != topic.message_count:
-            found.append(f"{where} counts {topic.message_count} messages on {topic.name}, the "
-                         f"storage files hold {count} readable")
+            found.append(f"{topic.name}: it counts {topic.message_count} messages, they hold "
+                         f"{count} readable")
     listed = {t.name for t in meta.topics}
-    found += [f"the storage files hold {t}, which {where} does not list"
-              for t in sorted(set(file_topics) - listed)]
+    found += [f"they hold {t}, which it does not list" for t in sorted(set(file_topics) - listed)]
     if (counted := sum(t.message_count for t in meta.topics)) != meta.message_count:
-        found.append(f"{where}'s message_count {meta.message_count} is not the sum of its "
-                     f"topics' counts ({counted})")
-    total = sum(held.values())
-    if total != meta.message_count:
-        found.append(f"{where}'s message_count is {meta.message_count}, the storage files hold "
-                     f"{total} readable")
+        found.append(f"its message_count {meta.message_count} is not the sum of its topics' "
+                     f"counts ({counted})")
+    if (total := sum(held.values())) != meta.message_count:
+        found.append(f"message_count: it says {meta.message_count}, they hold {total} readable")
     if (span := reader.time_range()) is not None and (
             meta.starting_time_ns, meta.duration_ns) != (span[0], span[1] - span[0]):
-        found.append(f"{where} spans {meta.starting_time_ns} + {meta.duration_ns} ns, the "
-                     f"messages {span[0]} + {span[1] - span[0]} ns")
+        found.append(f"it spans {meta.starting_time_ns} + {meta.duration_ns} ns, the messages "
+                     f"{span[0]} + {span[1] - span[0]} ns")
     if meta.files:
         names = [f.path for f in meta.files]
         if sorted(names) != sorted(meta.relative_file_paths):
-            found.append(f"{where}'s files ({', '.join(names)}) are not its relative_file_paths "
+            found.append(f"its files ({', '.join(names)}) are not its relative_file_paths "
                          f"({', '.join(meta.relative_file_paths)})")
-        if sum(f.message_count for f in meta.files) != meta.message_count:
-            found.append(f"{where}'s files count {sum(f.message_count for f in meta.files)} "
-                         f"messages, its message_count {meta.message_count}")
+        if (in_files := sum(f.message_count for f in meta.files)) != meta.message_count:
+            found.append(f"its files count {in_files} messages, its message_count "
+                         f"{meta.message_count}")
     return found
 
 
@@ -590,7 +586,10 @@ def bag_summary(path: str | Path, default_typestore: Typestore) -> BagSummary:
         meta = reader.metadata
         assert meta is not None
         qos = reader.channel_qos() if isinstance(reader, BagReader) else {}
-        problems = [*reader.problems, *(f"{bag}: {d}" for d in disagreements(reader))]
+        problems = list(reader.problems)
+        if differ := disagreements(reader):
+            problems.append(f"{bag / METADATA_FILE} disagrees with the storage files: "
+                            + "; ".join(differ))
     topics = [TopicSummary(name=t.name, type=t.type, count=t.message_count,
                            serialization_format=t.serialization_format,
                            type_description_hash=t.type_description_hash,
