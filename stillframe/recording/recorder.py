@@ -44,7 +44,6 @@ from __future__ import annotations
 
 import bisect
 import json
-import math
 import struct
 import time
 from collections.abc import Sequence
@@ -68,6 +67,9 @@ _TIME = "builtin_interfaces/msg/Time"
 STALL_S = 0.5
 #: the smallest grid taken for a period [ns]: stamps closer than that are not a sample grid
 MIN_PERIOD_NS = 1000
+#: step sizes kept per topic: a stream of stamps with more is not on a grid (a grid with gaps
+#: of every length up to a few thousand periods stays under it)
+MAX_STEP_SIZES = 4096
 #: ``custom_data`` keys of the bag's metadata: samples missing per topic, and the stalls (JSON)
 MISSING_KEY = "stillframe.missing_samples"
 STALLS_KEY = "stillframe.recorder_stalls"
@@ -87,36 +89,47 @@ def starts_with_stamp(msgtype: str) -> bool:
 
 
 class GapCounter:
-    """Samples missing from one topic's stream of stamps (module docstring): its period is the
-    greatest common divisor of the steps between consecutive stamps, trusted only when it is
-    also the smallest step (stamps of a clock that jitters have a tiny divisor and no step that
-    small); repeated and earlier stamps (a restarted simulator) are no steps."""
+    """Samples missing from one topic's stream of stamps (module docstring). The steps between
+    consecutive stamps are kept by size (a grid has few sizes: the period, gaps of a few
+    periods); the period is the smallest step, and the stream is on a grid when every step is
+    a whole number n of periods within n ns (stamps rounded to the nanosecond from a period
+    that is not a whole number of them, as 1/1024 s). Stamps of a clock that jitters are not,
+    and when they take more than :data:`MAX_STEP_SIZES` sizes they are no longer kept. Repeated
+    and earlier stamps (a restarted simulator) are no steps."""
 
-    __slots__ = ("last", "period", "smallest", "span", "steps")
+    __slots__ = ("last", "off_grid", "steps")
 
     def __init__(self) -> None:
         self.last: int | None = None
-        self.period = 0
-        self.smallest = 0
-        self.span = 0
-        self.steps = 0
+        #: step size [ns] -> how many steps of that size
+        self.steps: dict[int, int] = {}
+        self.off_grid = False
 
     def add(self, stamp_ns: int) -> None:
         last, self.last = self.last, stamp_ns
-        if last is None or stamp_ns <= last:
+        if last is None or stamp_ns <= last or self.off_grid:
             return
+        steps = self.steps
         step = stamp_ns - last
-        self.period = math.gcd(self.period, step)
-        self.smallest = step if not self.steps else min(self.smallest, step)
-        self.span += step
-        self.steps += 1
+        steps[step] = steps.get(step, 0) + 1
+        if len(steps) > MAX_STEP_SIZES:
+            self.off_grid = True
 
     def missing(self) -> int | None:
         """Samples missing between the first and the last stamp; None when the stamps are not
         on a grid (or too few to tell)."""
-        if not self.steps or self.period != self.smallest or self.period < MIN_PERIOD_NS:
+        if self.off_grid or not self.steps:
             return None
-        return self.span // self.period - self.steps
+        period = min(self.steps)
+        if period < MIN_PERIOD_NS:
+            return None
+        total = 0
+        for step, count in self.steps.items():
+            periods = round(step / period)
+            if abs(step - periods * period) > periods:
+                return None
+            total += (periods - 1) * count
+        return total
 
 
 class SimStamps:
