@@ -27,6 +27,13 @@ def test_holes_in_a_grid_are_counted_exactly() -> None:
         assert counted(kept) == holes
 
 
+def test_a_period_of_a_fraction_of_a_nanosecond_is_a_grid() -> None:
+    """1024 Hz: stamps rounded to the nanosecond from k / 1024 s, as the simulator makes them
+    (steps of 976562 and 976563 ns); a hole of 2000 samples among them."""
+    stamps = [round(k * 1e9 / 1024) for k in range(5000) if not 1000 <= k < 3000]
+    assert counted(stamps) == 2000
+
+
 def test_repeats_and_a_restart_are_not_holes() -> None:
     """A stamp sent twice (two writers of one sample) and a simulator that starts again at 0:
     the steps back and the repeats count nothing; the holes after the restart do."""
