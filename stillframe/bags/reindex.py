@@ -104,15 +104,13 @@ class Recovered:
 
     @property
     def state(self) -> str:
-        """One phrase: complete, cut short, or damaged (with what the summary counted)."""
+        """One phrase: complete, cut short, or damaged."""
         if self.complete:
             return "complete"
         if not (self.dropped or self.problems) and (self.indexed is None
                                                     or self.total >= self.indexed):
             return "cut short; kept every whole message"
-        counted = (f" of the {self.indexed} messages its summary counts"
-                   if self.indexed is not None and self.indexed > self.total else "")
-        return f"damaged; kept every intact message{counted}"
+        return "damaged; kept the intact messages"
 
 
 def _mcap_file(bag: Path) -> Path:

@@ -587,7 +587,8 @@ def bag_summary(path: str | Path, default_typestore: Typestore) -> BagSummary:
         assert meta is not None
         qos = reader.channel_qos() if isinstance(reader, BagReader) else {}
         problems = list(reader.problems)
-        if differ := disagreements(reader):
+        # against damaged files the counts disagree as a consequence: the damage is said
+        if not problems and (differ := disagreements(reader)):
             problems.append(f"{bag / METADATA_FILE} disagrees with the storage files: "
                             + "; ".join(differ))
     topics = [TopicSummary(name=t.name, type=t.type, count=t.message_count,

@@ -62,7 +62,9 @@ def run_reindex(args: argparse.Namespace) -> int:
     else:
         partial = (f" ({result.from_partial_chunk} from the chunk it was cut in)"
                    if result.from_partial_chunk else "")
-        print(f"{result.path}: {result.state}: {result.total} messages{partial}")
+        counted = (f" of the {result.indexed} its summary counts"
+                   if result.indexed is not None and result.indexed > result.total else "")
+        print(f"{result.path}: {result.state}: {result.total} messages{counted}{partial}")
         print(format_table(["topic", "messages"], [[t, n] for t, n in result.counts.items()]))
     for reason, count in result.dropped.items():
         print(f"{result.path}: dropped {count} ({reason.replace('_', ' ')})", file=sys.stderr)
