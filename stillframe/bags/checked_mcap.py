@@ -438,18 +438,23 @@ def _walk(found: McapFile, data: Any) -> int | None:
     return None
 
 
+def _take_definition(found: McapFile, opcode: int, body: memoryview) -> None:
+    """A schema or channel record outside chunks, taken unless its id is known already (the
+    chunks' own, CRC-checked, come first); other records are passed over."""
+    if opcode == Opcode.SCHEMA:
+        schema = _read(Schema, body)
+        found.schemas.setdefault(schema.id, schema)
+    elif opcode == Opcode.CHANNEL:
+        channel = _read(Channel, body)
+        found.channels.setdefault(channel.id, channel)
+
+
 def _take_record(found: McapFile, data: Any, opcode: int, at: int, end: int) -> None:
     """A record outside chunks: header, schema, channel, message, metadata."""
     body = memoryview(data)[at + PREFIX:end]
     try:
         if opcode == Opcode.HEADER:
             found.header = _read(Header, body)
-        elif opcode == Opcode.SCHEMA:
-            schema = _read(Schema, body)
-            found.schemas.setdefault(schema.id, schema)
-        elif opcode == Opcode.CHANNEL:
-            channel = _read(Channel, body)
-            found.channels.setdefault(channel.id, channel)
         elif opcode == Opcode.MESSAGE:
             if end - at < PREFIX + _MESSAGE.size:
                 raise ValueError("too short")
@@ -458,6 +463,8 @@ def _take_record(found: McapFile, data: Any, opcode: int, at: int, end: int) -> 
         elif opcode == Opcode.METADATA:
             record = _read(Metadata, body)
             found.metadata[record.name] = dict(record.metadata)
+        else:
+            _take_definition(found, opcode, body)
     except PARSE_ERRORS:
         name = Opcode(opcode).name.lower() if opcode in _KNOWN else f"{opcode:#04x}"
         found.faults.append(f"the {name} record at byte {at} does not parse")
@@ -500,12 +507,8 @@ def _read_summary(found: McapFile, data: Any) -> None:
                 found.statistics = _read(Statistics, body)
             elif opcode == Opcode.CHUNK_INDEX:
                 found.chunk_indexes.append(_read(ChunkIndex, body))
-            elif opcode == Opcode.SCHEMA:
-                schema = _read(Schema, body)
-                found.schemas.setdefault(schema.id, schema)
-            elif opcode == Opcode.CHANNEL:
-                channel = _read(Channel, body)
-                found.channels.setdefault(channel.id, channel)
+            else:
+                _take_definition(found, opcode, body)
             pos = end
     except PARSE_ERRORS:
         found.faults.append(f"the summary record at byte {pos} does not parse")
