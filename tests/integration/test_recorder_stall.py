@@ -8,8 +8,8 @@ topic at 1024 Hz, megabytes: more than the sockets and the publishers' histories
 stopped reader). What the bag misses is counted independently of the recorder: each per-step
 topic's stamps read back by rosbags, against every sample time from its first to its last. That
 count must be the recorder's, per topic, in its last line, in ``metadata.yaml``'s custom data
-(plain PyYAML) and in launch's JSON; launch ends with a warning line; the stall is logged while
-the recorder runs.
+(plain PyYAML) and in launch's JSON; launch ends with a warning line, and so does ``bag info``
+of the bag; the stall is logged while the recorder runs.
 """
 
 from __future__ import annotations
@@ -142,4 +142,9 @@ def test_a_stopped_recorder_counts_what_the_bag_misses(tmp_path: Path, ros_domai
     assert re.search(r"\[recorder\] .*recorder stalled: no poll for", text), text[-3000:]
     assert re.search(rf"\[recorder\] .*the bag is not complete: missing {total} samples", text)
     assert re.search(rf"stillframe launch: warning: the bag {re.escape(str(bag))} is not "
-                     rf"complete: it misses {sum(v for v in counted.values() if v)} samples", text)
+                     rf"complete: it misses {total} samples", text)
+    info = subprocess.run([sys.executable, "-m", "stillframe", "bag", "info", str(bag)],
+                          env=child_env(), cwd=REPO_ROOT, capture_output=True, text=True,
+                          timeout=WAIT_S)
+    assert info.returncode == 0, info.stderr
+    assert f"warning: the recorder found {total} samples missing" in info.stderr

@@ -1,12 +1,13 @@
 """``stillframe bag info DIR [--json]``: what ``ros2 bag info`` shows about a rosbag2 bag, its
 checksums and its metadata checked against its storage files (what is damaged or disagrees:
-one line, exit code 3, after the information).
+one line, exit code 3, after the information; samples the recorder counted missing: a warning).
 ``stillframe bag reindex DIR [--json]``: recover a bag whose recorder was killed or whose file
-was cut: every whole message before the cut (:mod:`stillframe.bags.reindex`)."""
+was cut or damaged: every whole, intact message (:mod:`stillframe.bags.reindex`)."""
 
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 
 from stillframe.app.commands.common import add_json_argument, emit_json
@@ -38,9 +39,25 @@ def run_info(args: argparse.Namespace) -> int:
         emit_json(summary.as_dict())
     else:
         print(format_summary(summary))
+    if missing := recorded_missing(summary.custom_data):
+        print(f"stillframe bag info: warning: the recorder found {sum(missing.values())} "
+              "samples missing from their topics' stamp grids: "
+              + ", ".join(f"{t} {n}" for t, n in missing.items()), file=sys.stderr)
     if summary.problems:
         raise BagError("; ".join(summary.problems))
     return 0
+
+
+def recorded_missing(custom_data: dict[str, str]) -> dict[str, int]:
+    """The samples the recorder counted missing per topic (its ``custom_data``), those with
+    any; empty when it counted none or the bag is not one of its."""
+    from stillframe.recording.recorder import MISSING_KEY
+
+    try:
+        counted = json.loads(custom_data.get(MISSING_KEY, "{}"))
+        return {str(t): int(n) for t, n in counted.items() if int(n) > 0}
+    except (ValueError, TypeError, AttributeError):
+        return {}
 
 
 def run_reindex(args: argparse.Namespace) -> int:
