@@ -6,7 +6,9 @@ reductions (thesis eq. 5.233, 5.287); ``--json`` prints it as one document
 ``{"reduction_pct": {"displacement": [...], "velocity": [...]}, "peak_command": ...,
 "lockstep_timeouts": ..., "steps": ..., "wall_s": ..., "degraded": false, "degraded_reasons":
 [], ...}``. A degraded real-time run (:mod:`stillframe.app.run_verdict`) ends with a warning line
-giving the reasons, and with ``--strict`` with exit code 6. Exit code 1 names a node that died
+giving the reasons, and with ``--strict`` with exit code 6. With ``--record`` the document's
+``bag`` says what the recorder found missing (``missing_samples`` per topic, ``recorder_stalls``),
+and a bag that misses samples ends the run with a warning line. Exit code 1 names a node that died
 (how: its exit code or signal) after the others were stopped cleanly; what the run still has (the
 samples the simulator ran, the statuses, the closed bag) is printed and written under ``--out``
 as a partial result marked ``"complete": false``. 130 follows Ctrl-C (every child stopped and
