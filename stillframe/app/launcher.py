@@ -33,10 +33,11 @@ import yaml
 
 from stillframe.app import running_graph
 from stillframe.app.tracking import TRACKER, TRACKER_STOP_S, read_tracked, tracker_command
+from stillframe.bags.metadata import load_metadata
 from stillframe.config.scene import Scene, load_scene
 from stillframe.contract import messages
 from stillframe.contract.topics import DEFAULT_NAMESPACE, STATUS_KEYS
-from stillframe.errors import BY_EXIT_CODE, InputError, StillframeError
+from stillframe.errors import BY_EXIT_CODE, BagError, InputError, StillframeError
 from stillframe.fidelity.auto_model import resolve_model
 from stillframe.identification.tracker import TRACKER_READY
 from stillframe.locations import REPO_ROOT
@@ -44,6 +45,7 @@ from stillframe.loop.parts import check_loop
 from stillframe.loop.spec import MODES
 from stillframe.middleware import api, discovery, names
 from stillframe.node_runtime.declarations import NODE_PARAMETERS, ManagedParameterValues
+from stillframe.recording.recorder import MISSING_KEY, STALLS_KEY
 
 NODES: tuple[str, ...] = tuple(NODE_PARAMETERS)
 #: the process that hosts the estimator and the controller with ``--compose``
@@ -720,6 +722,8 @@ class Launcher:
             evaluation = json.loads(path.read_text())
         except (OSError, ValueError) as exc:
             raise InputError(f"sim_node's result file {path}: cannot read it ({exc})") from None
+        if self.options.record_dir is not None:
+            evaluation["bag"] = _bag_state(self.options.record_dir)
         return LaunchResult(evaluation, path, path.with_suffix(".npz"), dict(self.statuses),
                             read_tracked(self.options.tracked_file) if self.options.track else [])
 
@@ -731,14 +735,18 @@ def _how_stopped(code: int | None) -> str:
 
 
 def _bag_state(bag: Path) -> dict[str, Any]:
-    """Whether the recorder closed its bag (metadata written) and how many messages it holds."""
+    """Whether the recorder closed its bag (metadata written), how many messages it holds, and
+    what the recorder found missing (samples per topic, its stalls; its ``custom_data``)."""
     try:
-        meta = yaml.safe_load((bag / "metadata.yaml").read_text())
-        count = int(meta["rosbag2_bagfile_information"]["message_count"])
-    except (OSError, ValueError, KeyError, TypeError, yaml.YAMLError):
+        meta = load_metadata(bag)
+    except BagError:
         return {"path": str(bag), "closed": False,
                 "note": f"not closed: recover it with stillframe bag reindex {bag}"}
-    return {"path": str(bag), "closed": True, "messages": count}
+    state: dict[str, Any] = {"path": str(bag), "closed": True, "messages": meta.message_count}
+    for name, key in (("missing_samples", MISSING_KEY), ("recorder_stalls", STALLS_KEY)):
+        with contextlib.suppress(KeyError, ValueError):
+            state[name] = json.loads(meta.custom_data[key])
+    return state
 
 
 def run_scene(scene: Path, overrides: Sequence[str] = (), *, out: Path,

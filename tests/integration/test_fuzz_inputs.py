@@ -15,6 +15,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import copy
+import functools
 import io
 import math
 import os
@@ -28,6 +29,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
+import yaml
 from mcap.reader import make_reader
 
 from stillframe.app import cli
@@ -362,6 +364,61 @@ def test_reindex_of_malformed_bags_recovers_or_refuses(tmp_path: Path) -> None:
             assert code == 0, (kind, err)
         else:
             assert_one_line_error(argv, code, err, {3}, str(bag))
+
+
+#: a value of each wrong type for a metadata field
+WRONG_VALUES = {"a string": "text", "a list": [1], "a map": {"a": 1}, "null": None,
+                "negative": -5, "huge": 2**70, "NaN": math.nan}
+
+
+def metadata_fields(node: object, path: tuple = ()) -> Iterator[tuple]:
+    """The path of every field of a metadata document (mappings and lists too), the first
+    topic's in full and the other topics' entries whole."""
+    if path:
+        yield path
+    if isinstance(node, dict):
+        for key, value in node.items():
+            yield from metadata_fields(value, (*path, key))
+    elif isinstance(node, list):
+        for i, value in enumerate(node):
+            if path[-1] == "topics_with_message_count" and i > 0:
+                yield (*path, i)
+            else:
+                yield from metadata_fields(value, (*path, i))
+
+
+def _replaced(document: object, path: tuple, value: object) -> object:
+    changed = copy.deepcopy(document)
+    node = changed
+    for key in path[:-1]:
+        node = node[key]
+    node[path[-1]] = value
+    return changed
+
+
+def test_metadata_fields_of_every_wrong_type_are_one_line(tmp_path: Path) -> None:
+    """Each field of the sample bag's metadata.yaml (every level) set to a value of each wrong
+    type, one at a time: ``bag info`` says which field in one line, exit 3. A string where a
+    string belongs and ``custom_data: null`` (what rosbag2 writes for none) are right, not
+    wrong, and left out."""
+    document = yaml.safe_load((HAMMER / "metadata.yaml").read_text())
+    bag = shutil.copytree(HAMMER, tmp_path / "bag")
+    cases = 0
+    for path in metadata_fields(document):
+        current = functools.reduce(lambda node, key: node[key], path, document)
+        for kind, value in WRONG_VALUES.items():
+            if (isinstance(current, str) and isinstance(value, str)) or (
+                    path[-1] == "custom_data" and value is None):
+                continue
+            (bag / "metadata.yaml").write_text(yaml.safe_dump(_replaced(document, path, value)))
+            argv = ["bag", "info", str(bag)]
+            code, _out, err = run(*argv)
+            where = ".".join(map(str, path))
+            assert_one_line_error([where[-60:] + f"={kind}", *argv], code, err, {3},
+                                  "metadata.yaml")
+            assert str(path[-1]) in err.strip().splitlines()[-1], (where, kind, err)
+            cases += 1
+    assert cases > 300
 
 
 def _garbage_bag(path: Path, rng: random.Random) -> int:

@@ -6,8 +6,10 @@ reductions (thesis eq. 5.233, 5.287); ``--json`` prints it as one document
 ``{"reduction_pct": {"displacement": [...], "velocity": [...]}, "peak_command": ...,
 "complete": true, "steps": ..., "wall_s": ..., "degraded": false, "degraded_reasons": [],
 ...}``. A degraded real-time run (:mod:`stillframe.app.run_verdict`) ends with a warning line
-giving the reasons, and with ``--strict`` with exit code 6. A node that ended on an error of its
-own passes on its line and exit code (7: a lock-step run whose peer left the graph or stopped
+giving the reasons, and with ``--strict`` with exit code 6. With ``--record`` the document's
+``bag`` says what the recorder found missing (``missing_samples`` per topic, ``recorder_stalls``),
+and a bag that misses samples ends the run with a warning line. A node that ended on an error of
+its own passes on its line and exit code (7: a lock-step run whose peer left the graph or stopped
 answering; 4: a plant that diverged). Exit code 1 names a node that died otherwise (how: its exit
 code or signal) after the others were stopped cleanly; what the run still has (the
 samples the simulator ran, the statuses, the closed bag) is printed and written under ``--out``
@@ -246,6 +248,20 @@ def print_partial(evaluation: dict[str, Any], scene: Scene, args: argparse.Names
     print(f"scene {scene.name}: partial result (complete: false): {'; '.join(kept)}")
 
 
+def bag_incomplete(bag: dict[str, Any] | None) -> str:
+    """One line on what the launch's bag misses (the recorder's counts), "" when nothing."""
+    if not bag or not bag.get("closed"):
+        return ""
+    missing = {t: n for t, n in bag.get("missing_samples", {}).items() if n}
+    stalls = bag.get("recorder_stalls", {}).get("count", 0)
+    if not missing and not stalls:
+        return ""
+    return (f"the bag {bag['path']} is not complete: it misses {sum(missing.values())} samples "
+            f"({', '.join(f'{t} {n}' for t, n in missing.items()) or 'none on a stamp grid'})"
+            + (f"; the recorder stalled {stalls} times, the longest "
+               f"{bag['recorder_stalls'].get('longest_s', 0):g} s" if stalls else ""))
+
+
 def recorder_args(args: argparse.Namespace) -> list[str] | None:
     """The recorder's priority arguments from ``--recorder-nice`` and ``--recorder-idle``; None
     when neither was given (the launch's default)."""
@@ -294,6 +310,8 @@ def run(args: argparse.Namespace) -> int:
             print("stillframe launch: interrupted; every node stopped", file=sys.stderr)
             return 130
     reasons = verdict(result.evaluation, result.diagnostics)
+    if incomplete := bag_incomplete(result.evaluation.get("bag")):
+        print(f"stillframe launch: warning: {incomplete}", file=sys.stderr)
     if args.json:
         emit_json({"scene": scene.name, **result.evaluation, "degraded": bool(reasons),
                    "degraded_reasons": reasons, "diagnostics": result.diagnostics,
