@@ -387,6 +387,7 @@ class SimNode(base.LoopNode):
             "command_gates": self.step.gate_reports([t.name for t in COMMAND_TOPICS]),
             "max_lateness_ms": 1e-6 * self.pacer.max_lateness_ns,
             "plant": plant_report(plant),
+            "structure_events": self.step.event_records(),
         })
         if error is not None:
             history.evaluation["error"] = {"kind": type(error).__name__, "message": str(error)}
