@@ -79,10 +79,13 @@ class FramePlant:
         #: integrator steps halved on the structures simulated before the current one
         self.halved_before = 0
         model = frame_for(scene.plant.model, scene.plant.file, scene, "plant.file")
-        self.take(model, np.zeros(4))
-        #: the model of the structure after each of the scene's events, built at load (a change
-        #: the model refuses is an error before the run) and taken at the event
-        self.changed = [_changed_model(scene, i) for i in range(len(scene.events))]
+        self.take(model, self.compiled_for(model), np.zeros(4))
+        #: the model of the structure after each of the scene's events with its compiled
+        #: kernels, built at load (a change the model refuses is an error before the run, and
+        #: the sample of the event does not wait for them) and taken at the event
+        self.changed = [(changed, self.compiled_for(changed))
+                        for changed in (_changed_model(scene, i)
+                                        for i in range(len(scene.events)))]
         self.x = initial_state(model, scene.initial)
         #: how a substep is taken: the integrator's name, or zoh
         self.method = "zoh" if self.discretization == "zoh" else self.integrator.name
@@ -96,10 +99,18 @@ class FramePlant:
         self._rows = 0
         self._record(0.0, self.x)
 
-    def take(self, model: FrameModel, control: np.ndarray) -> None:
-        """Simulate ``model`` from now on, with ``control`` = u held: everything derived from a
-        model (the system, a fresh integrator, the compiled kernels, the linear period) is
-        built here, once per structure."""
+    def compiled_for(self, model: FrameModel) -> CompiledFrame | None:
+        """``model`` prepared for the compiled kernels, where they handle the plant: the
+        nonlinear model under a load and integrator they take (None: the integrator's steps)."""
+        if self.linear_plant or not compiles(self.load, self.method_name):
+            return None
+        return CompiledFrame(model, self.subdivision)
+
+    def take(self, model: FrameModel, compiled: CompiledFrame | None,
+             control: np.ndarray) -> None:
+        """Simulate ``model`` (on ``compiled``, its kernels) from now on, with ``control`` = u
+        held: everything else derived from a model (the system, a fresh integrator, the linear
+        period) is built here, once per structure."""
         self.model = model
         n = model.n_dof
         self.n_dof = n
@@ -113,9 +124,7 @@ class FramePlant:
         self.integrator = make_integrator(self.method_name, self.subdivision)
         self.linear = self._linear_period()
         #: the nonlinear model's substeps on the compiled kernels where they handle its load
-        compiled = isinstance(self.system, MechanicalSystem) and compiles(self.load,
-                                                                          self.integrator.name)
-        self.compiled = CompiledFrame(model, self.subdivision) if compiled else None
+        self.compiled = compiled
         self._acceleration_rows = None
         if isinstance(self.system, LinearSystem):
             rows = [n + i for i in model.floor_index]
@@ -130,7 +139,7 @@ class FramePlant:
         carry over as they are: a mass added is bolted on at rest relative to its floor, a
         stiffness or damping changes with the deformation as it is."""
         self.halved_before = self.subdivisions
-        self.take(self.changed[index], self.system.control)
+        self.take(*self.changed[index], self.system.control)
 
     def _linear_period(self) -> LinearPeriod | None:
         """The period as one matrix product (:mod:`stillframe.plant.linear_period`) for a
@@ -160,10 +169,18 @@ class FramePlant:
     def warm_up(self) -> None:
         """Load (or compile) the compiled kernels now, with one substep on a copy of the state
         that is thrown away: the first ``advance`` otherwise takes them in, about 0.2 s, inside
-        the loop (a late first sample in real time). The plant's state does not change."""
+        the loop (a late first sample in real time). The plant's state does not change. The
+        kernels of the structures after the scene's events too (the implicit midpoint rule's
+        banded step matrix is factored on the first step: 0.5 s on FE 40), their throwaway
+        substep not counted."""
         if self.compiled is not None:
             self.compiled.run(self.integrator.name, self.x.copy(), self.h, 1, self.load,
                               control=self.system.control, t0=self.t)
+        for _, compiled in self.changed:
+            if compiled is not None:
+                compiled.run(self.integrator.name, self.x.copy(), self.h, 1, self.load,
+                             control=self.system.control, t0=self.t)
+                compiled.subdivisions = 0
 
     def sample(self) -> Sample:
         """Sensor readings and ground truth at the current time t_k."""
