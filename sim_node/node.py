@@ -37,6 +37,10 @@ At the end of the scene's duration it writes ``result_file`` (the evaluation of
 :func:`stillframe.loop.evaluation.evaluate` on its own truth history plus the loop's counters)
 and an ``.npz`` of the histories beside it, then exits 0. A plant that diverges ends the run the
 same way, with the partial result and the integration error's line and code (4).
+
+A scene's structure events (:mod:`stillframe.config.events`) are the step's too: at the sample
+where one applies, the simulator publishes it on ``structure_events`` (stamped with the sample,
+before the sample's readings) and logs it; the result lists them under ``structure_events``.
 """
 
 from __future__ import annotations
@@ -54,6 +58,7 @@ import numpy as np
 from stillframe.contract import topics
 from stillframe.contract.codecs import COMMAND_TOPICS, SAMPLE_TOPICS, SensorMessages, command_reader
 from stillframe.contract.signals import Sample
+from stillframe.contract.structure_events import event_message, summary
 from stillframe.errors import IntegrationError, LoopError, StillframeError
 from stillframe.loop.decimated_taps import DecimatedTaps
 from stillframe.loop.energy_balance import EnergyTopic
@@ -132,6 +137,10 @@ class SimNode(base.LoopNode):
                                      params.qos)
         #: pH plant: energy_balance and the live passivity check (None for the other plants)
         self.energy = EnergyTopic.of(node, plant, scene, params.qos(topics.ENERGY_BALANCE))
+        #: a scene with events: what the plant changed and when (None without events)
+        self.structure_events = (node.create_publisher(
+            topics.STRUCTURE_EVENTS.type_name, topics.STRUCTURE_EVENTS.name,
+            params.qos(topics.STRUCTURE_EVENTS)) if spec.events else None)
         self.readers = [command_reader(i) for i in range(len(COMMAND_TOPICS))]
         self.subscriptions = [
             node.create_subscription(topic.type_name, topic.name,
@@ -232,6 +241,16 @@ class SimNode(base.LoopNode):
         for old in [t for t in self.published_at if t < oldest]:
             del self.published_at[old]
 
+    def announce_structure(self) -> None:
+        """The structure events the step applied at this sample: on ``structure_events``
+        (stamped with the sample, before its readings) and in the log."""
+        records = [event.record(self.spec.period) for event in self.step.changed]
+        assert self.structure_events is not None
+        self.structure_events.publish(
+            event_message(self.step.now_ns, self.diagnostics.name, records))
+        for record in records:
+            self.node.get_logger().info(f"structure changed: {summary(record)}")
+
     def await_command(self, k: int, t: float) -> bool:
         """Lock-step: spin until the step has the command of sample k (True), or shutdown
         (False). Every :data:`PEER_CHECK_S` of waiting the graph is asked whether the peers are
@@ -314,6 +333,8 @@ class SimNode(base.LoopNode):
         if not api.ok():
             return None
         sample = step.sample()
+        if step.changed:
+            self.announce_structure()
         self.publish(sample, step.now_ns)
         missed = False
         if spec.lockstep:
@@ -387,6 +408,7 @@ class SimNode(base.LoopNode):
             "command_gates": self.step.gate_reports([t.name for t in COMMAND_TOPICS]),
             "max_lateness_ms": 1e-6 * self.pacer.max_lateness_ns,
             "plant": plant_report(plant),
+            "structure_events": self.step.event_records(),
         })
         if error is not None:
             history.evaluation["error"] = {"kind": type(error).__name__, "message": str(error)}

@@ -7,6 +7,7 @@ with its type, default, check and doc; every value can be overridden with
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -14,6 +15,15 @@ from typing import Any, Literal
 
 import yaml
 
+from stillframe.config.events import (
+    FACTOR_RANGE,
+    MAX_EVENTS,
+    Event,
+    changed_keys,
+    check_event,
+    damping_changes,
+    first_sample_at,
+)
 from stillframe.config.loop_sections import (
     Actuators,
     Controller,
@@ -58,6 +68,9 @@ class Columns(Section):
     density: float = key(7860.0, in_range(0.0, 1e5), doc="rho [kg/m^3]")
     youngs_modulus: float = key(207e9, in_range(1e3, 1e13), doc="E [Pa]")
     per_story: int = key(2, up_to(100), doc="blades per story")
+    stiffness_factors: Floats3 = key((1.0, 1.0, 1.0), in_range(*FACTOR_RANGE), doc=(
+        "stories 1..3: the blades' bending stiffness EJ times this (a loosened clamp or a "
+        "cracked blade: < 1), their mass unchanged [-]"))
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -180,6 +193,10 @@ class Scene(Section):
     estimator: Estimator = section(Estimator)
     controller: Controller = section(Controller)
     evaluation: Evaluation = section(Evaluation)
+    events: tuple[Event, ...] = key((), lambda v: None if len(v) <= MAX_EVENTS else (
+        f"at most {MAX_EVENTS} events"), doc=(
+            "changes of the structure while the run goes on, in time order "
+            "(stillframe/config/events.py)"))
 
 
 #: a scene file's size at most (a scene is a page of YAML; this keeps /dev/zero out)
@@ -238,6 +255,7 @@ def _check_consistency(scene: Scene) -> None:
     if abs(scene.initial.phi) > 100 * math.pi:
         raise InputError("initial.phi: more than 50 turns; give the angle in rad")
     _check_loop(scene)
+    _check_events(scene)
 
 
 #: how far ``period / integrator.dt`` may lie from a whole number, relative: the two are decimal
@@ -287,6 +305,81 @@ def _check_loop(scene: Scene) -> None:
         raise InputError("estimator.type: LQG works on a linear model; use kf, tvkf or truth")
     if scene.estimator.type == "none":
         raise InputError(f"estimator.type: {c.type} needs a state (kf, tvkf, ekf or truth)")
+
+
+def _check_events(scene: Scene) -> None:
+    """The events' checks that need the rest of the scene (:mod:`stillframe.config.events`)."""
+    period = 1.0 / scene.sensors.rate_hz
+    last = round(scene.duration / period) - 1      # the run's last sample (LoopSpec.samples)
+    previous = 0.0
+    for i, event in enumerate(scene.events):
+        name = f"events[{i}]"
+        if first_sample_at(event.time, period) > last:
+            raise InputError(
+                f"{name}.time: {event.time:g} s is past the run's last sample boundary "
+                f"({last * period:g} s; duration {scene.duration:g} s)")
+        if event.time < previous:
+            raise InputError(f"{name}.time: {event.time:g} s is before events[{i - 1}] "
+                             f"({previous:g} s); list the events in time order")
+        previous = event.time
+        check_event(name, event, scene.damping.model)
+        rig = changed_scene(scene, i + 1).rig
+        try:                  # the structure after it within the rig section's own bounds
+            validate(Rig, rig.to_dict(), prefix="rig.")
+        except InputError as exc:
+            raise InputError(f"{name}: the structure after it: {exc}") from None
+    if not scene.events:
+        return
+    if scene.plant.model == "file":
+        raise InputError(
+            "events: plant.model: file is a fixed identified linear model; events change the "
+            "scene's lumped or fe plant (plant.model: scene)")
+    if scene.model.type not in ("lumped", "fe"):
+        raise InputError(
+            f"events: model.type: {scene.model.type}: events change the lumped and fe plants "
+            "(a modal plant's reduced basis and a ph plant's constraints belong to one "
+            "structure, and auto may choose either)")
+
+
+def changed_scene(scene: Scene, count: int) -> Scene:
+    """``scene`` with the changes of its first ``count`` events made and no events: the scene a
+    plant of the structure after event ``count`` − 1 is built from. Factors are of the scene's
+    own values; a later event overrides the keys it names (:mod:`stillframe.config.events`)."""
+    rig, damping = scene.rig, scene.damping
+    masses = list(rig.floor_masses)
+    factors: tuple[float, ...] = rig.columns.stiffness_factors
+    pendulum_mass = rig.pendulum.mass
+    damping_values: dict[str, Any] = {}
+    for event in scene.events[:count]:
+        if event.floor is not None:
+            i, given = event.floor - 1, event.mass
+            masses[i] = given if given is not None else rig.floor_masses[i] * (
+                event.mass_factor or 1.0)
+        if event.story_stiffness is not None:
+            factors = tuple(f * g for f, g in zip(rig.columns.stiffness_factors,
+                                                  event.story_stiffness, strict=True))
+        if event.pendulum_mass is not None:
+            pendulum_mass = event.pendulum_mass
+        damping_values |= damping_changes(event)
+    replace = dataclasses.replace
+    rig = replace(rig, floor_masses=tuple(masses),
+                  columns=replace(rig.columns, stiffness_factors=factors),
+                  pendulum=replace(rig.pendulum, mass=pendulum_mass))
+    return replace(scene, rig=rig, damping=replace(damping, **damping_values), events=())
+
+
+def event_changes(scene: Scene, index: int) -> dict[str, Any]:
+    """What event ``index`` of ``scene`` changes: each key it changes (dotted) with its value
+    after the event, lists as lists (the record of the run's result and of the simulator's
+    topic)."""
+    after: Any = changed_scene(scene, index + 1)
+    values = {}
+    for dotted in changed_keys(scene.events[index]):
+        value = after
+        for part in dotted.split("."):
+            value = getattr(value, part)
+        values[dotted] = list(value) if isinstance(value, tuple) else value
+    return values
 
 
 def scene_from_dict(data: dict[str, Any], overrides: list[str] | None = None) -> Scene:

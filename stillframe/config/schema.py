@@ -8,7 +8,9 @@ the physical check and the documentation::
 
 The annotations understood: ``float``, ``int``, ``bool``, ``str``, ``Literal["a", "b"]`` (one of
 these strings), ``tuple[float, ...]`` (a list of numbers), ``tuple[float, float, float]`` (a list
-of exactly three), ``float | None`` (may be null) and another section (a nested mapping).
+of exactly three), ``float | None`` (may be null), another section (a nested mapping) and
+``tuple[Section, ...]`` (a list of mappings, each validated as that section; its entries are
+named ``key[i]`` in the errors).
 :func:`validate` fills defaults, converts numbers, runs each check and builds the instances;
 every problem raises :class:`~stillframe.errors.InputError` naming the dotted key.
 """
@@ -63,7 +65,7 @@ class Section:
 def _plain(value: Any) -> Any:
     if isinstance(value, Section):
         return value.to_dict()
-    return list(value) if isinstance(value, tuple) else value
+    return [_plain(v) for v in value] if isinstance(value, tuple) else value
 
 
 def _values(value: Any) -> tuple:
@@ -114,6 +116,7 @@ class _Spec(NamedTuple):
     nullable: bool = False
     choices: tuple[str, ...] | None = None
     length: int | None = None
+    entry: type[Section] | None = None  # a list of sections: the section of each entry
 
 
 def _is_section(kind: Any) -> bool:
@@ -129,6 +132,8 @@ def _spec(f: dataclasses.Field, hint: Any) -> _Spec:
     if get_origin(hint) is Literal:
         return spec._replace(kind=str, choices=args)
     if get_origin(hint) is tuple:
+        if _is_section(args[0]):
+            return spec._replace(kind=tuple, entry=args[0])
         length = None if args[-1] is Ellipsis else len(args)
         return spec._replace(kind=tuple, length=length)
     if hint in (float, int, bool, str) or _is_section(hint):
@@ -173,11 +178,21 @@ def _number(key: str, value: Any, kind: type) -> float | int:
     return value
 
 
+def _entries(key: str, spec: _Spec, value: Any) -> tuple[Section, ...]:
+    """A list of sections: each entry validated as ``spec.entry``, named ``key[i]``."""
+    if not isinstance(value, list | tuple):
+        raise InputError(f"{key}: expected a list of mappings, got {show(value)}")
+    assert spec.entry is not None
+    return tuple(validate(spec.entry, v, prefix=f"{key}[{i}].") for i, v in enumerate(value))
+
+
 def _leaf(key: str, spec: _Spec, value: Any) -> Any:
     if value is None and spec.nullable:
         return None
-    if spec.kind in (float, int):
-        out: Any = _number(key, value, spec.kind)
+    if spec.entry is not None:
+        out: Any = _entries(key, spec, value)
+    elif spec.kind in (float, int):
+        out = _number(key, value, spec.kind)
     elif spec.kind is tuple:
         if not isinstance(value, list | tuple):
             raise InputError(f"{key}: expected a list of numbers, got {show(value)}")

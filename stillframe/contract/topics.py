@@ -90,13 +90,22 @@ ENERGY_BALANCE = TopicSpec(
     "data[1]",
 )
 
+STRUCTURE_EVENTS = TopicSpec(
+    "structure_events", "diagnostic_msgs/msg/DiagnosticArray", "default",
+    "scenes with events only: one message at each sample where the simulator changed the "
+    "plant's structure, stamped with that sample's time; a status per event applied (name "
+    "'<node>: events[i]', level OK, message a one-line summary) with the values event, "
+    "time_s (the event's time), applied_s, sample and each scene key it changed with its "
+    "value after it, as JSON (stillframe.contract.structure_events)",
+)
+
 CONTRACT: tuple[TopicSpec, ...] = (
     CLOCK, *FLOOR_IMU, PENDULUM_JOINT_STATES, EXCITATION_WRENCH, FLOOR3_LOAD_CELL, TORQUE_CMD,
     FORCE_CMD,
     STATE_ESTIMATE, STATE_COVARIANCE, STATE_TRUTH, DIAGNOSTICS,
 )
 #: topics a loop node publishes only for some scenes (not every launch has them)
-CONDITIONAL: tuple[TopicSpec, ...] = (ENERGY_BALANCE,)
+CONDITIONAL: tuple[TopicSpec, ...] = (ENERGY_BALANCE, STRUCTURE_EVENTS)
 
 
 #: the ``/diagnostics`` values the status line shows, when a node reports them

@@ -76,6 +76,7 @@ def run_closed_loop(scene: Scene, progress: Progress | None = None) -> LoopHisto
         "loop_s": done - looping,   # without the set-up: what sim_node's wall_s counts
         "loop_cpu_s": time.process_time() - looping_cpu,
         "plant": plant_report(plant),
+        "structure_events": step.event_records(),
         **step.counts,
         "command_gates": step.gate_reports([spec.name for spec in COMMAND_TOPICS]),
         "estimator": vars(estimator.counters) if estimator else None,

@@ -18,6 +18,7 @@ import numpy as np
 
 from stillframe.config.scene import Scene
 from stillframe.loop.spec import LoopSpec
+from stillframe.loop.step import LoopStep
 from stillframe.plant.frame_plant import make_plant
 from stillframe.plant.protocol import Plant
 
@@ -56,10 +57,13 @@ def reduction_pct(uncontrolled: np.ndarray, controlled: np.ndarray) -> list[floa
 
 
 def open_loop_truth(scene: Scene) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The plant's fine truth history with no command (same scene and seeds)."""
-    plant = make_plant(scene)
-    for _ in range(LoopSpec.of(scene).samples):
-        plant.advance(np.zeros(2))
+    """The plant's fine truth history with no command (same scene and seeds), through the
+    loop's step (so that the scene's structure events apply at the same samples)."""
+    spec, plant = LoopSpec.of(scene), make_plant(scene)
+    step = LoopStep(spec, plant)
+    for _ in range(spec.samples):
+        step.sample()
+        step.advance()
     return plant.truth_history()
 
 

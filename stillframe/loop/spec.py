@@ -5,7 +5,8 @@ again: the sample period and the integrator steps in it
 (:func:`stillframe.config.scene.sample_grid`), the number of samples, the actuator the controller
 drives, the bound of each command the simulator takes
 (:attr:`stillframe.config.loop_sections.Actuators.bounds`), the actuation delay, and when the
-simulator falls back to zero actuation (the safe state) or ends a lock-step run.
+simulator falls back to zero actuation (the safe state) or ends a lock-step run, and the sample
+at which each of the scene's structure events applies (:class:`StructureEvent`).
 
 The defaults of the simulator's parameters that set these (``command_timeout_periods``,
 ``command_miss_limit``, ``lockstep_timeout_s``) are the constants of this module; the node
@@ -16,8 +17,10 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
-from stillframe.config.scene import Scene, sample_grid
+from stillframe.config.events import first_sample_at
+from stillframe.config.scene import Scene, event_changes, sample_grid
 from stillframe.contract.signals import actuator_of
 from stillframe.errors import InputError
 
@@ -27,6 +30,7 @@ __all__ = [
     "LOCKSTEP_TIMEOUT_S",
     "MODES",
     "LoopSpec",
+    "StructureEvent",
 ]
 
 #: the modes of the loop, one constant for every process (launch, nodes, benchmarks)
@@ -45,6 +49,24 @@ COMMAND_MISS_LIMIT = 0.25
 #: without the command of the current sample, so this is a guard against a peer that is alive
 #: but no longer answers, not a pace.
 LOCKSTEP_TIMEOUT_S = 60.0
+
+
+@dataclass(frozen=True, kw_only=True)
+class StructureEvent:
+    """The scene's event ``index`` (:mod:`stillframe.config.events`) as the loop applies it:
+    at the start of sample ``sample``, the first at or after its ``time_s``."""
+
+    index: int
+    time_s: float
+    sample: int
+    changes: dict[str, Any]
+    """Each scene key it changes with its value after it
+    (:func:`~stillframe.config.scene.event_changes`)."""
+
+    def record(self, period: float) -> dict[str, Any]:
+        """The event as the run's result and the ``structure_events`` topic tell it."""
+        return {"event": self.index, "time_s": self.time_s, "applied_s": self.sample * period,
+                "sample": self.sample, "changes": self.changes}
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -74,6 +96,8 @@ class LoopSpec:
     """Real time: the miss-rate guard's limit (0: off)."""
     miss_window: int
     """Real time: the samples the miss-rate guard looks back over (one second, at least 10)."""
+    events: tuple[StructureEvent, ...] = ()
+    """The scene's structure events, in order, with the sample each applies at."""
 
     @classmethod
     def of(cls, scene: Scene, *, mode: str = "lockstep",
@@ -92,4 +116,8 @@ class LoopSpec:
                    lockstep=mode == "lockstep", lockstep_timeout_s=lockstep_timeout_s,
                    command_timeout_periods=command_timeout_periods,
                    command_miss_limit=command_miss_limit,
-                   miss_window=max(10, round(1.0 / period)))
+                   miss_window=max(10, round(1.0 / period)),
+                   events=tuple(StructureEvent(index=i, time_s=e.time,
+                                               sample=first_sample_at(e.time, period),
+                                               changes=event_changes(scene, i))
+                                for i, e in enumerate(scene.events)))

@@ -4,8 +4,9 @@ Both the one-process loop (:func:`stillframe.loop.closed_loop.run_closed_loop`) 
 their sample periods through it, so that the two give the same numbers by construction. Per
 period k:
 
-1. :meth:`LoopStep.sample`: the plant's readings at t_k (the actuation of the period before still
-   applied).
+1. :meth:`LoopStep.sample`: the structure events due at sample k applied to the plant
+   (:attr:`~stillframe.loop.spec.LoopSpec.events`, :attr:`LoopStep.changed`), then the plant's
+   readings at t_k (the actuation of the period before still applied).
 2. :meth:`LoopStep.offer`: the commands that come for it, each through its topic's
    :class:`~stillframe.loop.command_gate.CommandGate` (the writer, when the caller knows one, then
    the value and the stamp); a command taken is held until the next one.
@@ -30,7 +31,7 @@ import numpy as np
 from stillframe.contract.codecs import SampleGrid
 from stillframe.contract.signals import Sample
 from stillframe.loop.command_gate import CommandGate
-from stillframe.loop.spec import LoopSpec
+from stillframe.loop.spec import LoopSpec, StructureEvent
 from stillframe.loop.watchdog import MissRateGuard, command_expired
 from stillframe.loop.writer_gate import WriterGate
 from stillframe.plant.actuation_delay import ActuationDelay
@@ -76,13 +77,30 @@ class LoopStep:
         self.k = 0                          # the period in progress (or next)
         self.now_ns = 0                     # its sample's stamp
         self.counts = dict.fromkeys(COUNTS, 0)
+        #: the structure events applied at the current sample (most samples: none)
+        self.changed: tuple[StructureEvent, ...] = ()
+        self.applied_events: list[StructureEvent] = []
 
     # -- 1. the sample -----------------------------------------------------------------
     def sample(self) -> Sample:
-        """Period ``k`` begins: the plant's readings at t_k."""
+        """Period ``k`` begins: the structure events due applied, the plant's readings at t_k."""
+        self.changed = self._change_structure()
         sample = self.plant.sample()
         self.now_ns = SampleGrid.ns(sample.t)
         return sample
+
+    def _change_structure(self) -> tuple[StructureEvent, ...]:
+        """The scene's events due at sample ``k``, applied to the plant in their order."""
+        events = self.spec.events[len(self.applied_events):]
+        due = tuple(e for e in events if e.sample <= self.k)
+        for event in due:
+            self.plant.change_structure(event.index)
+        self.applied_events.extend(due)
+        return due
+
+    def event_records(self) -> list[dict[str, object]]:
+        """The structure events applied so far, as the result tells them."""
+        return [e.record(self.spec.period) for e in self.applied_events]
 
     # -- 2. the commands ---------------------------------------------------------------
     def admits(self, actuator: int, gid: bytes, sequence: int = 0) -> bool:

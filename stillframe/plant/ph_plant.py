@@ -150,6 +150,12 @@ class PHPlant:
         return self.t, np.concatenate([[self.stepper.energy(self.z)],
                                        self._balance / self.period])
 
+    def change_structure(self, index: int) -> None:
+        """Refused: the pHDAE's constraints and energy ports belong to one structure (a scene
+        with events and ``model.type: ph`` is refused at load)."""
+        raise InputError(f"events[{index}]: the ph plant cannot change its structure while it "
+                         "runs; use model.type: lumped or fe")
+
     def truth_history(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         r = np.asarray(self._fine)
         return r[:, 0], r[:, 1:4], r[:, 4:7]

@@ -50,5 +50,10 @@ class Plant(Protocol):
         """Apply [torque, floor-3 force] through the actuators over one period; returns what
         they applied (after saturation and slew limits)."""
 
+    def change_structure(self, index: int) -> None:
+        """From now on the structure after the scene's event ``index``
+        (:mod:`stillframe.config.events`), the state carried over; called by the loop's step
+        at the event's sample boundary, before :meth:`sample`."""
+
     def truth_history(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Times, floor displacements (N×3) and velocities (N×3) at every integrator step."""

@@ -23,6 +23,8 @@ REFUSED = [
      "controller.injection_damping: k_d T / J ="),
     ("ph_passivity", ["integrator.dt=0.03125", "plant.process_noise_std=[1e-3,0,0,0,0,0,0,0]"],
      "plant.process_noise_std: model.type ph takes displacement noise as a force doublet"),
+    ("change_mass_floor2", ["events=[{time: 5, damping: {alpha: -5}}]"],
+     "events[0]: the structure after it: damping.beta: Rayleigh damping (alpha=-5"),
 ]
 
 
