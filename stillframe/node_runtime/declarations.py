@@ -16,6 +16,7 @@ from stillframe.errors import InputError
 from stillframe.node_runtime.parameters import (
     FromScene,
     NodeParameters,
+    at_least,
     between,
     limited,
     non_negative,
@@ -110,8 +111,7 @@ class SimParameterValues(NodeParameters):
     command_writer: str = param("", doc=(
         "the node allowed to command (`controller_node` under `stillframe launch`); empty: the "
         "first writer seen; other writers are ignored and reported"))
-    command_timeout_periods: int = param(3, limited(
-        lambda v: None if v >= 1 else "must be >= 1", ">= 1"), unit="periods", doc=(
+    command_timeout_periods: int = param(3, at_least(1), unit="periods", doc=(
         "zero actuation (the safe state, `safe_state_samples`) once the newest command is this "
         "many periods old"))
     command_miss_limit: float = param(0.25, between(0.0, 1.0, high_open=True), doc=(
