@@ -24,12 +24,12 @@ With ``actuators.delay_periods`` = d ≥ 1 the command stamped t_k is applied fr
 for it, and a command not in when its period starts is the deadline miss; the safe state below
 counts its periods from t_k+d.
 
-Commands pass a :class:`stillframe.loop.command_gate.CommandGate` per topic: only one node's
-writers (by their writer GIDs; the first seen, or the node named by the ``command_writer``
-parameter) may command,
-a second writer is reported in ``/diagnostics`` and ignored, and non-finite values, values beyond
-the actuator's limit and stamps from the future or before the held command are rejected and
-counted by reason.
+Commands pass a :class:`stillframe.loop.command_gate.CommandGate` per topic: only the loop's
+controller may command (with the run's token, the commands that carry it; without one, one
+node's writers by their writer GIDs: the first seen, or the node named by the ``command_writer``
+parameter), another writer is reported in ``/diagnostics`` and ignored, and non-finite values,
+values beyond the actuator's limit and stamps from the future or before the held command are
+rejected and counted by reason.
 
 When the newest command taken is ``command_timeout_periods`` (default 3) sample periods old, the
 sim applies zero actuation (the safe state) until a fresh command comes, and counts the samples
@@ -127,10 +127,10 @@ class SimNode(base.LoopNode):
         # by topic, in the order of SensorMessages.fill and then the truth
         self.publishers = {s.name: TappedPublisher(node, s.type_name, s.name, params.qos(s))
                            for s in (*SAMPLE_TOPICS, topics.STATE_TRUTH)}
-        self.messages = SensorMessages(scene.sensors)
+        self.messages = SensorMessages(scene.sensors, params.run_token)
         #: the sample topics anti-alias filtered and thinned (None at low rates): the tracker's
-        self.taps = DecimatedTaps.of(node, SensorMessages(scene.sensors), scene.sensors.rate_hz,
-                                     params.qos)
+        self.taps = DecimatedTaps.of(node, SensorMessages(scene.sensors, params.run_token),
+                                     scene.sensors.rate_hz, params.qos)
         #: pH plant: energy_balance and the live passivity check (None for the other plants)
         self.energy = EnergyTopic.of(node, self.plant, scene, params.qos(topics.ENERGY_BALANCE))
         limits = (scene.actuators.torque_limit, scene.actuators.force_limit)
@@ -138,7 +138,7 @@ class SimNode(base.LoopNode):
         self.gates = [CommandGate(limit, self.inputs.add(spec.name, "command_writer"),
                                   active=i == self.active)
                       for i, (limit, spec) in enumerate(zip(limits, COMMAND_TOPICS, strict=True))]
-        self.readers = [command_reader(i) for i in range(len(COMMAND_TOPICS))]
+        self.readers = [command_reader(i, params.run_token) for i in range(len(COMMAND_TOPICS))]
         self.subscriptions = [
             node.create_subscription(spec.type_name, spec.name,
                                      functools.partial(self.on_command, i),
@@ -166,7 +166,7 @@ class SimNode(base.LoopNode):
     def on_command(self, actuator: int, cdr: bytes, info: api.MessageInfo) -> None:
         """Take a command its topic's gate lets through (module docstring); count the others."""
         gate = self.gates[actuator]
-        if not gate.admits(info.publisher_gid, info.publication_sequence):
+        if not gate.admits(info.publisher_gid, info.publication_sequence, cdr):
             self.counts["rejected_commands"] += 1
             return
         read = self.readers[actuator].read(cdr)

@@ -43,6 +43,15 @@ def _refusal(parse: Callable[[Any], object], name: str) -> Callable[[Any], str |
     return check
 
 
+#: what a run token may hold (it ends every ``frame_id`` the loop writes)
+TOKEN_LIMITS = "letters, digits, - and _; at most 64"
+
+
+def _token(value: str) -> str | None:
+    ok = len(value) <= 64 and all(c.isascii() and (c.isalnum() or c in "-_") for c in value)
+    return None if ok else f"expected {TOKEN_LIMITS}"
+
+
 def _scene_file(value: str) -> str | None:
     return None if value else "give the scene file (--ros-args -p scene:=FILE)"
 
@@ -67,6 +76,11 @@ class LoopParameterValues(NodeParameters):
         "it, the controller a quarter; see the protocol)"))
     diagnostics_period_s: float = param(1.0, positive, unit="s", doc=(
         "wall time between `/diagnostics` messages"))
+    run_token: str = param("", limited(_token, TOKEN_LIMITS), doc=(
+        "the run's token: every stamped sample the node writes carries it in "
+        "`header.frame_id` (`floor1#TOKEN`), and it takes only the samples that do (writer "
+        "identity, below); `stillframe launch` and the launch file give each run a new one; "
+        "empty: none, the `*_writer` parameters decide"))
 
 
 @dataclass(frozen=True)
@@ -109,8 +123,8 @@ class SimParameterValues(NodeParameters):
         "topics the launch's recorder must subscribe before lock-step starts (`*`: every topic "
         "of the loop); empty: none"))
     command_writer: str = param("", doc=(
-        "the node allowed to command (`controller_node` under `stillframe launch`); empty: the "
-        "first writer seen; other writers are ignored and reported"))
+        "without a `run_token`: the node allowed to command (relative names in the node's "
+        "namespace); empty: the first writer seen; other writers are ignored and reported"))
     command_timeout_periods: int = param(3, at_least(1), unit="periods", doc=(
         "zero actuation (the safe state, `safe_state_samples`) once the newest command is this "
         "many periods old"))
@@ -132,8 +146,8 @@ class EstimatorParameterValues(NodeParameters):
         "real time: how long after a stamp's first message the estimator updates with the "
         "channels that have arrived"))
     sensor_writer: str = param("", doc=(
-        "the node whose sensor samples (and `state_truth`) are taken, e.g. `sim_node`; empty: "
-        "the first writer seen"))
+        "without a `run_token`: the node whose sensor samples (and `state_truth`) are taken, "
+        "e.g. `sim_node`; empty: the first writer seen"))
     command_writer: str = param("", doc=(
         "as sim_node's, for the commands the estimator reads (the actuation in effect where a "
         "report was lost)"))
@@ -161,11 +175,12 @@ class ControllerParameterValues(NodeParameters):
     """controller_node."""
 
     estimate_writer: str = param("", doc=(
-        "the node whose `state_estimate` is taken, e.g. `estimator_node`; empty: the first "
-        "writer seen"))
+        "without a `run_token`: the node whose `state_estimate` is taken, e.g. "
+        "`estimator_node`; empty: the first writer seen"))
     sensor_writer: str = param("", doc=(
-        "the node whose load cell (`excitation/wrench`) and, with `use_sim_time`, `/clock` are "
-        "taken, e.g. `sim_node`; empty: the first writer seen"))
+        "without a `run_token` (and for `/clock`, which carries none): the node whose load cell "
+        "(`excitation/wrench`) and, with `use_sim_time`, `/clock` are taken, e.g. `sim_node`; "
+        "empty: the first writer seen"))
     enabled: bool = param(True, dynamic=True, doc=(
         "false: the command is 0 from the next sample on (published as usual); true: the law "
         "again"))
@@ -180,6 +195,10 @@ _COMMON = (LoopParameterValues, RealtimeParameterValues)
 #: the loop's nodes by their default names (a node waits for its peers by these names, or by
 #: the writer pins when set: docs/nodes.md, lock-step protocol)
 LOOP_NODES = SIM, ESTIMATOR, CONTROLLER = ("sim_node", "estimator_node", "controller_node")
+#: the loop's node each ``*_writer`` parameter names when it is empty: the node whose samples
+#: carry the run's token on those inputs, and the peer a node waits for in lock-step
+WRITER_DEFAULTS = {"command_writer": CONTROLLER, "sensor_writer": SIM,
+                   "estimate_writer": ESTIMATOR}
 
 NODE_PARAMETERS: dict[str, tuple[type[NodeParameters], ...]] = {
     SIM: (*_COMMON, SimParameterValues),
