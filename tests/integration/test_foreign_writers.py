@@ -120,16 +120,17 @@ def test_strict_fails_a_run_beside_a_foreign_writer(ros_domain: int, tmp_path: P
 
 
 @pytest.mark.parametrize("backend", BACKENDS)
+@pytest.mark.parametrize("case", CASES)
 def test_in_real_time_the_loops_commands_are_all_taken_beside_a_writer(
-        ros_domain: int, tmp_path: Path, backend: str) -> None:
-    """The issue's case: a writer at 50 Hz started before a real-time launch (it took control
-    there). The simulator refuses the writer's commands for lacking the run's token, and none of
-    the controller's for its writer (the issue's 221 refused commands were the controller's);
-    the writer, and only it, is named."""
-    done, _ = launch_beside(tmp_path, backend, "before", "--mode", "realtime", rate=50.0)
+        ros_domain: int, tmp_path: Path, backend: str, case: str) -> None:
+    """The issue's cases in real time, the writer at 50 Hz (started before the launch it took
+    control of the estimator there). The simulator refuses the writer's commands for lacking
+    the run's token, and none of the controller's for its writer (the issue's 221 refused
+    commands were the controller's); the writer, and only it, is named."""
+    done, _ = launch_beside(tmp_path, backend, case, "--mode", "realtime", rate=50.0)
     assert done.returncode == 0, done.stderr[-3000:]
     result = json.loads(done.stdout)
     gate = result["command_gates"]["pendulum/torque_cmd"]
     assert gate["rejected_foreign_writer"] > 0 and gate["writer"] == "/frame/controller_node"
     assert refused(gate) == gate["rejected_foreign_writer"]
-    assert {w for f in result["foreign_writers"] for w in f["writers"]} == {"/rogue_tuner"}
+    assert {w for f in result["foreign_writers"] for w in f["writers"]} == {f"/{CASES[case][0]}"}

@@ -21,6 +21,7 @@ import pytest
 from stillframe.locations import REPO_ROOT
 from stillframe.loop.closed_loop import run_closed_loop
 from tests.integration.test_colcon import install, sourced, workspace_env  # noqa: F401
+from tests.integration.test_foreign_writers import start_writer, stop_writer
 from tests.support.nodes import SHORT_LQG
 from tests.support.ros2_peer import PEER_ENV, ros2_or_skip
 from tests.support.scenes import thesis_scene
@@ -50,9 +51,17 @@ def rclpy_nodes(ros_domain: int, monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.delenv("STILLFRAME_RMW")
 
 
+@pytest.mark.parametrize("beside", [False, True], ids=["alone", "beside_a_foreign_writer"])
 def test_the_launch_brings_the_loop_up_and_ends_with_the_scene(
-        install: Path, tmp_path: Path, rclpy_nodes: None) -> None:  # noqa: F811
-    done = ros2_launch(install, tmp_path, f"overrides:={json.dumps(SHORT_LQG)}")
+        install: Path, tmp_path: Path, rclpy_nodes: None, beside: bool) -> None:  # noqa: F811
+    """Alone, and beside a foreign writer named ``controller_node`` in the root namespace,
+    writing before the launch starts (the launch's run token keeps it out: the same numbers)."""
+    writer = start_writer("controller_node", "/", 500.0, None) if beside else None
+    try:
+        done = ros2_launch(install, tmp_path, f"overrides:={json.dumps(SHORT_LQG)}")
+    finally:
+        if writer is not None:
+            stop_writer(writer)
     log = done.stdout + done.stderr
     assert done.returncode == 0, log[-4000:]
     for name in ("estimator_node", "controller_node"):
@@ -66,6 +75,12 @@ def test_the_launch_brings_the_loop_up_and_ends_with_the_scene(
     with np.load(tmp_path / "closed_loop_result.npz") as hist:
         np.testing.assert_array_equal(hist["command"], reference.command)
         np.testing.assert_array_equal(hist["truth"], reference.truth)
+    gate = result["command_gates"]["pendulum/torque_cmd"]
+    assert (gate["rejected_foreign_writer"] > 0) == beside
+    if beside:
+        assert gate["ignored_writers"] == "/controller_node", gate
+        assert ("[frame.sim_node]: pendulum/torque_cmd: refusing the samples of a foreign "
+                "writer (without the run's token): /controller_node") in log
 
 
 def test_a_failed_run_fails_the_launch(install: Path, tmp_path: Path,  # noqa: F811

@@ -53,10 +53,11 @@ def main() -> None:
         print("ready", flush=True)
     sent, t0 = 0, time.monotonic()
     while not stop:
-        node.spin_once(max(0.0, t0 + sent / rate - time.monotonic()))
-        if from_ns is not None and clock[0] < from_ns:
+        if from_ns is not None and clock[0] < from_ns:     # the loop not that far yet
+            node.spin_once(0.01)
             t0 = time.monotonic()
             continue
+        node.spin_once(max(0.0, t0 + sent / rate - time.monotonic()))
         t = time.monotonic() - t0
         if t < sent / rate:
             continue
