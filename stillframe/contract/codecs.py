@@ -11,6 +11,7 @@ what :func:`stillframe.loop.closed_loop.run_closed_loop` computes.
 
 from __future__ import annotations
 
+import struct
 from typing import Any
 
 import numpy as np
@@ -54,15 +55,19 @@ def token_suffix(token: str) -> bytes:
     return (TOKEN_MARK + token).encode() if token else b""
 
 
+_FRAME_ID_LENGTH = struct.Struct("<I").unpack_from
+
+
 def carries_token(data: bytes | memoryview, suffix: bytes) -> bool:
     """Whether the CDR ``data`` of a stamped message (little-endian, as the loop's nodes write
     it) has a ``header.frame_id`` ending in ``suffix``: a length read and one slice compared,
-    before anything is decoded."""
-    if len(data) < FRAME_ID_AT + 4 or data[1] != 1:
+    before anything is decoded (a slice past the end is short, so never equal)."""
+    try:
+        length = _FRAME_ID_LENGTH(data, FRAME_ID_AT)[0]     # the string's, with its NUL
+    except struct.error:                                    # too short for a header
         return False
-    length = int.from_bytes(data[FRAME_ID_AT:FRAME_ID_AT + 4], "little")   # with its NUL
     end = FRAME_ID_AT + 3 + length
-    return length > len(suffix) and end <= len(data) and data[end - len(suffix):end] == suffix
+    return data[1] == 1 and length > len(suffix) and data[end - len(suffix):end] == suffix
 
 
 class SampleGrid:
