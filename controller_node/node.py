@@ -151,7 +151,7 @@ class ControllerNode(base.LoopNode):
         if self.sim_time:       # the watchdog follows the simulator's /clock (module docstring)
             fast_inputs.subscribe(self.node, clock.type_name, clock.name, clock.qos,
                                   clock_reader(), self.on_clock,
-                                  self.gates.add(clock.name, "sensor_writer"))
+                                  self.gates.add(clock.name, "sensor_writer", stamped=False))
 
     def on_force(self, ns: int, force: float) -> None:
         self.input_at = time.monotonic()

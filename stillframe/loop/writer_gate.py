@@ -341,11 +341,14 @@ class InputGates:
         self.next_announce = 0
         self.announced: dict[str, list[str]] = {}     # topic -> the writers last logged
 
-    def add(self, topic: str, parameter: str) -> WriterGate:
-        """The gate of ``topic``, taking the writers of the node ``parameter`` names."""
+    def add(self, topic: str, parameter: str, *, stamped: bool = True) -> WriterGate:
+        """The gate of ``topic``, taking the writers of the node ``parameter`` names, or, for a
+        ``stamped`` topic (its messages have a header) of a run with a token, the samples that
+        carry it."""
         gate = WriterGate(self.pins[parameter], graph_writers(self.node, topic),
                           count_writers=lambda: self.node.count_publishers(topic),
-                          namespace=self.node.get_namespace(), token=self.token,
+                          namespace=self.node.get_namespace(),
+                          token=self.token if stamped else b"",
                           own=self.pins[parameter] or self.defaults.get(parameter, ""))
         self.gates[topic] = gate
         return gate

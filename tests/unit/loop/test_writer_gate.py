@@ -370,3 +370,15 @@ def test_with_the_token_a_second_writer_under_the_loops_own_name_is_said_so() ->
     gate = WriterGate("controller_node", graph, token=token_suffix(TOKEN))
     assert not gate.admits(b"", 1, command(""))
     assert gate.report()["ignored_writers"] == "another writer named /frame/controller_node"
+
+
+def test_a_topic_without_a_header_keeps_the_rule_of_a_run_without_a_token() -> None:
+    """``/clock`` has no header, so no token to carry: its gate (the controller's, with
+    ``use_sim_time``) takes the first writer seen (or the pinned node), where a token gate would
+    refuse every sample, the simulator's too."""
+    gates = InputGates(Parameters(), {"sensor_writer": ""}, {"sensor_writer": "sim_node"}, TOKEN)
+    clock = gates.add("/clock", "sensor_writer", stamped=False)
+    stamped = gates.add("/frame/excitation/wrench", "sensor_writer")
+    tick = messages.serialize(messages.new("rosgraph_msgs/msg/Clock"))
+    assert clock.token == b"" and stamped.token == token_suffix(TOKEN)
+    assert clock.admits(SIM, 0, tick) and not stamped.admits(SIM, 0, tick)
