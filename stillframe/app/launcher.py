@@ -83,8 +83,7 @@ READY_LINES: dict[str, str] = {"recorder": "Recording to", "monitor": "Monitor r
 #: lines of a child's output kept to explain its death
 TAIL_LINES = 15
 #: how long the launch waits at the end of a run for its graph to name a writer a node reported
-#: by GID only (measured: a Cyclone participant named a Fast DDS node 2 to 7 s after its writer
-#: matched) [s]
+#: by GID only (across DDS vendors a node's name follows its writer by seconds) [s]
 NAME_WAIT_S = 10.0
 #: a writer GID as a node reports a writer its graph had not named (32 hex digits)
 GID_TEXT = re.compile(r"\b[0-9a-f]{32}\b")

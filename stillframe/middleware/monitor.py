@@ -26,10 +26,10 @@ def wait_for_publisher(
     """The type of ``topic`` and a QoS compatible with all its publishers (like ``ros2 topic``:
     reliable/transient-local only if every publisher offers it). ``on_missing(full_name)`` is
     called once if this node found no publisher in the first half second (it may raise): whether
-    a settled graph (the daemon's) shows one, None when it cannot say; then this node's own
-    discovery is given one announcement period (:data:`.graph.ANNOUNCE_S`). ros2's ``does not
-    appear to be published yet`` is printed only when nothing shows a publisher: a fresh node
-    finds a running topic's publishers only after a second or more."""
+    a settled graph (the daemon's) shows one, or None when it cannot say, and this node's own
+    discovery is then given one announcement period (:data:`.graph.ANNOUNCE_S`). ros2's ``does
+    not appear to be published yet`` is printed only when neither shows a publisher: a fresh
+    node finds a running topic's publishers only after a second or more."""
     full = names.resolve_topic(topic)
     found: list[api.TopicEndpointInfo] = []
     deadline = time.monotonic() + (1e9 if timeout is None else timeout)
