@@ -21,11 +21,13 @@ supervisor's zero command stamped with that time, once per sample time, and coun
 time rather than wall time: in lock-step the simulator then applies the zero command instead of
 timing out, and it needs no ``/clock``.
 
-Inputs are taken from one writer node per topic (:class:`stillframe.loop.writer_gate.WriterGate`):
-``state_estimate`` from the node ``estimate_writer`` names, the load cell and (with
-``use_sim_time``, read by the node itself for its watchdog) ``/clock`` from ``sensor_writer``'s
-("": the first writer seen); other writers' samples are refused, counted per topic and reason
-and named in ``/diagnostics``.
+Inputs are taken from the loop's own writer per topic
+(:class:`stillframe.loop.writer_gate.WriterGate`): with the run's token (``run_token``), the
+samples that carry it; without one (and for ``/clock``, which has no header: read with
+``use_sim_time`` by the node itself for its watchdog) ``state_estimate`` from the node
+``estimate_writer`` names, the load cell and ``/clock`` from ``sensor_writer``'s ("": the first
+writer seen). Other writers' samples are refused, counted per topic and reason and named in
+``/diagnostics``.
 
 When the loop's time goes back (a restarted simulator: an estimate stamped before the last one,
 with a load-cell reading of that stamp; :mod:`stillframe.loop.matching`) the watchdog is disarmed
@@ -94,7 +96,7 @@ class ControllerNode(base.LoopNode):
         self.grid = SampleGrid(params.period)
         spec = COMMAND_TOPICS[self.controller.actuator]
         self.pub = TappedPublisher(node, spec.type_name, spec.name, spec.qos)
-        self.out = CommandMessage(self.controller.actuator)
+        self.out = CommandMessage(self.controller.actuator, params.run_token)
         self.sim_time = bool(node.get_parameter("use_sim_time").value)
         self.clock_ns = 0                   # the newest /clock of the simulator (sim time)
         self.matching = ForceMatching(None, params.lockstep)
@@ -139,17 +141,18 @@ class ControllerNode(base.LoopNode):
 
     def subscribe_inputs(self) -> None:
         est, wrench, clock = topics.STATE_ESTIMATE, topics.EXCITATION_WRENCH, topics.CLOCK
+        token = self.params.run_token
         fast_inputs.subscribe(self.node, est.type_name, est.name, self.params.reader_qos(est),
-                              state_reader(), self.on_estimate,
+                              state_reader(token), self.on_estimate,
                               self.gates.add(est.name, "estimate_writer"))
         fast_inputs.subscribe(self.node, wrench.type_name, wrench.name,
                               self.params.reader_qos(wrench),
-                              wrench_reader("floor1", "wrench.force.x"), self.on_force,
+                              wrench_reader("floor1", "wrench.force.x", token), self.on_force,
                               self.gates.add(wrench.name, "sensor_writer"))
         if self.sim_time:       # the watchdog follows the simulator's /clock (module docstring)
             fast_inputs.subscribe(self.node, clock.type_name, clock.name, clock.qos,
                                   clock_reader(), self.on_clock,
-                                  self.gates.add(clock.name, "sensor_writer"))
+                                  self.gates.add(clock.name, "sensor_writer", stamped=False))
 
     def on_force(self, ns: int, force: float) -> None:
         self.input_at = time.monotonic()

@@ -37,11 +37,12 @@ a crash) starts a Kalman filter's mean from that sample's measurements
 state,
 at the first sample that carries all four measurements (earlier ones are skipped and counted).
 
-Every input is taken from one writer node per topic
-(:class:`stillframe.loop.writer_gate.WriterGate`): the sensors (and ``state_truth``) from the node
-the ``sensor_writer`` parameter names, the commands from ``command_writer``'s ("": the first
-writer seen); other writers' samples are refused before they are decoded, counted per topic and
-reason and named in ``/diagnostics``.
+Every input is taken from the loop's own writer per topic
+(:class:`stillframe.loop.writer_gate.WriterGate`): with the run's token (``run_token``), the
+samples that carry it; without one, the sensors (and ``state_truth``) from the node the
+``sensor_writer`` parameter names, the commands from ``command_writer``'s ("": the first writer
+seen). Other writers' samples are refused before they are decoded, counted per topic and reason
+and named in ``/diagnostics``.
 
 Negative stamps are rejected and counted (``negative_stamps``). Messages not newer than the last
 stamp used (``stale_messages``) or more than a second after it (``future_stamps``) are counted
@@ -129,10 +130,11 @@ class EstimatorNode(base.LoopNode):
         spec, cov = topics.STATE_ESTIMATE, topics.STATE_COVARIANCE
         self.state_pub = TappedPublisher(node, spec.type_name, spec.name, spec.qos)
         self.cov_pub = TappedPublisher(node, cov.type_name, cov.name, cov.qos)
-        self.out = EstimateMessages()
+        self.out = EstimateMessages(params.run_token)
         for i, spec in enumerate(COMMAND_TOPICS):
             fast_inputs.subscribe(node, spec.type_name, spec.name, params.reader_qos(spec),
-                                  command_reader(i), functools.partial(self.on_command, i),
+                                  command_reader(i, params.run_token),
+                                  functools.partial(self.on_command, i),
                                   self.gates.add(spec.name, "command_writer"))
         self.counts = {"estimates": 0, "initialised_from_measurements": 0,
                        "skipped_before_initialisation": 0, "held_while_inactive": 0}
@@ -182,12 +184,12 @@ class EstimatorNode(base.LoopNode):
     # -- inputs --------------------------------------------------------------------------
     def subscribe_inputs(self) -> None:
         """The scene's estimator inputs (:func:`stillframe.loop.wiring.estimator_inputs`)."""
-        sensors = self.params.scene.sensors
+        sensors, token = self.params.scene.sensors, self.params.run_token
         handlers: dict[str, tuple[TopicReader, Callable[..., None]]] = {
-            topics.FLOOR3_LOAD_CELL.name: (wrench_reader("floor3", "wrench.force.x"),
+            topics.FLOOR3_LOAD_CELL.name: (wrench_reader("floor3", "wrench.force.x", token),
                                            self.on_applied_force),
-            topics.STATE_TRUTH.name: (state_reader(), self.on_truth),
-            **{spec.name: (sensor_reader(channel, sensors),
+            topics.STATE_TRUTH.name: (state_reader(token), self.on_truth),
+            **{spec.name: (sensor_reader(channel, sensors, token),
                            functools.partial(self.on_sensor, channel))
                for channel, spec in enumerate(SENSOR_TOPICS)},
         }

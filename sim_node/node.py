@@ -25,12 +25,13 @@ With ``actuators.delay_periods`` = d ≥ 1 the command stamped t_k is applied fr
 (:class:`stillframe.plant.actuation_delay.ActuationDelay`): in real time the sim does not wait
 for it, and a command not in when its period starts is the deadline miss.
 
-Commands pass the step's :class:`stillframe.loop.command_gate.CommandGate` per topic: only one
-node's writers (by their writer GIDs; the first seen, or the node named by the
-``command_writer`` parameter) may command, a second writer is reported in ``/diagnostics`` and
-ignored, and non-finite values, values beyond the command's bound and stamps from the future or
-before the held command are rejected and counted by reason. The safe state (zero actuation once
-the newest command is ``command_timeout_periods`` old) and, in real time, the miss-rate guard
+Commands pass the step's :class:`stillframe.loop.command_gate.CommandGate` per topic: only
+the loop's controller may command (with the run's token, the commands that carry it; without one,
+one node's writers by their writer GIDs: the first seen, or the node named by the
+``command_writer`` parameter), another writer is reported in ``/diagnostics`` and ignored, and
+non-finite values, values beyond the command's bound and stamps from the future or before the
+held command are rejected and counted by reason. The safe state (zero actuation once the newest
+command is ``command_timeout_periods`` old) and, in real time, the miss-rate guard
 (``command_miss_limit``) are the step's (:class:`stillframe.loop.step.LoopStep`).
 
 At the end of the scene's duration it writes ``result_file`` (the evaluation of
@@ -131,17 +132,18 @@ class SimNode(base.LoopNode):
         # by topic, in the order of SensorMessages.fill and then the truth
         self.publishers = {s.name: TappedPublisher(node, s.type_name, s.name, params.qos(s))
                            for s in (*SAMPLE_TOPICS, topics.STATE_TRUTH)}
-        self.messages = SensorMessages(scene.sensors)
+        self.messages = SensorMessages(scene.sensors, params.run_token)
         #: the sample topics anti-alias filtered and thinned (None at low rates): the tracker's
-        self.taps = DecimatedTaps.of(node, SensorMessages(scene.sensors), scene.sensors.rate_hz,
-                                     params.qos)
+        self.taps = DecimatedTaps.of(node, SensorMessages(scene.sensors, params.run_token),
+                                     scene.sensors.rate_hz, params.qos)
         #: pH plant: energy_balance and the live passivity check (None for the other plants)
         self.energy = EnergyTopic.of(node, plant, scene, params.qos(topics.ENERGY_BALANCE))
         #: a scene with events: what the plant changed and when (None without events)
         self.structure_events = (node.create_publisher(
             topics.STRUCTURE_EVENTS.type_name, topics.STRUCTURE_EVENTS.name,
             params.qos(topics.STRUCTURE_EVENTS)) if spec.events else None)
-        self.readers = [command_reader(i) for i in range(len(COMMAND_TOPICS))]
+        self.readers = [command_reader(i, params.run_token)
+                        for i in range(len(COMMAND_TOPICS))]
         self.subscriptions = [
             node.create_subscription(topic.type_name, topic.name,
                                      functools.partial(self.on_command, i),
@@ -165,7 +167,7 @@ class SimNode(base.LoopNode):
         """Offer a command to the step (its writer, then its value and stamp); count the
         others."""
         step = self.step
-        if not step.admits(actuator, info.publisher_gid, info.publication_sequence):
+        if not step.admits(actuator, info.publisher_gid, info.publication_sequence, cdr):
             return
         read = self.readers[actuator].read(cdr)
         if read is None:

@@ -50,8 +50,8 @@ class IdentificationError(StillframeError):
 
 
 class DegradedRunError(StillframeError):
-    """A real-time run whose result cannot be trusted (``launch --strict``); the message gives the
-    reasons (:mod:`stillframe.app.run_verdict`)."""
+    """A run ``launch --strict`` refuses: a real-time run whose result cannot be trusted, or one
+    beside a foreign writer; the message gives the reasons (:mod:`stillframe.app.run_verdict`)."""
 
     exit_code = 6
 

@@ -17,6 +17,8 @@ import contextlib
 import ctypes
 import json
 import os
+import re
+import secrets
 import shutil
 import signal
 import subprocess
@@ -44,6 +46,7 @@ from stillframe.locations import REPO_ROOT
 from stillframe.loop.parts import check_loop
 from stillframe.loop.spec import MODES
 from stillframe.middleware import api, discovery, names
+from stillframe.middleware.graph import UNNAMED_NODES, fqn
 from stillframe.node_runtime.declarations import NODE_PARAMETERS, ManagedParameterValues
 from stillframe.recording.recorder import MISSING_KEY, STALLS_KEY
 
@@ -83,6 +86,11 @@ READY_LINES: dict[str, str] = {"recorder": "Recording to", "monitor": "Monitor r
                                TRACKER: TRACKER_READY}
 #: lines of a child's output kept to explain its death
 TAIL_LINES = 15
+#: how long the launch waits at the end of a run for its graph to name a writer a node reported
+#: by GID only (across DDS vendors a node's name follows its writer by seconds) [s]
+NAME_WAIT_S = 10.0
+#: a writer GID as a node reports a writer its graph had not named (32 hex digits)
+GID_TEXT = re.compile(r"\b[0-9a-f]{32}\b")
 _PR_SET_PDEATHSIG = 1
 
 
@@ -112,6 +120,12 @@ class NodeDiedError(RuntimeError):
         if kind is None or line is None:
             return None
         return kind(f"{self.name}: {line.split(': error: ', 1)[1]}")
+
+
+def new_run_token() -> str:
+    """A new run's token (64 random bits, hex): what its nodes write in every stamped sample
+    and require of every sample they take (docs/nodes.md, writer identity)."""
+    return secrets.token_hex(8)
 
 
 def node_command(package: str, scene: Path, overrides: Sequence[str], mode: str, *,
@@ -481,6 +495,8 @@ class Launcher:
                 "the loop's nodes, it takes no CPU they want (docs/realtime.md); "
                 "--recorder-nice 0 runs it as ros2 bag record does")
         self.processes = ProcessSet(self.status.echo)
+        #: the run's token: every stamped sample of its nodes carries it, and they take no other
+        self.token = new_run_token()
         self.node = api.create_node(running_graph.launcher_name(), argv=["stillframe"])
         self.created = time.monotonic()
         self.statuses: dict[str, dict[str, str]] = {}
@@ -502,6 +518,8 @@ class Launcher:
                 names.resolve_topic(t) for t in o.record_topics] or ["*"]
         if o.lockstep_timeout_s is not None:
             sim_params["lockstep_timeout_s"] = float(o.lockstep_timeout_s)
+        # the run's token, which only this launch's nodes know (docs/nodes.md, writer identity)
+        shared: dict[str, Any] = {"run_token": self.token}
         scene = self.scene_file()
         children = []
         if o.record_dir is not None:
@@ -525,7 +543,7 @@ class Launcher:
         sim = self.simulator()
         children += [(name, [*o.hosts.get("estimator_node" if name == CONTAINER else name, []),
                              *node_command(name, scene, [], o.mode, params={
-                                 **(rt if name in (sim, *LOOP) else {}),
+                                 **shared, **(rt if name in (sim, *LOOP) else {}),
                                  **(sim_params if name == sim else {}),
                                  **({"autostart": False} if name in MANAGED else {})},
                                  args=["all"] if name == sim == CONTAINER else [])])
@@ -606,6 +624,7 @@ class Launcher:
             self.node.spin_once(0.0)    # the nodes' last statuses, written as they stopped
             if (dead := self.processes.first_failure()) is not None:
                 raise NodeDiedError.exited(dead)
+            self._name_writers()
         except NodeDiedError as exc:
             exc.partial = self._partial(exc)
             raise
@@ -715,6 +734,29 @@ class Launcher:
             path.write_text(json.dumps(evaluation, indent=2) + "\n")
         history = path.with_suffix(".npz")
         return LaunchResult(evaluation, path, history, dict(self.statuses))
+
+    def _name_writers(self) -> None:
+        """Name, in the nodes' reports, the writers a node could give by GID only (its graph had
+        not named them yet: across DDS vendors a node's name comes seconds after its writer,
+        longer than a short run), from the launch's own graph, waiting for it at most
+        :data:`NAME_WAIT_S`: the result file and the statuses then name every writer."""
+        path = self.options.result_file
+        text = path.read_text() if path.is_file() else ""
+        gids = set(GID_TEXT.findall(text + json.dumps(self.statuses)))
+        names: dict[str, str] = {}
+        deadline = time.monotonic() + NAME_WAIT_S
+        while gids - names.keys() and time.monotonic() < deadline and api.ok():
+            self.node.spin_once(0.1)
+            for topic, _ in self.node.get_topic_names_and_types():
+                names.update({ep.endpoint_gid.hex(): fqn(ep.node_namespace, ep.node_name)
+                              for ep in self.node.get_publishers_info_by_topic(topic)
+                              if ep.endpoint_gid.hex() in gids
+                              and ep.node_name not in UNNAMED_NODES})
+        for gid, name in names.items():
+            text = text.replace(gid, name)
+            self.statuses = json.loads(json.dumps(self.statuses).replace(gid, name))
+        if names:
+            path.write_text(text)
 
     def _result(self) -> LaunchResult:
         path = self.options.result_file

@@ -6,7 +6,8 @@ evaluation (sim_node's, or the one-process loop's) and the controller's counters
 ``/diagnostics``, or the one-process loop's ``controller``) and gives the reasons, each a short
 text with its count; an empty list is a run to trust. In every mode:
 
-- the simulator refused commands (another writer, a bad value or stamp);
+- the simulator refused commands of the loop's controller (a bad value or stamp; another
+  writer's refused commands are not the run's figures, :func:`foreign_writers` names them);
 - the control law's output went beyond :data:`~stillframe.control.supervisor.RUNAWAY_FACTOR`
   times the command's bound, and was clipped to it (``runaway``: an estimate or a design that no
   longer matches the plant, or a plant driven far beyond what the rig can do);
@@ -21,15 +22,22 @@ and in real time:
 
 ``stillframe launch`` and ``stillframe closed-loop`` print the reasons on one warning line and
 add ``"degraded"`` and ``"degraded_reasons"`` to their JSON; ``launch --strict`` then exits with
-:class:`~stillframe.errors.DegradedRunError`'s code.
+:class:`~stillframe.errors.DegradedRunError`'s code. A run, in either mode, whose gates refused
+the samples of writers not of the run (:func:`foreign_writers`) ends with a warning line naming
+them, ``"foreign_writers"`` in its JSON, and exits 0 (its figures are its own nodes': a lock-step
+run bit for bit the clean run's), 6 with ``--strict``.
 """
 
 from __future__ import annotations
 
 from typing import Any
 
+from stillframe.contract.topics import CONTRACT, DEFAULT_NAMESPACE
 from stillframe.control.supervisor import RUNAWAY_FACTOR
-from stillframe.loop.writer_gate import same_node
+from stillframe.loop.writer_gate import REASONS, same_node
+from stillframe.middleware.graph import fqn
+from stillframe.middleware.names import resolve_topic
+from stillframe.node_runtime.declarations import CONTROLLER, SIM
 
 #: the share of a run's samples that may miss their deadline before the run is degraded
 DEADLINE_MISS_LIMIT = 0.01
@@ -39,7 +47,8 @@ def watchdog_zeros(statuses: dict[str, dict[str, str]]) -> int | None:
     """The zero commands controller_node's watchdog sent (its last ``/diagnostics``); None
     without a status of it."""
     return next((int(values["watchdog"]) for name, values in statuses.items()
-                 if same_node(name, "controller_node") and "watchdog" in values), None)
+                 if same_node(name, CONTROLLER, DEFAULT_NAMESPACE) and "watchdog" in values),
+                None)
 
 
 def controller_count(evaluation: dict[str, Any], statuses: dict[str, dict[str, str]],
@@ -49,14 +58,14 @@ def controller_count(evaluation: dict[str, Any], statuses: dict[str, dict[str, s
     if isinstance(own := evaluation.get("controller"), dict) and key in own:
         return int(own[key])
     return next((int(values[key]) for name, values in statuses.items()
-                 if same_node(name, "controller_node") and key in values), 0)
+                 if same_node(name, CONTROLLER, DEFAULT_NAMESPACE) and key in values), 0)
 
 
 def verdict(evaluation: dict[str, Any], statuses: dict[str, dict[str, str]]) -> list[str]:
     """The reasons a run is degraded (module docstring); [] for a run to trust."""
     steps = max(int(evaluation.get("steps", 0)), 1)
     reasons = []
-    if refused := int(evaluation.get("rejected_commands", 0)):
+    if refused := int(evaluation.get("rejected_commands", 0)) - writer_refusals(evaluation):
         reasons.append(f"{refused} refused commands")
     if runaway := controller_count(evaluation, statuses, "runaway"):
         reasons.append(f"{runaway} commands of the law beyond {RUNAWAY_FACTOR:g} times their "
@@ -76,3 +85,49 @@ def verdict(evaluation: dict[str, Any], statuses: dict[str, dict[str, str]]) -> 
     if zeroed > steps / 2:
         reasons.append(f"{zeroed} of {steps} samples degraded (zero actuation applied)")
     return reasons
+
+
+def writer_refusals(evaluation: dict[str, Any]) -> int:
+    """The commands the simulator refused for their writer (another writer's, a foreign one's:
+    :func:`foreign_writers` reports them), not for their value or stamp."""
+    return sum(int(report.get(f"rejected_{r}", 0))
+               for report in evaluation.get("command_gates", {}).values() for r in REASONS)
+
+
+def _topic_keys() -> dict[str, str]:
+    """The key prefix of each contract topic in a node's gate reports, to its full name."""
+    return {spec.name.strip("/").replace("/", "_"): resolve_topic(spec.name, DEFAULT_NAMESPACE)
+            for spec in CONTRACT}
+
+
+def foreign_writers(evaluation: dict[str, Any],
+                    statuses: dict[str, dict[str, str]]) -> list[dict[str, Any]]:
+    """The writers the loop's gates refused (without the run's token, or, in a run without one,
+    another node's), per node and topic: ``{"node", "topic", "writers", "refused"}``, the writers
+    fully qualified as the graph names them. The simulator's from its result (its command
+    gates), the other nodes' from their last ``/diagnostics``; [] for a run no writer but its
+    own reached."""
+    keys = _topic_keys()
+    sim = fqn(DEFAULT_NAMESPACE, SIM)
+    gates = evaluation.get("command_gates", {})
+    reports = [(sim, keys[topic.strip("/").replace("/", "_")], report)
+               for topic, report in gates.items()]
+    reports += [(node, name, {k.removeprefix(f"{key}_"): v for k, v in values.items()
+                              if k.startswith(f"{key}_")})
+                for node, values in statuses.items() if not (node == sim and gates)
+                for key, name in keys.items() if f"{key}_ignored_writers" in values]
+    found = []
+    for node, topic, report in reports:
+        if refused := sum(int(report.get(f"rejected_{r}", 0)) for r in REASONS):
+            writers = [w for w in str(report.get("ignored_writers", "")).split(",") if w]
+            found.append({"node": node, "topic": topic, "writers": writers or ["unnamed"],
+                          "refused": refused})
+    return found
+
+
+def foreign_warning(found: list[dict[str, Any]]) -> str:
+    """One line on :func:`foreign_writers`: who wrote where, refused how often by whom."""
+    return ("samples of writers not of this run refused (the figures are the loop's own "
+            "nodes'): " + "; ".join(
+                f"{' and '.join(f['writers'])} on {f['topic']} ({f['refused']} refused by "
+                f"{f['node']})" for f in found))

@@ -1,13 +1,14 @@
 """Command-path integrity: which actuator commands the simulator takes (issue 11, item 4).
 
-One :class:`CommandGate` per command topic. A command is taken only from *the* command writer:
-the writers of one node, decided by a :class:`stillframe.loop.writer_gate.WriterGate` (the first
-writer seen, or the node ``command_writer`` names; any other writer is reported and its samples
-are ignored). Commands from the command writer are rejected, and counted by reason, when their
-value is not finite or beyond the command's bound (the actuator's limit, or
-:data:`stillframe.config.loop_sections.COMMAND_BOUND` without one),
-or their stamp lies in the future of the current sample or before the command already held;
-commands for an actuator the scene's controller does not drive are refused.
+One :class:`CommandGate` per command topic. A command is taken only from *the* command writer,
+decided by a :class:`stillframe.loop.writer_gate.WriterGate`: with the run's token, the commands
+that carry it (the loop's controller's); without one, the writers of one node (the first writer
+seen, or the node ``command_writer`` names). Any other writer is reported and its samples are
+ignored. Commands from the command writer are rejected, and counted by reason, when their value
+is not finite or beyond the command's bound (the actuator's limit, or
+:data:`stillframe.config.loop_sections.COMMAND_BOUND` without one), or their stamp lies in the
+future of the current sample or before the command already held; commands for an actuator the
+scene's controller does not drive are refused.
 """
 
 from __future__ import annotations
@@ -38,12 +39,13 @@ class CommandGate:
     active: bool = True
     rejected: Counter = field(default_factory=Counter)
 
-    def admits(self, gid: bytes, sequence: int = 0) -> bool:
+    def admits(self, gid: bytes, sequence: int = 0, data: bytes | memoryview = b"") -> bool:
         """Whether writer ``gid`` (or, without one, the writer that numbered the sample
-        ``sequence``) may command this actuator (checked before the sample is decoded); counts
-        the reason if not (the writer's reasons in the writer gate)."""
+        ``sequence``; with the run's token, the sample's CDR ``data`` carrying it) may command
+        this actuator (checked before the sample is decoded); counts the reason if not (the
+        writer's reasons in the writer gate)."""
         if self.active:
-            return self.writer is None or self.writer.admits(gid, sequence)
+            return self.writer is None or self.writer.admits(gid, sequence, data)
         self.rejected["inactive_actuator"] += 1
         return False
 

@@ -1,7 +1,8 @@
 """Subscriptions of the loop nodes that read their values straight from the CDR bytes.
 
 The hot path of the estimator and the controller: a raw subscription checks the sample's writer
-against the topic's :class:`stillframe.loop.writer_gate.WriterGate` (a set lookup), hands the
+against the topic's :class:`stillframe.loop.writer_gate.WriterGate` (the run's token in its
+bytes, or a set lookup of its writer), hands the
 bytes to a :class:`stillframe.contract.codecs.TopicReader` (a few fields unpacked in place when
 the layout is the stack's own, ``rosbags`` otherwise), and the handler gets the values; bytes
 that are no valid message are counted in ``api.MALFORMED``, as the decoding subscriptions count
@@ -25,7 +26,7 @@ def reading(topic: str, reader: TopicReader, handler: Callable[..., None],
     read, admits = reader.read, gate.admits
 
     def callback(cdr: bytes, info: api.MessageInfo) -> None:
-        if not admits(info.publisher_gid, info.publication_sequence):
+        if not admits(info.publisher_gid, info.publication_sequence, cdr):
             return
         values = read(cdr)
         if values is None:

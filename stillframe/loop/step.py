@@ -103,11 +103,13 @@ class LoopStep:
         return [e.record(self.spec.period) for e in self.applied_events]
 
     # -- 2. the commands ---------------------------------------------------------------
-    def admits(self, actuator: int, gid: bytes, sequence: int = 0) -> bool:
+    def admits(self, actuator: int, gid: bytes, sequence: int = 0,
+               data: bytes | memoryview = b"") -> bool:
         """Whether writer ``gid`` (or, without one, the writer that numbered the sample
-        ``sequence``) may command ``actuator``; counted as a refused command if not. Asked
-        before the command is decoded."""
-        if self.gates[actuator].admits(gid, sequence):
+        ``sequence``; with the run's token, the sample's CDR ``data`` carrying it) may command
+        ``actuator``; counted as a refused command if not. Asked before the command is
+        decoded."""
+        if self.gates[actuator].admits(gid, sequence, data):
             return True
         self.counts["rejected_commands"] += 1
         return False

@@ -584,9 +584,11 @@ class DdsNode:
         self._clock.set_sim_time(messages.stamp_ns(msg.clock))
 
     def declare_parameter(
-        self, name: str, default: Any = None, read_only: bool = False
+        self, name: str, default: Any = None, read_only: bool = False, *,
+        descriptor: params.ParameterDescriptor | None = None,
     ) -> params.Parameter:
-        return params.Parameter(name, self._params.declare(name, default, read_only))
+        descriptor = params.described(descriptor, read_only=read_only)
+        return params.Parameter(name, self._params.declare(name, default, descriptor))
 
     def get_parameter(self, name: str) -> params.Parameter:
         return params.Parameter(name, self._params.get(name))

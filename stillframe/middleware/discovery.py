@@ -52,11 +52,15 @@ def discovery_range() -> DiscoveryRange:
         raise InputError(f"{RANGE_ENV}={text!r}: expected one of {choices}") from None
 
 
+#: the highest domain id rcl takes (its UDP ports must fit: rmw's 0..232)
+MAX_DOMAIN_ID = 232
+
+
 def domain_id() -> int:
-    """``ROS_DOMAIN_ID`` (default 0); InputError unless an integer 0..232."""
+    """``ROS_DOMAIN_ID`` (default 0); InputError unless an integer 0..:data:`MAX_DOMAIN_ID`."""
     text = os.environ.get("ROS_DOMAIN_ID", "").strip() or "0"
-    if not text.isdigit() or int(text) > 232:
-        raise InputError(f"ROS_DOMAIN_ID={text!r}: expected an integer 0..232")
+    if not text.isdigit() or int(text) > MAX_DOMAIN_ID:
+        raise InputError(f"ROS_DOMAIN_ID={text!r}: expected an integer 0..{MAX_DOMAIN_ID}")
     return int(text)
 
 

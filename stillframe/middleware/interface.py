@@ -19,7 +19,7 @@ from stillframe.contract import messages
 from stillframe.middleware.clock import Clock
 from stillframe.middleware.graph import TopicEndpointInfo
 from stillframe.middleware.logger import Logger
-from stillframe.middleware.params import Parameter, SetCallback
+from stillframe.middleware.params import Parameter, ParameterDescriptor, SetCallback
 from stillframe.middleware.qos import QoSProfile
 
 #: how often a service call that may give up (``call_service(..., give_up=...)``) asks [s]
@@ -101,7 +101,8 @@ class Node(Protocol):
         self, period_s: float, callback: Callable[[], None], clock: Clock | None = None
     ) -> Timer: ...
     def declare_parameter(
-        self, name: str, default: Any = None, read_only: bool = False
+        self, name: str, default: Any = None, read_only: bool = False, *,
+        descriptor: ParameterDescriptor | None = None,
     ) -> Parameter: ...
     def get_parameter(self, name: str) -> Parameter: ...
     def add_on_set_parameters_callback(self, callback: SetCallback) -> None: ...

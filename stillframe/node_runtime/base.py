@@ -24,6 +24,7 @@ from stillframe.middleware import api, lifecycle
 from stillframe.middleware.params import Parameter, SetParametersResult
 from stillframe.node_runtime.declarations import (
     NODE_PARAMETERS,
+    WRITER_DEFAULTS,
     ManagedParameterValues,
     RealtimeParameterValues,
 )
@@ -116,7 +117,8 @@ class LoopNode(Cycle):
         self.values = values or {}
         pins = {name: getattr(v, name) for v in self.values.values()
                 for name in self.WRITER_PINS if hasattr(v, name)}
-        self.gates = InputGates(node, {name: pins.get(name, "") for name in self.WRITER_PINS})
+        self.gates = InputGates(node, {name: pins.get(name, "") for name in self.WRITER_PINS},
+                                WRITER_DEFAULTS, params.run_token)
         self.diagnostics = Diagnostics(node, params.diagnostics_period_s)
         self.rt = Realtime(RealtimeOptions())   # enter_realtime() applies what was asked
         self.activated = True                      # lifecycle: inactive nodes do not act

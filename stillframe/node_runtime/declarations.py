@@ -21,6 +21,7 @@ from stillframe.loop.spec import (
 from stillframe.node_runtime.parameters import (
     FromScene,
     NodeParameters,
+    at_least,
     between,
     limited,
     non_negative,
@@ -44,6 +45,15 @@ def _refusal(parse: Callable[[Any], object], name: str) -> Callable[[Any], str |
     return check
 
 
+#: what a run token may hold (it ends every ``frame_id`` the loop writes)
+TOKEN_LIMITS = "letters, digits, - and _; at most 64"
+
+
+def _token(value: str) -> str | None:
+    ok = len(value) <= 64 and all(c.isascii() and (c.isalnum() or c in "-_") for c in value)
+    return None if ok else f"expected {TOKEN_LIMITS}"
+
+
 def _scene_file(value: str) -> str | None:
     return None if value else "give the scene file (--ros-args -p scene:=FILE)"
 
@@ -65,6 +75,11 @@ class LoopParameterValues(NodeParameters):
         "lock-step (the one-process numbers, bit for bit) or real time (below)"))
     diagnostics_period_s: float = param(1.0, positive, unit="s", doc=(
         "wall time between `/diagnostics` messages"))
+    run_token: str = param("", limited(_token, TOKEN_LIMITS), doc=(
+        "the run's token: every stamped sample the node writes carries it in "
+        "`header.frame_id` (`floor1#TOKEN`), and it takes only the samples that do (writer "
+        "identity, below); `stillframe launch` and the launch file give each run a new one; "
+        "empty: none, the `*_writer` parameters decide"))
 
 
 @dataclass(frozen=True)
@@ -107,14 +122,14 @@ class SimParameterValues(NodeParameters):
         "topics the launch's recorder must subscribe before lock-step starts (`*`: every topic "
         "of the loop); empty: none"))
     command_writer: str = param("", doc=(
-        "the node allowed to command (`controller_node` under `stillframe launch`); empty: the "
-        "first writer seen; other writers are ignored and reported"))
+        "without a `run_token`: the node allowed to command (relative names in the node's "
+        "namespace); empty: the first writer seen; other writers are ignored and reported"))
     lockstep_timeout_s: float = param(LOCKSTEP_TIMEOUT_S, positive, unit="s", doc=(
         "lock-step: the longest wall time one sample waits for its command while the estimator "
         "and the controller are on the graph; past it (or once one has left the graph) the run "
         "ends, incomplete, exit code 7 (the simulator never advances without the command)"))
-    command_timeout_periods: int = param(COMMAND_TIMEOUT_PERIODS, limited(
-        lambda v: None if v >= 1 else "must be >= 1", ">= 1"), unit="periods", doc=(
+    command_timeout_periods: int = param(COMMAND_TIMEOUT_PERIODS, at_least(1), unit="periods",
+                                         doc=(
         "zero actuation (the safe state, `safe_state_samples`) once the newest command is this "
         "many periods old"))
     command_miss_limit: float = param(COMMAND_MISS_LIMIT, between(0.0, 1.0, high_open=True), doc=(
@@ -135,8 +150,8 @@ class EstimatorParameterValues(NodeParameters):
         "real time: how long after a stamp's first message the estimator updates with the "
         "channels that have arrived"))
     sensor_writer: str = param("", doc=(
-        "the node whose sensor samples (and `state_truth`) are taken, e.g. `sim_node`; empty: "
-        "the first writer seen"))
+        "without a `run_token`: the node whose sensor samples (and `state_truth`) are taken, "
+        "e.g. `sim_node`; empty: the first writer seen"))
     command_writer: str = param("", doc=(
         "as sim_node's, for the commands the estimator reads (the actuation in effect where a "
         "report was lost)"))
@@ -164,11 +179,12 @@ class ControllerParameterValues(NodeParameters):
     """controller_node."""
 
     estimate_writer: str = param("", doc=(
-        "the node whose `state_estimate` is taken, e.g. `estimator_node`; empty: the first "
-        "writer seen"))
+        "without a `run_token`: the node whose `state_estimate` is taken, e.g. "
+        "`estimator_node`; empty: the first writer seen"))
     sensor_writer: str = param("", doc=(
-        "the node whose load cell (`excitation/wrench`) and, with `use_sim_time`, `/clock` are "
-        "taken, e.g. `sim_node`; empty: the first writer seen"))
+        "without a `run_token` (and for `/clock`, which carries none): the node whose load cell "
+        "(`excitation/wrench`) and, with `use_sim_time`, `/clock` are taken, e.g. `sim_node`; "
+        "empty: the first writer seen"))
     enabled: bool = param(True, dynamic=True, doc=(
         "false: the command is 0 from the next sample on (published as usual); true: the law "
         "again"))
@@ -183,6 +199,10 @@ _COMMON = (LoopParameterValues, RealtimeParameterValues)
 #: the loop's nodes by their default names (a node waits for its peers by these names, or by
 #: the writer pins when set: docs/nodes.md, lock-step protocol)
 LOOP_NODES = SIM, ESTIMATOR, CONTROLLER = ("sim_node", "estimator_node", "controller_node")
+#: the loop's node each ``*_writer`` parameter names when it is empty: the node whose samples
+#: carry the run's token on those inputs, and the peer a node waits for in lock-step
+WRITER_DEFAULTS = {"command_writer": CONTROLLER, "sensor_writer": SIM,
+                   "estimate_writer": ESTIMATOR}
 
 NODE_PARAMETERS: dict[str, tuple[type[NodeParameters], ...]] = {
     SIM: (*_COMMON, SimParameterValues),

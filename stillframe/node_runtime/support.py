@@ -57,6 +57,8 @@ class LoopParameters:
     scene: Scene
     mode: str
     diagnostics_period_s: float
+    #: the run's token (docs/nodes.md, writer identity; "": none)
+    run_token: str = ""
 
     @property
     def period(self) -> float:
@@ -114,7 +116,7 @@ def declare_loop_parameters(node: api.Node) -> LoopParameters:
     InputError naming a wrong one), with the scene loaded and its model resolved."""
     values = declare(node, LoopParameterValues)
     scene, _ = resolve_model(load_scene(values.scene, [v for v in values.overrides if v]))
-    return LoopParameters(scene, values.mode, values.diagnostics_period_s)
+    return LoopParameters(scene, values.mode, values.diagnostics_period_s, values.run_token)
 
 
 class Diagnostics:
@@ -223,38 +225,43 @@ def wait_for_peers(node: api.Node, ready: Callable[[], bool],
 
 
 def has_publisher(node: api.Node, topic: str, peer: str) -> bool:
-    """The graph shows a publisher of ``topic`` in node ``peer`` (the reader side of a match)."""
-    return any(same_node(fqn(ep.node_namespace, ep.node_name), peer)
+    """The graph shows a publisher of ``topic`` in node ``peer`` (a relative name in ``node``'s
+    namespace; the reader side of a match)."""
+    return any(same_node(fqn(ep.node_namespace, ep.node_name), peer, node.get_namespace())
                for ep in node.get_publishers_info_by_topic(topic))
 
 
 def has_subscriber(node: api.Node, topic: str, peer: str) -> bool:
-    """The graph shows a subscription of ``topic`` in node ``peer`` (the writer side of a
-    match)."""
-    return any(same_node(fqn(ep.node_namespace, ep.node_name), peer)
+    """The graph shows a subscription of ``topic`` in node ``peer`` (a relative name in
+    ``node``'s namespace; the writer side of a match)."""
+    return any(same_node(fqn(ep.node_namespace, ep.node_name), peer, node.get_namespace())
                for ep in node.get_subscriptions_info_by_topic(topic))
 
 
 def reaches_peer(node: api.Node, publisher: api.Publisher, peer: str) -> bool:
     """``publisher`` has matched every subscription of its topic the graph shows, and one of them
-    belongs to node ``peer`` (``name`` or ``/namespace/name``).
+    belongs to node ``peer`` (``name`` in ``node``'s namespace, or ``/namespace/name``).
 
     A matched count alone is not enough in lock-step, nor is any named node: the recorder
     subscribes every topic at once and can match before the peer does; a tool's idle publisher
     on the command topic did the same for the simulator's reader (CI, and 3 of 30 runs beside a
     writing peer under load). The loop then started before the peer's side had matched, and
     the first command was lost (a lock-step timeout)."""
-    return _matched_with_peer(node.get_subscriptions_info_by_topic(publisher.topic_name),
+    return _matched_with_peer(node, node.get_subscriptions_info_by_topic(publisher.topic_name),
                               publisher.get_subscription_count(), peer)
 
 
 def hears_peer(node: api.Node, subscription: api.Subscription, peer: str) -> bool:
     """``subscription`` has matched every publisher of its topic the graph shows, one of them in
     node ``peer`` (the reader's side of :func:`reaches_peer`)."""
-    return _matched_with_peer(node.get_publishers_info_by_topic(subscription.topic_name),
+    return _matched_with_peer(node, node.get_publishers_info_by_topic(subscription.topic_name),
                               subscription.get_publisher_count(), peer)
 
 
-def _matched_with_peer(remote: list[api.TopicEndpointInfo], matched: int, peer: str) -> bool:
+def _matched_with_peer(node: api.Node, remote: list[api.TopicEndpointInfo], matched: int,
+                       peer: str) -> bool:
+    """Every remote endpoint matched, one of them in node ``peer`` (resolved in ``node``'s
+    namespace: a ``controller_node`` in another namespace is not the loop's)."""
     return matched >= len(remote) and any(
-        same_node(fqn(ep.node_namespace, ep.node_name), peer) for ep in remote)
+        same_node(fqn(ep.node_namespace, ep.node_name), peer, node.get_namespace())
+        for ep in remote)

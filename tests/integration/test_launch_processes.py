@@ -155,13 +155,15 @@ def test_launch_passes_sim_nodes_result_through_and_stops_the_others(
     out, err = proc.communicate(timeout=60)
     assert proc.returncode == 0, err
     assert json.loads(out) == {"scene": "thesis_lqg", **RESULT, "degraded": False,
-                               "degraded_reasons": [], "diagnostics": {}}
+                               "degraded_reasons": [], "foreign_writers": [], "diagnostics": {}}
     err = "".join(lines) + err
     sim_argv = json.loads(next(line for line in err.splitlines() if "sim argv" in line)
                           .split("sim argv ", 1)[1])
     # the resolved scene (duration 60 in it), no overrides to apply again
     assert "mode:=realtime" in sim_argv and not any("overrides:=" in a for a in sim_argv)
     assert any(a.startswith("scene:=") and a.endswith("/scene.resolved.yaml") for a in sim_argv)
+    # the run's token (docs/nodes.md, writer identity): 64 random bits
+    assert sum(bool(re.fullmatch(r"run_token:=[0-9a-f]{16}", a)) for a in sim_argv) == 1
     assert not any(alive(pid) for pid in pids.values())
 
 

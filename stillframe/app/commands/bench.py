@@ -23,6 +23,7 @@ BENCHES: tuple[str, ...] = (
     "stillframe.app.commands.bench_soak",
     "stillframe.app.commands.bench_cli",
     "stillframe.app.commands.bench_controllers",
+    "stillframe.app.commands.bench_writers",
 )
 
 

@@ -5,16 +5,18 @@ evaluation sim_node wrote: steady-state peaks per floor with and without control
 reductions (thesis eq. 5.233, 5.287); ``--json`` prints it as one document
 ``{"reduction_pct": {"displacement": [...], "velocity": [...]}, "peak_command": ...,
 "complete": true, "steps": ..., "wall_s": ..., "degraded": false, "degraded_reasons": [],
-...}``. A degraded real-time run (:mod:`stillframe.app.run_verdict`) ends with a warning line
-giving the reasons, and with ``--strict`` with exit code 6. With ``--record`` the document's
-``bag`` says what the recorder found missing (``missing_samples`` per topic, ``recorder_stalls``),
-and a bag that misses samples ends the run with a warning line. A node that ended on an error of
-its own passes on its line and exit code (7: a lock-step run whose peer left the graph or stopped
+"foreign_writers": [], ...}``. A degraded run (:mod:`stillframe.app.run_verdict`) ends with a
+warning line giving the reasons, and with ``--strict`` with exit code 6; so does a run whose nodes
+refused the samples of writers not of the run (``foreign_writers``: each node, topic, the writers
+fully qualified and how many samples were refused), in either mode: exit 0 with the warning (the
+figures are the loop's own nodes'), 6 with ``--strict``. With ``--record`` the document's ``bag``
+says what the recorder found missing (``missing_samples`` per topic, ``recorder_stalls``), and a
+bag that misses samples ends the run with a warning line. A node that ended on an error of its
+own passes on its line and exit code (7: a lock-step run whose peer left the graph or stopped
 answering; 4: a plant that diverged). Exit code 1 names a node that died otherwise (how: its exit
-code or signal) after the others were stopped cleanly; what the run still has (the
-samples the simulator ran, the statuses, the closed bag) is printed and written under ``--out``
-as a partial result marked ``"complete": false``. 130 follows Ctrl-C (every child stopped and
-reaped).
+code or signal) after the others were stopped cleanly; what the run still has (the samples the
+simulator ran, the statuses, the closed bag) is printed and written under ``--out`` as a partial
+result marked ``"complete": false``. 130 follows Ctrl-C (every child stopped and reaped).
 """
 
 from __future__ import annotations
@@ -37,7 +39,7 @@ from stillframe.app.commands.common import (
 )
 from stillframe.app.launcher import MODES, RECORDED_ABOVE_HZ
 from stillframe.app.net_faults import FAULTS
-from stillframe.app.run_verdict import verdict
+from stillframe.app.run_verdict import foreign_warning, foreign_writers, verdict
 from stillframe.config.scene import Scene
 from stillframe.errors import BagError, DegradedRunError, InputError
 from stillframe.text_table import format_table
@@ -95,8 +97,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                         help="keep sim_node's result.json and result.npz (histories) here")
     parser.add_argument("--strict", action="store_true",
                         help="a degraded real-time run (deadline misses, watchdog zeros, refused "
-                             "commands, no command in time, mostly zero actuation) exits with "
-                             "code 6 instead of only warning")
+                             "commands, no command in time, mostly zero actuation) or a run "
+                             "beside a foreign writer (its samples refused) exits with code 6 "
+                             "instead of only warning")
     add_compose_arguments(parser)
     add_realtime_arguments(parser)
     add_netns_arguments(parser)
@@ -312,18 +315,21 @@ def run(args: argparse.Namespace) -> int:
     reasons = verdict(result.evaluation, result.diagnostics)
     if incomplete := bag_incomplete(result.evaluation.get("bag")):
         print(f"stillframe launch: warning: {incomplete}", file=sys.stderr)
+    foreign = foreign_writers(result.evaluation, result.diagnostics)
     if args.json:
         emit_json({"scene": scene.name, **result.evaluation, "degraded": bool(reasons),
-                   "degraded_reasons": reasons, "diagnostics": result.diagnostics,
+                   "degraded_reasons": reasons, "foreign_writers": foreign,
+                   "diagnostics": result.diagnostics,
                    **({"tracked_modes": result.tracked_modes} if args.track else {})})
     elif "reduction_pct" in result.evaluation:
         print_evaluation(result.evaluation, scene)
     else:
         print(f"scene {scene.name}: {result.evaluation.get('steps')} steps, no controller")
-    if reasons:
-        degraded = DegradedRunError(f"degraded {args.mode} run, its figures are not the "
-                                    f"controller's: {'; '.join(reasons)}")
-        if args.strict:
-            raise degraded
-        print(f"stillframe launch: warning: {degraded}", file=sys.stderr)
+    warnings = ([f"degraded {args.mode} run, its figures are not the controller's: "
+                 f"{'; '.join(reasons)}"] if reasons else []) + (
+        [foreign_warning(foreign)] if foreign else [])
+    if warnings and args.strict:
+        raise DegradedRunError(" | ".join(warnings))
+    for warning in warnings:
+        print(f"stillframe launch: warning: {warning}", file=sys.stderr)
     return 0

@@ -6,7 +6,12 @@ from __future__ import annotations
 
 import pytest
 
-from stillframe.app.run_verdict import DEADLINE_MISS_LIMIT, verdict
+from stillframe.app.run_verdict import (
+    DEADLINE_MISS_LIMIT,
+    foreign_warning,
+    foreign_writers,
+    verdict,
+)
 
 #: a clean real-time run of 960 samples (30 s at 32 Hz)
 CLEAN = {"mode": "realtime", "steps": 960, "deadline_misses": 0, "rejected_commands": 0,
@@ -52,3 +57,37 @@ def test_the_issues_run_gives_every_reason_it_had() -> None:
     """81 deadline misses, 12 watchdog zeros and every command refused by an idle peer."""
     run = {**CLEAN, "deadline_misses": 81, "rejected_commands": 960, "commands_in_time": 0}
     assert len(verdict(run, {"/frame/controller_node": {"watchdog": "12"}})) == 4
+
+
+#: a real-time run beside a foreign writer: 40 of its commands refused by the simulator for
+#: lacking the run's token, 3 of the controller's for their stamps
+GATE = {"writer": "/frame/controller_node", "ignored_writers": "/rogue_tuner",
+        "rejected_foreign_writer": 40, "rejected_second_writer": 0,
+        "rejected_unknown_writer": 0, "rejected_ambiguous_writer": 0, "rejected_past_stamp": 3}
+BESIDE = {**CLEAN, "rejected_commands": 43, "command_gates": {"pendulum/torque_cmd": GATE}}
+
+
+def test_a_foreign_writers_refused_commands_are_not_the_controllers() -> None:
+    assert verdict(BESIDE, STATUS) == ["3 refused commands"]
+
+
+def test_foreign_writers_are_named_per_node_and_topic() -> None:
+    """The simulator's from its result, the others' from their last status (keys prefixed by the
+    topic as the nodes write them); a node that refused nothing is not listed."""
+    statuses = {**STATUS, "/frame/estimator_node": {
+        "pendulum_torque_cmd_ignored_writers": "/rogue_tuner",
+        "pendulum_torque_cmd_rejected_foreign_writer": "12",
+        "floor1_imu_ignored_writers": "", "floor1_imu_rejected_foreign_writer": "0"},
+        "/frame/sim_node": {"pendulum_torque_cmd_ignored_writers": "stale",
+                            "pendulum_torque_cmd_rejected_foreign_writer": "1"}}
+    found = foreign_writers(BESIDE, statuses)
+    assert found == [
+        {"node": "/frame/sim_node", "topic": "/frame/pendulum/torque_cmd",
+         "writers": ["/rogue_tuner"], "refused": 40},
+        {"node": "/frame/estimator_node", "topic": "/frame/pendulum/torque_cmd",
+         "writers": ["/rogue_tuner"], "refused": 12}]
+    assert foreign_warning(found) == (
+        "samples of writers not of this run refused (the figures are the loop's own nodes'): "
+        "/rogue_tuner on /frame/pendulum/torque_cmd (40 refused by /frame/sim_node); "
+        "/rogue_tuner on /frame/pendulum/torque_cmd (12 refused by /frame/estimator_node)")
+    assert foreign_writers(CLEAN, STATUS) == []
