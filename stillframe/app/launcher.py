@@ -38,6 +38,7 @@ from stillframe.contract import messages
 from stillframe.contract.topics import DEFAULT_NAMESPACE, STATUS_KEYS
 from stillframe.errors import InputError
 from stillframe.fidelity.auto_model import resolve_model
+from stillframe.files import write_text
 from stillframe.identification.tracker import TRACKER_READY
 from stillframe.locations import REPO_ROOT
 from stillframe.middleware import api, discovery, names
@@ -525,7 +526,8 @@ class Launcher:
         ``repr`` writes them: the same numbers)."""
         path = self.scene_file()
         path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(yaml.safe_dump(self.scene.to_dict(), sort_keys=False))
+        write_text(path, yaml.safe_dump(self.scene.to_dict(), sort_keys=False),
+                   what="resolved scene")
         return path
 
     def nodes(self) -> list[str]:
@@ -695,8 +697,8 @@ class Launcher:
                       "stopped": stopped, "diagnostics": dict(self.statuses)}
         if self.options.record_dir is not None:
             evaluation["bag"] = _bag_state(self.options.record_dir)
-        with contextlib.suppress(OSError):
-            path.write_text(json.dumps(evaluation, indent=2) + "\n")
+        with contextlib.suppress(OSError, InputError):
+            write_text(path, json.dumps(evaluation, indent=2) + "\n", what="result file")
         history = path.with_suffix(".npz")
         return LaunchResult(evaluation, path, history, dict(self.statuses))
 

@@ -22,6 +22,7 @@ from rosbags.typesys import get_types_from_msg
 from rosbags.typesys.store import Typestore
 
 from stillframe.errors import BagError
+from stillframe.files import open_input
 
 
 @dataclass(frozen=True)
@@ -71,13 +72,14 @@ class LoneMcapReader:
 
 
 def is_lone_mcap(path: str | Path) -> bool:
-    """Whether ``path`` is a file ending in ``.mcap`` (not a bag directory)."""
-    return Path(path).suffix == ".mcap" and Path(path).is_file()
+    """Whether ``path`` ends in ``.mcap`` and is not a bag directory (what else it is, the
+    opening says)."""
+    return Path(path).suffix == ".mcap" and not Path(path).is_dir()
 
 
 @contextmanager
 def open_lone_mcap(path: str | Path, typestore: Typestore) -> Iterator[LoneMcapReader]:
     """An open :class:`LoneMcapReader` of ``path``."""
     path = Path(path)
-    with path.open("rb") as stream:
+    with open_input(path, what="storage file (MCAP)", error=BagError) as stream:
         yield LoneMcapReader(stream, path, typestore)

@@ -47,6 +47,7 @@ from rosbags.typesys.store import Typestore
 from stillframe.bags.full_disk import RESERVE_NAME
 from stillframe.bags.storage import BagWriter
 from stillframe.errors import BagError
+from stillframe.files import directory, open_input
 
 MAGIC = b"\x89MCAP0\r\n"
 #: what reading a cut or damaged MCAP stream can raise (struct.error: a cut inside a field;
@@ -88,8 +89,7 @@ class Recovered:
 
 
 def _mcap_file(bag: Path) -> Path:
-    if not bag.is_dir():
-        raise BagError(f"{bag}: not a bag directory (no such directory)")
+    directory(bag, what="bag directory", error=BagError)
     files = sorted(bag.glob("*.mcap"))
     if len(files) != 1:
         raise BagError(f"{bag}: expected one .mcap file to reindex, found {len(files)}")
@@ -147,7 +147,7 @@ def salvage(path: Path) -> Salvage:
     """Every whole schema, channel and message of the MCAP file at ``path`` (module docstring).
     A file that does not start as MCAP (beyond a cut inside the magic) is a :class:`BagError`."""
     found = Salvage()
-    with path.open("rb") as stream:
+    with open_input(path, what="storage file (MCAP)", error=BagError) as stream:
         head = stream.read(MAGIC_SIZE)
         if not MAGIC.startswith(head) or not head:
             raise BagError(f"{path}: not an MCAP file (its first bytes are not the MCAP magic)")

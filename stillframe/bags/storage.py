@@ -15,6 +15,7 @@ has no footer and reads as truncated.
 
 from __future__ import annotations
 
+import contextlib
 import re
 import shutil
 import time
@@ -32,7 +33,9 @@ from rosbags.rosbag2.metadata import dump_qos_v9
 from rosbags.typesys.store import Typestore
 
 from stillframe.bags.full_disk import DiskLedger
+from stillframe.config.yamlio import load_yaml, problem
 from stillframe.errors import BagError, InputError
+from stillframe.files import directory, open_input, read_bytes
 
 METADATA_VERSION = 9
 #: the ROS distribution a bag's metadata names, as ``ros2 bag record`` on Jazzy writes it (rosbags
@@ -43,6 +46,9 @@ ROS_DISTRO = "jazzy"
 _BAG_ERRORS = (AnyReaderError, ReaderError, OSError, yaml.YAMLError, KeyError, TypeError,
                ValueError, RecursionError)
 SERVICE_EVENT_SUFFIX = "/_service_event"
+#: ``metadata.yaml``'s size at most: rosbag2 writes a few hundred bytes per topic and per
+#: storage file, so a bag of a thousand of each stays under 1 MiB
+MAX_METADATA_BYTES = 4 << 20
 
 
 @dataclass(frozen=True)
@@ -203,9 +209,21 @@ class BagWriter:
         self.close()
 
 
+def _metadata(bag: Path) -> Any:
+    """``metadata.yaml`` parsed: a regular file of at most :data:`MAX_METADATA_BYTES`, YAML
+    whose aliases do not expand past the loader's bounds (:func:`load_yaml`)."""
+    meta = bag / "metadata.yaml"
+    raw = read_bytes(meta, what="bag metadata file", max_bytes=MAX_METADATA_BYTES,
+                     error=BagError)
+    try:
+        return load_yaml(raw)
+    except yaml.YAMLError as exc:
+        raise BagError(f"{meta}: unreadable bag file: not valid YAML: {problem(exc)}") from None
+
+
 def _storage_files(bag: Path) -> list[Path]:
     """The storage files that ``metadata.yaml`` lists (call after it has parsed)."""
-    meta = yaml.safe_load((bag / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+    meta = _metadata(bag)["rosbag2_bagfile_information"]
     return [bag / Path(p).name for p in meta["relative_file_paths"]]
 
 
@@ -234,10 +252,16 @@ def _first_line(exc: BaseException) -> str:
 
 
 def _check_dir(bag: Path) -> None:
-    if not bag.is_dir():
-        raise BagError(f"{bag}: not a bag directory (no such directory)")
-    if not (bag / "metadata.yaml").is_file():
+    """Before rosbags reads them: the bag is a directory, its ``metadata.yaml`` is there and
+    reads (:func:`_metadata`), and each storage file it lists that is there is a regular file
+    (a FIFO would block the reader)."""
+    directory(bag, what="bag directory", error=BagError)
+    if not (bag / "metadata.yaml").exists():
         raise BagError(f"{bag / 'metadata.yaml'}: missing (not a rosbag2 directory?)")
+    with contextlib.suppress(KeyError, TypeError):      # its contents: rosbags says what lacks
+        for path in _storage_files(bag):
+            if path.exists():
+                open_input(path, what="bag storage file", error=BagError).close()
 
 
 @contextmanager
@@ -300,8 +324,7 @@ def bag_summary(path: str | Path, default_typestore: Typestore) -> BagSummary:
             for c in sorted(reader.connections, key=lambda c: c.topic)
         ]
         distro = reader.readers[0].ros_distro or "unknown"
-        storage = yaml.safe_load((bag / "metadata.yaml").read_text())[
-            "rosbag2_bagfile_information"]["storage_identifier"]
+        storage = _metadata(bag)["rosbag2_bagfile_information"]["storage_identifier"]
     return BagSummary(
         path=str(bag), files=[p.name for p in _storage_files(bag)],
         size_bytes=sum(p.stat().st_size for p in bag.iterdir() if p.is_file()),

@@ -38,8 +38,9 @@ from stillframe.config.schema import (
     up_to,
     validate,
 )
-from stillframe.config.yamlio import load_yaml, problem
+from stillframe.config.yamlio import MAX_YAML_BYTES, load_yaml, problem
 from stillframe.errors import InputError
+from stillframe.files import read_bytes
 
 #: the finite-element mesh and the modal model's modes at most (matrices of 3 * 2 * n + 1)
 MAX_ELEMENTS = 200
@@ -182,18 +183,8 @@ class Scene(Section):
     evaluation: Evaluation = section(Evaluation)
 
 
-#: a scene file's size at most (a scene is a page of YAML; this keeps /dev/zero out)
-MAX_SCENE_BYTES = 1 << 20
-
-
 def _read(path: Path) -> dict[str, Any]:
-    try:
-        with path.open("rb") as stream:
-            raw = stream.read(MAX_SCENE_BYTES + 1)
-    except OSError as exc:
-        raise InputError(f"{path}: cannot read scene ({exc.strerror})") from None
-    if len(raw) > MAX_SCENE_BYTES:
-        raise InputError(f"{path}: more than {MAX_SCENE_BYTES >> 20} MiB; not a scene")
+    raw = read_bytes(path, what="scene file", max_bytes=MAX_YAML_BYTES)
     try:
         data = load_yaml(raw)
     except yaml.YAMLError as exc:

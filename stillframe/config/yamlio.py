@@ -20,6 +20,8 @@ from yaml.constructor import ConstructorError
 
 #: nesting depth of mappings and lists at most (PyYAML composes recursively)
 MAX_DEPTH = 200
+#: the size of a YAML file a person writes (a scene, a parameter file, a model in YAML) at most
+MAX_YAML_BYTES = 1 << 20
 
 
 class _Loader(yaml.SafeLoader):

@@ -32,6 +32,7 @@ add ``rayleigh_alpha``/``rayleigh_beta`` and ``mkr`` (sensor/actuator DOFs, outp
 from __future__ import annotations
 
 import json
+import math
 import zipfile
 from dataclasses import dataclass
 from pathlib import Path
@@ -40,6 +41,7 @@ from typing import Any
 import numpy as np
 
 from stillframe.errors import InputError
+from stillframe.files import open_input, open_output, size_text
 
 FORMAT = "stillframe-identified-model"
 VERSION = 1
@@ -48,6 +50,8 @@ MKR_KEYS = ("M", "K", "R")
 ALLOWED_KEYS = {"A", "B", "C", "D", "G", "meta", *MKR_KEYS, *MODAL_KEYS}
 #: ``meta`` keys with a meaning of their own; any other key is kept as extra metadata
 META_KEYS = ("format", "version", "dt", "inputs", "outputs", "provenance")
+#: a model file's size at most, on disk and unpacked (a model of 200 states takes under 1 MiB)
+MAX_MODEL_BYTES = 16 << 20
 
 
 @dataclass(frozen=True)
@@ -70,23 +74,44 @@ def write_archive(path: str | Path, arrays: dict[str, Any], meta: dict[str, Any]
         encoded = np.array(json.dumps(meta))
     except TypeError as exc:
         raise InputError(f"{path}: model metadata is not JSON-serialisable: {exc}") from None
-    with open(path, "wb") as handle:
+    with open_output(path, what="model file") as handle:
         np.savez(handle, **arrays, meta=encoded)
+
+
+def _check_members(archive: np.lib.npyio.NpzFile, name: str) -> None:
+    """Before any array is read: the archive unpacks to at most :data:`MAX_MODEL_BYTES`, and no
+    array's header claims more data than its member holds (numpy allocates what the header
+    claims before it reads)."""
+    members = archive.zip.infolist()
+    unpacked = sum(info.file_size for info in members)
+    if unpacked > MAX_MODEL_BYTES:
+        raise InputError(f"{name}: unpacks to {size_text(unpacked)}, more than the "
+                         f"{size_text(MAX_MODEL_BYTES)} a model file may have")
+    for info in members:
+        with archive.zip.open(info) as member:
+            version = np.lib.format.read_magic(member)
+            header = (np.lib.format.read_array_header_1_0 if version == (1, 0)
+                      else np.lib.format.read_array_header_2_0)
+            shape, _, dtype = header(member)
+            if math.prod(shape) * dtype.itemsize > info.file_size:
+                raise InputError(f"{name}: '{info.filename.removesuffix('.npy')}' claims "
+                                 f"shape {shape} of {dtype}, more than its "
+                                 f"{size_text(info.file_size)} hold")
 
 
 def read_archive(path: str | Path) -> ModelArchive:
     """Read and validate a model file; any defect raises :class:`InputError` naming it."""
     name = str(path)
-    try:
-        archive = np.load(path, allow_pickle=False)
-        if not isinstance(archive, np.lib.npyio.NpzFile):
-            raise InputError(f"{name}: not a .npz model file (a single array)")
-        with archive:
-            data = {key: archive[key] for key in archive.files}
-    except FileNotFoundError:
-        raise InputError(f"{name}: model file not found") from None
-    except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
-        raise InputError(f"{name}: not a readable .npz model file ({exc})") from None
+    with open_input(path, what="model file", max_bytes=MAX_MODEL_BYTES) as stream:
+        try:
+            archive = np.load(stream, allow_pickle=False)
+            if not isinstance(archive, np.lib.npyio.NpzFile):
+                raise InputError(f"{name}: not a .npz model file (a single array)")
+            with archive:
+                _check_members(archive, name)
+                data = {key: archive[key] for key in archive.files}
+        except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
+            raise InputError(f"{name}: not a readable .npz model file ({exc})") from None
     unknown = set(data) - ALLOWED_KEYS
     if unknown:
         raise InputError(f"{name}: unknown arrays {sorted(unknown)}")

@@ -20,12 +20,13 @@ import numpy as np
 import yaml
 
 from stillframe.config.scene import Rig, Scene
-from stillframe.config.yamlio import load_yaml
+from stillframe.config.yamlio import MAX_YAML_BYTES, load_yaml, problem
 from stillframe.contract.model_file import read_archive
 from stillframe.dynamics.models import build_model
 from stillframe.dynamics.models.frame import FrameModel
 from stillframe.dynamics.models.structure import Structure
 from stillframe.errors import InputError
+from stillframe.files import read_bytes
 from stillframe.locations import DATA_DIR
 
 
@@ -35,17 +36,18 @@ def resolve_model_file(name: str, key: str) -> Path:
     if "/" not in name and "." not in name and bundled.exists():
         return bundled
     path = Path(name)
-    if not path.is_file():
+    if not path.exists():       # a FIFO or a directory is named as such by the reader
         known = ", ".join(sorted(p.stem for p in DATA_DIR.glob("*.yaml")))
         raise InputError(f"{key}: {name!r} is neither a file nor a bundled model ({known})")
     return path
 
 
 def _matrices_from_yaml(path: Path) -> tuple[dict[str, np.ndarray], str]:
+    raw = read_bytes(path, what="model file", max_bytes=MAX_YAML_BYTES)
     try:
-        data = load_yaml(path.read_text())
-    except (OSError, yaml.YAMLError) as exc:
-        raise InputError(f"{path}: cannot read the model file ({exc})") from None
+        data = load_yaml(raw)
+    except yaml.YAMLError as exc:
+        raise InputError(f"{path}: not a model file: not valid YAML: {problem(exc)}") from None
     if not isinstance(data, dict) or data.get("format") != "stillframe-mkr":
         raise InputError(f"{path}: not a model file (expected 'format: stillframe-mkr')")
     try:

@@ -41,6 +41,7 @@ import scipy.io
 from scipy import signal
 
 from stillframe.errors import IdentificationError, InputError
+from stillframe.files import open_input
 from stillframe.identification.frf import h1_frf
 from stillframe.identification.modal import modal_parameters
 from stillframe.identification.n4sid import identify_n4sid
@@ -55,6 +56,8 @@ which ships the record with its licence)."""
 DEFAULT_PATH = (Path(os.environ.get(DATASETS_VARIABLE) or DATASETS_DIR)
                 / "daisy" / "flexible_structure_dat.mat")
 DT = 1 / 1024
+#: the data file's size at most (the record, 8523 samples of 30 channels, takes 2 MB)
+MAX_BYTES = 64 << 20
 ORDER = 20
 BLOCK_ROWS = 21
 OUTPUTS = 4
@@ -82,11 +85,12 @@ class Model:
 def load(path: str | Path = DEFAULT_PATH) -> tuple[np.ndarray, np.ndarray]:
     """Detrended inputs (N, 2) and outputs (N, 28)."""
     path = Path(path)
-    if not path.is_file():
+    if not path.exists():
         raise InputError(f"DaISy file {path} not found (flexible_structure_dat.mat, DaISy 96-013; "
                          "give its path with --data)")
     try:
-        data = scipy.io.loadmat(path)["flexible_structure_dat"]
+        with open_input(path, what="DaISy data file", max_bytes=MAX_BYTES) as stream:
+            data = scipy.io.loadmat(stream)["flexible_structure_dat"]
     except (KeyError, ValueError, OSError) as exc:
         raise InputError(f"{path}: not the DaISy flexible-structure .mat file ({exc})") from None
     if data.ndim != 2 or data.shape[1] != 30:

@@ -417,7 +417,7 @@ def test_real_stderr_of_a_binary_scene_and_non_utf8_arguments(tmp_path: Path) ->
     assert b"not valid YAML: not UTF-8 or UTF-16 text" in done.stderr
     done = _stillframe("modes", os.fsencode(tmp_path) + b"/\xff\xfe.yaml")
     assert done.returncode == 2 and b"Traceback" not in done.stderr
-    assert b"cannot read scene" in done.stderr
+    assert b"cannot read the scene file" in done.stderr
 
 
 def test_unwritable_outputs_are_one_line(tmp_path: Path) -> None:

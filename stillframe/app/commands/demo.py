@@ -16,10 +16,10 @@ from pathlib import Path
 
 import numpy as np
 
-from stillframe.app.commands.common import check_output
 from stillframe.app.commands.launch import add_launch_arguments, print_evaluation, report_death
 from stillframe.config.scene import Scene
 from stillframe.errors import InputError
+from stillframe.files import check_output, save_figure
 from stillframe.locations import SCENES_DIR
 
 DEMO_SCENE = SCENES_DIR / "thesis_lqg.yaml"
@@ -69,7 +69,7 @@ def plot_floors(path: Path, controlled: tuple[np.ndarray, np.ndarray],
     axes[0].set_title(f"{scene.name}: floor displacements, {scene.controller.type} from "
                       f"{scene.controller.start:g} s (dashed)")
     axes[-1].set_xlabel("t [s]")
-    fig.savefig(path, dpi=110)
+    save_figure(fig, path, dpi=110)
     plt.close(fig)
 
 
@@ -84,7 +84,7 @@ def run(args: argparse.Namespace) -> int:
     from stillframe.config.scene import load_scene
     from stillframe.loop.closed_loop import open_loop_truth
 
-    check_output("--out", args.out)
+    check_output("--out", args.out, folder=True)
 
     scene = load_scene(DEMO_SCENE, args.overrides)
     out: Path = args.out

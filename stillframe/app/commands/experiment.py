@@ -13,8 +13,9 @@ import argparse
 import sys
 from pathlib import Path
 
-from stillframe.app.commands.common import add_scene_arguments, check_output, emit_json
+from stillframe.app.commands.common import add_scene_arguments, emit_json
 from stillframe.app.commands.launch import add_launch_arguments, report_death
+from stillframe.files import check_output
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -41,7 +42,7 @@ def run(args: argparse.Namespace) -> int:
     from stillframe.app.experiment_report import document, plot_comparison, print_report
     from stillframe.app.launcher import NodeDiedError
 
-    check_output("--out", args.out)
+    check_output("--out", args.out, folder=True)
 
     test = IdentificationTest(args.test_force, args.test_duration, args.test_seed)
     try:

@@ -25,7 +25,6 @@ from typing import Any
 from stillframe.app.commands.common import (
     NICE_RANGE,
     add_scene_arguments,
-    check_output,
     emit_json,
     scene_from_args,
     seconds,
@@ -36,6 +35,7 @@ from stillframe.app.net_faults import FAULTS
 from stillframe.app.run_verdict import verdict
 from stillframe.config.scene import Scene
 from stillframe.errors import BagError, DegradedRunError, InputError
+from stillframe.files import check_output
 from stillframe.text_table import format_table
 
 
@@ -260,8 +260,8 @@ def run(args: argparse.Namespace) -> int:
     from stillframe.app.launcher import NodeDiedError, run_scene
     from stillframe.app.net_faults import hosts_if
 
-    check_output("--out", args.out)
-    check_output("--record", args.record)
+    check_output("--out", args.out, folder=True)
+    check_output("--record", args.record, folder=True)
 
     scene = scene_from_args(args)
     rt, rt_cpus = realtime_arguments(args)
