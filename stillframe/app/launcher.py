@@ -67,6 +67,9 @@ PROBE_S = 1.0
 TRANSITION_TIMEOUT_S = 20.0
 #: the resolved scene the launch hands every node, beside the result file
 RESOLVED_SCENE = "scene.resolved.yaml"
+#: how a child asked to stop may end: cleanly, by the signal, or interrupted in its start-up
+#: (:func:`stillframe.interrupts.exit_code`)
+STOPPED_CODES = (0, -signal.SIGINT, -signal.SIGTERM, 128 + signal.SIGINT, 128 + signal.SIGTERM)
 #: seconds a child gets to exit after SIGINT, then after SIGTERM, before SIGKILL
 STOP_GRACE_S = 10.0
 #: children that get longer to exit after SIGINT: the tracker finishes the windows due
@@ -102,12 +105,14 @@ class NodeDiedError(RuntimeError):
 
 def node_command(package: str, scene: Path, overrides: Sequence[str], mode: str, *,
                  params: dict[str, Any] | None = None, args: Sequence[str] = ()) -> list[str]:
-    """``python -m PACKAGE.node ARGS --ros-args -p scene:=... -p overrides:=[...] -p mode:=...``.
+    """``python -m PACKAGE ARGS --ros-args -p scene:=... -p overrides:=[...] -p mode:=...``
+    (the package's ``__main__``: Ctrl-C answered from the process's first line,
+    :func:`stillframe.interrupts.run_module`).
 
     Overrides go as a JSON list of strings (JSON is YAML, so rcl-style parsing keeps each
     ``key=value`` whole even when the value is itself a list); an empty list is left out
     because ROS parameters cannot be empty arrays."""
-    argv = [sys.executable, "-m", f"{package}.node", *args, "--ros-args",
+    argv = [sys.executable, "-m", package, *args, "--ros-args",
             "-p", f"scene:={scene}", "-p", f"mode:={mode}"]
     if overrides:
         argv += ["-p", f"overrides:={json.dumps(list(overrides))}"]
@@ -205,10 +210,30 @@ def nodes_for(scene: Scene) -> list[str]:
     return [name for name in NODES if used[name]]
 
 
-def _die_with_parent() -> None:
-    """In the child before exec: SIGTERM when the launcher dies (Linux prctl)."""
-    with contextlib.suppress(OSError, AttributeError):
-        ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGTERM)
+def _prepare_child() -> None:
+    """In the child before exec: SIGINT ignored until the child's own code installs its handler,
+    and on Linux SIGTERM when the launcher dies (prctl). Python installs no KeyboardInterrupt
+    handler for a SIGINT its parent ignored (the signal module's documentation), so a SIGINT
+    forwarded while the child's interpreter is still starting (importing ``site``) cannot
+    print a traceback from there; the node executables install theirs on their first line
+    (:func:`stillframe.interrupts.run_module`), and :meth:`ProcessSet.stop` sends SIGTERM
+    to a child that has none yet."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    if sys.platform == "linux":
+        with contextlib.suppress(OSError, AttributeError):
+            ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGTERM)
+
+
+def catches_sigint(pid: int) -> bool:
+    """Whether process ``pid`` has a handler of its own for SIGINT (``SigCgt`` in
+    ``/proc/PID/status``); True where the kernel does not say."""
+    try:
+        status = Path(f"/proc/{pid}/status").read_text()
+    except OSError:
+        return True
+    caught = next((line.split()[1] for line in status.splitlines()
+                   if line.startswith("SigCgt:")), None)
+    return caught is None or bool(int(caught, 16) & (1 << (signal.SIGINT - 1)))
 
 
 @dataclass
@@ -262,7 +287,7 @@ class ProcessSet:
         proc = subprocess.Popen(
             argv, env=env, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
             stderr=subprocess.STDOUT, text=True, errors="replace", process_group=0,
-            preexec_fn=_die_with_parent if sys.platform == "linux" else None)
+            preexec_fn=_prepare_child)
         child = Child(name, proc, grace_s=grace_s)
         self.children.append(child)
         self.echo(f"started {name} (pid {proc.pid})")
@@ -282,14 +307,17 @@ class ProcessSet:
             code = child.proc.poll()
             if code is None:
                 continue
-            if not child.stop_requested or code not in (0, -signal.SIGINT, -signal.SIGTERM):
+            if not child.stop_requested or code not in STOPPED_CODES:
                 return child
         return None
 
     def stop(self, child: Child) -> None:
-        """SIGINT, wait (the child's grace); SIGTERM, wait; SIGKILL. Always reaps the process."""
+        """SIGINT (SIGTERM to a child still starting: one without a SIGINT handler yet,
+        :func:`_prepare_child`), wait (the child's grace); SIGTERM, wait; SIGKILL. Always reaps
+        the process."""
         child.stop_requested = True
-        for sig, grace in ((signal.SIGINT, child.grace_s), (signal.SIGTERM, STOP_GRACE_S),
+        first = signal.SIGINT if catches_sigint(child.pid) else signal.SIGTERM
+        for sig, grace in ((first, child.grace_s), (signal.SIGTERM, STOP_GRACE_S),
                            (signal.SIGKILL, STOP_GRACE_S)):
             if child.exited():
                 break

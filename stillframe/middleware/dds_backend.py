@@ -738,6 +738,7 @@ class DdsNode:
         """Release every entity of the node and drop it from the node list."""
         if self not in self.context.nodes:
             return
+        interface.node_destroyed(self)
         delete(self._waitset)
         for entity in (*self._publishers, *self._subscriptions, *self._polled):
             entity.release()

@@ -438,6 +438,7 @@ class RclpyNode:
             RclpyNode._wait.spin_once(round(wait * 1e9))
 
     def destroy_node(self) -> None:
+        interface.node_destroyed(self)
         RclpyNode._wait.remove_node(self._node)
         self._node.destroy_node()
         if not RclpyNode._wait.executor.get_nodes():
