@@ -24,6 +24,7 @@ from pathlib import Path
 from typing import Any, NoReturn
 
 from stillframe import interrupts
+from stillframe.config.environment import check_environment
 from stillframe.errors import InputError, StillframeError
 
 COMMANDS: tuple[str, ...] = (
@@ -152,14 +153,15 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _run(args: argparse.Namespace) -> int:
-    """The command's ``run``: its exit code; a StillframeError, a broken pipe or an OSError on a
-    named file as one line and its code (unless it came after an interruption, which
-    :func:`stillframe.interrupts.run_work` answers)."""
+    """The command's ``run``, after the environment's checks: its exit code; a StillframeError,
+    a broken pipe or an OSError on a named file as one line and its code (unless it came after
+    an interruption, which :func:`stillframe.interrupts.run_work` answers)."""
     if args.verbose:
         from stillframe.app.ros_tools import VERBOSE_ENV
 
         os.environ[VERBOSE_ENV] = "1"  # read by the tools' own nodes
     try:
+        check_environment()
         code = int(args.func(args) or 0)
         sys.stdout.flush()
         return code

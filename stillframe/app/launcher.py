@@ -33,6 +33,7 @@ import yaml
 
 from stillframe.app import running_graph
 from stillframe.app.tracking import TRACKER, TRACKER_STOP_S, read_tracked, tracker_command
+from stillframe.config import environment
 from stillframe.config.scene import Scene, load_scene
 from stillframe.contract import messages
 from stillframe.contract.topics import DEFAULT_NAMESPACE, STATUS_KEYS
@@ -141,7 +142,7 @@ def recorded_default(specs: Sequence[str], *, record: bool, mode: str,
     child chose one; None otherwise."""
     if (not fast_recorded(record=record, mode=mode, rate_hz=rate_hz)
             or any("=" not in spec for spec in specs)
-            or os.environ.get(api.BACKEND_ENV, "").strip() or api.backend_name() == "dds"):
+            or environment.value(api.BACKEND_ENV) or api.backend_name() == "dds"):
         return None
     return "dds"
 

@@ -30,7 +30,6 @@ FRF), among modes with damping ratio below 0.2.
 from __future__ import annotations
 
 import math
-import os
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -40,6 +39,7 @@ import numpy as np
 import scipy.io
 from scipy import signal
 
+from stillframe.config.environment import value
 from stillframe.errors import IdentificationError, InputError
 from stillframe.files import open_input
 from stillframe.identification.frf import h1_frf
@@ -50,11 +50,15 @@ from stillframe.identification.pipeline import identify
 from stillframe.identification.validation import fit_percent, simulate_fitted
 from stillframe.locations import DATASETS_DIR
 
-DATASETS_VARIABLE = "STILLFRAME_DATASETS"
-"""Environment variable naming another datasets folder (default: ``datasets/`` of the checkout,
-which ships the record with its licence)."""
-DEFAULT_PATH = (Path(os.environ.get(DATASETS_VARIABLE) or DATASETS_DIR)
-                / "daisy" / "flexible_structure_dat.mat")
+#: the record's file under a datasets folder
+RECORD = Path("daisy") / "flexible_structure_dat.mat"
+
+
+def default_path() -> Path:
+    """The record in ``STILLFRAME_DATASETS``, else in ``datasets/`` of the checkout (which
+    ships it with its licence)."""
+    return Path(value("STILLFRAME_DATASETS") or DATASETS_DIR) / RECORD
+
 DT = 1 / 1024
 #: the data file's size at most (the record, 8523 samples of 30 channels, takes 2 MB)
 MAX_BYTES = 64 << 20
@@ -82,9 +86,10 @@ class Model:
     only)."""
 
 
-def load(path: str | Path = DEFAULT_PATH) -> tuple[np.ndarray, np.ndarray]:
-    """Detrended inputs (N, 2) and outputs (N, 28)."""
-    path = Path(path)
+def load(path: str | Path | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Detrended inputs (N, 2) and outputs (N, 28) of the record at ``path`` (None:
+    :func:`default_path`)."""
+    path = Path(path) if path is not None else default_path()
     if not path.exists():
         raise InputError(f"DaISy file {path} not found (flexible_structure_dat.mat, DaISy 96-013; "
                          "give its path with --data)")
@@ -172,7 +177,7 @@ def dominant_modes(model: Model) -> list[dict[str, float]]:
     return sorted(rows, key=lambda r: -r["peak"])
 
 
-def report(path: str | Path = DEFAULT_PATH,
+def report(path: str | Path | None = None,
            progress: Callable[[str], None] = lambda _: None) -> dict:
     """Identify on the first half, validate on the second; everything the report prints."""
     u, y_all = load(path)

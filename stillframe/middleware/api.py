@@ -27,6 +27,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 from stillframe import interrupts
+from stillframe.config.environment import check_environment
 from stillframe.errors import StillframeError
 from stillframe.middleware.backend_choice import (
     BACKEND_ENV,
@@ -100,6 +101,7 @@ def node_main(main: Callable[[], int | None]) -> Callable[[], int]:
 
         def work() -> int:
             try:
+                check_environment()
                 if backend_name() == "dds":     # Cyclone's dropped samples counted
                     count_deserialization_failures()
                 return int(main() or 0)

@@ -37,7 +37,7 @@ def run(args: argparse.Namespace) -> int:
     check_output("--plots", args.plots, folder=True)
 
     progress = Progress(args.progress or sys.stderr.isatty())
-    result = daisy.report(args.data or daisy.DEFAULT_PATH, progress)
+    result = daisy.report(args.data, progress)
     methods = result["methods"]
     agreement = {m: daisy.match_dominant(methods["n4sid"]["modes"], methods[m]["modes"], 3)
                  for m in daisy.OKID_METHODS}

@@ -18,7 +18,6 @@ double. A refused set prints the node's reason and exits 1.
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 from pathlib import Path
 from typing import Any
@@ -33,6 +32,7 @@ from stillframe.app.ros_tools import (
     node_name,
     tool_node,
 )
+from stillframe.config import environment
 from stillframe.contract import messages
 from stillframe.errors import InputError
 from stillframe.middleware import api
@@ -94,7 +94,7 @@ class ParameterCalls:
         if response is None:
             raise InputError(
                 f"node {self.target}: no answer on {service} within {self.timeout_sec:g} s "
-                f"(is it running, on ROS_DOMAIN_ID={os.environ.get('ROS_DOMAIN_ID', '0')}?)")
+                f"(is it running, on ROS_DOMAIN_ID={environment.value('ROS_DOMAIN_ID')}?)")
         return response
 
     def describe(self, names_: list[str]) -> list[dict[str, Any]]:

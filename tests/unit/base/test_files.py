@@ -169,6 +169,7 @@ OWN = {
     ("stillframe/bench/soak.py", "rss_bytes"): "/proc/PID/status",
     ("stillframe/bench/stall_probe.py", "stall_probe"): "the probe's own log",
     ("stillframe/node_runtime/realtime.py", "_loop_threads"): "/proc/self/task",
+    ("stillframe/config/environment.py", "<module>"): "regenerates docs/middleware.md",
     ("stillframe/node_runtime/declarations.py", "<module>"): "regenerates docs/nodes.md",
     ("stillframe/node_runtime/qos_table.py", "<module>"): "regenerates docs/nodes.md",
     ("identification/node.py", "ModalTrackerNode.publish"): "appends to the launch's record",
