@@ -68,6 +68,14 @@ def _descriptor(path: str | Path, flags: int, what: str, error: type[StillframeE
         raise error(f"{path}: cannot {verb} the {what} ({exc.strerror})") from None
 
 
+def _stream(fd: int, path: str | Path, mode: str) -> BinaryIO:
+    """The descriptor, blocking again, as a file object named ``path`` (as ``open`` names it)."""
+    os.set_blocking(fd, True)
+    stream = os.fdopen(fd, mode)
+    stream.raw.name = os.fspath(path)      # type: ignore[attr-defined]
+    return stream
+
+
 def open_input(path: str | Path, *, what: str, max_bytes: int | None = None,
                error: type[StillframeError] = InputError) -> BinaryIO:
     """``path`` opened for reading in binary, if it is a regular file of at most ``max_bytes``
@@ -76,8 +84,7 @@ def open_input(path: str | Path, *, what: str, max_bytes: int | None = None,
     fd = _descriptor(path, _READ, what, error, "read")
     try:
         _refuse(path, os.fstat(fd), what, max_bytes, error)
-        os.set_blocking(fd, True)
-        return os.fdopen(fd, "rb")
+        return _stream(fd, path, "rb")
     except BaseException:
         os.close(fd)
         raise
@@ -103,8 +110,7 @@ def open_output(path: str | Path, *, what: str,
     try:
         _refuse(path, os.fstat(fd), what, None, error)
         os.ftruncate(fd, 0)
-        os.set_blocking(fd, True)
-        return os.fdopen(fd, "wb")
+        return _stream(fd, path, "wb")
     except BaseException:
         os.close(fd)
         raise
