@@ -36,10 +36,13 @@ import math
 import zipfile
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
+import scipy.linalg
 
+from stillframe.config.scene import DAMPING_COEFFICIENT, FLOOR_MASS, FREQUENCY_HZ
+from stillframe.config.schema import Check, show
 from stillframe.errors import InputError
 from stillframe.files import open_input, open_output, size_text
 
@@ -52,6 +55,60 @@ ALLOWED_KEYS = {"A", "B", "C", "D", "G", "meta", *MKR_KEYS, *MODAL_KEYS}
 META_KEYS = ("format", "version", "dt", "inputs", "outputs", "provenance")
 #: a model file's size at most, on disk and unpacked (a model of 200 states takes under 1 MiB)
 MAX_MODEL_BYTES = 16 << 20
+#: relative tolerance of symmetry and of a semidefinite matrix's least eigenvalue
+SYMMETRY_TOLERANCE = 1e-9
+
+
+@dataclass(frozen=True)
+class Physical:
+    """A matrix of an identified structure: what it is, the check of its diagonal (the scene
+    key's own, config/scene.py) and the definiteness physics asks of it (symmetric always)."""
+
+    doc: str
+    diagonal: Check | None
+    definite: Literal["positive definite", "positive semidefinite"]
+
+
+#: the matrices of an identified structure, by their keys in a ``.npz`` model file (``mass``,
+#: ``stiffness`` and ``damping`` in a YAML one); the natural frequencies of M and K must lie
+#: where the scene's frequencies may (:data:`~stillframe.config.scene.FREQUENCY_HZ`), which
+#: bounds a huge stiffness
+STRUCTURE = {
+    "M": Physical("mass [kg]", FLOOR_MASS, "positive definite"),
+    "K": Physical("stiffness [N/m]", None, "positive semidefinite"),
+    "R": Physical("damping [N s/m]", DAMPING_COEFFICIENT, "positive semidefinite"),
+}
+
+
+def check_structure(matrices: dict[str, np.ndarray], name: str,
+                    labels: dict[str, str] | None = None) -> None:
+    """InputError naming the file and the entry unless the structure's M, K, R (``labels``: the
+    file's own names for them) are finite square matrices of one size, symmetric, as definite
+    as :data:`STRUCTURE` says, with diagonals within their checks and natural frequencies
+    within :data:`~stillframe.config.scene.FREQUENCY_HZ`."""
+    labels = labels or {key: key for key in STRUCTURE}
+    size = np.asarray(matrices["M"]).shape[:1] * 2
+    for key, physical in STRUCTURE.items():
+        where = f"{name}: {labels[key]!r} ({physical.doc})"
+        matrix = np.asarray(matrices[key])
+        _matrix(name, labels[key], matrix, size)
+        scale = float(np.max(np.abs(matrix), initial=0.0))
+        if np.max(np.abs(matrix - matrix.T), initial=0.0) > SYMMETRY_TOLERANCE * scale:
+            raise InputError(f"{where}: not symmetric")
+        diagonal = tuple(float(v) for v in np.diag(matrix))
+        problem = physical.diagonal(diagonal) if physical.diagonal else None
+        if problem:
+            raise InputError(f"{where}: its diagonal {problem} (got {show(diagonal)})")
+        least = float(np.min(np.linalg.eigvalsh(matrix)))
+        floor = 0.0 if physical.definite == "positive definite" else -SYMMETRY_TOLERANCE * scale
+        if least < floor or (physical.definite == "positive definite" and least <= 0.0):
+            raise InputError(f"{where}: not {physical.definite} (least eigenvalue {least:.6g})")
+    squares = scipy.linalg.eigh(matrices["K"], matrices["M"], eigvals_only=True)
+    hz = tuple(float(np.sqrt(max(w, 0.0)) / (2 * np.pi)) for w in squares)
+    problem = FREQUENCY_HZ(hz)
+    if problem:
+        raise InputError(f"{name}: {labels['K']!r} ({STRUCTURE['K'].doc}) with "
+                         f"{labels['M']!r}: natural frequencies {problem} Hz (got {show(hz)})")
 
 
 @dataclass(frozen=True)
