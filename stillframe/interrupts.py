@@ -162,15 +162,29 @@ def ending(prog: str) -> None:
     _install(_exit_now(prog))
 
 
+#: what :func:`finish` runs before the process ends, in order (what ``atexit`` would have run
+#: that matters: a tap on stderr passing on its last bytes)
+_at_finish: list[Callable[[], None]] = []
+
+
+def at_finish(function: Callable[[], None]) -> None:
+    """Run ``function`` in :func:`finish`, after the output is flushed (a process that ends
+    otherwise runs its ``atexit`` functions instead: register it there too)."""
+    _at_finish.append(function)
+
+
 def finish(prog: str, code: int) -> NoReturn:
-    """A process entry point's last act: :func:`ending`, its output flushed, then the process
-    ends with ``code`` without the interpreter's teardown (module docstring)."""
+    """A process entry point's last act: :func:`ending`, its output flushed and the functions
+    of :func:`at_finish` run, then the process ends with ``code`` without the interpreter's
+    teardown (module docstring)."""
     ending(prog)
     for stream in (sys.stdout, sys.stderr):
         with contextlib.suppress(OSError, ValueError):     # a reader gone, a stream closed
             stream.flush()
     if "logging" in sys.modules:
         sys.modules["logging"].shutdown()
+    for function in _at_finish:
+        function()
     os._exit(code)
 
 
