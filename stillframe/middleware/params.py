@@ -21,7 +21,7 @@ from typing import Any
 
 import yaml
 
-from stillframe.config.yamlio import MAX_YAML_BYTES, load_yaml
+from stillframe.config.yamlio import MAX_YAML_BYTES, load_yaml, problem
 from stillframe.errors import InputError
 from stillframe.files import read_bytes
 
@@ -133,9 +133,7 @@ def _param_file_entries(path: Path) -> list[tuple[str, dict[str, Any]]]:
     try:
         tree = load_yaml(raw)
     except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        line = f" (line {mark.line + 1})" if mark else ""
-        raise InputError(f"parameter file {path}: not valid YAML{line}") from exc
+        raise InputError(f"parameter file {path}: not valid YAML: {problem(exc)}") from None
     if not isinstance(tree, dict):
         raise InputError(f"parameter file {path}: expected 'node_name: {{ros__parameters: ...}}'")
     entries = []

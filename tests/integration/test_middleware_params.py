@@ -91,7 +91,7 @@ def test_command_line_as_ros2_run_passes_it(ros_domain: int, param_file: Path) -
 @pytest.mark.parametrize(
     ("content", "message"),
     [
-        ("a: [1, 2\n", "not valid YAML (line 2)"),
+        ("a: [1, 2\n", "not valid YAML: expected ',' or ']', but got '<stream end>' at line 2"),
         ("- just a list\n", "expected 'node_name: {ros__parameters: ...}'"),
         ("sim_node:\n  rate: 1\n", "node 'sim_node' has no 'ros__parameters' map"),
         ("/**:\n  ros__parameters:\n    mixed: [1, abc]\n", "parameter 'mixed'"),
