@@ -111,7 +111,7 @@ def test_bad_parameter_files_name_the_file_and_the_problem(
 
 def test_missing_parameter_file(tmp_path: Path) -> None:
     path = tmp_path / "nope.yaml"
-    with pytest.raises(InputError, match=r"nope\.yaml: No such file"):
+    with pytest.raises(InputError, match=r"nope\.yaml: cannot read the parameter file \(No "):
         params.node_overrides(params.parse_ros_args(["--ros-args", "--params-file", str(path)]),
                               "/n")
 

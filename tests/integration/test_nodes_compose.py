@@ -70,7 +70,7 @@ def test_compose_all_runs_every_node_in_the_container(ros_domain: int) -> None:
         launcher.node.destroy_node()
     assert list(commands) == [CONTAINER]
     argv = commands[CONTAINER]
-    assert argv[1:4] == ["-m", "container_node.node", "all"]
+    assert argv[1:4] == ["-m", "container_node", "all"]
     # the simulator's parameters (result file, pinned command writer) and the practices
     assert any(a.startswith("result_file:=") for a in argv)
     assert "command_writer:=controller_node" in argv and "rt:=gc" in argv
