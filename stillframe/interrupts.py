@@ -136,8 +136,9 @@ def received() -> bool:
 def run_work(prog: str, work: Callable[[], int]) -> int:
     """``work()``'s exit code, or, when it was interrupted, ``{prog}: interrupted`` on stderr
     and 128 + the signal: a KeyboardInterrupt, any exception raised after a signal in the
-    working phase, or a normal end after one (the interruption swallowed on the way). An
-    interruption is answered once: the signal is forgotten then."""
+    working phase, or a normal end after one (the interruption swallowed on the way), unless
+    the work returned that code itself (it has said so). An interruption is answered once: the
+    signal is forgotten then."""
     global _received
     try:
         code = work()
@@ -148,7 +149,9 @@ def run_work(prog: str, work: Callable[[], int]) -> int:
             raise
         code = -(128 + _received)
     if _received is not None and code >= 0:
-        code = -(128 + _received)
+        answered = code == 128 + _received         # the work said so itself (launch does)
+        code = code if answered else -(128 + _received)
+        _received = None if answered else _received
     if code < 0:
         _say(f"{prog}: interrupted")
         code = -code

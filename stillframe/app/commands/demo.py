@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
+from stillframe import interrupts
 from stillframe.app.commands.launch import add_launch_arguments, print_evaluation, report_death
 from stillframe.config.scene import Scene
 from stillframe.errors import InputError
@@ -96,9 +97,9 @@ def run(args: argparse.Namespace) -> int:
                            lockstep_timeout_s=args.lockstep_timeout, backends=args.backends)
     except NodeDiedError as exc:
         return report_death("demo", exc)
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as exc:
         print("stillframe demo: interrupted; every node stopped", file=sys.stderr)
-        return 130
+        return interrupts.exit_code(exc)
     print_evaluation(result.evaluation, scene)
     t, floors, _ = open_loop_truth(scene)
     plot_floors(out / "floors.png", controlled_floors(result.history_file), (t, floors), scene)

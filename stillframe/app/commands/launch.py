@@ -22,6 +22,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from stillframe import interrupts
 from stillframe.app.commands.common import (
     NICE_RANGE,
     add_scene_arguments,
@@ -284,9 +285,9 @@ def run(args: argparse.Namespace) -> int:
             if exc.partial is not None:
                 print_partial(exc.partial.evaluation, scene, args)
             return code
-        except KeyboardInterrupt:
+        except KeyboardInterrupt as exc:
             print("stillframe launch: interrupted; every node stopped", file=sys.stderr)
-            return 130
+            return interrupts.exit_code(exc)
     reasons = verdict(result.evaluation, result.diagnostics)
     if args.json:
         emit_json({"scene": scene.name, **result.evaluation, "degraded": bool(reasons),
