@@ -5,7 +5,7 @@ Every path the project reads or writes for a user (scenes, model files, paramete
 their ``metadata.yaml``, datasets, plots, ``--out``, ``--save-model``) goes through this module,
 so that a FIFO, a character device (``/dev/zero``), a socket, a directory where a file is
 expected or a file of gigabytes is one line naming it, never a read that blocks or never ends
-(``tests/unit/test_files.py`` holds the library to it).
+(``tests/unit/base/test_files.py`` holds the library to it).
 
 The kind is read with ``fstat`` on the descriptor that is then read (or written), not on the
 name beforehand, so that nothing swapped in between gets through; the descriptor is opened with

@@ -14,17 +14,18 @@ PACKAGE``, :func:`run_module`) goes through three phases, each with its handler:
   (``api.install_signal_handlers``) take over once a node exists: a spinning node ends its loop
   cleanly. The signal is also noted, because a KeyboardInterrupt raised at an arbitrary line
   does not always arrive as one: raised in a C extension's initialisation it comes back as that
-  module's ImportError (pybind11: "initialization failed"), a library's ``except Exception``
-  may end it, and raised in a finaliser Python can only print it ("Exception ignored in ...")
-  and go on (then it is raised again in the main thread). Whatever the work then raises or
-  returns, the entry point answers the noted signal.
+  module's ImportError (pybind11: "initialization failed"), a library's bare ``except`` may
+  end it, and raised in a finaliser Python can only print it ("Exception ignored in ...") and go
+  on (then it is raised again in the main thread). Whatever the work then raises or returns,
+  the entry point answers the noted signal.
 - **ending** (:func:`finish`): the work is done; the output is flushed under the handler of
-  the starting phase, and the process ends there with its code (``os._exit``). The interpreter's
-  own teardown after that (clearing modules, 0.2 s after a simulation here) would run with the
-  default handlers, where a signal kills the process without its line; what it would do is
-  done by the work itself (bags closed, nodes destroyed, children reaped and temporary files
-  removed by their context managers; logging flushed here), and the rest of ``atexit`` is
-  libraries' shutdown flags and caches.
+  the starting phase, the functions of :func:`at_finish` run, and the process ends there with
+  its code (``os._exit``). The interpreter's own teardown after that (clearing the modules,
+  which takes a while after numpy, scipy and numba) would run with the default handlers, where
+  a signal kills the process without its line; what it would do is done by the work itself
+  (bags closed, nodes destroyed, children reaped and temporary files removed by their context
+  managers; logging flushed here), and the rest of ``atexit`` is libraries' shutdown flags and
+  caches.
 
 Before the interpreter runs the entry point's first line (its own start-up, ``site``) a signal is
 Python's: it ends the process by the signal, or with Python's own KeyboardInterrupt message.
