@@ -61,6 +61,7 @@ from stillframe.contract.codecs import COMMAND_TOPICS, SAMPLE_TOPICS, SensorMess
 from stillframe.contract.signals import Sample
 from stillframe.contract.structure_events import event_message, summary
 from stillframe.errors import IntegrationError, LoopError, StillframeError
+from stillframe.files import open_output, write_text
 from stillframe.loop.decimated_taps import DecimatedTaps
 from stillframe.loop.energy_balance import EnergyTopic
 from stillframe.loop.evaluation import LoopHistory, evaluate, plant_report
@@ -422,10 +423,11 @@ class SimNode(base.LoopNode):
 def write_result(history: LoopHistory, path: Path) -> None:
     """The evaluation as JSON at ``path`` and the histories as ``path`` with suffix ``.npz``."""
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(history.evaluation, indent=2) + "\n")
-    np.savez(path.with_suffix(".npz"), t=history.t, truth=history.truth, command=history.command,
-             force=history.force, fine_t=history.fine_t, fine_floors=history.fine_floors,
-             fine_velocities=history.fine_velocities)
+    write_text(path, json.dumps(history.evaluation, indent=2) + "\n", what="result file")
+    with open_output(path.with_suffix(".npz"), what="history file") as stream:
+        np.savez(stream, t=history.t, truth=history.truth, command=history.command,
+                 force=history.force, fine_t=history.fine_t, fine_floors=history.fine_floors,
+                 fine_velocities=history.fine_velocities)
 
 
 def build(node: api.Node) -> SimNode:

@@ -44,6 +44,7 @@ from stillframe.contract import topics
 from stillframe.design.identified import load_identified_structure, resolve_model_file
 from stillframe.dynamics.models import build_model
 from stillframe.errors import IdentificationError, InputError
+from stillframe.files import write_text
 from stillframe.identification.structure_model import (
     IdentifiedStructure,
     identify_structure,
@@ -231,4 +232,4 @@ def run_experiment(scene_path: Path, user: Sequence[str], out: Path, test: Ident
 
 def write_summary(out: Path, document: dict[str, Any]) -> None:
     """``experiment.json`` in ``out`` (also the marker that lets the next run clear ``out``)."""
-    (out / MARKER).write_text(json.dumps(document, indent=2) + "\n")
+    write_text(out / MARKER, json.dumps(document, indent=2) + "\n", what="experiment summary")

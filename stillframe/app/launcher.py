@@ -36,11 +36,13 @@ import yaml
 from stillframe.app import running_graph
 from stillframe.app.tracking import TRACKER, TRACKER_STOP_S, read_tracked, tracker_command
 from stillframe.bags.metadata import load_metadata
+from stillframe.config import environment
 from stillframe.config.scene import Scene, load_scene
 from stillframe.contract import messages
 from stillframe.contract.topics import DEFAULT_NAMESPACE, STATUS_KEYS
 from stillframe.errors import BY_EXIT_CODE, BagError, InputError, StillframeError
 from stillframe.fidelity.auto_model import resolve_model
+from stillframe.files import write_text
 from stillframe.identification.tracker import TRACKER_READY
 from stillframe.locations import REPO_ROOT
 from stillframe.loop.parts import check_loop
@@ -73,6 +75,9 @@ PROBE_S = 1.0
 TRANSITION_TIMEOUT_S = 20.0
 #: the resolved scene the launch hands every node, beside the result file
 RESOLVED_SCENE = "scene.resolved.yaml"
+#: how a child asked to stop may end: cleanly, by the signal, or interrupted in its start-up
+#: (:func:`stillframe.interrupts.exit_code`)
+STOPPED_CODES = (0, -signal.SIGINT, -signal.SIGTERM, 128 + signal.SIGINT, 128 + signal.SIGTERM)
 #: seconds a child gets to exit after SIGINT, then after SIGTERM, before SIGKILL
 STOP_GRACE_S = 10.0
 #: children that get longer to exit after SIGINT: the tracker finishes the windows due
@@ -130,12 +135,14 @@ def new_run_token() -> str:
 
 def node_command(package: str, scene: Path, overrides: Sequence[str], mode: str, *,
                  params: dict[str, Any] | None = None, args: Sequence[str] = ()) -> list[str]:
-    """``python -m PACKAGE.node ARGS --ros-args -p scene:=... -p overrides:=[...] -p mode:=...``.
+    """``python -m PACKAGE ARGS --ros-args -p scene:=... -p overrides:=[...] -p mode:=...``
+    (the package's ``__main__``: Ctrl-C answered from the process's first line,
+    :func:`stillframe.interrupts.run_module`).
 
     Overrides go as a JSON list of strings (JSON is YAML, so rcl-style parsing keeps each
     ``key=value`` whole even when the value is itself a list); an empty list is left out
     because ROS parameters cannot be empty arrays."""
-    argv = [sys.executable, "-m", f"{package}.node", *args, "--ros-args",
+    argv = [sys.executable, "-m", package, *args, "--ros-args",
             "-p", f"scene:={scene}", "-p", f"mode:={mode}"]
     if overrides:
         argv += ["-p", f"overrides:={json.dumps(list(overrides))}"]
@@ -164,7 +171,7 @@ def recorded_default(specs: Sequence[str], *, record: bool, mode: str,
     child chose one; None otherwise."""
     if (not fast_recorded(record=record, mode=mode, rate_hz=rate_hz)
             or any("=" not in spec for spec in specs)
-            or os.environ.get(api.BACKEND_ENV, "").strip() or api.backend_name() == "dds"):
+            or environment.value(api.BACKEND_ENV) or api.backend_name() == "dds"):
         return None
     return "dds"
 
@@ -233,10 +240,30 @@ def nodes_for(scene: Scene) -> list[str]:
     return [name for name in NODES if used[name]]
 
 
-def _die_with_parent() -> None:
-    """In the child before exec: SIGTERM when the launcher dies (Linux prctl)."""
-    with contextlib.suppress(OSError, AttributeError):
-        ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGTERM)
+def _prepare_child() -> None:
+    """In the child before exec: SIGINT ignored until the child's own code installs its handler,
+    and on Linux SIGTERM when the launcher dies (prctl). Python installs no KeyboardInterrupt
+    handler for a SIGINT its parent ignored (the signal module's documentation), so a SIGINT
+    forwarded while the child's interpreter is still starting (importing ``site``) cannot
+    print a traceback from there; the node executables install theirs on their first line
+    (:func:`stillframe.interrupts.run_module`), and :meth:`ProcessSet.stop` sends SIGTERM
+    to a child that has none yet."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    if sys.platform == "linux":
+        with contextlib.suppress(OSError, AttributeError):
+            ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGTERM)
+
+
+def catches_sigint(pid: int) -> bool:
+    """Whether process ``pid`` has a handler of its own for SIGINT (``SigCgt`` in
+    ``/proc/PID/status``); True where the kernel does not say."""
+    try:
+        status = Path(f"/proc/{pid}/status").read_text()
+    except OSError:
+        return True
+    caught = next((line.split()[1] for line in status.splitlines()
+                   if line.startswith("SigCgt:")), None)
+    return caught is None or bool(int(caught, 16) & (1 << (signal.SIGINT - 1)))
 
 
 @dataclass
@@ -290,7 +317,7 @@ class ProcessSet:
         proc = subprocess.Popen(
             argv, env=env, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
             stderr=subprocess.STDOUT, text=True, errors="replace", process_group=0,
-            preexec_fn=_die_with_parent if sys.platform == "linux" else None)
+            preexec_fn=_prepare_child)
         child = Child(name, proc, grace_s=grace_s)
         self.children.append(child)
         self.echo(f"started {name} (pid {proc.pid})")
@@ -310,14 +337,17 @@ class ProcessSet:
             code = child.proc.poll()
             if code is None:
                 continue
-            if not child.stop_requested or code not in (0, -signal.SIGINT, -signal.SIGTERM):
+            if not child.stop_requested or code not in STOPPED_CODES:
                 return child
         return None
 
     def stop(self, child: Child) -> None:
-        """SIGINT, wait (the child's grace); SIGTERM, wait; SIGKILL. Always reaps the process."""
+        """SIGINT (SIGTERM to a child still starting: one without a SIGINT handler yet,
+        :func:`_prepare_child`), wait (the child's grace); SIGTERM, wait; SIGKILL. Always reaps
+        the process."""
         child.stop_requested = True
-        for sig, grace in ((signal.SIGINT, child.grace_s), (signal.SIGTERM, STOP_GRACE_S),
+        first = signal.SIGINT if catches_sigint(child.pid) else signal.SIGTERM
+        for sig, grace in ((first, child.grace_s), (signal.SIGTERM, STOP_GRACE_S),
                            (signal.SIGKILL, STOP_GRACE_S)):
             if child.exited():
                 break
@@ -559,7 +589,8 @@ class Launcher:
         ``repr`` writes them: the same numbers)."""
         path = self.scene_file()
         path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(yaml.safe_dump(self.scene.to_dict(), sort_keys=False))
+        write_text(path, yaml.safe_dump(self.scene.to_dict(), sort_keys=False),
+                   what="resolved scene")
         return path
 
     def nodes(self) -> list[str]:
@@ -730,8 +761,8 @@ class Launcher:
                       "stopped": stopped, "diagnostics": dict(self.statuses)}
         if self.options.record_dir is not None:
             evaluation["bag"] = _bag_state(self.options.record_dir)
-        with contextlib.suppress(OSError):
-            path.write_text(json.dumps(evaluation, indent=2) + "\n")
+        with contextlib.suppress(OSError, InputError):
+            write_text(path, json.dumps(evaluation, indent=2) + "\n", what="result file")
         history = path.with_suffix(".npz")
         return LaunchResult(evaluation, path, history, dict(self.statuses))
 

@@ -48,6 +48,7 @@ from mcap.opcode import Opcode
 from mcap.records import Channel, ChunkIndex, Header, Metadata, Schema, Statistics
 
 from stillframe.errors import BagError
+from stillframe.files import open_input
 
 MAGIC = b"\x89MCAP0\r\n"
 #: opcode (1 byte) and record length (8 bytes) before every record
@@ -535,7 +536,7 @@ def _indexed_chunks(found: McapFile, data: Any) -> None:
 
 @contextmanager
 def _mapped(path: Path) -> Iterator[Any]:
-    with path.open("rb") as stream:
+    with open_input(path, what="storage file (MCAP)", error=BagError) as stream:
         if stream.seek(0, io.SEEK_END) == 0:
             yield b""
             return

@@ -19,8 +19,9 @@ from stillframe.bags.storage import BagReader
 
 
 def is_lone_mcap(path: str | Path) -> bool:
-    """Whether ``path`` is a file ending in ``.mcap`` (not a bag directory)."""
-    return Path(path).suffix == ".mcap" and Path(path).is_file()
+    """Whether ``path`` ends in ``.mcap`` and is not a bag directory (what else it is, the
+    opening says)."""
+    return Path(path).suffix == ".mcap" and not Path(path).is_dir()
 
 
 @contextmanager

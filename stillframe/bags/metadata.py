@@ -26,8 +26,12 @@ from rosbags.interfaces import Qos
 from stillframe.bags.qos import qos_from_yaml, qos_to_yaml
 from stillframe.config.yamlio import load_yaml, problem
 from stillframe.errors import BagError
+from stillframe.files import directory, read_bytes
 
 METADATA_FILE = "metadata.yaml"
+#: ``metadata.yaml``'s size at most: rosbag2 writes a few hundred bytes per topic and per
+#: storage file, so a bag of a thousand of each stays under 1 MiB
+MAX_METADATA_BYTES = 4 << 20
 ROOT_KEY = "rosbag2_bagfile_information"
 #: the version written, and the newest read (ROS 2 Jazzy's)
 METADATA_VERSION = 9
@@ -195,16 +199,16 @@ def parse_metadata(document: Any, source: Path) -> BagMetadata:
 
 def load_metadata(bag: Path) -> BagMetadata:
     """The bag directory's ``metadata.yaml``, checked; BagError naming it when it is missing,
-    not YAML, or has a field of the wrong type."""
+    not a regular file of at most :data:`MAX_METADATA_BYTES`, not YAML (or YAML whose aliases
+    expand past the loader's bounds), or has a field of the wrong type."""
     source = bag / METADATA_FILE
-    if not bag.is_dir():
-        raise BagError(f"{bag}: not a bag directory (no such directory)")
-    if not source.is_file():
+    directory(bag, what="bag directory", error=BagError)
+    if not source.exists():
         raise BagError(f"{source}: missing (not a rosbag2 directory?)")
+    raw = read_bytes(source, what="bag metadata file", max_bytes=MAX_METADATA_BYTES,
+                     error=BagError)
     try:
-        document = load_yaml(source.read_bytes())
-    except OSError as exc:
-        raise BagError(f"{source}: cannot read: {exc.strerror or exc}") from None
+        document = load_yaml(raw)
     except yaml.YAMLError as exc:
         raise BagError(f"{source}: not rosbag2 metadata: {problem(exc)}") from None
     except MemoryError:

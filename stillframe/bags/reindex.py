@@ -50,6 +50,7 @@ from stillframe.bags.full_disk import RESERVE_NAME
 from stillframe.bags.qos import qos_from_yaml
 from stillframe.bags.storage import BagWriter
 from stillframe.errors import BagError
+from stillframe.files import directory, open_input
 
 MAGIC = b"\x89MCAP0\r\n"
 #: what reading a cut or damaged MCAP stream can raise (struct.error: a cut inside a field;
@@ -114,8 +115,7 @@ class Recovered:
 
 
 def _mcap_file(bag: Path) -> Path:
-    if not bag.is_dir():
-        raise BagError(f"{bag}: not a bag directory (no such directory)")
+    directory(bag, what="bag directory", error=BagError)
     files = sorted(bag.glob("*.mcap"))
     if len(files) != 1:
         raise BagError(f"{bag}: expected one .mcap file to reindex, found {len(files)}")
@@ -172,7 +172,7 @@ def salvage(path: Path) -> Salvage:
     """Every intact schema, channel and message of the MCAP file at ``path`` (module
     docstring). A file that does not start as MCAP (beyond a cut inside the magic) is a
     :class:`BagError`."""
-    with path.open("rb") as stream:
+    with open_input(path, what="storage file (MCAP)", error=BagError) as stream:
         head = stream.read(MAGIC_SIZE)
     if not head or not MAGIC.startswith(head):
         raise BagError(f"{path}: not an MCAP file (its first bytes are not the MCAP magic)")
@@ -187,7 +187,7 @@ def salvage(path: Path) -> Salvage:
     if checked.statistics is not None and checked.summary_crc in ("ok", "absent"):
         found.indexed = checked.statistics.message_count
     if checked.cut_at is not None:
-        with path.open("rb") as stream:
+        with open_input(path, what="storage file (MCAP)", error=BagError) as stream:
             stream.seek(checked.cut_at)
             chunk = _partial_chunk(stream.read())
         if chunk is not None:

@@ -59,6 +59,7 @@ from stillframe.bags.metadata import (
 )
 from stillframe.bags.qos import qos_from_yaml, qos_to_yaml
 from stillframe.errors import BagError, InputError
+from stillframe.files import open_input
 
 #: the ROS distribution a bag's metadata names, as ``ros2 bag record`` on Jazzy writes it
 ROS_DISTRO = "jazzy"
@@ -464,16 +465,18 @@ class _RosbagsReader:
 
 
 def storage_files(bag: Path, metadata: BagMetadata) -> list[Path]:
-    """The storage files ``metadata.yaml`` lists, each a file of the bag directory; BagError
-    naming the first that is missing or lies elsewhere."""
+    """The storage files ``metadata.yaml`` lists, each a regular file of the bag directory
+    (:func:`stillframe.files.open_input`: a FIFO would block a reader); BagError naming the
+    first that is missing, of another kind, or lies elsewhere."""
     files = []
     for name in metadata.relative_file_paths:
         path = bag / name
         if Path(name).name != name or name in ("", ".", ".."):
             raise BagError(f"{bag / METADATA_FILE}: relative_file_paths: {name!r} is not a file "
                            "of the bag directory")
-        if not path.is_file():
+        if not path.exists():
             raise BagError(f"{path}: missing (metadata.yaml lists it)")
+        open_input(path, what="bag storage file", error=BagError).close()
         files.append(path)
     if not files:
         raise BagError(f"{bag / METADATA_FILE}: relative_file_paths: lists no storage file")

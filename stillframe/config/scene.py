@@ -48,14 +48,24 @@ from stillframe.config.schema import (
     up_to,
     validate,
 )
-from stillframe.config.yamlio import load_yaml, problem
+from stillframe.config.yamlio import MAX_YAML_BYTES, load_yaml, problem
 from stillframe.errors import InputError
+from stillframe.files import read_bytes
 
 #: the finite-element mesh and the modal model's modes at most (matrices of 3 * 2 * n + 1)
 MAX_ELEMENTS = 200
 #: integrator steps of one run at most (duration / integrator.dt): the simulator keeps a row
 #: of 7 values per step (1e7 steps: 560 MB)
 MAX_STEPS = 10_000_000
+#: a floor's mass [kg]: rig.floor_masses, and an identified model's masses (its mass matrix's
+#: diagonal, contract/model_file.py)
+FLOOR_MASS = in_range(1e-6, 1e7)
+#: a frequency of the rig [Hz]: excitation.frequencies_hz, and an identified model's natural
+#: frequencies
+FREQUENCY_HZ = in_range(0.0, 1e5)
+#: a damping coefficient [N m s/rad, N s/m]: rig.pendulum.hinge_damping, and an identified
+#: model's damping matrix's diagonal
+DAMPING_COEFFICIENT = in_range(0.0, 1e9)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -81,14 +91,14 @@ class Pendulum(Section):
     mass: float = key(0.083, in_range(1e-6, 1e6), doc="m4 [kg]")
     inertia: float = key(8.32e-4, in_range(1e-12, 1e9),
                          doc="Izz,4 about the centre of mass [kg m^2]")
-    hinge_damping: float = key(2.432e-3, in_range(0.0, 1e9), doc="r4 [N m s/rad]")
+    hinge_damping: float = key(2.432e-3, DAMPING_COEFFICIENT, doc="r4 [N m s/rad]")
 
 
 @dataclass(frozen=True, kw_only=True)
 class Rig(Section):
     """rig: the test rig; defaults are the thesis's (§5.2)."""
 
-    floor_masses: Floats3 = key((1.281, 0.814, 1.380), in_range(1e-6, 1e7), doc="m1..m3 [kg]")
+    floor_masses: Floats3 = key((1.281, 0.814, 1.380), FLOOR_MASS, doc="m1..m3 [kg]")
     columns: Columns = section(Columns)
     pendulum: Pendulum = section(Pendulum)
     gravity: float = key(9.81, in_range(0.0, 100.0), doc="g [m/s^2]")
@@ -115,7 +125,7 @@ class Excitation(Section):
     type: Literal["none", "harmonics", "hammer", "white_noise", "chirp"] = key("none")
     floor: int = key(1, in_range(1, 3), doc="floor the force acts on")
     amplitudes: Floats = key((0.1, 0.1, 0.1), magnitude(1e9), doc="harmonics: force amplitudes [N]")
-    frequencies_hz: Floats = key((1.9, 5.7, 8.8), in_range(0.0, 1e5), doc="harmonics [Hz]")
+    frequencies_hz: Floats = key((1.9, 5.7, 8.8), FREQUENCY_HZ, doc="harmonics [Hz]")
     phases: Floats = key((), magnitude(1e6), doc="harmonics: phases [rad], zeros when empty")
     impulse: float = key(0.05, magnitude(1e9), doc="hammer: impulse [N s]")
     time: float = key(0.0, in_range(0.0, 1e6), doc="hammer: time of the blow [s]")
@@ -199,18 +209,8 @@ class Scene(Section):
             "(stillframe/config/events.py)"))
 
 
-#: a scene file's size at most (a scene is a page of YAML; this keeps /dev/zero out)
-MAX_SCENE_BYTES = 1 << 20
-
-
 def _read(path: Path) -> dict[str, Any]:
-    try:
-        with path.open("rb") as stream:
-            raw = stream.read(MAX_SCENE_BYTES + 1)
-    except OSError as exc:
-        raise InputError(f"{path}: cannot read scene ({exc.strerror})") from None
-    if len(raw) > MAX_SCENE_BYTES:
-        raise InputError(f"{path}: more than {MAX_SCENE_BYTES >> 20} MiB; not a scene")
+    raw = read_bytes(path, what="scene file", max_bytes=MAX_YAML_BYTES)
     try:
         data = load_yaml(raw)
     except yaml.YAMLError as exc:
@@ -297,6 +297,17 @@ def _check_loop(scene: Scene) -> None:
             f"evaluation.window: {window:g} s does not fit before controller.start ({c.start:g} s) "
             f"and after it within duration {scene.duration:g} s"
         )
+    if window < scene.integrator.dt * (1.0 - 1e-9):
+        raise InputError(
+            f"evaluation.window: {window:g} s is shorter than one integrator step "
+            f"(integrator.dt {scene.integrator.dt:g} s): a peak needs at least one state in it")
+    acting = c.start + scene.actuators.delay_periods * period
+    if acting > scene.duration - window + 1e-9:
+        raise InputError(
+            f"actuators.delay_periods: {scene.actuators.delay_periods} periods of {period:g} s "
+            f"after controller.start ({c.start:g} s) the first command acts at {acting:g} s, "
+            f"after the evaluation window begins ({scene.duration - window:g} s: duration less "
+            "evaluation.window)")
     if c.type == "mpc" and c.horizon_s < period * (1.0 - 1e-9):
         raise InputError(
             f"controller.horizon_s: {c.horizon_s:g} s is shorter than one sample period "

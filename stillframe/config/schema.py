@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import reprlib
 import types
 from collections.abc import Callable, Mapping
 from dataclasses import MISSING, dataclass
@@ -152,12 +153,26 @@ def _specs(cls: type[Section]) -> tuple[_Spec, ...]:
     return _SPECS[cls]
 
 
+def _shortener(width: int) -> reprlib.Repr:
+    short = reprlib.Repr()
+    short.maxlevel, short.maxstring, short.maxlong, short.maxother = 3, width, width, width
+    for name in ("maxtuple", "maxlist", "maxarray", "maxdict", "maxset", "maxfrozenset",
+                 "maxdeque"):
+        setattr(short, name, 6)
+    return short
+
+
 def show(value: Any, width: int = 60, *, quote: bool = True) -> str:
     """``repr(value)`` (text as it is without ``quote``) cut to ``width`` characters, for
-    one-line messages (a 3000-deep list or a 4000-digit number stays one short line)."""
+    one-line messages. Cut while it is made (:mod:`reprlib`: the first elements, levels and
+    characters), so that a value of a billion elements (a YAML alias bomb), a 3000-deep list or
+    a 4000-digit number costs no more than its first ``width`` characters."""
     try:
-        text = repr(value) if quote or not isinstance(value, str) else value
-    except (ValueError, RecursionError):     # an int beyond Python's digit limit; deep nesting
+        if quote or not isinstance(value, str):
+            text = _shortener(width).repr(value)
+        else:
+            text = value[:width + 1]
+    except (ValueError, RecursionError):     # an int beyond Python's digit limit
         text = f"<{type(value).__name__}>"
     return text if len(text) <= width else text[: width - 1] + "…"
 
@@ -224,10 +239,11 @@ def validate(cls: type[S], data: Any, prefix: str = "") -> S:
     if not isinstance(data, Mapping):
         raise InputError(f"{where}: expected a mapping of keys, got {show(data)}")
     keys = _specs(cls)
-    unknown = sorted(set(data) - {s.name for s in keys}, key=str)
+    unknown = sorted(set(data) - {s.name for s in keys}, key=lambda k: show(k, quote=False))
     if unknown:
         known = ", ".join(sorted(s.name for s in keys))
-        raise InputError(f"{prefix}{unknown[0]}: unknown key (known here: {known})")
+        raise InputError(f"{prefix}{show(unknown[0], quote=False)}: unknown key (known here: "
+                         f"{known})")
     values: dict[str, Any] = {}
     for spec in keys:
         dotted = f"{prefix}{spec.name}"

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 from stillframe.config.scene import Scene
 from stillframe.contract.signals import ACTUATOR
 from stillframe.control.euk import EUKLaw
@@ -12,6 +14,9 @@ from stillframe.control.prediction import DelayPredictor
 from stillframe.control.supervisor import Controller
 from stillframe.dynamics.models import FrameModel
 from stillframe.errors import InputError
+
+if TYPE_CHECKING:
+    from stillframe.control.mpc import MPCLaw
 
 TORQUE_INPUT = 3  # index of the hinge torque in u = [f1, f2, f3, torque]
 
@@ -26,6 +31,20 @@ def check_sampled_injection(damping: float, period: float, inertia: float) -> No
             f"controller.injection_damping: k_d T / J = {ratio:.3g} >= 2 destabilises the sampled "
             f"loop (T = {period:g} s, pendulum J = {inertia:.4g} kg m^2); use k_d < "
             f"{2 * inertia / period:.3g} or a higher sensors.rate_hz")
+
+
+def check_solve_time(law: MPCLaw, horizon_s: float, period: float) -> None:
+    """InputError naming ``controller.prediction_steps`` when the MPC's QP cannot be solved
+    within the sample period on this machine (:meth:`MPCLaw.least_solve_s`: the least a
+    solve takes, measured at load): every sample would miss its command, and the one-process
+    loop would take that long per sample."""
+    least = law.least_solve_s()
+    if least > period:
+        raise InputError(
+            f"controller.prediction_steps: {law.grid.steps} steps over controller.horizon_s "
+            f"{horizon_s:g} s ({law.grid.samples} samples each) make a QP that takes at least "
+            f"{least * 1e3:.3g} ms to solve here, longer than the sample period "
+            f"{period * 1e3:.3g} ms (1/sensors.rate_hz): fewer steps or a shorter horizon")
 
 
 def make_controller(scene: Scene, design: FrameModel) -> Controller:
@@ -53,6 +72,7 @@ def make_controller(scene: Scene, design: FrameModel) -> Controller:
                          limits=limits, grid=grid, angle_index=design.phi_index,
                          rate_weight=c.rate_weight, angle_penalty=c.angle_penalty,
                          max_iter=iteration_limit(c.max_iter, period))
+            check_solve_time(law, c.horizon_s, period)
         elif c.anti_windup:
             law = ConditionedLQGLaw(lqr, c.feedforward, limits, design.phi_index)
         else:

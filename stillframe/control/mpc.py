@@ -50,6 +50,7 @@ every solve (``stillframe bench controllers`` prints its p50 and p99 against the
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -74,10 +75,13 @@ def iteration_limit(max_iter: int | None, period: float) -> int:
     return int(min(MAX_ITER, max(MIN_ITER, round(period * ITERATIONS_PER_S))))
 
 
-#: OSQP settings: its default tolerances, checked every 10 iterations (not 25: a warm-started
-#: solve at 1 kHz ends after 30 to 40), polished solutions
-SETTINGS = {"eps_abs": 1e-3, "eps_rel": 1e-3, "check_termination": 10, "polishing": True,
-            "verbose": False, "warm_starting": True}
+#: OSQP checks whether it has converged every this many iterations (not 25: a warm-started
+#: solve at 1 kHz ends after 30 to 40), so a solve takes at least this many
+CHECK_EVERY = 10
+#: OSQP settings: its default tolerances, checked every :data:`CHECK_EVERY` iterations,
+#: polished solutions
+SETTINGS = {"eps_abs": 1e-3, "eps_rel": 1e-3, "check_termination": CHECK_EVERY,
+            "polishing": True, "verbose": False, "warm_starting": True}
 
 
 @dataclass(frozen=True)
@@ -167,6 +171,7 @@ class MPCLaw:
             self._l[N:2 * N], self._u[N:2 * N] = -steps, steps
         #: the QP ½ xᵀ P x + qᵀ x, l ≤ A x ≤ u as given to OSQP (q, l, u: :meth:`bounds`)
         self.qp_hessian, self.qp_matrix = P, A
+        self.max_iter = max_iter
         self.solver = osqp.OSQP()
         self.solver.setup(sp.csc_matrix(np.triu(P)), self._q, sp.csc_matrix(A), self._l,
                           self._u, max_iter=max_iter, **SETTINGS)
@@ -189,6 +194,21 @@ class MPCLaw:
         self.limits = limits
         self._bound_inputs(limits)
         self.fallback_law.set_limits(limits)
+
+    def least_solve_s(self) -> float:
+        """The least CPU time a solve of this QP takes here: :data:`CHECK_EVERY` iterations (or
+        ``max_iter``, if fewer), measured on a solver of its own (this one keeps its cold
+        start) that checks no termination (it does them all) and adapts no rho (no
+        factorisation among the iterations measured)."""
+        iterations = min(CHECK_EVERY, self.max_iter)
+        probe = osqp.OSQP()
+        q, lo, hi = self.bounds(np.zeros(self.design.A.shape[0]))
+        probe.setup(sp.csc_matrix(np.triu(self.qp_hessian)), q, sp.csc_matrix(self.qp_matrix),
+                    lo, hi, **{**SETTINGS, "check_termination": 0, "polishing": False,
+                               "adaptive_rho": False, "max_iter": iterations})
+        started = time.thread_time()
+        probe.solve(raise_error=False)
+        return time.thread_time() - started
 
     def inputs(self, z: np.ndarray, solution: np.ndarray) -> np.ndarray:
         """The planned commands u_0 … u_{N−1} of a QP solution [V, s] at the estimate z."""

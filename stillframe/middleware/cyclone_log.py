@@ -21,6 +21,7 @@ import os
 import re
 import threading
 
+from stillframe import interrupts
 from stillframe.middleware.interface import MALFORMED
 
 #: Cyclone's line for a refused sample: ``... deserialization rt/frame/floor1/imu/sensor_msgs::
@@ -66,3 +67,4 @@ def count_deserialization_failures() -> None:
         thread.join(10.0)
 
     atexit.register(restore)
+    interrupts.at_finish(restore)       # a node executable ends without atexit

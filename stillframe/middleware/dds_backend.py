@@ -174,8 +174,15 @@ class Context:
     def __init__(self, domain: int) -> None:
         self.domain_id = domain
         config = discovery.cyclone_config()
-        self.domain = Domain(domain, config) if config else None
-        self.participant = DomainParticipant(domain, qos=Qos(Policy.Userdata(data=b"enclave=/;")))
+        try:
+            self.domain = Domain(domain, config) if config else None
+            self.participant = DomainParticipant(domain,
+                                                 qos=Qos(Policy.Userdata(data=b"enclave=/;")))
+        except DDSException as exc:     # the configuration: the user's, or the variables'
+            source = "CYCLONEDDS_URI" if discovery.value("CYCLONEDDS_URI") else \
+                "the discovery variables"
+            raise InputError(f"Cyclone DDS refuses the configuration of {source} (domain "
+                             f"{domain}): {str(exc).splitlines()[0]}") from None
         self.gid = self.participant.guid.bytes
         self.nodes: list[DdsNode] = []
         self.topics: dict[str, Topic] = {}
@@ -740,6 +747,7 @@ class DdsNode:
         """Release every entity of the node and drop it from the node list."""
         if self not in self.context.nodes:
             return
+        interface.node_destroyed(self)
         delete(self._waitset)
         for entity in (*self._publishers, *self._subscriptions, *self._polled):
             entity.release()

@@ -147,7 +147,10 @@ def deliver(callback: Callable[[Any], None], data: bytes | memoryview, type_name
 
 
 _shutdown = threading.Event()
-_handlers_installed = False
+#: the handlers :func:`install_signal_handlers` replaced (empty: its own are not installed)
+_replaced: dict[int, Any] = {}
+#: the nodes of this process not destroyed yet (by id)
+_live_nodes: set[int] = set()
 _gc_frozen = False
 
 
@@ -168,13 +171,30 @@ def _on_signal(signum: int, frame: Any) -> None:
 
 
 def install_signal_handlers() -> None:
-    """Make SIGINT and SIGTERM request a clean shutdown (main thread only; idempotent)."""
-    global _handlers_installed
-    if _handlers_installed or threading.current_thread() is not threading.main_thread():
+    """Make SIGINT and SIGTERM request a clean shutdown (main thread only; idempotent) while
+    this process has nodes (:func:`node_destroyed`)."""
+    if _replaced or threading.current_thread() is not threading.main_thread():
         return
-    signal.signal(signal.SIGINT, _on_signal)
-    signal.signal(signal.SIGTERM, _on_signal)
-    _handlers_installed = True
+    for signum in (signal.SIGINT, signal.SIGTERM):
+        _replaced[signum] = signal.signal(signum, _on_signal)
+
+
+def node_created(node: object) -> None:
+    """A node of this process exists (the node API counts them)."""
+    _live_nodes.add(id(node))
+
+
+def node_destroyed(node: object) -> None:
+    """A node was destroyed. With the process's last node gone, the handlers from before
+    :func:`install_signal_handlers` are back: no loop reads the shutdown request any more, so a
+    signal from then on is the process's own again (:mod:`stillframe.interrupts`: one line and
+    its exit code) rather than a request nobody sees."""
+    _live_nodes.discard(id(node))
+    if _live_nodes or not _replaced or threading.current_thread() is not threading.main_thread():
+        return
+    for signum, handler in _replaced.items():
+        signal.signal(signum, handler)
+    _replaced.clear()
 
 
 def freeze_setup_objects() -> None:

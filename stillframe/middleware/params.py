@@ -21,8 +21,9 @@ from typing import Any
 
 import yaml
 
-from stillframe.config.yamlio import load_yaml
+from stillframe.config.yamlio import MAX_YAML_BYTES, load_yaml, problem
 from stillframe.errors import InputError
+from stillframe.files import read_bytes
 
 #: Types a ROS parameter may hold (arrays are homogeneous lists of the scalar types).
 SCALAR_TYPES = (bool, int, float, str)
@@ -128,14 +129,11 @@ def key_matches(key: str, node_fqn: str) -> bool:
 
 def param_file_entries(path: Path) -> list[tuple[str, dict[str, Any]]]:
     """(node key, flattened parameters) of each entry of a ROS 2 parameter file, in file order."""
+    raw = read_bytes(path, what="parameter file", max_bytes=MAX_YAML_BYTES)
     try:
-        tree = load_yaml(Path(path).read_text())
-    except OSError as exc:
-        raise InputError(f"parameter file {path}: {exc.strerror}") from exc
+        tree = load_yaml(raw)
     except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        line = f" (line {mark.line + 1})" if mark else ""
-        raise InputError(f"parameter file {path}: not valid YAML{line}") from exc
+        raise InputError(f"parameter file {path}: not valid YAML: {problem(exc)}") from None
     if not isinstance(tree, dict):
         raise InputError(f"parameter file {path}: expected 'node_name: {{ros__parameters: ...}}'")
     entries = []

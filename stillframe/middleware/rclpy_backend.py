@@ -20,7 +20,7 @@ from typing import Any
 import rclpy
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 from rcl_interfaces.msg import SetParametersResult as RclpySetParametersResult
-from rclpy._rclpy_pybind11 import NodeNameNonExistentError
+from rclpy._rclpy_pybind11 import NodeNameNonExistentError, RCLError
 from rclpy.clock import ClockType
 from rclpy.duration import Duration
 from rclpy.exceptions import InvalidParameterValueException
@@ -277,8 +277,13 @@ class RclpyNode:
     def __init__(self, name: str, namespace: str, args: list[str], managed: bool = False) -> None:
         if not rclpy.ok():
             rclpy.init(args=["stillframe", *args], signal_handler_options=SignalHandlerOptions.NO)
-        self._node = (ManagedNode(name, namespace=namespace) if managed
-                      else rclpy.create_node(name, namespace=namespace))
+        try:
+            self._node = (ManagedNode(name, namespace=namespace) if managed
+                          else rclpy.create_node(name, namespace=namespace))
+        except RCLError as exc:
+            reason = str(exc).splitlines()[0].removeprefix("error creating node: ")
+            where = "ROS_STATIC_PEERS: " if "peer" in reason else ""
+            raise InputError(f"{where}rcl cannot create node {name!r}: {reason}") from None
         self.user_args = rclpy.utilities.remove_ros_args(["stillframe", *args])[1:]
         self._clock = RclpyClock(self._node.get_clock())
         if RclpyNode._wait is None:
@@ -465,6 +470,7 @@ class RclpyNode:
             RclpyNode._wait.spin_once(round(wait * 1e9))
 
     def destroy_node(self) -> None:
+        interface.node_destroyed(self)
         RclpyNode._wait.remove_node(self._node)
         self._node.destroy_node()
         if not RclpyNode._wait.executor.get_nodes():

@@ -31,6 +31,7 @@ from stillframe.node_runtime.parameters import (
     reference,
 )
 from stillframe.node_runtime.realtime import NO_PINNING, PRACTICES, parse_cpus, parse_practices
+from stillframe.text_table import with_section
 
 
 def _refusal(parse: Callable[[Any], object], name: str) -> Callable[[Any], str | None]:
@@ -219,10 +220,7 @@ REFERENCE_MARKERS = ("<!-- parameter reference: generated from "
 
 def with_reference(text: str) -> str:
     """``text`` (docs/nodes.md) with the reference between its markers made anew."""
-    start, end = REFERENCE_MARKERS
-    head, _, rest = text.partition(start + "\n")
-    _, _, tail = rest.partition(end)
-    return f"{head}{start}\n{reference(NODE_PARAMETERS)}{end}{tail}"
+    return with_section(text, REFERENCE_MARKERS, reference(NODE_PARAMETERS))
 
 
 if __name__ == "__main__":

@@ -70,16 +70,16 @@ RESULT = {"reduction_pct": {"displacement": [71.0, 75.0, 57.0], "velocity": [73.
 
 def write_stand_ins(root: Path, sim_seconds: float = 1.0, life: float = 3600,
                     code: int = 0, wait_for: str = "") -> None:
-    """Packages sim_node/estimator_node/controller_node with a ``node`` module each: the sim
-    writes RESULT after ``sim_seconds``; the others wait for SIGINT (exit 0) or exit with
-    ``code`` after ``life`` seconds."""
+    """Packages sim_node/estimator_node/controller_node with a ``__main__`` module each (what
+    the launcher runs): the sim writes RESULT after ``sim_seconds``; the others wait for SIGINT
+    (exit 0) or exit with ``code`` after ``life`` seconds."""
     for name in ("sim_node", "estimator_node", "controller_node"):
         (root / name).mkdir()
         (root / name / "__init__.py").write_text("")
-    (root / "sim_node" / "node.py").write_text(
+    (root / "sim_node" / "__main__.py").write_text(
         SIM.format(sim_seconds=sim_seconds, result=RESULT, wait_for=wait_for))
-    (root / "estimator_node" / "node.py").write_text(WAITER.format(life=3600, code=0))
-    (root / "controller_node" / "node.py").write_text(WAITER.format(life=life, code=code))
+    (root / "estimator_node" / "__main__.py").write_text(WAITER.format(life=3600, code=0))
+    (root / "controller_node" / "__main__.py").write_text(WAITER.format(life=life, code=code))
 
 
 def start_launch(cwd: Path, *args: str) -> subprocess.Popen:
@@ -125,7 +125,7 @@ def test_node_command_passes_overrides_through_the_ros_parameter_parser() -> Non
                  "description=a b: c"]
     argv = node_command("sim_node", Path("/s/scene.yaml"), overrides, "lockstep",
                         params={"result_file": "/tmp/r.json", "lockstep_timeout_s": 2.0})
-    assert argv[1:3] == ["-m", "sim_node.node"]
+    assert argv[1:3] == ["-m", "sim_node"]
     params = node_overrides(parse_ros_args(argv[3:]), "/sim_node")
     assert params == {"scene": "/s/scene.yaml", "mode": "lockstep", "overrides": overrides,
                       "result_file": "/tmp/r.json", "lockstep_timeout_s": 2.0}
@@ -175,7 +175,7 @@ def test_the_nodes_last_statuses_written_as_they_stop_are_in_the_result(
     waits for the file the controller writes then, not for a time that a loaded machine may
     not keep)."""
     write_stand_ins(tmp_path, sim_seconds=0.2, wait_for="controller_matched")
-    (tmp_path / "controller_node" / "node.py").write_text(STATUS_AT_STOP.format())
+    (tmp_path / "controller_node" / "__main__.py").write_text(STATUS_AT_STOP.format())
     proc = start_launch(tmp_path, "--json", "--mode", "realtime")
     out, err = proc.communicate(timeout=120)
     assert proc.returncode == 0, err

@@ -59,7 +59,7 @@ def test_compose_replaces_the_two_processes_by_the_container(ros_domain: int) ->
     finally:
         launcher.node.destroy_node()
     assert [name for name, _ in commands] == [CONTAINER, "sim_node"]
-    assert dict(commands)[CONTAINER][1:3] == ["-m", "container_node.node"]
+    assert dict(commands)[CONTAINER][1:3] == ["-m", "container_node"]
 
 
 def test_compose_all_runs_every_node_in_the_container(ros_domain: int) -> None:
@@ -70,7 +70,7 @@ def test_compose_all_runs_every_node_in_the_container(ros_domain: int) -> None:
         launcher.node.destroy_node()
     assert list(commands) == [CONTAINER]
     argv = commands[CONTAINER]
-    assert argv[1:4] == ["-m", "container_node.node", "all"]
+    assert argv[1:4] == ["-m", "container_node", "all"]
     # the simulator's parameters (result file, pinned command writer) and the practices
     assert any(a.startswith("result_file:=") for a in argv)
     assert "command_writer:=controller_node" in argv and "rt:=gc" in argv

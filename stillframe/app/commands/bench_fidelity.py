@@ -15,6 +15,7 @@ from pathlib import Path
 from stillframe.app.commands.common import add_json_argument, emit_json, seconds
 from stillframe.app.commands.montecarlo import add_executor_arguments
 from stillframe.errors import InputError
+from stillframe.files import check_output, save_figure
 from stillframe.text_table import format_table
 
 
@@ -68,7 +69,7 @@ def plot(result: dict, directory: Path) -> list[Path]:
         ax.legend(fontsize=7, ncol=2)
         path = directory / f"fidelity_{scene}.png"
         fig.tight_layout()
-        fig.savefig(path, dpi=110)
+        save_figure(fig, path, dpi=110)
         plt.close(fig)
         written.append(path)
     return written
@@ -79,6 +80,8 @@ def run(args: argparse.Namespace) -> int:
     from stillframe.fidelity.auto_model import write_table
     from stillframe.fidelity.work_precision import GRID_DT, sweep
 
+    check_output("--plots", args.plots, folder=True)
+    check_output("--write-table", args.write_table)
     if args.duration is not None:
         grid_steps = args.duration / GRID_DT
         if args.duration <= 0 or abs(grid_steps - round(grid_steps)) > 1e-9:

@@ -25,6 +25,7 @@ import numpy as np
 from stillframe.app.commands.common import add_json_argument, emit_json
 from stillframe.app.commands.montecarlo import add_executor_arguments
 from stillframe.errors import InputError
+from stillframe.files import check_output, save_figure
 from stillframe.text_table import format_table
 
 FIGURES: tuple[tuple[str, str, float], ...] = (
@@ -102,7 +103,7 @@ def heat_maps(table: list[dict], directory: Path) -> list[Path]:
             fig.colorbar(image, ax=ax, label="error [log10 %]" if scale != 1.0 else "runs [-]")
             fig.tight_layout()
             path = directory / f"identify_sweep_{method}_{key}.png"
-            fig.savefig(path, dpi=100)
+            save_figure(fig, path, dpi=100)
             plt.close(fig)
             paths.append(path)
     return paths
@@ -120,6 +121,7 @@ def _subset(flag: str, chosen: list | None, cells: tuple) -> tuple:
 
 
 def run(args: argparse.Namespace) -> int:
+    check_output("--plots", args.plots, folder=True)
     from stillframe.identification.sweep import (
         LENGTHS,
         METHODS,

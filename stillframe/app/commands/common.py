@@ -4,12 +4,10 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from stillframe.errors import InputError
 from stillframe.locations import find_scene, shipped_scenes
 
 if TYPE_CHECKING:
@@ -103,20 +101,6 @@ def apply_priority(args: argparse.Namespace) -> None:
     run_nicer(args.nice)
     if args.idle:
         run_idle()
-
-
-def check_output(option: str, path: str | Path | None) -> None:
-    """Before any work: InputError when ``path`` (a file or directory to write) cannot be made:
-    an ancestor that is a file, or a directory that cannot be written (read-only)."""
-    if path is None:
-        return
-    target = Path(path)
-    existing = next(p for p in (target, *target.parents) if p.exists() or p == Path(p.anchor))
-    if existing != target and not existing.is_dir():
-        raise InputError(f"{option} {target}: {existing} is a file, not a directory")
-    folder = existing if existing.is_dir() else existing.parent
-    if not os.access(folder, os.W_OK):
-        raise InputError(f"{option} {target}: {folder} is not writable")
 
 
 def add_json_argument(parser: argparse.ArgumentParser) -> None:

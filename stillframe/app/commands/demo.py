@@ -24,12 +24,14 @@ from pathlib import Path
 
 import numpy as np
 
-from stillframe.app.commands.common import check_output, whole
+from stillframe import interrupts
+from stillframe.app.commands.common import whole
 from stillframe.app.commands.launch import add_launch_arguments, print_evaluation, report_death
+from stillframe.config.environment import MAX_DOMAIN_ID
 from stillframe.config.scene import Scene
 from stillframe.errors import InputError
+from stillframe.files import check_output, save_figure
 from stillframe.locations import SCENES_DIR
-from stillframe.middleware.discovery import MAX_DOMAIN_ID
 
 DEMO_SCENE = SCENES_DIR / "thesis_lqg.yaml"
 #: the ROS domain ids a demo may be isolated on, the first to the last
@@ -99,7 +101,7 @@ def plot_floors(path: Path, controlled: tuple[np.ndarray, np.ndarray],
     axes[0].set_title(f"{scene.name}: floor displacements, {scene.controller.type} from "
                       f"{scene.controller.start:g} s (dashed)")
     axes[-1].set_xlabel("t [s]")
-    fig.savefig(path, dpi=110)
+    save_figure(fig, path, dpi=110)
     plt.close(fig)
 
 
@@ -114,7 +116,7 @@ def run(args: argparse.Namespace) -> int:
     from stillframe.config.scene import load_scene
     from stillframe.loop.closed_loop import open_loop_truth
 
-    check_output("--out", args.out)
+    check_output("--out", args.out, folder=True)
 
     scene = load_scene(DEMO_SCENE, args.overrides)
     out: Path = args.out
@@ -127,9 +129,9 @@ def run(args: argparse.Namespace) -> int:
                            lockstep_timeout_s=args.lockstep_timeout, backends=args.backends)
     except NodeDiedError as exc:
         return report_death("demo", exc)
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as exc:
         print("stillframe demo: interrupted; every node stopped", file=sys.stderr)
-        return 130
+        return interrupts.exit_code(exc)
     print_evaluation(result.evaluation, scene)
     t, floors, _ = open_loop_truth(scene)
     plot_floors(out / "floors.png", controlled_floors(result.history_file), (t, floors), scene)

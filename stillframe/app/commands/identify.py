@@ -13,8 +13,9 @@ import sys
 import time
 from typing import TYPE_CHECKING, Any
 
-from stillframe.app.commands.common import add_json_argument, check_output, emit_json
+from stillframe.app.commands.common import add_json_argument, emit_json
 from stillframe.errors import InputError
+from stillframe.files import check_output
 
 if TYPE_CHECKING:
     from stillframe.bags.channels import Record
@@ -177,7 +178,7 @@ def run(args: argparse.Namespace) -> int:
     from stillframe.identification.report import format_matrix, identification_document, modes_table
 
     check_output("--save-model", args.save_model)
-    check_output("--plots", args.plots)
+    check_output("--plots", args.plots, folder=True)
 
     progress = Progress(args.progress or sys.stderr.isatty())
     inputs = [Channel.parse(s) for s in args.inputs]

@@ -28,10 +28,10 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from stillframe import interrupts
 from stillframe.app.commands.common import (
     NICE_RANGE,
     add_scene_arguments,
-    check_output,
     emit_json,
     scene_from_args,
     seconds,
@@ -42,6 +42,7 @@ from stillframe.app.net_faults import FAULTS
 from stillframe.app.run_verdict import foreign_warning, foreign_writers, verdict
 from stillframe.config.scene import Scene
 from stillframe.errors import BagError, DegradedRunError, InputError
+from stillframe.files import check_output
 from stillframe.text_table import format_table
 
 
@@ -285,8 +286,8 @@ def run(args: argparse.Namespace) -> int:
     from stillframe.app.launcher import NodeDiedError, run_scene
     from stillframe.app.net_faults import hosts_if
 
-    check_output("--out", args.out)
-    check_output("--record", args.record)
+    check_output("--out", args.out, folder=True)
+    check_output("--record", args.record, folder=True)
 
     scene = scene_from_args(args)
     rt, rt_cpus = realtime_arguments(args)
@@ -309,9 +310,9 @@ def run(args: argparse.Namespace) -> int:
             if exc.partial is not None:
                 print_partial(exc.partial.evaluation, scene, args)
             return code
-        except KeyboardInterrupt:
+        except KeyboardInterrupt as exc:
             print("stillframe launch: interrupted; every node stopped", file=sys.stderr)
-            return 130
+            return interrupts.exit_code(exc)
     reasons = verdict(result.evaluation, result.diagnostics)
     if incomplete := bag_incomplete(result.evaluation.get("bag")):
         print(f"stillframe launch: warning: {incomplete}", file=sys.stderr)

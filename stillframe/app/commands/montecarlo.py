@@ -17,8 +17,9 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from stillframe.app.commands.common import add_scene_arguments, check_output, emit_json, whole
+from stillframe.app.commands.common import add_scene_arguments, emit_json, whole
 from stillframe.errors import InputError
+from stillframe.files import check_output
 from stillframe.text_table import format_table
 
 DEFAULT_RUNS = 100
@@ -90,7 +91,7 @@ def run(args: argparse.Namespace) -> int:
     from stillframe.studies.montecarlo import flatten, plan, row, run_one
     from stillframe.studies.vary import parse_vary
 
-    check_output("--out", args.out)
+    check_output("--out", args.out, folder=True)
 
     variations = [parse_vary(item) for item in args.vary]
     scene = load_scene(args.scene, args.overrides)

@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import argparse
 import math
-import os
 import sys
 from pathlib import Path
 from typing import Any
@@ -40,6 +39,7 @@ from stillframe.app.ros_tools import (
     node_name,
     tool_node,
 )
+from stillframe.config import environment
 from stillframe.contract import messages
 from stillframe.errors import InputError
 from stillframe.middleware import api
@@ -137,7 +137,7 @@ class ParameterCalls:
                     f"than this client's {ours}, run the call with STILLFRAME_RMW={other}: "
                     "parameter services do not cross vendors")
         return (f"it is not in the graph: is it running, on ROS_DOMAIN_ID="
-                f"{os.environ.get('ROS_DOMAIN_ID', '0')}?")
+                f"{environment.value('ROS_DOMAIN_ID')}?")
 
     def declared(self, name: str) -> Any:
         """The ``ParameterValue`` of ``name``; InputError naming the node's closest parameters

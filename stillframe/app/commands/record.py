@@ -9,7 +9,8 @@ from __future__ import annotations
 import argparse
 import sys
 
-from stillframe.app.commands.common import add_priority_arguments, apply_priority, check_output
+from stillframe.app.commands.common import add_priority_arguments, apply_priority
+from stillframe.files import check_output
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -38,7 +39,7 @@ def run(args: argparse.Namespace) -> int:
     from stillframe.node_runtime.support import RECORDER_NODE
     from stillframe.recording.recorder import Recorder
 
-    check_output("-o", args.output)
+    check_output("-o", args.output, folder=True)
 
     if args.all == bool(args.topics):
         raise InputError("give either --all or one or more TOPICs")

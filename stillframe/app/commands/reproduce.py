@@ -15,6 +15,7 @@ import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
+from stillframe import interrupts
 from stillframe.app.commands.common import add_json_argument, emit_json, scene_path
 from stillframe.app.commands.launch import add_launch_arguments, print_evaluation, report_death
 from stillframe.config.scene import load_scene
@@ -86,9 +87,9 @@ def run(args: argparse.Namespace) -> int:
                                    backends=args.backends)
             except NodeDiedError as exc:
                 return report_death("reproduce", exc)
-            except KeyboardInterrupt:
+            except KeyboardInterrupt as exc:
                 print("stillframe reproduce: interrupted; every node stopped", file=sys.stderr)
-                return 130
+                return interrupts.exit_code(exc)
             results.append((scene, result.evaluation))
             if not args.json:
                 print_evaluation(result.evaluation, scene)

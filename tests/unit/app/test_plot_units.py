@@ -27,10 +27,11 @@ BARE_KEY = re.compile(r"[A-Za-z_]\w*(\.\w+)+")
 
 @pytest.fixture
 def figures(monkeypatch: pytest.MonkeyPatch) -> dict[str, matplotlib.figure.Figure]:
-    """The figures saved while the test runs, by file name (nothing is written)."""
+    """The figures saved while the test runs, by file name (nothing is drawn into the files
+    ``stillframe.files`` opens for them, which have the path as their name)."""
     saved: dict[str, matplotlib.figure.Figure] = {}
     monkeypatch.setattr(matplotlib.figure.Figure, "savefig",
-                        lambda fig, path, **_: saved.__setitem__(Path(path).name, fig))
+                        lambda fig, to, **_: saved.__setitem__(Path(to.name).name, fig))
     return saved
 
 
