@@ -34,8 +34,11 @@ from tests.support.nodes import params_file, start_node, stop
 from tests.support.scenes import thesis_scene
 
 SCENE = "thesis_lqg"
-#: 40 s of sim time (1280 samples), control from 10 s: the probe acts at 12 s, with control on
-OVERRIDES = ["duration=40", "controller.start=10", "evaluation.window=10"]
+#: 120 s of sim time (3840 samples), control from 10 s: the probe acts at 12 s, with control
+#: on, and the run cannot have ended by then (it is 108 s of lock-step away)
+OVERRIDES = ["duration=120", "controller.start=10", "evaluation.window=10"]
+#: the killed-peer runs: long enough that no machine ends them before the kill
+KILLED = ["duration=600", "controller.start=10", "evaluation.window=10"]
 ACT_AT_S = 12.0
 PERIOD_NS = round(1e9 / 32)
 STOPPED_S = 3.0
@@ -76,6 +79,7 @@ def test_a_peer_stopped_for_3_s_changes_no_bit(ros_domain: int, tmp_path: Path,
         stopped_at = clock.ns
         clock.wait(STOPPED_S)
         held = clock.ns
+        running = sim.poll() is None
         peers[victim].send_signal(signal.SIGCONT)
         _out, err = finish(sim, timeout=300)
     finally:
@@ -86,8 +90,8 @@ def test_a_peer_stopped_for_3_s_changes_no_bit(ros_domain: int, tmp_path: Path,
                 stop(proc)
     print(f"{victim} stopped at sim time {stopped_at * 1e-9:.4f} s; "
           f"{STOPPED_S:g} s later {held * 1e-9:.4f} s")
-    assert held == stopped_at               # the simulator waited for the stopped peer
-    assert stopped_at < 40e9                # ... in the middle of the run, control on
+    assert held == stopped_at and running   # the simulator waited for the stopped peer
+    assert stopped_at < 110e9               # ... in the middle of the run, control on
     assert sim.returncode == 0, err[-2000:]
     evaluation = json.loads(result.read_text())
     assert evaluation["complete"] is True
@@ -102,7 +106,7 @@ def test_a_peer_stopped_for_3_s_changes_no_bit(ros_domain: int, tmp_path: Path,
 def test_a_killed_controller_ends_the_launch_at_once(ros_domain: int, tmp_path: Path) -> None:
     out = tmp_path / "out"
     launch = subprocess.Popen(
-        [sys.executable, "-m", "stillframe", "launch", SCENE, *(f"--set={o}" for o in OVERRIDES),
+        [sys.executable, "-m", "stillframe", "launch", SCENE, *(f"--set={o}" for o in KILLED),
          "--out", str(out), "--json"],
         env=child_env(), cwd=REPO_ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
         text=True)
@@ -130,7 +134,7 @@ def test_a_killed_controller_ends_the_run_of_nodes_started_by_hand(
     """On the suite's backend (dds: Cyclone, whose lease is 10 s) the graph drops the killed
     controller within its lease; the simulator then names it and the sample that waited."""
     result = tmp_path / "result.json"
-    params = params_file(tmp_path, SCENE, OVERRIDES, result_file=str(result))
+    params = params_file(tmp_path, SCENE, KILLED, result_file=str(result))
     peers = {name: start_node(name, params) for name in ("estimator_node", "controller_node")}
     sim = start_node("sim_node", params)
     clock = Clock()
@@ -154,8 +158,8 @@ def test_a_killed_controller_ends_the_run_of_nodes_started_by_hand(
 
 
 def _child_pid(parent: int, name: str) -> int:
-    """The pid of the launch's child running ``name`` (``python -m name.node``)."""
-    out = subprocess.run(["pgrep", "-P", str(parent), "-f", f"{name}.node"], capture_output=True,
-                         text=True, check=True).stdout.split()
+    """The pid of the launch's child running the node package ``name`` (``python -m name``)."""
+    out = subprocess.run(["pgrep", "-P", str(parent), "-f", f"-m {name}( |$)"],
+                         capture_output=True, text=True, check=True).stdout.split()
     assert len(out) == 1, out
     return int(out[0])
