@@ -55,6 +55,7 @@ from stillframe.contract.signals import Command, Estimate
 from stillframe.control.factory import make_controller
 from stillframe.control.supervisor import RUNAWAY_FACTOR
 from stillframe.design.coordinates import design_map
+from stillframe.durations import Durations
 from stillframe.loop import fast_inputs
 from stillframe.loop.matching import ForceMatching
 from stillframe.loop.watchdog import EstimateWatchdog
@@ -69,7 +70,6 @@ from stillframe.node_runtime.support import (
     ERROR,
     OK,
     WARN,
-    Durations,
     LoopParameters,
     RateMeter,
     reaches_peer,
@@ -168,18 +168,32 @@ class ControllerNode(base.LoopNode):
             self.controller.latest = None
             self.watchdog = EstimateWatchdog(self.controller, self.grid)
         answered = 0
-        while (m := self.matching.pop_ready(time.monotonic_ns())) is not None:
+        timing, slot = self.timing, self.slot
+        while (m := self.matching.pop_ready(now := time.monotonic_ns())) is not None:
             started = time.perf_counter()
+            timing.begin(m.ns)
+            timing.mark_at(slot["estimate_in"], m.arrival_ns)
+            timing.mark_at(slot["ready"], now)
+            self.sample_start_ns = m.arrival_ns
             t = self.grid.seconds(m.ns)
             estimate = Estimate(t, self.to_design @ m.physical, m.physical)
-            self.send(self.controller.command(t, estimate, m.force))
+            command = self.controller.command(t, estimate, m.force)
+            timing.mark(slot["computed"])
+            self.send(command)
             self.compute.add(time.perf_counter() - started)
             self.rate.tick()
             answered += 1
         return answered
 
     def send(self, command: Command) -> None:
-        self.pub.publish(self.out.cdr(command, self.grid.ns(command.t)))
+        """Publish ``command``; the law's (not the watchdog's) marks the sample's phases."""
+        timing = self.timing if not command.watchdog else None
+        cdr = self.out.cdr(command, self.grid.ns(command.t))
+        if timing is not None:
+            timing.mark(self.slot["serialized"])
+        self.pub.publish(cdr)
+        if timing is not None:
+            timing.mark(self.slot["written"])
         self.last_command = command
 
     def check(self) -> None:

@@ -54,6 +54,7 @@ import numpy as np
 from stillframe.contract import topics
 from stillframe.contract.codecs import COMMAND_TOPICS, SAMPLE_TOPICS, SensorMessages, command_reader
 from stillframe.contract.signals import Sample
+from stillframe.durations import Durations
 from stillframe.errors import IntegrationError, LoopError, StillframeError
 from stillframe.loop.decimated_taps import DecimatedTaps
 from stillframe.loop.energy_balance import EnergyTopic
@@ -79,7 +80,6 @@ from stillframe.node_runtime.support import (
     OK,
     RECORDER_NODE,
     WARN,
-    Durations,
     LoopParameters,
     has_publisher,
     has_subscriber,
@@ -166,6 +166,8 @@ class SimNode(base.LoopNode):
         fresh = ns != step.command_ns[actuator]
         if not step.offer(actuator, value, ns):
             return
+        if actuator == self.spec.active and ns == step.now_ns and fresh:
+            self.timing.mark(self.slot["command_in"])
         if actuator == self.spec.active and ns in self.published_at and fresh:
             self.latency.add(time.monotonic() - self.published_at[ns])
             # in time: taken before the advance that applies it (d = 0: in its own period)
@@ -219,14 +221,17 @@ class SimNode(base.LoopNode):
         )
 
     def publish(self, sample: Sample, ns: int) -> None:
-        """/clock, then the samples serialized first and written in one burst (the readers
-        wake once for all of them instead of competing with the serialization for the CPU)."""
-        self.clock.publish(ns)
+        """The samples serialized, then /clock and the samples written in one burst (the
+        readers wake once for all of them instead of competing with the serialization for the
+        CPU)."""
         cdrs = self.messages.cdr(sample, ns)
+        self.timing.mark(self.slot["serialized"])
+        self.clock.publish(ns)
         for pub, cdr in zip(self.publishers.values(), cdrs, strict=True):
             pub.publish(cdr)
         if self.energy is not None:
             self.energy.publish(float(sample.truth[3]))
+        self.timing.mark(self.slot["written"])
         self.published_at[ns] = time.monotonic()
         oldest = ns - self.spec.delay_periods * self.spec.period_ns
         for old in [t for t in self.published_at if t < oldest]:
@@ -266,6 +271,10 @@ class SimNode(base.LoopNode):
                 return False
             self.spin(remaining)
         return True
+
+    def slack_ns(self, now_ns: int) -> int | None:
+        """Real time: how long before the next sample is due; None in lock-step."""
+        return None if self.pacer.lockstep else self.pacer.due_ns(self.step.k) - now_ns
 
     def sleep_until(self, when_ns: int) -> None:
         wait_until(when_ns, time.monotonic_ns, self.spin, self.rt.spin_margin_ns,
@@ -308,12 +317,19 @@ class SimNode(base.LoopNode):
         """Sample k: publish, wait for its command, advance. The row [t, truth (8), command
         (2), load cell], or None on shutdown."""
         step, pacer, spec = self.step, self.pacer, self.spec
+        timing, slot = self.timing, self.slot
+        due = timing.ended_ns if pacer.lockstep else pacer.due_ns(k)
         if not pacer.lockstep:
-            self.sleep_until(pacer.due_ns(k))
-        pacer.begin(k, time.monotonic_ns())
+            self.sleep_until(due)
+        woke = time.monotonic_ns()
+        pacer.begin(k, woke)
         if not api.ok():
             return None
         sample = step.sample()
+        timing.begin(step.now_ns)
+        timing.mark_at(slot["due"], due)
+        timing.mark_at(slot["woke"], woke)
+        timing.mark(slot["sampled"])
         self.publish(sample, step.now_ns)
         missed = False
         if spec.lockstep:
@@ -323,7 +339,9 @@ class SimNode(base.LoopNode):
             if not api.ok():
                 return None
             missed = True
+        timing.mark(slot["answered"])
         period = step.advance(missed=missed)
+        timing.mark(slot["advanced"])
         if period.missed:
             pacer.missed()
         if period.guard_changed:
@@ -334,9 +352,11 @@ class SimNode(base.LoopNode):
                 log.info("control path recovered: commands applied again")
         if self.taps is not None:      # after the command is taken: off its path
             self.taps.publish(sample, step.now_ns)
-        self.rt.idle()
+        timing.mark(slot["tapped"])
+        self.idle()
         if self.gates.announce(self.node.get_logger()) or self.diagnostics.due():
             self.publish_status()
+        timing.end(slot["done"])
         return np.concatenate([[sample.t], sample.truth, period.command, [sample.force]])
 
     def run(self) -> tuple[LoopHistory | None, StillframeError | None]:
@@ -356,6 +376,7 @@ class SimNode(base.LoopNode):
         rows = np.empty((n, 12))
         self.gates.read_graph()
         self.pacer.start(time.monotonic_ns())
+        self.timing.ended_ns = self.pacer.started_ns
         wall = time.perf_counter()
         done, error = 0, None
         for k in range(n):
@@ -368,6 +389,7 @@ class SimNode(base.LoopNode):
                 break
             rows[k] = row
             done = k + 1
+        self.write_phases()
         if done == 0:
             return None, error
         rows = rows[:done]

@@ -430,6 +430,11 @@ class LaunchOptions:
     hosts: dict[str, list[str]] = field(default_factory=dict)
     #: run the modal tracker beside the nodes (:mod:`stillframe.app.tracking`)
     track: bool = False
+    #: where the loop nodes write their per-sample phase rings
+    #: (:mod:`stillframe.node_runtime.phase_timing`); None: nowhere
+    phase_log: Path | None = None
+    #: False: the nodes time no phases (a twin run measuring the timing's own cost)
+    phase_timing: bool = True
 
     @property
     def tracked_file(self) -> Path:
@@ -521,8 +526,11 @@ class Launcher:
         rt = ({"rt": self.rt, **({"rt_cpus": o.rt_cpus} if o.rt_cpus else {})}
               if self.rt else {})
         sim = self.simulator()
+        timing = {**({"phase_log": str(o.phase_log.resolve())} if o.phase_log else {}),
+                  **({} if o.phase_timing else {"phase_timing": False})}
         children += [(name, [*o.hosts.get("estimator_node" if name == CONTAINER else name, []),
                              *node_command(name, scene, [], o.mode, params={
+                                 **timing,
                                  **(rt if name in (sim, *LOOP) else {}),
                                  **(sim_params if name == sim else {}),
                                  **({"autostart": False} if name in MANAGED else {})},
@@ -750,7 +758,8 @@ def run_scene(scene: Path, overrides: Sequence[str] = (), *, out: Path,
               rt: str | None = None, rt_cpus: Sequence[int] = (),
               hosts: dict[str, list[str]] | None = None,
               resolved: Scene | None = None, track: bool = False,
-              recorder_args: Sequence[str] | None = None) -> LaunchResult:
+              recorder_args: Sequence[str] | None = None, phase_log: Path | None = None,
+              phase_timing: bool = True) -> LaunchResult:
     """Launch ``scene`` with ``overrides`` through the three nodes to its end; sim_node's
     results go to ``out`` (``result.json``, ``result.npz``, beside the resolved scene the nodes
     read); ``record`` records ``record_topics`` (default all) into a bag; ``backends`` are
@@ -761,8 +770,10 @@ def run_scene(scene: Path, overrides: Sequence[str] = (), *, out: Path,
     (:mod:`stillframe.node_runtime.realtime`; ``rt`` None: :func:`practices_default`);
     ``hosts`` runs nodes on other hosts (:attr:`LaunchOptions.hosts`); ``resolved``: the scene
     already loaded and resolved (else it is done here, once); ``track`` adds the modal tracker;
-    ``recorder_args``: the recorder's priority (:func:`recorder_priority`). ``prepare(node)``
-    may subscribe the launcher's hidden node to more topics before the children start."""
+    ``recorder_args``: the recorder's priority (:func:`recorder_priority`); ``phase_log`` and
+    ``phase_timing``: the nodes' phase timing (:attr:`LaunchOptions.phase_log`).
+    ``prepare(node)`` may subscribe the launcher's hidden node to more topics before the
+    children start."""
     out.mkdir(parents=True, exist_ok=True)
     launcher = Launcher(LaunchOptions(
         scene, list(overrides), resolved, mode=mode, result_file=out / "result.json",
@@ -770,7 +781,8 @@ def run_scene(scene: Path, overrides: Sequence[str] = (), *, out: Path,
         record_topics=list(record_topics), backends=list(backends),
         monitor_args=None if monitor_args is None else list(monitor_args), compose=compose,
         rt=rt, rt_cpus=list(rt_cpus), hosts=dict(hosts or {}), track=track,
-        recorder_args=None if recorder_args is None else list(recorder_args)))
+        recorder_args=None if recorder_args is None else list(recorder_args),
+        phase_log=phase_log, phase_timing=phase_timing))
     if prepare is not None:
         prepare(launcher.node)
     return launcher.run()

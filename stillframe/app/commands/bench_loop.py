@@ -38,6 +38,8 @@ from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from stillframe.app.commands.common import add_json_argument, emit_json, seconds
 from stillframe.app.commands.launch import (
     add_compose_arguments,
@@ -48,6 +50,7 @@ from stillframe.app.commands.launch import (
 )
 from stillframe.app.launcher import run_scene
 from stillframe.app.run_verdict import watchdog_zeros
+from stillframe.bench import phases, pingpong
 from stillframe.bench.latency import LatencyLog
 from stillframe.bench.recorder_load import (
     RecorderRun,
@@ -70,6 +73,8 @@ SCENE = SCENES_DIR / "thesis_lqg.yaml"
 RATES_HZ: tuple[float, ...] = (100.0, 1000.0)
 #: one-process runs of the scene; the fastest is the baseline
 ONE_PROCESS_RUNS = 3
+#: seconds of raw Cyclone ping-pong, back to back, for the floor of a lock-step hop
+FLOOR_S = 3.0
 
 
 def register(benches: argparse._SubParsersAction) -> None:
@@ -201,7 +206,8 @@ def realtime(rate_hz: float, duration: float, out: Path, backend: str,
           else contextlib.nullcontext() as recorder):
         result = run_scene(SCENE, realtime_overrides(rate_hz, duration), out=out, mode="realtime",
                            prepare=observe(log), backends=[backend], rt=rt[0], rt_cpus=rt[1],
-                           monitor_args=monitor_args, compose=compose, track=track)
+                           monitor_args=monitor_args, compose=compose, track=track,
+                           phase_log=out / "phases")
     share = others.stop()      # the children are reaped here, the recorder too
     nodes_cpu_s = children_cpu_s() - children_before - (recorder.total_cpu_s if recorder else 0)
     e = result.evaluation
@@ -210,6 +216,7 @@ def realtime(rate_hz: float, duration: float, out: Path, backend: str,
         shutil.rmtree(recorder.bag, ignore_errors=True)   # read; its pages leave the cache
     summary = log.summary()
     zeros = watchdog_zeros(result.diagnostics)
+    explained = explain_latency(log, out / "phases")
     return {"backend": backend, "compose": compose, "rate_hz": rate_hz, "rt": rt[0],
             "rt_cpus": rt[1], **summary, "watchdog_zeros": zeros,
             "within_period_pct": within_period_pct(summary, zeros or 0),
@@ -218,7 +225,18 @@ def realtime(rate_hz: float, duration: float, out: Path, backend: str,
             "load_1min": os.getloadavg()[0], **share, "nodes_cpu_s": nodes_cpu_s,
             "record": record is not None, "recorder_args": " ".join(record or []), **recorded,
             "track": track, "tracker_updates": len(result.tracked_modes),
-            **(stalls.summary if stalls else {})}
+            **(stalls.summary if stalls else {}), **explained}
+
+
+def explain_latency(log: LatencyLog, directory: Path) -> dict[str, Any]:
+    """The latency histogram of the samples the observer saw answered, the worst ten explained
+    by the nodes' phase rings in ``directory`` (when they wrote them), and each step's figures
+    along the path."""
+    latency = log.latencies_us()
+    figures = path_figures(directory)
+    paths = (phases.SamplePaths(phases.load(directory)) if figures else None)
+    return {"histogram": phases.histogram(np.array(list(latency.values()))),
+            "worst": phases.worst(latency, paths), **figures}
 
 
 def recorder_figures(recorder: RecorderRun, steps: int, rate_hz: float) -> dict[str, Any]:
@@ -277,15 +295,23 @@ def goal_rows(rows: list[dict[str, Any]], speeds: list[dict[str, Any]]) -> list[
 
 
 def lockstep(out: Path, backend: str, one: dict[str, Any], compose: str,
-             rt: tuple[str, list[int]] = ("", [])) -> dict[str, Any]:
+             rt: tuple[str, list[int]] = ("", []), pairs: int = 1) -> dict[str, Any]:
     """The full LQG scene through the nodes on ``backend`` (with the real-time practices ``rt``)
     against ``one`` (one process); with ``compose`` ("pair", "all") also with those nodes
-    composed in one process."""
+    composed in one process. ``pairs`` times a run without the phase timing, then one with it:
+    the timing's cost as the ratio of their walls, and the last timed run's path per hop."""
     scene = load_scene(SCENE)
-    started = time.perf_counter()
-    nodes = run_scene(SCENE, out=out, mode="lockstep", backends=[backend], rt=rt[0],
-                      rt_cpus=rt[1]).evaluation
-    launch_wall = time.perf_counter() - started
+    walls: dict[bool, list[float]] = {False: [], True: []}
+    for pair in range(pairs):
+        for timed in (False, True):
+            where = out / f"{'timed' if timed else 'untimed'}-{pair}"
+            started = time.perf_counter()
+            nodes = run_scene(SCENE, out=where, mode="lockstep", backends=[backend], rt=rt[0],
+                              rt_cpus=rt[1], phase_timing=timed,
+                              phase_log=where / "phases" if timed else None).evaluation
+            launch_wall = time.perf_counter() - started
+            walls[timed].append(nodes["wall_s"])
+    hops = path_figures(where / "phases")
     composed = {}
     if compose:
         c = run_scene(SCENE, out=out / "composed", mode="lockstep", backends=[backend],
@@ -304,7 +330,23 @@ def lockstep(out: Path, backend: str, one: dict[str, Any], compose: str,
         "nodes_over_one_process": one["loop_s"] / nodes["wall_s"],
         "complete": nodes.get("complete"),
         "reduction_pct": nodes["reduction_pct"],
+        "untimed_wall_s": walls[False], "timed_wall_s": walls[True],
+        "timing_cost_ratio": float(np.median(np.array(walls[True]) / np.array(walls[False]))),
+        **hops,
     }
+
+
+def path_figures(directory: Path) -> dict[str, Any]:
+    """The phase rings the nodes wrote to ``directory`` as each step's figures along a sample's
+    path and beside it (:mod:`stillframe.bench.phases`); empty when sim_node's is missing."""
+    rings = phases.load(directory) if directory.is_dir() else {}
+    if phases.SIM not in rings:
+        return {}
+    paths = phases.SamplePaths(rings)
+    return {"path": paths.table(phases.PATH), "beside": paths.table(phases.BESIDE),
+            "rt_budget": phases.rt_budget(rings),
+            "rt_applied": {node: ring.meta.get("rt_applied", []) for node, ring in rings.items()},
+            "rt_refused": {node: ring.meta.get("rt_refused", []) for node, ring in rings.items()}}
 
 
 def twin(rows: list[dict[str, Any]], r: dict[str, Any]) -> dict[str, Any] | None:
@@ -407,7 +449,7 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(f"bench loop: --repeat must be 1..100, got {args.repeat}")
     one = min((run_closed_loop(load_scene(SCENE)).evaluation for _ in range(ONE_PROCESS_RUNS)),
               key=lambda e: e["loop_s"]) if args.lockstep else {}
-    rows, speeds = [], []
+    rows, speeds, floor = [], [], {}
     with tempfile.TemporaryDirectory(prefix="stillframe-bench-loop-") as tmp:
         for backend in backends:
             for rate, repeat in ((rate, i) for rate in rates for i in range(args.repeat)):
@@ -429,7 +471,11 @@ def run(args: argparse.Namespace) -> int:
             if args.lockstep:
                 print(f"{backend}: lock-step, the full LQG scene", file=sys.stderr)
                 speeds.append(lockstep(Path(tmp) / f"{backend}-lockstep", backend, one,
-                                       args.compose, rt))
+                                       args.compose, rt, pairs=args.repeat))
+        if args.lockstep:
+            print(f"raw Cyclone ping-pong, back to back, {FLOOR_S:g} s (the floor of a hop)",
+                  file=sys.stderr)
+            floor = pingpong.measure(0, FLOOR_S, ("raw",))["raw"]
     for r in rows:
         if r["record"]:
             ratio, r["holds_issue_32"] = recorder_verdict(r, twin(rows, r))
@@ -437,7 +483,7 @@ def run(args: argparse.Namespace) -> int:
     goals = goal_rows(rows, speeds)
     if args.json:
         emit_json({"realtime": rows, "lockstep": speeds, "goals": goals,
-                   "tracker": tracker_rows(rows), "cpus": os.cpu_count()})
+                   "tracker": tracker_rows(rows), "cpus": os.cpu_count(), "floor": floor})
         return 0
     print(format_table(
         ["backend", "composed", "rate [Hz]", "samples", "answered", "within period [%]", "p50 [us]",
@@ -456,6 +502,8 @@ def run(args: argparse.Namespace) -> int:
         print(recorder_table([r for r in rows if not r["track"]]))
     if args.track:
         print(tracker_table(tracker_rows(rows)))
+    for r in rows:
+        print(explained_text(r))
     print(format_table(["figure", "backend", "measured", "goal", "met"],
                        [[g["figure"], g["backend"], f"{g['value']:.4g}", g["goal"],
                          "yes" if g["met"] else "NO"] for g in goals]))
@@ -472,4 +520,23 @@ def run(args: argparse.Namespace) -> int:
            for s in speeds if args.compose]
         + [["one process", one["steps"], f"{one['loop_s']:.2f}",
             f"{one['steps'] / one['loop_s']:.0f}", "", "1.00", ""]]))
+    for s in speeds:
+        print(f"\n{s['backend']}: lock-step, one sample's path (the last timed run); phase timing "
+              f"costs x{s['timing_cost_ratio']:.3f} of the wall of a run without it "
+              f"(median of {len(s['timed_wall_s'])} pair(s), same run)")
+        if "path" in s:
+            print(phases.path_table(s["path"], s["beside"], floor.get("p50_us")))
     return 0
+
+
+def explained_text(r: dict[str, Any]) -> str:
+    """A real-time run's latency histogram and worst ten samples, explained."""
+    head = (f"\n{r['backend']}{' composed ' + r['compose'] if r['compose'] else ''}, "
+            f"{r['rate_hz']:g} Hz{' --rt ' + r['rt'] if r['rt'] else ''}")
+    parts = [f"{head}: latency of the samples answered", phases.histogram_text(r["histogram"]),
+             f"{head}: the worst ten samples", phases.worst_text(r["worst"])]
+    if "path" in r:
+        parts += [f"{head}: each step of a sample (nodes' practices: "
+                  + "; ".join(f"{n} {', '.join(a) or 'none'}" for n, a in r["rt_applied"].items())
+                  + ")", phases.path_table(r["path"], r["beside"]), r["rt_budget"]]
+    return "\n".join(parts)

@@ -18,6 +18,8 @@ from stillframe.locations import REPO_ROOT
 from stillframe.loop.pacing import wait_until
 from stillframe.node_runtime.realtime import (
     CPU_LATENCY_DEVICE,
+    GC_LIMIT,
+    GC_SLACK_NS,
     GC_YOUNG,
     PRACTICES,
     Realtime,
@@ -165,6 +167,40 @@ def test_collector_is_off_in_the_loop_and_idle_collects_the_young_generation() -
         assert gc.get_count()[0] > GC_YOUNG
         rt.idle()
         assert rt.young_collections == 1 and gc.get_count()[0] < GC_YOUNG
+    finally:
+        rt.leave()
+        gc.unfreeze()
+    assert gc.isenabled()
+
+
+def young_cycles(n: int) -> None:
+    """``n`` young objects that only the collector can free (each refers to itself)."""
+    for _ in range(n):
+        cycle: list = []
+        cycle.append(cycle)
+
+
+def test_idle_collects_only_when_the_next_sample_leaves_time() -> None:
+    """The young generation past :data:`GC_YOUNG`: with less than :data:`GC_SLACK_NS` to the
+    next sample the collection is put off; with enough, or without a deadline, it runs; past
+    :data:`GC_LIMIT` it runs whatever the slack."""
+    rt = Realtime(RealtimeOptions())
+    rt.hold_collector()
+    try:
+        assert not gc.isenabled() and rt.applied == ["gc frozen and off in the loop"]
+        young_cycles(2 * GC_YOUNG)
+        rt.idle(GC_SLACK_NS - 1)
+        assert (rt.young_collections, rt.deferred_collections) == (0, 1)
+        assert gc.get_count()[0] > GC_YOUNG
+        rt.idle(GC_SLACK_NS)
+        assert rt.young_collections == 1 and gc.get_count()[0] < GC_YOUNG
+        young_cycles(2 * GC_YOUNG)
+        rt.idle(None)                                       # lock-step: no deadline
+        assert rt.young_collections == 2
+        young_cycles(GC_LIMIT + GC_YOUNG)
+        rt.idle(0)
+        assert (rt.young_collections, rt.forced_collections) == (3, 1)
+        assert gc.get_count()[0] < GC_YOUNG
     finally:
         rt.leave()
         gc.unfreeze()
