@@ -5,7 +5,8 @@ one-process loop runs too. Per sample k it publishes ``/clock`` = t_k, the three
 encoder (its ``effort`` the torque applied over the last period), the load cell, the floor-3
 actuator's load cell (the force applied) and ``state_truth``, all stamped t_k, then waits for the
 command stamped t_k on the scene's actuator topic, offers it to the step (its command gate) and
-advances the period:
+advances the period. ``state_truth`` goes out after the advance, off the command's path, unless the
+``truth`` estimator reads it:
 
 - ``mode: lockstep``: the simulator never advances without the command of the current sample.
   It waits while the loop's peers (the estimator reading the samples, the controller writing
@@ -127,6 +128,10 @@ class SimNode(base.LoopNode):
         self.publishers = {s.name: TappedPublisher(node, s.type_name, s.name, params.qos(s))
                            for s in (*SAMPLE_TOPICS, topics.STATE_TRUTH)}
         self.messages = SensorMessages(scene.sensors)
+        #: ``state_truth`` goes out after the advance, off the command's path, unless the
+        #: estimator reads it (the ``truth`` estimator)
+        self.truth_after = topics.STATE_TRUTH not in estimator_inputs(scene)
+        self.truth_cdr = bytearray()
         #: the sample topics anti-alias filtered and thinned (None at low rates): the tracker's
         self.taps = DecimatedTaps.of(node, SensorMessages(scene.sensors), scene.sensors.rate_hz,
                                      params.qos)
@@ -223,11 +228,14 @@ class SimNode(base.LoopNode):
     def publish(self, sample: Sample, ns: int) -> None:
         """The samples serialized, then /clock and the samples written in one burst (the
         readers wake once for all of them instead of competing with the serialization for the
-        CPU)."""
+        CPU); ``state_truth`` among them only when the estimator reads it."""
         cdrs = self.messages.cdr(sample, ns)
         self.timing.mark(self.slot["serialized"])
         self.clock.publish(ns)
         for pub, cdr in zip(self.publishers.values(), cdrs, strict=True):
+            if cdr is cdrs[-1] and self.truth_after:
+                self.truth_cdr = cdr          # the truth, later (:meth:`publish_after`)
+                break
             pub.publish(cdr)
         if self.energy is not None:
             self.energy.publish(float(sample.truth[3]))
@@ -236,6 +244,14 @@ class SimNode(base.LoopNode):
         oldest = ns - self.spec.delay_periods * self.spec.period_ns
         for old in [t for t in self.published_at if t < oldest]:
             del self.published_at[old]
+
+    def publish_after(self, sample: Sample, ns: int) -> None:
+        """What no node of the loop waits for, once the command is taken: ``state_truth``
+        (unless the estimator reads it) and the decimated taps."""
+        if self.truth_after:
+            self.publishers[topics.STATE_TRUTH.name].publish(self.truth_cdr)
+        if self.taps is not None:
+            self.taps.publish(sample, ns)
 
     def await_command(self, k: int, t: float) -> bool:
         """Lock-step: spin until the step has the command of sample k (True), or shutdown
@@ -350,8 +366,7 @@ class SimNode(base.LoopNode):
                 log.error(self.degraded_message())
             else:
                 log.info("control path recovered: commands applied again")
-        if self.taps is not None:      # after the command is taken: off its path
-            self.taps.publish(sample, step.now_ns)
+        self.publish_after(sample, step.now_ns)
         timing.mark(slot["tapped"])
         self.idle()
         if self.gates.announce(self.node.get_logger()) or self.diagnostics.due():

@@ -19,6 +19,7 @@ from typing import Any
 
 import numpy as np
 
+from stillframe.bench.latency import LatencyLog
 from stillframe.text_table import format_table
 
 SIM, EST, CTL = "sim_node", "estimator_node", "controller_node"
@@ -42,7 +43,7 @@ PATH: tuple[tuple[str, str, tuple[str, str], tuple[str, str]], ...] = (
      (CTL, "serialized"), (SIM, "command_in")),
     (SIM, "rest of the wait (other commands, the gate)", (SIM, "command_in"), (SIM, "answered")),
     (SIM, "plant advance", (SIM, "answered"), (SIM, "advanced")),
-    (SIM, "decimated taps", (SIM, "advanced"), (SIM, "tapped")),
+    (SIM, "state_truth and decimated taps", (SIM, "advanced"), (SIM, "tapped")),
     (SIM, "collector", (SIM, "tapped"), (SIM, "collected")),
     (SIM, "status", (SIM, "collected"), (SIM, "done")),
     (SIM, "to the next sample", (SIM, "done"), (SIM, "next_woke")),
@@ -169,6 +170,24 @@ class SamplePaths:
             if text := ", ".join(f for f in facts if f):
                 kernel.append({"node": node, "text": text, **counts})
         return {"stamp": stamp, "phases": phases, "kernel": kernel, "found": True}
+
+
+def latency_log(rings: dict[str, NodeRing], period_ns: int) -> LatencyLog:
+    """Each sample's latency as the nodes' rings time it: from sim_node's first write of the
+    sample (its ``serialized`` mark, just before ``/clock``) to the controller's write of the
+    command (its ``serialized`` mark). The same span an observer's DDS source timestamps give
+    (the floor-1 IMU's write to the command's), begun one write earlier; with no observer
+    taking the messages. Empty without sim_node's or the controller's ring."""
+    log = LatencyLog(period_ns)
+    if SIM not in rings or CTL not in rings:
+        return log
+    for node, add in ((SIM, log.on_sample), (CTL, log.on_command)):
+        columns = rings[node].columns
+        for stamp, at in zip(columns["stamp"].tolist(), columns["serialized"].tolist(),
+                             strict=True):
+            if at:
+                add(stamp, at)
+    return log
 
 
 def medians(paths: SamplePaths) -> dict[str, float]:

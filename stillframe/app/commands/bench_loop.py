@@ -1,12 +1,15 @@
 """``stillframe bench loop``: the closed loop's latency in real time and its lock-step speed.
 
 1. Real-time mode at 100 Hz and 1 kHz (the LQG scene with ``sensors.rate_hz`` and a matching
-   ``integrator.dt``): sensor-stamp-to-command latency p50 / p99 / max and deadline misses, seen
-   by an observer in this process (:mod:`stillframe.bench.latency`), beside sim_node's overruns.
+   ``integrator.dt``): sensor-stamp-to-command latency p50 / p99 / max and deadline misses, timed
+   by the nodes' own phase rings (:mod:`stillframe.bench.phases`; ``--dds-observer``: by an
+   observer node in this process, :mod:`stillframe.bench.latency`), beside sim_node's overruns,
+   with a histogram, the worst ten samples explained phase by phase, and each step of a sample.
 2. Lock-step: the full LQG scene through the three nodes, steps per second and the ratio of
    simulated to wall time, against the same scene in one process (``closed-loop``, the best of
    :data:`ONE_PROCESS_RUNS` in this run: the baseline is the loop's cost, not the machine's
-   noise).
+   noise); each hop of a sample against a raw Cyclone ping-pong measured in the same run, and
+   the phase timing's own cost (runs without it beside runs with it).
 
 Both run once per middleware backend (``dds``: Cyclone; ``rclpy``: real rclpy on Fast DDS), all
 three nodes on it, so the backends are compared in the same run. ``--compose`` /
@@ -101,6 +104,11 @@ def register(benches: argparse._SubParsersAction) -> None:
     parser.add_argument("--track", action="store_true",
                         help="run each real-time run twice, without and with the modal tracker "
                              "(`launch --track`) beside it: deadline misses and p50/p99 of each")
+    parser.add_argument("--dds-observer", action="store_true",
+                        help="time each sample's latency by an observer node in this process "
+                             "(DDS source timestamps of the floor-1 IMU and the command), as a "
+                             "cross-check; by default the nodes' own phase rings time it, and no "
+                             "observer takes messages, CPU or wake-ups from the loop")
     parser.add_argument("--stall-probe", action="store_true",
                         help="run cyclictest (rt-tests, root) beside each real-time run: "
                              "the machine's stalls of 1 ms or more, and its worst")
@@ -190,22 +198,25 @@ def realtime(rate_hz: float, duration: float, out: Path, backend: str,
              rt: tuple[str, list[int]] = ("", []),
              monitor_args: list[str] | None = None, compose: str = "",
              probe: bool = False, record: Sequence[str] | None = None,
-             track: bool = False) -> dict[str, Any]:
+             track: bool = False, dds_observer: bool = False) -> dict[str, Any]:
     """The LQG scene in real time at ``rate_hz`` through the nodes on ``backend`` (composed as
-    ``compose`` says): latency and deadline figures seen by an observer here;
-    ``monitor_args`` start a monitor beside them; ``probe``: cyclictest beside them;
+    ``compose`` says): latency and deadline figures from the nodes' phase rings
+    (:func:`stillframe.bench.phases.latency_log`), or with ``dds_observer`` as an observer here
+    sees them; ``monitor_args`` start a monitor beside them; ``probe``: cyclictest beside them;
     ``record``: ``stillframe record --all`` beside them with these further arguments
     (:mod:`stillframe.bench.recorder_load`; None: no recorder);
     ``track``: the modal tracker beside them (:mod:`stillframe.app.tracking`)."""
     log = LatencyLog(round(1e9 / rate_hz))
     others = CpuShare()
     children_before = children_cpu_s()
-    with (observer_backend(backend), observer_realtime(rt[0]),
+    with (observer_backend(backend),
+          observer_realtime(rt[0]) if dds_observer else contextlib.nullcontext(),
           stall_probe() if probe else contextlib.nullcontext() as stalls,
           recorder_process(out / "bag", backend, record) if record is not None
           else contextlib.nullcontext() as recorder):
         result = run_scene(SCENE, realtime_overrides(rate_hz, duration), out=out, mode="realtime",
-                           prepare=observe(log), backends=[backend], rt=rt[0], rt_cpus=rt[1],
+                           prepare=observe(log) if dds_observer else None, backends=[backend],
+                           rt=rt[0], rt_cpus=rt[1],
                            monitor_args=monitor_args, compose=compose, track=track,
                            phase_log=out / "phases")
     share = others.stop()      # the children are reaped here, the recorder too
@@ -214,10 +225,14 @@ def realtime(rate_hz: float, duration: float, out: Path, backend: str,
     recorded = recorder_figures(recorder, e["steps"], rate_hz) if recorder else {}
     if recorder:
         shutil.rmtree(recorder.bag, ignore_errors=True)   # read; its pages leave the cache
+    rings = phases.load(out / "phases") if (out / "phases").is_dir() else {}
+    if not dds_observer:
+        log = phases.latency_log(rings, log.period_ns)
     summary = log.summary()
     zeros = watchdog_zeros(result.diagnostics)
     explained = explain_latency(log, out / "phases")
     return {"backend": backend, "compose": compose, "rate_hz": rate_hz, "rt": rt[0],
+            "latency_from": "dds observer" if dds_observer else "phase rings",
             "rt_cpus": rt[1], **summary, "watchdog_zeros": zeros,
             "within_period_pct": within_period_pct(summary, zeros or 0),
             "sim_overruns": e.get("overruns"), "sim_deadline_misses": e.get("deadline_misses"),
@@ -467,7 +482,8 @@ def run(args: argparse.Namespace) -> int:
                     rows.append({"repeat": repeat, **settled.figures(), **realtime(
                         rate, args.duration,
                         Path(tmp) / f"{backend}{rate:g}-{repeat}{'-' + name if name else ''}",
-                        backend, rt, compose=args.compose, probe=args.stall_probe, **extra)})
+                        backend, rt, compose=args.compose, probe=args.stall_probe,
+                        dds_observer=args.dds_observer, **extra)})
             if args.lockstep:
                 print(f"{backend}: lock-step, the full LQG scene", file=sys.stderr)
                 speeds.append(lockstep(Path(tmp) / f"{backend}-lockstep", backend, one,

@@ -103,3 +103,16 @@ def test_histogram_counts_as_numpy_does() -> None:
     edges = np.array(phases.HISTOGRAM_US, dtype=float)
     assert [b["samples"] for b in bins] == np.histogram(latency, edges)[0].tolist()
     assert sum(b["pct"] for b in bins) == pytest.approx(100.0)
+
+
+def test_latency_from_the_rings_is_the_command_write_less_the_sample_write() -> None:
+    """sim_node writes at 60 µs, the controller at 365 µs (865 µs in the slow sample): 305 µs
+    a sample, 805 µs once, within the 1 ms period; no ring of the controller, no latency."""
+    log = phases.latency_log(rings(), PERIOD)
+    latency = log.latencies_us()
+    assert latency == pytest.approx({k * PERIOD: 805.0 if k == SLOW_SAMPLE else 305.0
+                                     for k in range(6)})
+    summary = log.summary()
+    assert (summary["answered"], summary["deadline_misses"]) == (6, 0)
+    without = {node: ring for node, ring in rings().items() if node != CTL}
+    assert phases.latency_log(without, PERIOD).latencies_us() == {}
