@@ -424,6 +424,7 @@ class SimNode(base.LoopNode):
             "command_gates": self.step.gate_reports([t.name for t in COMMAND_TOPICS]),
             "max_lateness_ms": 1e-6 * self.pacer.max_lateness_ns,
             "plant": plant_report(plant),
+            "realtime": {"applied": self.rt.applied, "refused": self.rt.refused},
         })
         if error is not None:
             history.evaluation["error"] = {"kind": type(error).__name__, "message": str(error)}

@@ -44,6 +44,7 @@ from stillframe.loop.parts import check_loop
 from stillframe.loop.spec import MODES
 from stillframe.middleware import api, discovery, names
 from stillframe.node_runtime.declarations import NODE_PARAMETERS, ManagedParameterValues
+from stillframe.node_runtime.realtime import RealtimeOptions, parse_practices, permissions_line
 
 NODES: tuple[str, ...] = tuple(NODE_PARAMETERS)
 #: the process that hosts the estimator and the controller with ``--compose``
@@ -128,16 +129,15 @@ def node_command(package: str, scene: Path, overrides: Sequence[str], mode: str,
     return argv
 
 
-#: a real-time run recorded above this rate gets :data:`RECORDED_PRACTICES`,
-#: :data:`RECORDED_RECORDER_ARGS` and ``dds`` where the user did not choose (issue 32,
+#: a real-time run recorded above this rate gets :data:`RECORDED_RECORDER_ARGS` and ``dds``
+#: where the user did not choose (issue 32,
 #: docs/realtime.md "Recording beside a 1 kHz loop"): measured at 1 kHz on a quiet 2-core
 #: machine; at the thesis's 32 Hz a recorded loop holds without them. Between the two it was not
 #: measured.
 RECORDED_ABOVE_HZ = 200.0
-#: the loop nodes' real-time practices in such a run, unless ``--rt`` says otherwise: with them
-#: and the recorder below the loop, the recorded loop missed fewer deadlines than the unrecorded
-#: one without them, on both backends (docs/realtime.md)
-RECORDED_PRACTICES = "all"
+#: the loop nodes' real-time practices in a real-time run unless ``--rt`` says otherwise, each
+#: where the user may (:func:`stillframe.node_runtime.realtime.may`; docs/realtime.md)
+REALTIME_PRACTICES = "all"
 
 
 def recorded_default(specs: Sequence[str], *, record: bool, mode: str,
@@ -165,13 +165,12 @@ def fast_recorded(*, record: bool, mode: str, rate_hz: float) -> bool:
     return record and mode == "realtime" and rate_hz > RECORDED_ABOVE_HZ
 
 
-def practices_default(given: str | None, *, record: bool, mode: str, rate_hz: float) -> str:
+def practices_default(given: str | None, *, mode: str) -> str:
     """The loop nodes' practices: ``given`` (``--rt``) when the user gave it, else
-    :data:`RECORDED_PRACTICES` for a recorded real-time run above :data:`RECORDED_ABOVE_HZ`,
-    else none (issue 10: opt-in)."""
+    :data:`REALTIME_PRACTICES` in real time and none in lock-step (which keeps no deadline)."""
     if given is not None:
         return given
-    return RECORDED_PRACTICES if fast_recorded(record=record, mode=mode, rate_hz=rate_hz) else ""
+    return REALTIME_PRACTICES if mode == "realtime" else ""
 
 
 def recorder_priority(given: Sequence[str] | None, *, mode: str, rate_hz: float) -> list[str]:
@@ -471,13 +470,11 @@ class Launcher:
         rate_hz, record = self.scene.sensors.rate_hz, options.record_dir is not None
         self.recorder_args = recorder_priority(options.recorder_args, mode=options.mode,
                                                rate_hz=rate_hz)
-        self.rt = practices_default(options.rt, record=record, mode=options.mode,
-                                    rate_hz=rate_hz)
-        if options.rt is None and self.rt:
-            self.status.echo(
-                f"real-time practices '{self.rt}' for the loop nodes: a recorded real-time "
-                f"loop at {rate_hz:g} Hz keeps its deadlines with them (docs/realtime.md); "
-                "--rt none runs without them")
+        self.rt = practices_default(options.rt, mode=options.mode)
+        if self.rt:
+            self.status.echo(permissions_line(RealtimeOptions(
+                parse_practices(self.rt), cpus=tuple(options.rt_cpus)))
+                + ("; --rt none runs without them" if options.rt is None else ""))
         if record and options.recorder_args is None and self.recorder_args:
             self.status.echo(
                 f"recorder run as `stillframe record {' '.join(self.recorder_args)}`: below "

@@ -21,8 +21,13 @@ The node parameter ``rt`` names the practices to apply (``all``, or a comma list
   message wakes its reader without an idle exit (on a VM, without the host rescheduling the
   virtual CPU). It holds for the whole machine and ends when the process does.
 
-A practice the OS refuses (no root, no ``CAP_SYS_NICE``, no ``RLIMIT_MEMLOCK``) is skipped with one
-warning naming it and why; the node runs on without it.
+What the user may (:func:`may`), no root needed: ``SCHED_FIFO`` with ``CAP_SYS_NICE`` or up to
+``RLIMIT_RTPRIO`` (the ``rtprio`` of ``/etc/security/limits.conf``; the priority asked is lowered
+to it), memory locking with ``CAP_IPC_LOCK`` or an ``RLIMIT_MEMLOCK`` with room for the process to
+double (a finite limit under ``MCL_FUTURE`` would otherwise fail its later allocations), the PM QoS
+request with write access to its device. A process first raises its soft limits to the hard ones
+(which needs no privilege). A practice it may not apply is skipped with one warning naming it and
+why; the node runs on without it.
 """
 
 from __future__ import annotations
@@ -31,6 +36,7 @@ import contextlib
 import ctypes
 import gc
 import os
+import resource
 import struct
 from dataclasses import dataclass, field
 from typing import Any
@@ -60,6 +66,111 @@ GC_SLACK_NS = 300_000
 GC_LIMIT = 20 * GC_YOUNG
 #: the PM QoS interface for the CPUs' wake-up latency (kernel: Documentation/power/pm_qos_interface)
 CPU_LATENCY_DEVICE = "/dev/cpu_dma_latency"
+#: capability bits (linux/capability.h)
+CAP_IPC_LOCK, CAP_SYS_NICE = 14, 23
+#: a finite RLIMIT_MEMLOCK allows locking when it holds this many times the process's mapped size
+MEMLOCK_ROOM = 2
+#: what the docs tell a user to add to /etc/security/limits.conf (docs/realtime.md)
+LIMITS_HINT = ("add yourself to a `realtime` group with `@realtime - rtprio 98` and "
+               "`@realtime - memlock unlimited` in /etc/security/limits.conf (docs/realtime.md)")
+
+
+def capable(bit: int) -> bool:
+    """Whether this process has capability ``bit`` in its effective set."""
+    with open("/proc/self/status") as status:
+        for line in status:
+            if line.startswith("CapEff:"):
+                return bool(int(line.split()[1], 16) >> bit & 1)
+    return False
+
+
+def raise_soft_limits() -> None:
+    """The soft RLIMIT_RTPRIO and RLIMIT_MEMLOCK up to their hard limits (``limits.conf``'s
+    ``-`` sets both; a ``hard`` line alone leaves the soft one low), which needs no privilege."""
+    for limit in (resource.RLIMIT_RTPRIO, resource.RLIMIT_MEMLOCK):
+        soft, hard = resource.getrlimit(limit)
+        if soft != hard:
+            with contextlib.suppress(ValueError, OSError):
+                resource.setrlimit(limit, (hard, hard))
+
+
+def _mapped_bytes() -> int:
+    """This process's mapped size (VmSize)."""
+    with open("/proc/self/status") as status:
+        for line in status:
+            if line.startswith("VmSize:"):
+                return int(line.split()[1]) * 1024
+    return 0
+
+
+def _mib(n: int) -> str:
+    return f"{n / 2**20:.0f} MiB"
+
+
+@dataclass(frozen=True)
+class Permission:
+    """Whether this process may apply a practice, and on what grounds (or why not)."""
+
+    allowed: bool
+    why: str
+
+
+def fifo_priority(asked: int) -> int:
+    """The ``SCHED_FIFO`` priority this process may take for ``asked``: ``asked`` with
+    ``CAP_SYS_NICE``, else at most the soft RLIMIT_RTPRIO (0: none)."""
+    return asked if capable(CAP_SYS_NICE) else min(asked, resource.getrlimit(
+        resource.RLIMIT_RTPRIO)[0])
+
+
+def may(practice: str) -> Permission:
+    """Whether this process may apply ``practice``, from its capabilities and limits (module
+    docstring); the practices that need nothing are always allowed."""
+    if practice == "fifo":
+        if capable(CAP_SYS_NICE):
+            return Permission(True, "CAP_SYS_NICE")
+        rtprio = resource.getrlimit(resource.RLIMIT_RTPRIO)[0]
+        return (Permission(True, f"RLIMIT_RTPRIO {rtprio}") if rtprio > 0 else
+                Permission(False, "RLIMIT_RTPRIO 0 and no CAP_SYS_NICE"))
+    if practice == "mlock":
+        if capable(CAP_IPC_LOCK):
+            return Permission(True, "CAP_IPC_LOCK")
+        limit = resource.getrlimit(resource.RLIMIT_MEMLOCK)[0]
+        if limit == resource.RLIM_INFINITY:
+            return Permission(True, "RLIMIT_MEMLOCK unlimited")
+        mapped = _mapped_bytes()
+        if limit >= MEMLOCK_ROOM * mapped:
+            return Permission(True, f"RLIMIT_MEMLOCK {_mib(limit)}")
+        return Permission(False, f"RLIMIT_MEMLOCK {_mib(limit)}, less than {MEMLOCK_ROOM} times "
+                                 f"the {_mib(mapped)} this process maps")
+    if practice == "cpu_latency":
+        return (Permission(True, f"{CPU_LATENCY_DEVICE} writable")
+                if os.access(CPU_LATENCY_DEVICE, os.W_OK)
+                else Permission(False, f"{CPU_LATENCY_DEVICE} not writable (root)"))
+    return Permission(True, "no privilege needed")
+
+
+def permissions_line(options: RealtimeOptions) -> str:
+    """One line: the practices of ``options`` this process (and so the nodes it starts as the
+    same user) may apply and those it may not, with why and, for the latter, the fix."""
+    raise_soft_limits()
+    labels = {"mlock": "memory locked", "gc": "collector held", "fifo": "SCHED_FIFO",
+              "affinity": "pinned", "spin": "sleep/spin", "cpu_latency": "CPUs out of idle"}
+    got, not_got = [], []
+    for practice in PRACTICES:
+        if practice not in options.practices or (practice == "affinity" and not options.cpus):
+            continue
+        allowed = may(practice)
+        label = labels[practice]
+        if not allowed.allowed:
+            not_got.append(f"{label} ({allowed.why})")
+        elif practice == "fifo":
+            got.append(f"{label} {fifo_priority(options.priority)} ({allowed.why})")
+        else:
+            got.append(label if practice in ("gc", "spin", "affinity")
+                       else f"{label} ({allowed.why})")
+    return ("real-time practice: " + (", ".join(got) or "nothing")
+            + (f"; not permitted: {', '.join(not_got)}; to allow them, {LIMITS_HINT}"
+               if not_got else ""))
 
 
 @dataclass
@@ -181,6 +292,8 @@ class Realtime:
         """Apply every practice asked for (call once, after the node's entities exist, so the
         DDS threads are there to be scheduled)."""
         asked = self.options.practices
+        if asked & {"fifo", "mlock"}:
+            raise_soft_limits()
         if "mlock" in asked:
             self._mlock()
         if "fifo" in asked:
@@ -217,9 +330,13 @@ class Realtime:
         return True
 
     def _mlock(self) -> None:
+        allowed = may("mlock")
+        if not allowed.allowed:
+            self.refused.append(f"memory not locked: {allowed.why}")
+            return
         libc = ctypes.CDLL(None, use_errno=True)
         if libc.mlockall(MCL_CURRENT | MCL_FUTURE) == 0:
-            self.applied.append("memory locked")
+            self.applied.append(f"memory locked ({allowed.why})")
         else:
             self.refused.append(f"mlockall refused: {_errno_text(ctypes.get_errno())} "
                                 "(needs CAP_IPC_LOCK or a larger RLIMIT_MEMLOCK)")
@@ -234,7 +351,12 @@ class Realtime:
         self.applied.append("CPUs kept out of idle states (PM QoS 0 us)")
 
     def _fifo(self) -> None:
-        param = os.sched_param(self.options.priority)
+        allowed = may("fifo")
+        if not allowed.allowed:
+            self.refused.append(f"SCHED_FIFO not permitted: {allowed.why}")
+            return
+        priority = fifo_priority(self.options.priority)
+        param = os.sched_param(priority)
         threads = _loop_threads()
         try:
             for tid in threads:   # children started later do not inherit it
@@ -245,7 +367,7 @@ class Realtime:
             return
         ctypes.CDLL(None, use_errno=True).prctl(PR_SET_TIMERSLACK, 1, 0, 0, 0)
         self.blas_limits = threadpool_limits(limits=1, user_api="blas")
-        self.applied.append(f"SCHED_FIFO {self.options.priority} on {len(threads)} threads; "
+        self.applied.append(f"SCHED_FIFO {priority} on {len(threads)} threads ({allowed.why}); "
                             "BLAS on one thread")
 
     def leave(self) -> None:
