@@ -54,6 +54,7 @@ from stillframe.app.commands.launch import (
 from stillframe.app.launcher import run_scene
 from stillframe.app.run_verdict import watchdog_zeros
 from stillframe.bench import phases, pingpong
+from stillframe.bench.busy import busy_loops
 from stillframe.bench.latency import LatencyLog
 from stillframe.bench.recorder_load import (
     RecorderRun,
@@ -104,6 +105,11 @@ def register(benches: argparse._SubParsersAction) -> None:
     parser.add_argument("--track", action="store_true",
                         help="run each real-time run twice, without and with the modal tracker "
                              "(`launch --track`) beside it: deadline misses and p50/p99 of each")
+    parser.add_argument("--load", type=int, default=0, metavar="N",
+                        help="run each real-time run twice, without and with N busy loops "
+                             "(`sh -c 'while :; do :; done'`, each in its own session) beside "
+                             "it: the loop's figures on a busy workstation against its quiet "
+                             "twin, in the same run")
     parser.add_argument("--dds-observer", action="store_true",
                         help="time each sample's latency by an observer node in this process "
                              "(DDS source timestamps of the floor-1 IMU and the command), as a "
@@ -198,20 +204,22 @@ def realtime(rate_hz: float, duration: float, out: Path, backend: str,
              rt: tuple[str, list[int]] = ("", []),
              monitor_args: list[str] | None = None, compose: str = "",
              probe: bool = False, record: Sequence[str] | None = None,
-             track: bool = False, dds_observer: bool = False) -> dict[str, Any]:
+             track: bool = False, dds_observer: bool = False, load: int = 0) -> dict[str, Any]:
     """The LQG scene in real time at ``rate_hz`` through the nodes on ``backend`` (composed as
     ``compose`` says): latency and deadline figures from the nodes' phase rings
     (:func:`stillframe.bench.phases.latency_log`), or with ``dds_observer`` as an observer here
     sees them; ``monitor_args`` start a monitor beside them; ``probe``: cyclictest beside them;
     ``record``: ``stillframe record --all`` beside them with these further arguments
     (:mod:`stillframe.bench.recorder_load`; None: no recorder);
-    ``track``: the modal tracker beside them (:mod:`stillframe.app.tracking`)."""
+    ``track``: the modal tracker beside them (:mod:`stillframe.app.tracking`); ``load``: that
+    many busy loops beside them (:mod:`stillframe.bench.busy`)."""
     log = LatencyLog(round(1e9 / rate_hz))
     others = CpuShare()
     children_before = children_cpu_s()
     with (observer_backend(backend),
           observer_realtime(rt[0]) if dds_observer else contextlib.nullcontext(),
           stall_probe() if probe else contextlib.nullcontext() as stalls,
+          busy_loops(load),
           recorder_process(out / "bag", backend, record) if record is not None
           else contextlib.nullcontext() as recorder):
         result = run_scene(SCENE, realtime_overrides(rate_hz, duration), out=out, mode="realtime",
@@ -239,7 +247,7 @@ def realtime(rate_hz: float, duration: float, out: Path, backend: str,
             "steps": e["steps"], "degraded_samples": e.get("degraded_samples"),
             "load_1min": os.getloadavg()[0], **share, "nodes_cpu_s": nodes_cpu_s,
             "record": record is not None, "recorder_args": " ".join(record or []), **recorded,
-            "track": track, "tracker_updates": len(result.tracked_modes),
+            "track": track, "tracker_updates": len(result.tracked_modes), "busy_loops": load,
             **(stalls.summary if stalls else {}), **explained}
 
 
@@ -367,6 +375,7 @@ def path_figures(directory: Path) -> dict[str, Any]:
 def twin(rows: list[dict[str, Any]], r: dict[str, Any]) -> dict[str, Any] | None:
     """The run without recorder or tracker of the same backend, rate and repeat as ``r``."""
     return next((b for b in rows if not b["record"] and not b["track"]
+                 and not b.get("busy_loops")
                  and (b["backend"], b["rate_hz"], b.get("repeat", 0))
                  == (r["backend"], r["rate_hz"], r.get("repeat", 0))), None)
 
@@ -419,6 +428,24 @@ def recorder_table(rows: list[dict[str, Any]]) -> str:
          for r in rows])
 
 
+def loaded_table(rows: list[dict[str, Any]]) -> str:
+    """Each run beside the busy loops against its quiet twin: the share within the period, the
+    latency p50 / p99 / max and sim_node's deadline misses of each, and the p99 ratio."""
+    out = []
+    for r in rows:
+        base = twin(rows, r)
+        if not r.get("busy_loops") or base is None:
+            continue
+        out.append([r["backend"], f"{r['rate_hz']:g}", r["rt"] or "-", r["busy_loops"],
+                    *(f"{base[k]:.2f} / {r[k]:.2f}" for k in ("within_period_pct",)),
+                    *(f"{base[k]:.0f} / {r[k]:.0f}" for k in ("p50_us", "p99_us", "max_us")),
+                    f"{base['sim_deadline_misses']} / {r['sim_deadline_misses']}",
+                    f"{r['p99_us'] / base['p99_us']:.2f}" if base["p99_us"] else "-"])
+    return format_table(
+        ["backend", "rate [Hz]", "--rt", "busy loops", "within period [%] (quiet / loaded)",
+         "p50 [us]", "p99 [us]", "max [us]", "sim deadline misses", "p99 loaded / quiet"], out)
+
+
 def tracker_rows(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
     """Per backend and rate, the run with the modal tracker against the one without: deadline
     misses (the observer's and sim_node's) and latency p50 / p99 of each, and with / without."""
@@ -460,6 +487,8 @@ def run(args: argparse.Namespace) -> int:
     rates = args.rates or list(RATES_HZ)
     if not all(1.0 <= r <= 10_000.0 for r in rates):
         raise InputError(f"bench loop: --rate must be 1..10000 Hz, got {rates}")
+    if not 0 <= args.load <= 64:
+        raise InputError(f"bench loop: --load must be 0..64 busy loops, got {args.load}")
     if not 1 <= args.repeat <= 100:
         raise InputError(f"bench loop: --repeat must be 1..100, got {args.repeat}")
     one = min((run_closed_loop(load_scene(SCENE)).evaluation for _ in range(ONE_PROCESS_RUNS)),
@@ -471,7 +500,9 @@ def run(args: argparse.Namespace) -> int:
                 variants = [("", {})] + ([("recorded", {"record": recorder_args(args) or []})]
                                           if args.record
                                           else []) + ([("tracked", {"track": True})]
-                                                      if args.track else [])
+                                                      if args.track else []) + (
+                    [(f"beside {args.load} busy loops", {"load": args.load})] if args.load
+                    else [])
                 for name, extra in variants:
                     settled = settle()
                     print(f"{backend}: real time at {rate:g} Hz for {args.duration:g} s"
@@ -502,11 +533,13 @@ def run(args: argparse.Namespace) -> int:
                    "tracker": tracker_rows(rows), "cpus": os.cpu_count(), "floor": floor})
         return 0
     print(format_table(
-        ["backend", "composed", "rate [Hz]", "samples", "answered", "within period [%]", "p50 [us]",
+        ["backend", "composed", "rate [Hz]", "busy loops", "samples", "answered",
+         "within period [%]", "p50 [us]",
          "p99 [us]", "max [us]", "deadline misses", "watchdog zeros", "unanswered", "unobserved",
          "sim overruns",
          "machine stalls (worst [us])", "load", "others' CPUs (niced)"],
-        [[r["backend"], r["compose"] or "-", f"{r['rate_hz']:g}", r["samples"], r["answered"],
+        [[r["backend"], r["compose"] or "-", f"{r['rate_hz']:g}", r["busy_loops"], r["samples"],
+          r["answered"],
           f"{r['within_period_pct']:.2f}", f"{r['p50_us']:.0f}",
           f"{r['p99_us']:.0f}", f"{r['max_us']:.0f}", r["deadline_misses"],
           "-" if r["watchdog_zeros"] is None else r["watchdog_zeros"], r["unanswered"],
@@ -518,6 +551,8 @@ def run(args: argparse.Namespace) -> int:
         print(recorder_table([r for r in rows if not r["track"]]))
     if args.track:
         print(tracker_table(tracker_rows(rows)))
+    if args.load:
+        print(loaded_table(rows))
     for r in rows:
         print(explained_text(r))
     print(format_table(["figure", "backend", "measured", "goal", "met"],
