@@ -254,6 +254,14 @@ class ControllerNode(base.LoopNode):
             wait_for_peers(self.node, self.peers_ready)
         self.subscribe_inputs()
 
+    def mid_sample(self) -> bool:
+        """The load cell of the sample after the last estimate is in, less than a period ago,
+        and its estimate not yet (estimates further behind are the watchdog's: not a sample in
+        progress)."""
+        m, period = self.matching, self.params.period
+        return (m.last_ns >= 0 and 0 < m.sample_ns - m.last_ns <= round(period * 1e9)
+                and self.input_at is not None and time.monotonic() - self.input_at < period)
+
     def next_wait(self) -> float:
         left = self.matching.wait_ns_left(time.monotonic_ns())
         return 0.05 if left is None else min(left * 1e-9, 0.05)

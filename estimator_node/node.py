@@ -255,6 +255,11 @@ class EstimatorNode(base.LoopNode):
         self.counts["estimates"] += 1
         self.rate.tick()
 
+    def mid_sample(self) -> bool:
+        """A stamp has some of its messages in, the first less than a period ago."""
+        first = min((p.first_ns for p in self.assembly.pending.values()), default=None)
+        return first is not None and time.monotonic_ns() - first < self.params.period * 1e9
+
     def next_wait(self) -> float:
         left = self.assembly.wait_ns_left(time.monotonic_ns())
         return 0.1 if left is None else min(0.1, left * 1e-9)

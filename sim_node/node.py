@@ -5,8 +5,9 @@ one-process loop runs too. Per sample k it publishes ``/clock`` = t_k, the three
 encoder (its ``effort`` the torque applied over the last period), the load cell, the floor-3
 actuator's load cell (the force applied) and ``state_truth``, all stamped t_k, then waits for the
 command stamped t_k on the scene's actuator topic, offers it to the step (its command gate) and
-advances the period. ``state_truth`` goes out after the advance, off the command's path, unless the
-``truth`` estimator reads it:
+advances the period. The sample topics no node of the loop reads (``state_truth`` unless the
+``truth`` estimator reads it, the floor-3 load cell unless the force is driven) go out after the
+advance, off the command's path:
 
 - ``mode: lockstep``: the simulator never advances without the command of the current sample.
   It waits while the loop's peers (the estimator reading the samples, the controller writing
@@ -128,10 +129,16 @@ class SimNode(base.LoopNode):
         self.publishers = {s.name: TappedPublisher(node, s.type_name, s.name, params.qos(s))
                            for s in (*SAMPLE_TOPICS, topics.STATE_TRUTH)}
         self.messages = SensorMessages(scene.sensors)
-        #: ``state_truth`` goes out after the advance, off the command's path, unless the
-        #: estimator reads it (the ``truth`` estimator)
-        self.truth_after = topics.STATE_TRUTH not in estimator_inputs(scene)
-        self.truth_cdr = bytearray()
+        #: the sample topics no node of the loop waits for (``state_truth`` unless the ``truth``
+        #: estimator reads it, the floor-3 load cell unless the force is driven) go out after
+        #: the advance, off the command's path: their indices in :attr:`publishers`, and the others'
+        read = {t.name for t in estimator_inputs(scene)} | (
+            {topics.EXCITATION_WRENCH.name} if command_topic(scene) is not None else set())
+        names = list(self.publishers)
+        self.on_path = [i for i, name in enumerate(names) if name in read]
+        self.after_path = [i for i, name in enumerate(names) if name not in read]
+        self.writers = list(self.publishers.values())
+        self.cdrs: list[bytearray] = []
         #: the sample topics anti-alias filtered and thinned (None at low rates): the tracker's
         self.taps = DecimatedTaps.of(node, SensorMessages(scene.sensors), scene.sensors.rate_hz,
                                      params.qos)
@@ -228,15 +235,13 @@ class SimNode(base.LoopNode):
     def publish(self, sample: Sample, ns: int) -> None:
         """The samples serialized, then /clock and the samples written in one burst (the
         readers wake once for all of them instead of competing with the serialization for the
-        CPU); ``state_truth`` among them only when the estimator reads it."""
-        cdrs = self.messages.cdr(sample, ns)
+        CPU); of the sample topics only those a node of the loop reads (:attr:`on_path`)."""
+        self.cdrs = cdrs = self.messages.cdr(sample, ns)
         self.timing.mark(self.slot["serialized"])
         self.clock.publish(ns)
-        for pub, cdr in zip(self.publishers.values(), cdrs, strict=True):
-            if cdr is cdrs[-1] and self.truth_after:
-                self.truth_cdr = cdr          # the truth, later (:meth:`publish_after`)
-                break
-            pub.publish(cdr)
+        writers = self.writers
+        for i in self.on_path:
+            writers[i].publish(cdrs[i])
         if self.energy is not None:
             self.energy.publish(float(sample.truth[3]))
         self.timing.mark(self.slot["written"])
@@ -246,10 +251,11 @@ class SimNode(base.LoopNode):
             del self.published_at[old]
 
     def publish_after(self, sample: Sample, ns: int) -> None:
-        """What no node of the loop waits for, once the command is taken: ``state_truth``
-        (unless the estimator reads it) and the decimated taps."""
-        if self.truth_after:
-            self.publishers[topics.STATE_TRUTH.name].publish(self.truth_cdr)
+        """What no node of the loop waits for, once the command is taken: the sample topics
+        off the command's path (:attr:`after_path`) and the decimated taps."""
+        writers, cdrs = self.writers, self.cdrs
+        for i in self.after_path:
+            writers[i].publish(cdrs[i])
         if self.taps is not None:
             self.taps.publish(sample, ns)
 

@@ -43,7 +43,7 @@ PATH: tuple[tuple[str, str, tuple[str, str], tuple[str, str]], ...] = (
      (CTL, "serialized"), (SIM, "command_in")),
     (SIM, "rest of the wait (other commands, the gate)", (SIM, "command_in"), (SIM, "answered")),
     (SIM, "plant advance", (SIM, "answered"), (SIM, "advanced")),
-    (SIM, "state_truth and decimated taps", (SIM, "advanced"), (SIM, "tapped")),
+    (SIM, "topics off the path, decimated taps", (SIM, "advanced"), (SIM, "tapped")),
     (SIM, "collector", (SIM, "tapped"), (SIM, "collected")),
     (SIM, "status", (SIM, "collected"), (SIM, "done")),
     (SIM, "to the next sample", (SIM, "done"), (SIM, "next_woke")),

@@ -3,7 +3,8 @@ container that composes them: the cycle, the parameters, ``/diagnostics``, the w
 real-time practices and the lifecycle.
 
 - :class:`Cycle`: spin → process → idle → housekeeping, until shutdown, then a last status;
-  a node (or the container) says what each step is.
+  a node (or the container) says what each step is; idle and housekeeping wait while a sample
+  is partly in (:meth:`Cycle.mid_sample`).
 - :class:`LoopNode`: a :class:`Cycle` on one node, with its declared parameters
   (:data:`.declarations.NODE_PARAMETERS`, checked at start and at every set), ``/diagnostics``
   from :meth:`LoopNode.status`, the writer gates named by its ``*_writer`` parameters and the
@@ -80,11 +81,16 @@ class Cycle:
     def finish(self) -> None:
         """After the last cycle (a last status)."""
 
+    def mid_sample(self) -> bool:
+        """Whether a sample is partly in (some of its messages taken, not yet handled): the idle
+        work and the housekeeping then wait until it is, off the sample's path."""
+        return False
+
     def cycle(self) -> None:
         self.spin(self.next_wait())
-        self.process_ready()
-        self.idle()
-        self.housekeeping()
+        if self.process_ready() or not self.mid_sample():
+            self.idle()
+            self.housekeeping()
 
     def run(self) -> None:
         self.start()
