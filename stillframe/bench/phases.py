@@ -146,7 +146,8 @@ class SamplePaths:
     def explain(self, stamp: int, medians: dict[str, float]) -> dict[str, Any]:
         """Sample ``stamp``: the steps of its path (and beside it) that took
         :data:`EXCESS_US` more than their median, largest first, and what each node's main
-        thread met in it (page faults, involuntary context switches)."""
+        thread met in it (page faults, involuntary context switches, more waits than usual: a
+        call that blocked)."""
         hits = np.nonzero(self.stamps == stamp)[0]
         if not hits.size:
             return {"stamp": stamp, "phases": [], "kernel": [], "found": False}
@@ -162,11 +163,14 @@ class SamplePaths:
         for node, ring in self.rings.items():
             counts = {name: int(self.counts[node, name][i]) for name in ring.meta["counters"]}
             fifo = ring.meta.get("sched_policy") == 1
+            usual_waits = int(np.median(self.counts[node, "nvcsw"]))
             facts = [f"{counts['majflt']} major page faults" if counts["majflt"] else "",
                      f"{counts['minflt']} minor page faults" if counts["minflt"] else "",
                      (f"{counts['nivcsw']} involuntary context switches"
                       + (" at SCHED_FIFO (a higher priority, or the kernel's RT throttling)"
-                         if fifo else "")) if counts["nivcsw"] else ""]
+                         if fifo else "")) if counts["nivcsw"] else "",
+                     (f"{counts['nvcsw']} waits (voluntary switches; usually {usual_waits})"
+                      if counts["nvcsw"] > usual_waits else "")]
             if text := ", ".join(f for f in facts if f):
                 kernel.append({"node": node, "text": text, **counts})
         return {"stamp": stamp, "phases": phases, "kernel": kernel, "found": True}
