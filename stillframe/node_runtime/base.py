@@ -220,7 +220,8 @@ class LoopNode(Cycle):
         return published
 
     def check(self) -> None:
-        """Every cycle, before the status (the controller's watchdog)."""
+        """Every cycle not in the middle of a sample, before the status (the controller's
+        watchdog)."""
 
     def status(self) -> tuple[dict[str, Any], int, str]:
         """``/diagnostics``: the values, the level and the message."""
