@@ -57,6 +57,7 @@ from stillframe.contract.signals import Command, Estimate
 from stillframe.control.factory import make_controller
 from stillframe.control.supervisor import RUNAWAY_FACTOR
 from stillframe.design.coordinates import design_map
+from stillframe.durations import Durations
 from stillframe.loop import fast_inputs
 from stillframe.loop.matching import ForceMatching
 from stillframe.loop.watchdog import EstimateWatchdog
@@ -71,7 +72,6 @@ from stillframe.node_runtime.support import (
     ERROR,
     OK,
     WARN,
-    Durations,
     LoopParameters,
     RateMeter,
     reaches_peer,
@@ -171,18 +171,32 @@ class ControllerNode(base.LoopNode):
             self.controller.latest = None
             self.watchdog = EstimateWatchdog(self.controller, self.grid)
         answered = 0
-        while (m := self.matching.pop_ready(time.monotonic_ns())) is not None:
+        timing, slot = self.timing, self.slot
+        while (m := self.matching.pop_ready(now := time.monotonic_ns())) is not None:
             started = time.perf_counter()
+            timing.begin(m.ns)
+            timing.mark_at(slot["estimate_in"], m.arrival_ns)
+            timing.mark_at(slot["ready"], now)
+            self.sample_start_ns = m.arrival_ns
             t = self.grid.seconds(m.ns)
             estimate = Estimate(t, self.to_design @ m.physical, m.physical)
-            self.send(self.controller.command(t, estimate, m.force))
+            command = self.controller.command(t, estimate, m.force)
+            timing.mark(slot["computed"])
+            self.send(command)
             self.compute.add(time.perf_counter() - started)
             self.rate.tick()
             answered += 1
         return answered
 
     def send(self, command: Command) -> None:
-        self.pub.publish(self.out.cdr(command, self.grid.ns(command.t)))
+        """Publish ``command``; the law's (not the watchdog's) marks the sample's phases."""
+        timing = self.timing if not command.watchdog else None
+        cdr = self.out.cdr(command, self.grid.ns(command.t))
+        if timing is not None:
+            timing.mark(self.slot["serialized"])
+        self.pub.publish(cdr)
+        if timing is not None:
+            timing.mark(self.slot["written"])
         self.last_command = command
 
     def check(self) -> None:
@@ -242,6 +256,14 @@ class ControllerNode(base.LoopNode):
             self.node.get_logger().info("lock-step: waiting for the simulator")
             wait_for_peers(self.node, self.peers_ready)
         self.subscribe_inputs()
+
+    def mid_sample(self) -> bool:
+        """The load cell of the sample after the last estimate is in, less than a period ago,
+        and its estimate not yet (estimates further behind are the watchdog's: not a sample in
+        progress)."""
+        m, period = self.matching, self.params.period
+        return (m.last_ns >= 0 and 0 < m.sample_ns - m.last_ns <= round(period * 1e9)
+                and self.input_at is not None and time.monotonic() - self.input_at < period)
 
     def next_wait(self) -> float:
         left = self.matching.wait_ns_left(time.monotonic_ns())

@@ -78,6 +78,7 @@ from stillframe.contract.codecs import (
     wrench_reader,
 )
 from stillframe.contract.signals import actuator_of
+from stillframe.durations import Durations
 from stillframe.errors import InputError
 from stillframe.estimation.base import Filter
 from stillframe.estimation.factory import FILTERS, make_estimator
@@ -99,7 +100,6 @@ from stillframe.node_runtime.support import (
     ERROR,
     OK,
     WARN,
-    Durations,
     LoopParameters,
     RateMeter,
     has_publisher,
@@ -217,13 +217,19 @@ class EstimatorNode(base.LoopNode):
         if self.assembly.take_jump():        # a new run of the loop: a new filter
             self.reset()
         used = 0
-        while (ready := self.assembly.pop_ready(time.monotonic_ns())) is not None:
-            self.use(ready)
+        while (ready := self.assembly.pop_ready(now := time.monotonic_ns())) is not None:
+            self.use(ready, now)
             used += 1
         return used
 
-    def use(self, ready: Ready) -> None:
+    def use(self, ready: Ready, now_ns: int) -> None:
+        """Step the filter with the stamp taken at ``now_ns`` and publish the estimate."""
         started = time.perf_counter()
+        timing, slot = self.timing, self.slot
+        timing.begin(ready.ns)
+        timing.mark_at(slot["first_in"], ready.first_ns)
+        timing.mark_at(slot["ready"], now_ns)
+        self.sample_start_ns = ready.first_ns
         sample, control = ready.sample, ready.control
         if (self.assembly.last_ns < 0 and ready.ns > 0
                 and isinstance(self.estimator, LinearFilter)):
@@ -235,6 +241,7 @@ class EstimatorNode(base.LoopNode):
             self.estimator.initialise_from(sample, control)
             self.counts["initialised_from_measurements"] += 1
         estimate = self.estimator.step(sample, control)
+        timing.mark(slot["computed"])
         self.assembly.used(ready.ns)
         if estimate is None:
             return
@@ -242,11 +249,18 @@ class EstimatorNode(base.LoopNode):
             self.counts["held_while_inactive"] += 1
             return
         state, cov = self.out.cdr(estimate, ready.ns)
+        timing.mark(slot["serialized"])
         self.state_pub.publish(state)
         self.cov_pub.publish(cov)
+        timing.mark(slot["written"])
         self.compute.add(time.perf_counter() - started)
         self.counts["estimates"] += 1
         self.rate.tick()
+
+    def mid_sample(self) -> bool:
+        """A stamp has some of its messages in, the first less than a period ago."""
+        first = min((p.first_ns for p in self.assembly.pending.values()), default=None)
+        return first is not None and time.monotonic_ns() - first < self.params.period * 1e9
 
     def next_wait(self) -> float:
         left = self.assembly.wait_ns_left(time.monotonic_ns())

@@ -5,7 +5,9 @@ one-process loop runs too. Per sample k it publishes ``/clock`` = t_k, the three
 encoder (its ``effort`` the torque applied over the last period), the load cell, the floor-3
 actuator's load cell (the force applied) and ``state_truth``, all stamped t_k, then waits for the
 command stamped t_k on the scene's actuator topic, offers it to the step (its command gate) and
-advances the period:
+advances the period. The sample topics no node of the loop reads (``state_truth`` unless the
+``truth`` estimator reads it, the floor-3 load cell unless the force is driven) go out after the
+advance, off the command's path:
 
 - ``mode: lockstep``: the simulator never advances without the command of the current sample.
   It waits while the loop's peers (the estimator reading the samples, the controller writing
@@ -60,6 +62,7 @@ from stillframe.contract import topics
 from stillframe.contract.codecs import COMMAND_TOPICS, SAMPLE_TOPICS, SensorMessages, command_reader
 from stillframe.contract.signals import Sample
 from stillframe.contract.structure_events import event_message, summary
+from stillframe.durations import Durations
 from stillframe.errors import IntegrationError, LoopError, StillframeError
 from stillframe.files import open_output, write_text
 from stillframe.loop.decimated_taps import DecimatedTaps
@@ -86,7 +89,6 @@ from stillframe.node_runtime.support import (
     OK,
     RECORDER_NODE,
     WARN,
-    Durations,
     LoopParameters,
     has_publisher,
     has_subscriber,
@@ -134,6 +136,16 @@ class SimNode(base.LoopNode):
         self.publishers = {s.name: TappedPublisher(node, s.type_name, s.name, params.qos(s))
                            for s in (*SAMPLE_TOPICS, topics.STATE_TRUTH)}
         self.messages = SensorMessages(scene.sensors, params.run_token)
+        #: the sample topics no node of the loop waits for (``state_truth`` unless the ``truth``
+        #: estimator reads it, the floor-3 load cell unless the force is driven) go out after
+        #: the advance, off the command's path: their indices in :attr:`publishers`, and the others'
+        read = {t.name for t in estimator_inputs(scene)} | (
+            {topics.EXCITATION_WRENCH.name} if command_topic(scene) is not None else set())
+        names = list(self.publishers)
+        self.on_path = [i for i, name in enumerate(names) if name in read]
+        self.after_path = [i for i, name in enumerate(names) if name not in read]
+        self.writers = list(self.publishers.values())
+        self.cdrs: list[bytearray] = []
         #: the sample topics anti-alias filtered and thinned (None at low rates): the tracker's
         self.taps = DecimatedTaps.of(node, SensorMessages(scene.sensors, params.run_token),
                                      scene.sensors.rate_hz, params.qos)
@@ -178,6 +190,8 @@ class SimNode(base.LoopNode):
         fresh = ns != step.command_ns[actuator]
         if not step.offer(actuator, value, ns):
             return
+        if actuator == self.spec.active and ns == step.now_ns and fresh:
+            self.timing.mark(self.slot["command_in"])
         if actuator == self.spec.active and ns in self.published_at and fresh:
             self.latency.add(time.monotonic() - self.published_at[ns])
             # in time: taken before the advance that applies it (d = 0: in its own period)
@@ -231,14 +245,18 @@ class SimNode(base.LoopNode):
         )
 
     def publish(self, sample: Sample, ns: int) -> None:
-        """/clock, then the samples serialized first and written in one burst (the readers
-        wake once for all of them instead of competing with the serialization for the CPU)."""
+        """The samples serialized, then /clock and the samples written in one burst (the
+        readers wake once for all of them instead of competing with the serialization for the
+        CPU); of the sample topics only those a node of the loop reads (:attr:`on_path`)."""
+        self.cdrs = cdrs = self.messages.cdr(sample, ns)
+        self.timing.mark(self.slot["serialized"])
         self.clock.publish(ns)
-        cdrs = self.messages.cdr(sample, ns)
-        for pub, cdr in zip(self.publishers.values(), cdrs, strict=True):
-            pub.publish(cdr)
+        writers = self.writers
+        for i in self.on_path:
+            writers[i].publish(cdrs[i])
         if self.energy is not None:
             self.energy.publish(float(sample.truth[3]))
+        self.timing.mark(self.slot["written"])
         self.published_at[ns] = time.monotonic()
         oldest = ns - self.spec.delay_periods * self.spec.period_ns
         for old in [t for t in self.published_at if t < oldest]:
@@ -253,6 +271,15 @@ class SimNode(base.LoopNode):
             event_message(self.step.now_ns, self.diagnostics.name, records))
         for record in records:
             self.node.get_logger().info(f"structure changed: {summary(record)}")
+
+    def publish_after(self, sample: Sample, ns: int) -> None:
+        """What no node of the loop waits for, once the command is taken: the sample topics
+        off the command's path (:attr:`after_path`) and the decimated taps."""
+        writers, cdrs = self.writers, self.cdrs
+        for i in self.after_path:
+            writers[i].publish(cdrs[i])
+        if self.taps is not None:
+            self.taps.publish(sample, ns)
 
     def await_command(self, k: int, t: float) -> bool:
         """Lock-step: spin until the step has the command of sample k (True), or shutdown
@@ -288,6 +315,10 @@ class SimNode(base.LoopNode):
                 return False
             self.spin(remaining)
         return True
+
+    def slack_ns(self, now_ns: int) -> int | None:
+        """Real time: how long before the next sample is due; None in lock-step."""
+        return None if self.pacer.lockstep else self.pacer.due_ns(self.step.k) - now_ns
 
     def sleep_until(self, when_ns: int) -> None:
         wait_until(when_ns, time.monotonic_ns, self.spin, self.rt.spin_margin_ns,
@@ -330,12 +361,19 @@ class SimNode(base.LoopNode):
         """Sample k: publish, wait for its command, advance. The row [t, truth (8), command
         (2), load cell], or None on shutdown."""
         step, pacer, spec = self.step, self.pacer, self.spec
+        timing, slot = self.timing, self.slot
+        due = timing.ended_ns if pacer.lockstep else pacer.due_ns(k)
         if not pacer.lockstep:
-            self.sleep_until(pacer.due_ns(k))
-        pacer.begin(k, time.monotonic_ns())
+            self.sleep_until(due)
+        woke = time.monotonic_ns()
+        pacer.begin(k, woke)
         if not api.ok():
             return None
         sample = step.sample()
+        timing.begin(step.now_ns)
+        timing.mark_at(slot["due"], due)
+        timing.mark_at(slot["woke"], woke)
+        timing.mark(slot["sampled"])
         if step.changed:
             self.announce_structure()
         self.publish(sample, step.now_ns)
@@ -347,7 +385,9 @@ class SimNode(base.LoopNode):
             if not api.ok():
                 return None
             missed = True
+        timing.mark(slot["answered"])
         period = step.advance(missed=missed)
+        timing.mark(slot["advanced"])
         if period.missed:
             pacer.missed()
         if period.guard_changed:
@@ -356,11 +396,12 @@ class SimNode(base.LoopNode):
                 log.error(self.degraded_message())
             else:
                 log.info("control path recovered: commands applied again")
-        if self.taps is not None:      # after the command is taken: off its path
-            self.taps.publish(sample, step.now_ns)
-        self.rt.idle()
+        self.publish_after(sample, step.now_ns)
+        timing.mark(slot["tapped"])
+        self.idle()
         if self.gates.announce(self.node.get_logger()) or self.diagnostics.due():
             self.publish_status()
+        timing.end(slot["done"])
         return np.concatenate([[sample.t], sample.truth, period.command, [sample.force]])
 
     def run(self) -> tuple[LoopHistory | None, StillframeError | None]:
@@ -380,6 +421,7 @@ class SimNode(base.LoopNode):
         rows = np.empty((n, 12))
         self.gates.read_graph()
         self.pacer.start(time.monotonic_ns())
+        self.timing.ended_ns = self.pacer.started_ns
         wall = time.perf_counter()
         done, error = 0, None
         for k in range(n):
@@ -392,6 +434,7 @@ class SimNode(base.LoopNode):
                 break
             rows[k] = row
             done = k + 1
+        self.write_phases()
         if done == 0:
             return None, error
         rows = rows[:done]
@@ -412,6 +455,7 @@ class SimNode(base.LoopNode):
             "max_lateness_ms": 1e-6 * self.pacer.max_lateness_ns,
             "plant": plant_report(plant),
             "structure_events": self.step.event_records(),
+            "realtime": {"applied": self.rt.applied, "refused": self.rt.refused},
         })
         if error is not None:
             history.evaluation["error"] = {"kind": type(error).__name__, "message": str(error)}

@@ -50,6 +50,7 @@ from stillframe.loop.spec import MODES
 from stillframe.middleware import api, discovery, names
 from stillframe.middleware.graph import UNNAMED_NODES, fqn
 from stillframe.node_runtime.declarations import NODE_PARAMETERS, ManagedParameterValues
+from stillframe.node_runtime.realtime import RealtimeOptions, parse_practices, permissions_line
 from stillframe.recording.recorder import MISSING_KEY, STALLS_KEY
 
 NODES: tuple[str, ...] = tuple(NODE_PARAMETERS)
@@ -151,16 +152,15 @@ def node_command(package: str, scene: Path, overrides: Sequence[str], mode: str,
     return argv
 
 
-#: a real-time run recorded above this rate gets :data:`RECORDED_PRACTICES`,
-#: :data:`RECORDED_RECORDER_ARGS` and ``dds`` where the user did not choose (issue 32,
+#: a real-time run recorded above this rate gets :data:`RECORDED_RECORDER_ARGS` and ``dds``
+#: where the user did not choose (issue 32,
 #: docs/realtime.md "Recording beside a 1 kHz loop"): measured at 1 kHz on a quiet 2-core
 #: machine; at the thesis's 32 Hz a recorded loop holds without them. Between the two it was not
 #: measured.
 RECORDED_ABOVE_HZ = 200.0
-#: the loop nodes' real-time practices in such a run, unless ``--rt`` says otherwise: with them
-#: and the recorder below the loop, the recorded loop missed fewer deadlines than the unrecorded
-#: one without them, on both backends (docs/realtime.md)
-RECORDED_PRACTICES = "all"
+#: the loop nodes' real-time practices in a real-time run unless ``--rt`` says otherwise, each
+#: where the user may (:func:`stillframe.node_runtime.realtime.may`; docs/realtime.md)
+REALTIME_PRACTICES = "all"
 
 
 def recorded_default(specs: Sequence[str], *, record: bool, mode: str,
@@ -188,13 +188,12 @@ def fast_recorded(*, record: bool, mode: str, rate_hz: float) -> bool:
     return record and mode == "realtime" and rate_hz > RECORDED_ABOVE_HZ
 
 
-def practices_default(given: str | None, *, record: bool, mode: str, rate_hz: float) -> str:
+def practices_default(given: str | None, *, mode: str) -> str:
     """The loop nodes' practices: ``given`` (``--rt``) when the user gave it, else
-    :data:`RECORDED_PRACTICES` for a recorded real-time run above :data:`RECORDED_ABOVE_HZ`,
-    else none (issue 10: opt-in)."""
+    :data:`REALTIME_PRACTICES` in real time and none in lock-step (which keeps no deadline)."""
     if given is not None:
         return given
-    return RECORDED_PRACTICES if fast_recorded(record=record, mode=mode, rate_hz=rate_hz) else ""
+    return REALTIME_PRACTICES if mode == "realtime" else ""
 
 
 def recorder_priority(given: Sequence[str] | None, *, mode: str, rate_hz: float) -> list[str]:
@@ -476,6 +475,11 @@ class LaunchOptions:
     hosts: dict[str, list[str]] = field(default_factory=dict)
     #: run the modal tracker beside the nodes (:mod:`stillframe.app.tracking`)
     track: bool = False
+    #: where the loop nodes write their per-sample phase rings
+    #: (:mod:`stillframe.node_runtime.phase_timing`); None: nowhere
+    phase_log: Path | None = None
+    #: False: the nodes time no phases (a twin run measuring the timing's own cost)
+    phase_timing: bool = True
 
     @property
     def tracked_file(self) -> Path:
@@ -512,13 +516,11 @@ class Launcher:
         rate_hz, record = self.scene.sensors.rate_hz, options.record_dir is not None
         self.recorder_args = recorder_priority(options.recorder_args, mode=options.mode,
                                                rate_hz=rate_hz)
-        self.rt = practices_default(options.rt, record=record, mode=options.mode,
-                                    rate_hz=rate_hz)
-        if options.rt is None and self.rt:
-            self.status.echo(
-                f"real-time practices '{self.rt}' for the loop nodes: a recorded real-time "
-                f"loop at {rate_hz:g} Hz keeps its deadlines with them (docs/realtime.md); "
-                "--rt none runs without them")
+        self.rt = practices_default(options.rt, mode=options.mode)
+        if self.rt:
+            self.status.echo(permissions_line(RealtimeOptions(
+                parse_practices(self.rt), cpus=tuple(options.rt_cpus)))
+                + ("; --rt none runs without them" if options.rt is None else ""))
         if record and options.recorder_args is None and self.recorder_args:
             self.status.echo(
                 f"recorder run as `stillframe record {' '.join(self.recorder_args)}`: below "
@@ -571,9 +573,12 @@ class Launcher:
         rt = ({"rt": self.rt, **({"rt_cpus": o.rt_cpus} if o.rt_cpus else {})}
               if self.rt else {})
         sim = self.simulator()
+        timing = {**({"phase_log": str(o.phase_log.resolve())} if o.phase_log else {}),
+                  **({} if o.phase_timing else {"phase_timing": False})}
         children += [(name, [*o.hosts.get("estimator_node" if name == CONTAINER else name, []),
                              *node_command(name, scene, [], o.mode, params={
-                                 **shared, **(rt if name in (sim, *LOOP) else {}),
+                                 **shared, **timing,
+                                 **(rt if name in (sim, *LOOP) else {}),
                                  **(sim_params if name == sim else {}),
                                  **({"autostart": False} if name in MANAGED else {})},
                                  args=["all"] if name == sim == CONTAINER else [])])
@@ -831,7 +836,8 @@ def run_scene(scene: Path, overrides: Sequence[str] = (), *, out: Path,
               rt: str | None = None, rt_cpus: Sequence[int] = (),
               hosts: dict[str, list[str]] | None = None,
               resolved: Scene | None = None, track: bool = False,
-              recorder_args: Sequence[str] | None = None) -> LaunchResult:
+              recorder_args: Sequence[str] | None = None, phase_log: Path | None = None,
+              phase_timing: bool = True) -> LaunchResult:
     """Launch ``scene`` with ``overrides`` through the three nodes to its end; sim_node's
     results go to ``out`` (``result.json``, ``result.npz``, beside the resolved scene the nodes
     read); ``record`` records ``record_topics`` (default all) into a bag; ``backends`` are
@@ -842,8 +848,10 @@ def run_scene(scene: Path, overrides: Sequence[str] = (), *, out: Path,
     (:mod:`stillframe.node_runtime.realtime`; ``rt`` None: :func:`practices_default`);
     ``hosts`` runs nodes on other hosts (:attr:`LaunchOptions.hosts`); ``resolved``: the scene
     already loaded and resolved (else it is done here, once); ``track`` adds the modal tracker;
-    ``recorder_args``: the recorder's priority (:func:`recorder_priority`). ``prepare(node)``
-    may subscribe the launcher's hidden node to more topics before the children start."""
+    ``recorder_args``: the recorder's priority (:func:`recorder_priority`); ``phase_log`` and
+    ``phase_timing``: the nodes' phase timing (:attr:`LaunchOptions.phase_log`).
+    ``prepare(node)`` may subscribe the launcher's hidden node to more topics before the
+    children start."""
     out.mkdir(parents=True, exist_ok=True)
     launcher = Launcher(LaunchOptions(
         scene, list(overrides), resolved, mode=mode, result_file=out / "result.json",
@@ -851,7 +859,8 @@ def run_scene(scene: Path, overrides: Sequence[str] = (), *, out: Path,
         record_topics=list(record_topics), backends=list(backends),
         monitor_args=None if monitor_args is None else list(monitor_args), compose=compose,
         rt=rt, rt_cpus=list(rt_cpus), hosts=dict(hosts or {}), track=track,
-        recorder_args=None if recorder_args is None else list(recorder_args)))
+        recorder_args=None if recorder_args is None else list(recorder_args),
+        phase_log=phase_log, phase_timing=phase_timing))
     if prepare is not None:
         prepare(launcher.node)
     return launcher.run()

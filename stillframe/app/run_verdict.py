@@ -14,7 +14,8 @@ text with its count; an empty list is a run to trust. In every mode:
 
 and in real time:
 
-- more than :data:`DEADLINE_MISS_LIMIT` of the samples missed their command's deadline;
+- more than :data:`DEADLINE_MISS_LIMIT` of the samples missed their command's deadline (and when
+  the simulator ran without ``SCHED_FIFO``, that, why, and the real-time practice as the fix);
 - the controller's watchdog sent zero commands (its estimates fell behind);
 - the controller never commanded in time (no sample had its command before its deadline);
 - most samples were degraded: the simulator applied zero (the safe state after the command
@@ -38,6 +39,7 @@ from stillframe.loop.writer_gate import REASONS, same_node
 from stillframe.middleware.graph import fqn
 from stillframe.middleware.names import resolve_topic
 from stillframe.node_runtime.declarations import CONTROLLER, SIM
+from stillframe.node_runtime.realtime import LIMITS_HINT
 
 #: the share of a run's samples that may miss their deadline before the run is degraded
 DEADLINE_MISS_LIMIT = 0.01
@@ -61,6 +63,19 @@ def controller_count(evaluation: dict[str, Any], statuses: dict[str, dict[str, s
                  if same_node(name, CONTROLLER, DEFAULT_NAMESPACE) and key in values), 0)
 
 
+def without_fifo(evaluation: dict[str, Any]) -> str:
+    """When the simulator ran without ``SCHED_FIFO`` (its ``realtime`` report): that, why, and
+    the real-time practice as the fix; "" when it had it or did not report."""
+    practices = evaluation.get("realtime")
+    if not isinstance(practices, dict) or any(
+            str(a).startswith("SCHED_FIFO") for a in practices.get("applied", ())):
+        return ""
+    why = next((str(r) for r in practices.get("refused", ()) if "SCHED_FIFO" in str(r)),
+               "SCHED_FIFO not asked for (--rt)")
+    return (f", the nodes without SCHED_FIFO ({why}): the fix is the real-time practice, "
+            f"{LIMITS_HINT}")
+
+
 def verdict(evaluation: dict[str, Any], statuses: dict[str, dict[str, str]]) -> list[str]:
     """The reasons a run is degraded (module docstring); [] for a run to trust."""
     steps = max(int(evaluation.get("steps", 0)), 1)
@@ -75,7 +90,7 @@ def verdict(evaluation: dict[str, Any], statuses: dict[str, dict[str, str]]) -> 
     misses = int(evaluation.get("deadline_misses", 0))
     if misses > DEADLINE_MISS_LIMIT * steps:
         reasons.append(f"{misses} deadline misses ({100 * misses / steps:.1f} % of {steps} "
-                       f"samples, over {100 * DEADLINE_MISS_LIMIT:g} %)")
+                       f"samples, over {100 * DEADLINE_MISS_LIMIT:g} %)" + without_fifo(evaluation))
     if zeros := watchdog_zeros(statuses):
         reasons.append(f"{zeros} watchdog zeros")
     if "reduction_pct" in evaluation and not evaluation.get("commands_in_time", 1):

@@ -37,6 +37,11 @@ class LatencyLog:
         """The first command for a stamp counts (EUK and LQG answer on one topic each)."""
         self.commands.setdefault(stamp_ns, at_ns)
 
+    def latencies_us(self) -> dict[int, float]:
+        """The latency [µs] of every answered sample, by its stamp."""
+        return {s: (self.commands[s] - at) * 1e-3 for s, at in self.samples.items()
+                if s in self.commands}
+
     def summary(self) -> dict[str, float | int]:
         """p50 / p99 / max latency in µs over the answered samples, deadline misses (latency
         above one period), unanswered samples, samples before the first command

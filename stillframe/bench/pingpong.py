@@ -29,7 +29,7 @@ import struct
 import subprocess
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
@@ -55,6 +55,8 @@ BLOCK_S = 1.0
 BLOCK_DRAIN_NS = 20_000_000
 FINAL_DRAIN_S = 0.5
 READY_TIMEOUT_S = 30.0
+#: back to back: a pong not in after this long [ns] is lost, and the next ping goes
+LOST_NS = 10_000_000
 
 
 def topics(variant: str) -> tuple[str, str]:
@@ -164,16 +166,23 @@ class ApiPinger:
 
 
 def drive(pinger: Any, rate: float, seconds: float) -> int:
-    """Ping at ``rate`` for ``seconds``, receiving in between; the number of pings sent."""
-    period = round(1e9 / rate)
+    """Ping at ``rate`` for ``seconds``, receiving in between (``rate`` 0: back to back, the
+    next ping when the pong is in, as a lock-step loop sends; a ping lost is sent again after
+    :data:`LOST_NS`); the number of pings sent."""
+    period = round(1e9 / rate) if rate else 0
     start = time.monotonic_ns()
     end = start + round(seconds * 1e9)
-    sent = 0
+    sent, answered, sent_at = 0, len(pinger.rtts), 0
     while (now := time.monotonic_ns()) < end:
-        due = start + sent * period
+        if period:
+            due = start + sent * period
+        else:
+            due = now if (len(pinger.rtts) - answered >= sent
+                          or now - sent_at >= LOST_NS) else now + LOST_NS
         if now >= due:
             pinger.send()
             sent += 1
+            sent_at = now
         else:
             pinger.receive(due - now)
     drain_end = time.monotonic_ns() + BLOCK_DRAIN_NS
@@ -242,27 +251,29 @@ def _summary(sent: int, rtts: list[int]) -> dict[str, float]:
     }
 
 
-def measure(rate: float, duration: float) -> dict[str, dict[str, float]]:
-    """Run the three variants interleaved; per variant the figures of :func:`_summary`."""
+def measure(rate: float, duration: float,
+            variants: Sequence[str] = VARIANTS) -> dict[str, dict[str, float]]:
+    """Run ``variants`` interleaved at ``rate`` (0: back to back, :func:`drive`); per variant the
+    figures of :func:`_summary`."""
     env = dict(os.environ, PYTHONPATH=str(REPO_ROOT))
     peers = [
         subprocess.Popen([sys.executable, "-m", "stillframe.bench.pingpong",
                           "--peer", variant], env=env, stderr=subprocess.DEVNULL)
-        for variant in VARIANTS
+        for variant in variants
     ]
     nodes = {v: api.create_node(f"bench_transport_ping_{v}", argv=["bench"],
                                 backend="dds" if v == "dds_raw" else v)
-             for v in VARIANTS if v in (*api.BACKENDS, "dds_raw")}
+             for v in (*variants, "dds") if v in (*api.BACKENDS, "dds_raw")}
     node = nodes["dds"]
     try:
-        pingers = {"raw": RawPinger(), "typed": TypedPinger(),
-                   **{v: ApiPinger(n, v) for v, n in nodes.items()}}
+        cyclone = {"raw": RawPinger, "typed": TypedPinger}
+        pingers = {v: cyclone[v]() if v in cyclone else ApiPinger(nodes[v], v) for v in variants}
         _wait_ready(node, pingers)
-        sent = dict.fromkeys(VARIANTS, 0)
+        sent = dict.fromkeys(variants, 0)
         blocks = math.ceil(duration / BLOCK_S)
         for block in range(blocks):
             seconds = min(BLOCK_S, duration - block * BLOCK_S)
-            for variant in VARIANTS:
+            for variant in variants:
                 if not api.ok():
                     raise KeyboardInterrupt
                 sent[variant] += drive(pingers[variant], rate, seconds)
@@ -272,7 +283,7 @@ def measure(rate: float, duration: float) -> dict[str, dict[str, float]]:
         while time.monotonic() < drain_end:
             for pinger in pingers.values():
                 pinger.receive(5_000_000)
-        return {v: _summary(sent[v], pingers[v].rtts) for v in VARIANTS}
+        return {v: _summary(sent[v], pingers[v].rtts) for v in variants}
     finally:
         for each in nodes.values():
             each.destroy_node()

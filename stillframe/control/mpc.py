@@ -45,7 +45,7 @@ them) falls back to the anti-windup LQG command of the grid's model
 (:class:`~stillframe.control.lqg.ConditionedLQGLaw`, within the torque and rate limits by
 construction; the unconstrained MPC's own first move); ``fallbacks`` counts them, and
 controller_node reports the count in ``/diagnostics``. ``solve_s`` keeps the solver's own time of
-every solve (``stillframe bench controllers`` prints its p50 and p99 against the period).
+the last 10⁵ solves (``stillframe bench controllers`` prints its p50 and p99 against the period).
 """
 
 from __future__ import annotations
@@ -59,6 +59,7 @@ import scipy.sparse as sp
 
 from stillframe.control.limits import CommandLimits
 from stillframe.control.lqg import ConditionedLQGLaw, LQRDesign
+from stillframe.durations import Durations
 from stillframe.errors import InputError
 
 SOLVED = osqp.SolverStatus.OSQP_SOLVED
@@ -177,8 +178,7 @@ class MPCLaw:
                           self._u, max_iter=max_iter, **SETTINGS)
         self.previous = 0.0
         self.fallbacks = 0
-        self.solve_s: list[float] = []
-        self.iterations: list[int] = []
+        self.solve_s = Durations()
         self.last: np.ndarray | None = None                     # the last solution (N + 1)
         self.dual: np.ndarray | None = None                     # … and its multipliers
 
@@ -242,8 +242,7 @@ class MPCLaw:
             f = 1.0 / self.grid.samples                         # … one sample later
             self.solver.warm_start(x=np.append((1.0 - f) * v + f * ahead, self.last[-1]))
         result = self.solver.solve(raise_error=False)
-        self.solve_s.append(result.info.solve_time)
-        self.iterations.append(result.info.iter)
+        self.solve_s.add(result.info.solve_time)
         if result.info.status_val != SOLVED.value:
             self.fallbacks += 1
             self.last = None

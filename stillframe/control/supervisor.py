@@ -28,6 +28,7 @@ from stillframe.config.loop_sections import COMMAND_BOUND
 from stillframe.contract.signals import Command, Estimate
 from stillframe.control.limits import CommandLimits
 from stillframe.control.prediction import DelayPredictor
+from stillframe.durations import Durations
 
 #: A law output beyond this multiple of the command's limit is flagged ``runaway``.
 RUNAWAY_FACTOR = 10.0
@@ -75,8 +76,8 @@ class Controller:
         self.enabled = True
         self.latest: Estimate | None = None
         self.counters = ControllerCounters()
-        self.law_s: list[float] = []       # wall time of every law evaluation (compute_stats)
-        self.law_cpu_s: list[float] = []   # … and this thread's CPU time for it
+        self.law_s = Durations()           # wall time of each law evaluation (compute_stats)
+        self.law_cpu_s = Durations()       # … and this thread's CPU time for it
 
     @property
     def limit(self) -> float | None:
@@ -96,11 +97,9 @@ class Controller:
         wall time for a law that keeps it (MPC); empty before the first command."""
         stats: dict[str, float] = {}
         for name, times in (("", self.law_s), ("cpu_", self.law_cpu_s),
-                            ("solve_", getattr(self.law, "solve_s", []))):
-            if len(times):
-                p50, p99 = np.percentile(times, [50, 99])
-                stats.update({f"{name}p50": float(p50), f"{name}p99": float(p99),
-                              f"{name}max": float(np.max(times))})
+                            ("solve_", getattr(self.law, "solve_s", None))):
+            if times is not None and times.count:
+                stats.update({f"{name}{key}": 1e-3 * ms for key, ms in times.summary().items()})
         return stats
 
     def stale(self, t: float) -> bool:
@@ -134,8 +133,8 @@ class Controller:
         z = latest.z if self.predictor is None else self.predictor.ahead(latest.t, latest.z)
         started, started_cpu = time.perf_counter(), time.thread_time()
         value, out.singular = self.law(z, force)
-        self.law_s.append(time.perf_counter() - started)
-        self.law_cpu_s.append(time.thread_time() - started_cpu)
+        self.law_s.add(time.perf_counter() - started)
+        self.law_cpu_s.add(time.thread_time() - started_cpu)
         c.fallback = getattr(self.law, "fallbacks", 0)   # laws with a safe fallback count it
         if not np.isfinite(value):
             value, out.singular = 0.0, True

@@ -61,6 +61,8 @@ class Ready:
     sample: Sample
     control: np.ndarray
     complete: bool
+    first_ns: int = 0
+    """When the stamp's first message arrived (the caller's ``now_ns``)."""
 
 
 class SampleAssembly:
@@ -190,7 +192,7 @@ class SampleAssembly:
         del self.pending[p.ns]
         return Ready(p.ns, Sample(self.grid.seconds(p.ns), p.values[:4].copy(), float(p.values[4]),
                                   p.present.copy(), p.truth),
-                     self._control(p), complete)
+                     self._control(p), complete, p.first_ns)
 
     def _control(self, p: Pending) -> np.ndarray:
         """The actuation in effect over the period before ``p``: what the simulator reports it

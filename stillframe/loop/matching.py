@@ -35,6 +35,8 @@ class Matched:
     ns: int
     physical: np.ndarray
     force: float
+    arrival_ns: int = 0
+    """When the estimate arrived (the caller's ``now_ns``)."""
 
 
 class ForceMatching:
@@ -107,7 +109,7 @@ class ForceMatching:
         self.pending.pop(0)
         force = self.forces.get(ns, self.force)
         self.forces = {k: v for k, v in self.forces.items() if k > ns}
-        return Matched(ns, physical, force)
+        return Matched(ns, physical, force, arrival)
 
     def wait_ns_left(self, now_ns: int) -> int | None:
         """Nanoseconds until the oldest estimate stops waiting for its force (None: none waits

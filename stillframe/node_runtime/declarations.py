@@ -100,6 +100,18 @@ class RealtimeParameterValues(NodeParameters):
 
 
 @dataclass(frozen=True)
+class TimingParameterValues(NodeParameters):
+    """Every loop node: the per-sample phase timing (:mod:`.phase_timing`)."""
+
+    phase_timing: bool = param(True, doc=(
+        "time the phases of every sample into a preallocated ring (a few µs a sample); false: "
+        "not at all"))
+    phase_log: str = param("", doc=(
+        "at the end, write the ring to `<phase_log>/<node>.npz` (`stillframe bench loop` "
+        "reads it); empty: kept in memory only"))
+
+
+@dataclass(frozen=True)
 class ManagedParameterValues(NodeParameters):
     """The managed (lifecycle) nodes: estimator_node and controller_node."""
 
@@ -195,7 +207,7 @@ class ControllerParameterValues(NodeParameters):
             "the command is clipped to ±limit; 0: no limit"))
 
 
-_COMMON = (LoopParameterValues, RealtimeParameterValues)
+_COMMON = (LoopParameterValues, RealtimeParameterValues, TimingParameterValues)
 #: the parameter declarations of each node, in the order they are declared
 #: the loop's nodes by their default names (a node waits for its peers by these names, or by
 #: the writer pins when set: docs/nodes.md, lock-step protocol)

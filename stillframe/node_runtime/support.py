@@ -13,8 +13,6 @@ from collections.abc import Callable
 from dataclasses import dataclass, replace
 from typing import Any
 
-import numpy as np
-
 from stillframe.config.scene import Scene, load_scene
 from stillframe.contract import messages, topics
 from stillframe.fidelity.auto_model import resolve_model
@@ -155,44 +153,6 @@ def _text(value: Any) -> str:
 def diagnostic_values(msg: Any) -> dict[str, str]:
     """The key/value pairs of the first status of a DiagnosticArray (for tools and tests)."""
     return {kv.key: kv.value for kv in msg.status[0].values} if msg.status else {}
-
-
-class Durations:
-    """Wall-clock durations [s] (latencies, compute times) kept in a preallocated ring of the
-    last ``keep``: percentiles in ms over all of them (:meth:`summary`, for a run's result) or
-    over those added since the last report (:meth:`recent`, for ``/diagnostics``). A report
-    costs what its window holds, not the whole run: at 1 kHz a summary over the run's 10⁵
-    values took milliseconds, once a second, inside the loop."""
-
-    def __init__(self, keep: int = 100_000) -> None:
-        self.values = np.empty(keep)
-        self.count = 0              # values added, ever
-        self.reported = 0           # ``count`` at the last :meth:`recent`
-
-    def add(self, seconds: float) -> None:
-        self.values[self.count % len(self.values)] = seconds
-        self.count += 1
-
-    def summary(self) -> dict[str, float]:
-        """Over every value kept."""
-        return self._percentiles(self.values[:min(self.count, len(self.values))])
-
-    def recent(self) -> dict[str, float]:
-        """Over the values added since the last call (at most ``keep``)."""
-        n = min(self.count - self.reported, len(self.values))
-        self.reported = self.count
-        end = self.count % len(self.values)
-        window = (self.values[end - n:end] if n <= end
-                  else np.concatenate([self.values[end - n:], self.values[:end]]))
-        return self._percentiles(window)
-
-    @staticmethod
-    def _percentiles(seconds: np.ndarray) -> dict[str, float]:
-        if not len(seconds):
-            return {"p50": float("nan"), "p99": float("nan"), "max": float("nan")}
-        p50, p99 = np.percentile(seconds, (50, 99))
-        return {"p50": 1e3 * float(p50), "p99": 1e3 * float(p99),
-                "max": 1e3 * float(seconds.max())}
 
 
 class RateMeter:

@@ -53,14 +53,16 @@ class Probe:
         self.cmd = self.node.create_publisher(topics.TORQUE_CMD.type_name, topics.TORQUE_CMD.name,
                                               topics.TORQUE_CMD.qos)
         self.answers = answers
-        self.node.create_subscription(topics.STATE_TRUTH.type_name, topics.STATE_TRUTH.name,
-                                      self.answer, topics.STATE_TRUTH.qos)
+        # a controller answers once its load cell is in (the last message the loop waits for;
+        # state_truth comes after the command, docs/nodes.md, lock-step protocol)
+        wrench = topics.EXCITATION_WRENCH      # reliable, as the loop's own readers in lock-step
+        self.node.create_subscription(wrench.type_name, wrench.name, self.answer, "default")
 
-    def answer(self, truth: object) -> None:
-        k = round(messages.stamp_ns(truth.header.stamp) * 1e-9 * RATE_HZ)
+    def answer(self, reading: object) -> None:
+        k = round(messages.stamp_ns(reading.header.stamp) * 1e-9 * RATE_HZ)
         if k < self.answers:
             msg = messages.new("geometry_msgs/msg/WrenchStamped")
-            msg.header.stamp = truth.header.stamp
+            msg.header.stamp = reading.header.stamp
             msg.wrench.torque.z = torque(k)
             self.cmd.publish(msg)
 

@@ -40,7 +40,7 @@ def run(args: argparse.Namespace) -> int:
     backends = args.backends or [b for b in api.BACKENDS if b == "dds" or api.has_rclpy()]
     for backend in backends:
         api.check_backend(backend, f"bench hops --backend {backend}")
-    rows = compute_hops(scene, args.number)
+    rows = [*compute_hops(scene, args.number), phase_timing_hop(args.number)]
     for backend in backends:
         rows += dds_hops(scene, backend, args.number)
     if args.json:
@@ -53,3 +53,22 @@ def run(args: argparse.Namespace) -> int:
           "" if r["rosbags_us"] is None else f"{r['rosbags_us'] / r['us']:.1f}"]
          for r in rows]))
     return 0
+
+
+def phase_timing_hop(number: int, repeats: int = 7) -> dict[str, object]:
+    """What sim_node's phase timing (:mod:`stillframe.node_runtime.phase_timing`) costs a
+    sample: a row begun, every mark made, the counters read."""
+    from stillframe.bench.hops import per_call_us
+    from stillframe.node_runtime.phase_timing import MARKS, PhaseLog
+
+    timing = PhaseLog("sim_node", MARKS["sim_node"], capacity=number)
+    slots = list(timing.slots.values())
+
+    def row() -> None:
+        timing.begin(1_000_000)
+        for slot in slots[:-1]:
+            timing.mark(slot)
+        timing.end(slots[-1])
+
+    return {"node": "sim_node", "hop": f"phase timing of a sample ({len(slots)} marks, counters)",
+            "us": per_call_us(row, number, repeats), "rosbags_us": None}

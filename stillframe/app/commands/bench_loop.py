@@ -1,12 +1,15 @@
 """``stillframe bench loop``: the closed loop's latency in real time and its lock-step speed.
 
 1. Real-time mode at 100 Hz and 1 kHz (the LQG scene with ``sensors.rate_hz`` and a matching
-   ``integrator.dt``): sensor-stamp-to-command latency p50 / p99 / max and deadline misses, seen
-   by an observer in this process (:mod:`stillframe.bench.latency`), beside sim_node's overruns.
+   ``integrator.dt``): sensor-stamp-to-command latency p50 / p99 / max and deadline misses, timed
+   by the nodes' own phase rings (:mod:`stillframe.bench.phases`; ``--dds-observer``: by an
+   observer node in this process, :mod:`stillframe.bench.latency`), beside sim_node's overruns,
+   with a histogram, the worst ten samples explained phase by phase, and each step of a sample.
 2. Lock-step: the full LQG scene through the three nodes, steps per second and the ratio of
    simulated to wall time, against the same scene in one process (``closed-loop``, the best of
    :data:`ONE_PROCESS_RUNS` in this run: the baseline is the loop's cost, not the machine's
-   noise).
+   noise); each hop of a sample against a raw Cyclone ping-pong measured in the same run, and
+   the phase timing's own cost (runs without it beside runs with it).
 
 Both run once per middleware backend (``dds``: Cyclone; ``rclpy``: real rclpy on Fast DDS), all
 three nodes on it, so the backends are compared in the same run. ``--compose`` /
@@ -38,6 +41,8 @@ from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from stillframe.app.commands.common import add_json_argument, emit_json, seconds
 from stillframe.app.commands.launch import (
     add_compose_arguments,
@@ -48,6 +53,8 @@ from stillframe.app.commands.launch import (
 )
 from stillframe.app.launcher import run_scene
 from stillframe.app.run_verdict import watchdog_zeros
+from stillframe.bench import phases, pingpong
+from stillframe.bench.busy import busy_loops
 from stillframe.bench.latency import LatencyLog
 from stillframe.bench.recorder_load import (
     RecorderRun,
@@ -70,6 +77,8 @@ SCENE = SCENES_DIR / "thesis_lqg.yaml"
 RATES_HZ: tuple[float, ...] = (100.0, 1000.0)
 #: one-process runs of the scene; the fastest is the baseline
 ONE_PROCESS_RUNS = 3
+#: seconds of raw Cyclone ping-pong, back to back, for the floor of a lock-step hop
+FLOOR_S = 3.0
 
 
 def register(benches: argparse._SubParsersAction) -> None:
@@ -96,6 +105,16 @@ def register(benches: argparse._SubParsersAction) -> None:
     parser.add_argument("--track", action="store_true",
                         help="run each real-time run twice, without and with the modal tracker "
                              "(`launch --track`) beside it: deadline misses and p50/p99 of each")
+    parser.add_argument("--load", type=int, default=0, metavar="N",
+                        help="run each real-time run twice, without and with N busy loops "
+                             "(`sh -c 'while :; do :; done'`, each in its own session) beside "
+                             "it: the loop's figures on a busy workstation against its quiet "
+                             "twin, in the same run")
+    parser.add_argument("--dds-observer", action="store_true",
+                        help="time each sample's latency by an observer node in this process "
+                             "(DDS source timestamps of the floor-1 IMU and the command), as a "
+                             "cross-check; by default the nodes' own phase rings time it, and no "
+                             "observer takes messages, CPU or wake-ups from the loop")
     parser.add_argument("--stall-probe", action="store_true",
                         help="run cyclictest (rt-tests, root) beside each real-time run: "
                              "the machine's stalls of 1 ms or more, and its worst")
@@ -185,40 +204,62 @@ def realtime(rate_hz: float, duration: float, out: Path, backend: str,
              rt: tuple[str, list[int]] = ("", []),
              monitor_args: list[str] | None = None, compose: str = "",
              probe: bool = False, record: Sequence[str] | None = None,
-             track: bool = False) -> dict[str, Any]:
+             track: bool = False, dds_observer: bool = False, load: int = 0) -> dict[str, Any]:
     """The LQG scene in real time at ``rate_hz`` through the nodes on ``backend`` (composed as
-    ``compose`` says): latency and deadline figures seen by an observer here;
-    ``monitor_args`` start a monitor beside them; ``probe``: cyclictest beside them;
+    ``compose`` says): latency and deadline figures from the nodes' phase rings
+    (:func:`stillframe.bench.phases.latency_log`), or with ``dds_observer`` as an observer here
+    sees them; ``monitor_args`` start a monitor beside them; ``probe``: cyclictest beside them;
     ``record``: ``stillframe record --all`` beside them with these further arguments
     (:mod:`stillframe.bench.recorder_load`; None: no recorder);
-    ``track``: the modal tracker beside them (:mod:`stillframe.app.tracking`)."""
+    ``track``: the modal tracker beside them (:mod:`stillframe.app.tracking`); ``load``: that
+    many busy loops beside them (:mod:`stillframe.bench.busy`)."""
     log = LatencyLog(round(1e9 / rate_hz))
     others = CpuShare()
     children_before = children_cpu_s()
-    with (observer_backend(backend), observer_realtime(rt[0]),
+    with (observer_backend(backend),
+          observer_realtime(rt[0]) if dds_observer else contextlib.nullcontext(),
           stall_probe() if probe else contextlib.nullcontext() as stalls,
+          busy_loops(load),
           recorder_process(out / "bag", backend, record) if record is not None
           else contextlib.nullcontext() as recorder):
         result = run_scene(SCENE, realtime_overrides(rate_hz, duration), out=out, mode="realtime",
-                           prepare=observe(log), backends=[backend], rt=rt[0], rt_cpus=rt[1],
-                           monitor_args=monitor_args, compose=compose, track=track)
+                           prepare=observe(log) if dds_observer else None, backends=[backend],
+                           rt=rt[0], rt_cpus=rt[1],
+                           monitor_args=monitor_args, compose=compose, track=track,
+                           phase_log=out / "phases")
     share = others.stop()      # the children are reaped here, the recorder too
     nodes_cpu_s = children_cpu_s() - children_before - (recorder.total_cpu_s if recorder else 0)
     e = result.evaluation
     recorded = recorder_figures(recorder, e["steps"], rate_hz) if recorder else {}
     if recorder:
         shutil.rmtree(recorder.bag, ignore_errors=True)   # read; its pages leave the cache
+    rings = phases.load(out / "phases") if (out / "phases").is_dir() else {}
+    if not dds_observer:
+        log = phases.latency_log(rings, log.period_ns)
     summary = log.summary()
     zeros = watchdog_zeros(result.diagnostics)
+    explained = explain_latency(log, out / "phases")
     return {"backend": backend, "compose": compose, "rate_hz": rate_hz, "rt": rt[0],
+            "latency_from": "dds observer" if dds_observer else "phase rings",
             "rt_cpus": rt[1], **summary, "watchdog_zeros": zeros,
             "within_period_pct": within_period_pct(summary, zeros or 0),
             "sim_overruns": e.get("overruns"), "sim_deadline_misses": e.get("deadline_misses"),
             "steps": e["steps"], "degraded_samples": e.get("degraded_samples"),
             "load_1min": os.getloadavg()[0], **share, "nodes_cpu_s": nodes_cpu_s,
             "record": record is not None, "recorder_args": " ".join(record or []), **recorded,
-            "track": track, "tracker_updates": len(result.tracked_modes),
-            **(stalls.summary if stalls else {})}
+            "track": track, "tracker_updates": len(result.tracked_modes), "busy_loops": load,
+            **(stalls.summary if stalls else {}), **explained}
+
+
+def explain_latency(log: LatencyLog, directory: Path) -> dict[str, Any]:
+    """The latency histogram of the samples the observer saw answered, the worst ten explained
+    by the nodes' phase rings in ``directory`` (when they wrote them), and each step's figures
+    along the path."""
+    latency = log.latencies_us()
+    figures = path_figures(directory)
+    paths = (phases.SamplePaths(phases.load(directory)) if figures else None)
+    return {"histogram": phases.histogram(np.array(list(latency.values()))),
+            "worst": phases.worst(latency, paths), **figures}
 
 
 def recorder_figures(recorder: RecorderRun, steps: int, rate_hz: float) -> dict[str, Any]:
@@ -277,15 +318,23 @@ def goal_rows(rows: list[dict[str, Any]], speeds: list[dict[str, Any]]) -> list[
 
 
 def lockstep(out: Path, backend: str, one: dict[str, Any], compose: str,
-             rt: tuple[str, list[int]] = ("", [])) -> dict[str, Any]:
+             rt: tuple[str, list[int]] = ("", []), pairs: int = 1) -> dict[str, Any]:
     """The full LQG scene through the nodes on ``backend`` (with the real-time practices ``rt``)
     against ``one`` (one process); with ``compose`` ("pair", "all") also with those nodes
-    composed in one process."""
+    composed in one process. ``pairs`` times a run without the phase timing, then one with it:
+    the timing's cost as the ratio of their walls, and the last timed run's path per hop."""
     scene = load_scene(SCENE)
-    started = time.perf_counter()
-    nodes = run_scene(SCENE, out=out, mode="lockstep", backends=[backend], rt=rt[0],
-                      rt_cpus=rt[1]).evaluation
-    launch_wall = time.perf_counter() - started
+    walls: dict[bool, list[float]] = {False: [], True: []}
+    for pair in range(pairs):
+        for timed in (False, True):
+            where = out / f"{'timed' if timed else 'untimed'}-{pair}"
+            started = time.perf_counter()
+            nodes = run_scene(SCENE, out=where, mode="lockstep", backends=[backend], rt=rt[0],
+                              rt_cpus=rt[1], phase_timing=timed,
+                              phase_log=where / "phases" if timed else None).evaluation
+            launch_wall = time.perf_counter() - started
+            walls[timed].append(nodes["wall_s"])
+    hops = path_figures(where / "phases")
     composed = {}
     if compose:
         c = run_scene(SCENE, out=out / "composed", mode="lockstep", backends=[backend],
@@ -304,12 +353,29 @@ def lockstep(out: Path, backend: str, one: dict[str, Any], compose: str,
         "nodes_over_one_process": one["loop_s"] / nodes["wall_s"],
         "complete": nodes.get("complete"),
         "reduction_pct": nodes["reduction_pct"],
+        "untimed_wall_s": walls[False], "timed_wall_s": walls[True],
+        "timing_cost_ratio": float(np.median(np.array(walls[True]) / np.array(walls[False]))),
+        **hops,
     }
+
+
+def path_figures(directory: Path) -> dict[str, Any]:
+    """The phase rings the nodes wrote to ``directory`` as each step's figures along a sample's
+    path and beside it (:mod:`stillframe.bench.phases`); empty when sim_node's is missing."""
+    rings = phases.load(directory) if directory.is_dir() else {}
+    if phases.SIM not in rings:
+        return {}
+    paths = phases.SamplePaths(rings)
+    return {"path": paths.table(phases.PATH), "beside": paths.table(phases.BESIDE),
+            "rt_budget": phases.rt_budget(rings),
+            "rt_applied": {node: ring.meta.get("rt_applied", []) for node, ring in rings.items()},
+            "rt_refused": {node: ring.meta.get("rt_refused", []) for node, ring in rings.items()}}
 
 
 def twin(rows: list[dict[str, Any]], r: dict[str, Any]) -> dict[str, Any] | None:
     """The run without recorder or tracker of the same backend, rate and repeat as ``r``."""
     return next((b for b in rows if not b["record"] and not b["track"]
+                 and not b.get("busy_loops")
                  and (b["backend"], b["rate_hz"], b.get("repeat", 0))
                  == (r["backend"], r["rate_hz"], r.get("repeat", 0))), None)
 
@@ -362,6 +428,24 @@ def recorder_table(rows: list[dict[str, Any]]) -> str:
          for r in rows])
 
 
+def loaded_table(rows: list[dict[str, Any]]) -> str:
+    """Each run beside the busy loops against its quiet twin: the share within the period, the
+    latency p50 / p99 / max and sim_node's deadline misses of each, and the p99 ratio."""
+    out = []
+    for r in rows:
+        base = twin(rows, r)
+        if not r.get("busy_loops") or base is None:
+            continue
+        out.append([r["backend"], f"{r['rate_hz']:g}", r["rt"] or "-", r["busy_loops"],
+                    *(f"{base[k]:.2f} / {r[k]:.2f}" for k in ("within_period_pct",)),
+                    *(f"{base[k]:.0f} / {r[k]:.0f}" for k in ("p50_us", "p99_us", "max_us")),
+                    f"{base['sim_deadline_misses']} / {r['sim_deadline_misses']}",
+                    f"{r['p99_us'] / base['p99_us']:.2f}" if base["p99_us"] else "-"])
+    return format_table(
+        ["backend", "rate [Hz]", "--rt", "busy loops", "within period [%] (quiet / loaded)",
+         "p50 [us]", "p99 [us]", "max [us]", "sim deadline misses", "p99 loaded / quiet"], out)
+
+
 def tracker_rows(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
     """Per backend and rate, the run with the modal tracker against the one without: deadline
     misses (the observer's and sim_node's) and latency p50 / p99 of each, and with / without."""
@@ -403,18 +487,22 @@ def run(args: argparse.Namespace) -> int:
     rates = args.rates or list(RATES_HZ)
     if not all(1.0 <= r <= 10_000.0 for r in rates):
         raise InputError(f"bench loop: --rate must be 1..10000 Hz, got {rates}")
+    if not 0 <= args.load <= 64:
+        raise InputError(f"bench loop: --load must be 0..64 busy loops, got {args.load}")
     if not 1 <= args.repeat <= 100:
         raise InputError(f"bench loop: --repeat must be 1..100, got {args.repeat}")
     one = min((run_closed_loop(load_scene(SCENE)).evaluation for _ in range(ONE_PROCESS_RUNS)),
               key=lambda e: e["loop_s"]) if args.lockstep else {}
-    rows, speeds = [], []
+    rows, speeds, floor = [], [], {}
     with tempfile.TemporaryDirectory(prefix="stillframe-bench-loop-") as tmp:
         for backend in backends:
             for rate, repeat in ((rate, i) for rate in rates for i in range(args.repeat)):
                 variants = [("", {})] + ([("recorded", {"record": recorder_args(args) or []})]
                                           if args.record
                                           else []) + ([("tracked", {"track": True})]
-                                                      if args.track else [])
+                                                      if args.track else []) + (
+                    [(f"beside {args.load} busy loops", {"load": args.load})] if args.load
+                    else [])
                 for name, extra in variants:
                     settled = settle()
                     print(f"{backend}: real time at {rate:g} Hz for {args.duration:g} s"
@@ -425,11 +513,16 @@ def run(args: argparse.Namespace) -> int:
                     rows.append({"repeat": repeat, **settled.figures(), **realtime(
                         rate, args.duration,
                         Path(tmp) / f"{backend}{rate:g}-{repeat}{'-' + name if name else ''}",
-                        backend, rt, compose=args.compose, probe=args.stall_probe, **extra)})
+                        backend, rt, compose=args.compose, probe=args.stall_probe,
+                        dds_observer=args.dds_observer, **extra)})
             if args.lockstep:
                 print(f"{backend}: lock-step, the full LQG scene", file=sys.stderr)
                 speeds.append(lockstep(Path(tmp) / f"{backend}-lockstep", backend, one,
-                                       args.compose, rt))
+                                       args.compose, rt, pairs=args.repeat))
+        if args.lockstep:
+            print(f"raw Cyclone ping-pong, back to back, {FLOOR_S:g} s (the floor of a hop)",
+                  file=sys.stderr)
+            floor = pingpong.measure(0, FLOOR_S, ("raw",))["raw"]
     for r in rows:
         if r["record"]:
             ratio, r["holds_issue_32"] = recorder_verdict(r, twin(rows, r))
@@ -437,14 +530,16 @@ def run(args: argparse.Namespace) -> int:
     goals = goal_rows(rows, speeds)
     if args.json:
         emit_json({"realtime": rows, "lockstep": speeds, "goals": goals,
-                   "tracker": tracker_rows(rows), "cpus": os.cpu_count()})
+                   "tracker": tracker_rows(rows), "cpus": os.cpu_count(), "floor": floor})
         return 0
     print(format_table(
-        ["backend", "composed", "rate [Hz]", "samples", "answered", "within period [%]", "p50 [us]",
+        ["backend", "composed", "rate [Hz]", "busy loops", "samples", "answered",
+         "within period [%]", "p50 [us]",
          "p99 [us]", "max [us]", "deadline misses", "watchdog zeros", "unanswered", "unobserved",
          "sim overruns",
          "machine stalls (worst [us])", "load", "others' CPUs (niced)"],
-        [[r["backend"], r["compose"] or "-", f"{r['rate_hz']:g}", r["samples"], r["answered"],
+        [[r["backend"], r["compose"] or "-", f"{r['rate_hz']:g}", r["busy_loops"], r["samples"],
+          r["answered"],
           f"{r['within_period_pct']:.2f}", f"{r['p50_us']:.0f}",
           f"{r['p99_us']:.0f}", f"{r['max_us']:.0f}", r["deadline_misses"],
           "-" if r["watchdog_zeros"] is None else r["watchdog_zeros"], r["unanswered"],
@@ -456,6 +551,10 @@ def run(args: argparse.Namespace) -> int:
         print(recorder_table([r for r in rows if not r["track"]]))
     if args.track:
         print(tracker_table(tracker_rows(rows)))
+    if args.load:
+        print(loaded_table(rows))
+    for r in rows:
+        print(explained_text(r))
     print(format_table(["figure", "backend", "measured", "goal", "met"],
                        [[g["figure"], g["backend"], f"{g['value']:.4g}", g["goal"],
                          "yes" if g["met"] else "NO"] for g in goals]))
@@ -472,4 +571,23 @@ def run(args: argparse.Namespace) -> int:
            for s in speeds if args.compose]
         + [["one process", one["steps"], f"{one['loop_s']:.2f}",
             f"{one['steps'] / one['loop_s']:.0f}", "", "1.00", ""]]))
+    for s in speeds:
+        print(f"\n{s['backend']}: lock-step, one sample's path (the last timed run); phase timing "
+              f"costs x{s['timing_cost_ratio']:.3f} of the wall of a run without it "
+              f"(median of {len(s['timed_wall_s'])} pair(s), same run)")
+        if "path" in s:
+            print(phases.path_table(s["path"], s["beside"], floor.get("p50_us")))
     return 0
+
+
+def explained_text(r: dict[str, Any]) -> str:
+    """A real-time run's latency histogram and worst ten samples, explained."""
+    head = (f"\n{r['backend']}{' composed ' + r['compose'] if r['compose'] else ''}, "
+            f"{r['rate_hz']:g} Hz{' --rt ' + r['rt'] if r['rt'] else ''}")
+    parts = [f"{head}: latency of the samples answered", phases.histogram_text(r["histogram"]),
+             f"{head}: the worst ten samples", phases.worst_text(r["worst"])]
+    if "path" in r:
+        parts += [f"{head}: each step of a sample (nodes' practices: "
+                  + "; ".join(f"{n} {', '.join(a) or 'none'}" for n, a in r["rt_applied"].items())
+                  + ")", phases.path_table(r["path"], r["beside"]), r["rt_budget"]]
+    return "\n".join(parts)

@@ -21,14 +21,15 @@ def register(benches: argparse._SubParsersAction) -> None:
     parser.add_argument("--duration", type=seconds, default=10.0, metavar="S",
                         help="seconds of pinging per variant (default 10)")
     parser.add_argument("--rate", type=float, default=1000.0, metavar="HZ",
-                        help="pings per second (default 1000)")
+                        help="pings per second (default 1000; 0: back to back, the next ping "
+                             "as soon as the pong is in, as a lock-step loop goes)")
     add_json_argument(parser)
     parser.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    if not args.duration > 0 or not args.rate > 0:
-        raise InputError("bench transport: --duration and --rate must be > 0")
+    if not args.duration > 0 or not args.rate >= 0:
+        raise InputError("bench transport: --duration must be > 0 and --rate >= 0")
     from stillframe.bench.pingpong import IMU, measure
     from stillframe.middleware import api
 

@@ -174,8 +174,8 @@ def add_compose_arguments(parser: argparse.ArgumentParser) -> None:
 def add_realtime_arguments(parser: argparse.ArgumentParser, *, launch: bool = True) -> None:
     """``--rt [PRACTICES]`` and ``--rt-cpus`` (shared with ``bench loop``, which has no default
     practices: ``launch`` False)."""
-    default = (f"none, but all for a --record'ed real-time run above {RECORDED_ABOVE_HZ:g} Hz"
-               if launch else "none")
+    default = ("all in --mode realtime, each practice where you may (one line says which), "
+               "none in lock-step" if launch else "none")
     parser.add_argument("--rt", nargs="?", const="all", default=None, metavar="PRACTICES",
                         help="real-time mode for the loop nodes: 'all' (the default with --rt), "
                              "'none', or a comma list of mlock, gc, fifo, affinity, spin, "

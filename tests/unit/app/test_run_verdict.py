@@ -91,3 +91,29 @@ def test_foreign_writers_are_named_per_node_and_topic() -> None:
         "/rogue_tuner on /frame/pendulum/torque_cmd (40 refused by /frame/sim_node); "
         "/rogue_tuner on /frame/pendulum/torque_cmd (12 refused by /frame/estimator_node)")
     assert foreign_writers(CLEAN, STATUS) == []
+
+
+@pytest.mark.parametrize(("practices", "says"), [
+    ({"applied": ["gc frozen and off in the loop"],
+      "refused": ["SCHED_FIFO not permitted: RLIMIT_RTPRIO 0 and no CAP_SYS_NICE"]},
+     "the nodes without SCHED_FIFO (SCHED_FIFO not permitted: RLIMIT_RTPRIO 0 and no "
+     "CAP_SYS_NICE): the fix is the real-time practice, add yourself to a `realtime` group "
+     "with `@realtime - rtprio 98`"),
+    ({"applied": ["gc frozen and off in the loop"], "refused": []},
+     "the nodes without SCHED_FIFO (SCHED_FIFO not asked for (--rt)): the fix is the real-time "
+     "practice"),
+])
+def test_deadline_misses_without_sched_fifo_name_the_practice_as_the_fix(
+        practices: dict, says: str) -> None:
+    reasons = verdict({**CLEAN, "deadline_misses": 81, "realtime": practices}, STATUS)
+    assert len(reasons) == 1
+    assert reasons[0].startswith("81 deadline misses (8.4 % of 960 samples, over 1 %), " + says)
+
+
+def test_deadline_misses_with_sched_fifo_say_nothing_of_the_practice() -> None:
+    practices = {"applied": ["SCHED_FIFO 80 on 4 threads (CAP_SYS_NICE); BLAS on one thread"],
+                 "refused": []}
+    assert verdict({**CLEAN, "deadline_misses": 81, "realtime": practices}, STATUS) == [
+        "81 deadline misses (8.4 % of 960 samples, over 1 %)"]
+    # a run without misses is clean, with or without the practice
+    assert verdict({**CLEAN, "realtime": {"applied": [], "refused": []}}, STATUS) == []
