@@ -93,6 +93,7 @@ from stillframe.node_runtime.support import (
     has_publisher,
     has_subscriber,
     hears_peer,
+    malformed_samples,
     reaches_peer,
     wait_for_peers,
 )
@@ -184,7 +185,7 @@ class SimNode(base.LoopNode):
             return
         read = self.readers[actuator].read(cdr)
         if read is None:
-            api.MALFORMED[COMMAND_TOPICS[actuator].name] += 1
+            self.node.malformed[COMMAND_TOPICS[actuator].name] += 1
             return
         ns, value = read
         fresh = ns != step.command_ns[actuator]
@@ -448,7 +449,7 @@ class SimNode(base.LoopNode):
         history.evaluation.update({
             "complete": done == n, "steps_planned": n,
             "mode": p.mode, "steps": done, "wall_s": time.perf_counter() - wall,
-            "malformed_samples": sum(api.MALFORMED.values()),
+            "malformed_samples": malformed_samples(self.node),
             **self.pacer.counts, **self.step.counts, "latency_ms": self.latency.summary(),
             "commands_in_time": self.commands_in_time,
             "command_gates": self.step.gate_reports([t.name for t in COMMAND_TOPICS]),

@@ -37,9 +37,9 @@ from stillframe.middleware.backend_choice import (
     has_rclpy,
 )
 from stillframe.middleware.clock import Clock, Time
+from stillframe.middleware.cyclone_log import DROPPED as CYCLONE_DROPPED
 from stillframe.middleware.cyclone_log import count_deserialization_failures
 from stillframe.middleware.interface import (
-    MALFORMED,
     ManagedNode,
     MessageInfo,
     Node,
@@ -56,7 +56,7 @@ from stillframe.middleware.interface import (
 )
 from stillframe.middleware.params import Parameter, SetParametersResult
 
-__all__ = ["BACKENDS", "BACKEND_ENV", "MALFORMED", "ManagedNode", "MessageInfo", "Node",
+__all__ = ["BACKENDS", "BACKEND_ENV", "CYCLONE_DROPPED", "ManagedNode", "MessageInfo", "Node",
            "Parameter", "Publisher", "SetParametersResult", "Subscription", "Timer",
            "TopicEndpointInfo", "backend_name",
            "check_backend", "create_node", "deliver", "freeze_setup_objects", "has_rclpy",

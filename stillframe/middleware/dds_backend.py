@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import itertools
 import time
+from collections import Counter
 from collections.abc import Callable
 from typing import Any, ClassVar
 
@@ -416,6 +417,7 @@ class DdsSubscription:
         self.qos_profile = qos
         self.raw = raw
         self.callback = callback
+        self.malformed = node.malformed
         #: the process's own writers hand their samples over (:mod:`.intra_process`) and the
         #: reader ignores them
         self.intra = intra
@@ -489,7 +491,8 @@ class DdsSubscription:
             if self.raw:
                 self.callback(bytes(data), self._info(info))
             else:
-                interface.deliver(self.callback, data, self.msg_type, self.topic_name)
+                interface.deliver(self.callback, data, self.msg_type, self.topic_name,
+                                  self.malformed)
         return len(samples)
 
 
@@ -553,6 +556,7 @@ class DdsNode:
         self._params = params.Parameters(fqn, params.node_overrides(ros_args, fqn))
         self.user_args = ros_args.user_args
         self.context = Context.get()
+        self.malformed: Counter[str] = Counter()
         self._publishers: list[DdsPublisher] = []
         self._subscriptions: list[DdsSubscription] = []
         self._polled: list[DdsSubscription] = []    # readers outside the wait set

@@ -81,6 +81,10 @@ class Node(Protocol):
     """What every backend's node offers."""
 
     backend: str
+    #: samples per topic that did not decode (malformed CDR), dropped by this node's
+    #: subscriptions (:func:`deliver`, and the loop's raw readers); the loop nodes report them in
+    #: ``/diagnostics``
+    malformed: Counter[str]
 
     def get_name(self) -> str: ...
     def get_namespace(self) -> str: ...
@@ -131,17 +135,13 @@ class ManagedNode(Node, Protocol):
     def trigger(self, transition: str) -> str: ...
 
 
-#: samples per topic that did not decode (malformed CDR), dropped by the subscriptions of this
-#: process; the loop nodes report them in ``/diagnostics``
-MALFORMED: Counter[str] = Counter()
-
-
 def deliver(callback: Callable[[Any], None], data: bytes | memoryview, type_name: str,
-            topic: str) -> None:
-    """Decode ``data`` and hand it to ``callback``; a malformed sample is dropped and counted."""
+            topic: str, malformed: Counter[str]) -> None:
+    """Decode ``data`` and hand it to ``callback``; a malformed sample is dropped and counted in
+    ``malformed`` (its node's :attr:`Node.malformed`)."""
     msg = messages.decode_sample(data, type_name)
     if msg is None:
-        MALFORMED[topic] += 1
+        malformed[topic] += 1
     else:
         callback(msg)
 

@@ -13,6 +13,7 @@ from __future__ import annotations
 import array
 import importlib
 import time
+from collections import Counter
 from collections.abc import Callable
 from dataclasses import replace
 from typing import Any
@@ -285,6 +286,7 @@ class RclpyNode:
             where = "ROS_STATIC_PEERS: " if "peer" in reason else ""
             raise InputError(f"{where}rcl cannot create node {name!r}: {reason}") from None
         self.user_args = rclpy.utilities.remove_ros_args(["stillframe", *args])[1:]
+        self.malformed: Counter[str] = Counter()
         self._clock = RclpyClock(self._node.get_clock())
         if RclpyNode._wait is None:
             RclpyNode._wait = SubscriptionWait(SingleThreadedExecutor())
@@ -397,7 +399,7 @@ class RclpyNode:
             if raw:
                 callback(data, message_info(info, self._clock))
             else:
-                interface.deliver(callback, data, name, topic)
+                interface.deliver(callback, data, name, topic, self.malformed)
 
         return self._node.create_subscription(
             ros_message_class(name), topic, on_data, rclpy_qos(as_profile(qos)),

@@ -117,6 +117,12 @@ def declare_loop_parameters(node: api.Node) -> LoopParameters:
     return LoopParameters(scene, values.mode, values.diagnostics_period_s, values.run_token)
 
 
+def malformed_samples(node: api.Node) -> int:
+    """The samples that did not decode: those ``node``'s subscriptions dropped, and those
+    Cyclone dropped in this process before any node saw them (:mod:`.cyclone_log`)."""
+    return sum(node.malformed.values()) + sum(api.CYCLONE_DROPPED.values())
+
+
 class Diagnostics:
     """One ``diagnostic_msgs/DiagnosticStatus`` per node on ``/diagnostics``, published at most
     every ``period_s`` of wall time (and on :meth:`publish` with ``force``)."""
@@ -124,6 +130,7 @@ class Diagnostics:
     def __init__(self, node: api.Node, period_s: float) -> None:
         self.pub = node.create_publisher(topics.DIAGNOSTICS.type_name, topics.DIAGNOSTICS.name,
                                          topics.DIAGNOSTICS.qos)
+        self.node = node
         self.name = f"{node.get_namespace().rstrip('/')}/{node.get_name()}"
         self.period_s = period_s
         self.next = time.monotonic() + period_s
@@ -134,7 +141,7 @@ class Diagnostics:
     def publish(self, stamp_ns: int, values: dict[str, Any], level: int = OK,
                 message: str = "") -> None:
         kv = messages.msg_class("diagnostic_msgs/msg/KeyValue")
-        values = {**values, "malformed_samples": sum(api.MALFORMED.values())}
+        values = {**values, "malformed_samples": malformed_samples(self.node)}
         status = messages.new(
             "diagnostic_msgs/msg/DiagnosticStatus", level=level, name=self.name,
             message=message or ("OK" if level == OK else "degraded"), hardware_id="stillframe",

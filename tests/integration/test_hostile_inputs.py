@@ -21,6 +21,7 @@ import signal
 import subprocess
 import sys
 import time
+from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -103,10 +104,10 @@ def test_truncated_and_garbage_cdr_is_dropped_and_counted(kind: str) -> None:
     bad = [whole[: len(whole) // 2], b"", b"\x00\x01\x00\x00",
            b"\x00\x01\x00\x00" + rng.integers(0, 256, 48, dtype=np.uint8).tobytes()]
     got: list = []
-    before = api.MALFORMED["/hostile"]
+    malformed: Counter[str] = Counter()
     for data in [*bad, whole]:
-        api.deliver(got.append, data, kind, "/hostile")
-    assert len(got) == 1 and api.MALFORMED["/hostile"] - before == len(bad)
+        api.deliver(got.append, data, kind, "/hostile", malformed)
+    assert len(got) == 1 and malformed == {"/hostile": len(bad)}
 
 
 @dataclass
@@ -308,9 +309,9 @@ def test_cyclones_deserialisation_failures_are_counted_and_passed_on() -> None:
         "os.write(2, b'other output\\n')\n"
         "import time\n"
         "deadline = time.monotonic() + 60    # the tap's thread has counted them all\n"
-        "while sum(api.MALFORMED.values()) < 6 and time.monotonic() < deadline:\n"
+        "while sum(api.CYCLONE_DROPPED.values()) < 6 and time.monotonic() < deadline:\n"
         "    time.sleep(0.01)\n"
-        "print(dict(api.MALFORMED), flush=True)\n")
+        "print(dict(api.CYCLONE_DROPPED), flush=True)\n")
     done = subprocess.run([sys.executable, "-c", script], env=child_env(), cwd=REPO_ROOT,
                           capture_output=True, text=True, timeout=60)
     assert done.returncode == 0, done.stderr
