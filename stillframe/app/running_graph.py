@@ -1,4 +1,4 @@
-"""Two launches on one ROS domain (issue 26): the second refuses at start, naming the first.
+"""Two launches on one ROS domain: the second refuses at start, naming the first.
 
 The loop's nodes have fixed names in ``/frame`` and share ``/clock`` and ``/diagnostics``, so two
 loops on one domain would each take the other's samples and commands (refused by their writer

@@ -1,4 +1,4 @@
-"""``stillframe launch SCENE --track``: the modal tracker beside the loop (issue 27).
+"""``stillframe launch SCENE --track``: the modal tracker beside the loop.
 
 The tracker (``identification``'s ``modal_tracker``) subscribes to the excitation's load cell
 and the three floor accelerometers, identifies its window every few seconds and appends each

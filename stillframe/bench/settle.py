@@ -1,7 +1,7 @@
 """A settled machine before each real-time run of a benchmark, and the CPU others used during it.
 
 ``stillframe bench loop`` runs several real-time runs one after the other; each must start where
-the last one left nothing behind (issue 32). :func:`settle` does, before each run: checks that the
+the last one left nothing behind. :func:`settle` does, before each run: checks that the
 previous run's children are gone (reaped, not only signalled), collects this process's garbage
 (the previous bag was read here), flushes the dirty pages the previous run wrote (``os.sync``: the
 kernel writes them back 30 s later otherwise, during the next run), then waits until the machine

@@ -1,4 +1,4 @@
-"""Memory over a long run (issue 11, item 7): resident set sizes sampled against sim time, and
+"""Memory over a long run: resident set sizes sampled against sim time, and
 their growth after warm-up.
 
 The simulator keeps its histories for the evaluation at the end (per sample a row of 12 values,

@@ -1,4 +1,4 @@
-"""Prediction-error refinement of a realized model, with the modes' covariance (issue 12).
+"""Prediction-error refinement of a realized model, with the modes' covariance.
 
 Model in innovation form (Ljung, *System Identification*, 2nd ed. 1999, §4.3, eq. 4.84):
 

@@ -1,4 +1,4 @@
-"""Command-path integrity: which actuator commands the simulator takes (issue 11, item 4).
+"""Command-path integrity: which actuator commands the simulator takes.
 
 One :class:`CommandGate` per command topic. A command is taken only from *the* command writer,
 decided by a :class:`stillframe.loop.writer_gate.WriterGate`: with the run's token, the commands

@@ -1,5 +1,5 @@
 """The QoS table of docs/nodes.md, generated from the topic contract and the loop's own QoS
-rules (issue 26): what each topic's writer offers and what the loop's own readers ask for, in
+rules: what each topic's writer offers and what the loop's own readers ask for, in
 lock-step and in real time.
 
 The contract (:data:`stillframe.contract.topics.CONTRACT`) names one profile per topic;

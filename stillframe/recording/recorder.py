@@ -6,7 +6,7 @@ seen on a topic goes into the bag; each message is stamped with its receive time
 time with ``sim_time``).
 
 The per-message path is as short as Python allows, so that a recorder beside a 1 kHz loop costs
-the loop nothing it would notice (issue 32). Nothing runs per sample as it arrives: the
+the loop nothing it would notice. Nothing runs per sample as it arrives: the
 subscriptions are *polled* (the middleware's polled subscriptions, KEEP_LAST of at least
 :data:`stillframe.middleware.qos.RECORD_DEPTH`): every :data:`POLL_PERIOD_S` the recorder wakes
 once, takes the CDR bytes waiting in each DDS reader and appends them to the open MCAP chunk;

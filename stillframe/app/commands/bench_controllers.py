@@ -1,4 +1,4 @@
-"""``stillframe bench controllers``: the control laws side by side (issue 30, docs/controllers.md).
+"""``stillframe bench controllers``: the control laws side by side (docs/controllers.md).
 
 Two cases, each through the one-process closed loop (:func:`run_closed_loop`, the nodes' numbers):
 

@@ -1,4 +1,4 @@
-"""``stillframe bench identify``: the identification sweep of issue 12.
+"""``stillframe bench identify``: the identification sweep (:mod:`stillframe.identification.sweep`).
 
 The cases and their scoring are in :mod:`stillframe.identification.sweep`.
 

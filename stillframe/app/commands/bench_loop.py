@@ -18,10 +18,9 @@ lock-step run; ``--record`` / ``--track`` repeat each real-time run with the rec
 modal tracker beside the loop, the figures without and with in one table (``--repeat N``: N such
 pairs); each real-time run starts on a settled machine (:mod:`stillframe.bench.settle`: the last
 run's children reaped, its pages flushed, an idle check printed), and its table says how much CPU
-other jobs took during it; ``--rt`` runs the
-nodes with the real-time practices of docs/realtime.md. The figures are printed beside the
-goals of issue 10, with the machine's load average during each real-time run (the machine may
-be shared); ``--stall-probe`` runs cyclictest beside each real-time run
+other jobs took during it; ``--rt`` runs the nodes with the real-time practices of
+docs/realtime.md. The figures are printed beside the loop's goals (:data:`GOALS`), with the
+machine's load average during each real-time run (the machine may be shared); ``--stall-probe`` runs cyclictest beside each real-time run
 (:mod:`stillframe.bench.stall_probe`) and prints the machine's own stalls, which no practice of
 the loop can remove.
 """
@@ -285,7 +284,7 @@ def within_period_pct(summary: dict[str, Any], zeros: int) -> float:
     return 100.0 * max(within, 0) / seen if seen else float("nan")
 
 
-#: the goals of issue 10: (figure, key, rate or None, test, goal text)
+#: the loop's goals (docs/realtime.md): (figure, key, rate or None, test, goal text)
 GOALS: tuple[tuple[str, str, float | None, Any, str], ...] = (
     ("answered within the period [%]", "within_period_pct", 1000.0, lambda v: v >= 99.9,
      ">= 99.9"),
@@ -302,7 +301,7 @@ GOALS: tuple[tuple[str, str, float | None, Any, str], ...] = (
 
 
 def goal_rows(rows: list[dict[str, Any]], speeds: list[dict[str, Any]]) -> list[dict[str, Any]]:
-    """Each measured figure with its goal of issue 10 and whether it is met."""
+    """Each measured figure with its goal (:data:`GOALS`) and whether it is met."""
     out = []
     for figure, key, rate, test, goal in GOALS:
         runs = [r for r in (speeds if rate is None else
@@ -380,12 +379,13 @@ def twin(rows: list[dict[str, Any]], r: dict[str, Any]) -> dict[str, Any] | None
                  == (r["backend"], r["rate_hz"], r.get("repeat", 0))), None)
 
 
-#: issue 32's bound: a recorded run may miss at most this many times the deadlines of its twin
+#: a recorded run may miss at most this many times the deadlines of its unrecorded twin (a
+#: recorder beside the loop must cost it nothing it would notice: docs/realtime.md)
 RECORDED_MISS_RATIO = 2.0
 
 
 def recorder_verdict(r: dict[str, Any], base: dict[str, Any] | None) -> tuple[float, bool]:
-    """A recorded run against its unrecorded twin (issue 32): the ratio of sim_node's deadline
+    """A recorded run against its unrecorded twin: the ratio of sim_node's deadline
     misses, and whether the run holds: at most :data:`RECORDED_MISS_RATIO` times the misses,
     no degraded samples, every per-step sample in the bag and no hole (a twin without misses
     allows two: one miss more or less is not a ratio)."""
@@ -401,7 +401,7 @@ def recorder_verdict(r: dict[str, Any], base: dict[str, Any] | None) -> tuple[fl
 def recorder_table(rows: list[dict[str, Any]]) -> str:
     """Each real-time run without and with the recorder: the loop's figures, the recorder's
     cost and throughput, whether the bag holds every per-step sample, and whether the recorded
-    run holds issue 32's bound against its twin (:func:`recorder_verdict`)."""
+    run holds :data:`RECORDED_MISS_RATIO` against its twin (:func:`recorder_verdict`)."""
     def recorded(r: dict[str, Any], key: str, form: str) -> str:
         return format(r[key], form) if r["record"] else "-"
 

@@ -1,6 +1,5 @@
 """``stillframe bench soak``: one hour of simulated lock-step LQG through the three node
-processes (115,200 samples at 32 Hz), each process's resident set size sampled against sim time
-(issue 11, item 7).
+processes (115,200 samples at 32 Hz), each process's resident set size sampled against sim time.
 
 Reported per process: RSS after warm-up, at the end (the last second of sim time left out: the
 simulator then evaluates the run and writes its results), and the growth between (must stay

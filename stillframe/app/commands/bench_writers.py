@@ -28,7 +28,8 @@ from stillframe.text_table import format_table
 #: the issue's writer: ``ros2 topic pub -r 50 /frame/pendulum/torque_cmd`` of 0.5 N m
 TOPIC = "/frame/pendulum/torque_cmd"
 MESSAGE = "{header: auto, wrench: {torque: {z: 0.5}}}"
-#: how many times the twin's misses the run beside the writer may have (issue 39)
+#: how many times the twin's misses the run beside the writer may have (a foreign writer must
+#: not cost the loop its deadlines: docs/nodes.md, writer identity)
 GOAL_RATIO = 2.0
 
 
