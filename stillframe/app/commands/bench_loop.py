@@ -20,9 +20,9 @@ pairs); each real-time run starts on a settled machine (:mod:`stillframe.bench.s
 run's children reaped, its pages flushed, an idle check printed), and its table says how much CPU
 other jobs took during it; ``--rt`` runs the nodes with the real-time practices of
 docs/realtime.md. The figures are printed beside the loop's goals (:data:`GOALS`), with the
-machine's load average during each real-time run (the machine may be shared); ``--stall-probe`` runs cyclictest beside each real-time run
-(:mod:`stillframe.bench.stall_probe`) and prints the machine's own stalls, which no practice of
-the loop can remove.
+machine's load average during each real-time run (the machine may be shared); ``--stall-probe``
+runs cyclictest beside each real-time run (:mod:`stillframe.bench.stall_probe`) and prints the
+machine's own stalls, which no practice of the loop can remove.
 """
 
 from __future__ import annotations
