@@ -15,8 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
-from stillframe.loop.closed_loop import run_closed_loop
 from stillframe.config.loop_sections import COMMAND_BOUND
+from stillframe.loop.closed_loop import run_closed_loop
 from stillframe.loop.command_gate import REASONS, CommandGate
 from stillframe.loop.writer_gate import WriterGate
 from tests.support.nodes import SHORT_LQG, run_loop_beside
