@@ -111,6 +111,10 @@ class Design(Section):
         "scene's rig, or the identified structure of design.file with the rig's pendulum "
         "(eq. 5.200–5.205)"))
     file: str = key("thesis_mkr", doc="identified model: a bundled name or a path")
+    after_events: int = key(0, in_range(0, 100), doc=(
+        "scene or lumped: design on the structure after the first this many of the scene's "
+        "events (0: the structure the run starts with); the oracle of an adaptation, which "
+        "knows the change before it happens"))
 
 
 @dataclass(frozen=True, kw_only=True)

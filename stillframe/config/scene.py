@@ -328,6 +328,13 @@ def _check_events(scene: Scene) -> None:
             validate(Rig, rig.to_dict(), prefix="rig.")
         except InputError as exc:
             raise InputError(f"{name}: the structure after it: {exc}") from None
+    after = scene.design.after_events
+    if after > len(scene.events):
+        raise InputError(f"design.after_events: {after}, but the scene has "
+                         f"{len(scene.events)} events")
+    if after and scene.design.model == "file":
+        raise InputError("design.after_events: the design is the identified model of "
+                         "design.file, which no event changes; use design.model: scene or lumped")
     if not scene.events:
         return
     if scene.plant.model == "file":
