@@ -77,16 +77,36 @@ def load_identified_structure(path: Path) -> Structure:
             raise InputError(f"{path}: {name} is not symmetric")
     if np.min(np.linalg.eigvalsh(arrays["mass"])) <= 0:
         raise InputError(f"{path}: mass is not positive definite")
-    return Structure(f"identified({source})", arrays["mass"], arrays["stiffness"], (0, 1, 2),
-                     ("x1", "x2", "x3"), arrays["damping"])
+    return storeys(arrays["mass"], arrays["stiffness"], arrays["damping"], source)
 
 
 def identified_frame(name: str, rig: Rig, key: str) -> FrameModel:
     """Identified structure + the rig's nonlinear pendulum on floor 3 (eq. 5.200–5.205)."""
-    structure = load_identified_structure(resolve_model_file(name, key))
+    return storeys_frame(load_identified_structure(resolve_model_file(name, key)), rig)
+
+
+def storeys_frame(structure: Structure, rig: Rig) -> FrameModel:
+    """An identified floors-only ``structure`` with the rig's pendulum: the design model."""
     model = FrameModel(structure, rig)
     model.name = "identified"
     return model
+
+
+def storeys(mass: np.ndarray, stiffness: np.ndarray, damping: np.ndarray,
+            source: str) -> Structure:
+    """The floors-only structure of M, K, R (3×3, floors 1–3), named after its ``source``."""
+    return Structure(f"identified({source})", mass, stiffness, (0, 1, 2), ("x1", "x2", "x3"),
+                     damping)
+
+
+def write_mkr_file(path: Path, structure: Structure, source: str) -> None:
+    """``structure`` as a model file ``format: stillframe-mkr`` (what ``design.model: file`` and
+    the nodes' ``design`` parameter read; floats written to the last bit)."""
+    data = {"format": "stillframe-mkr", "source": source,
+            **{name: np.asarray(matrix, dtype=float).tolist() for name, matrix in (
+                ("mass", structure.mass), ("stiffness", structure.stiffness),
+                ("damping", structure.damping))}}
+    path.write_text(yaml.safe_dump(data, sort_keys=False))
 
 
 def frame_for(source: str, file: str, scene: Scene, key: str) -> FrameModel:
