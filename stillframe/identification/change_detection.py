@@ -83,6 +83,13 @@ class ChangeDetector:
         """Whether the reference is set (updates now feed the statistics)."""
         return self.mean is not None
 
+    def statistic(self) -> float | None:
+        """The largest CUSUM statistic over the modes (None while the reference is being
+        set)."""
+        if self.upper is None or self.lower is None:
+            return None
+        return float(max(self.upper.max(), self.lower.max()))
+
     def restart(self) -> None:
         """A new reference from the next updates (after a change was handled)."""
         self.reference, self.mean, self.std = [], None, None

@@ -33,8 +33,11 @@ sample and every number after it are the same in both.
 
 from __future__ import annotations
 
+import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
+from pathlib import Path
+from typing import Any, Generic, TypeVar
 
 import numpy as np
 
@@ -44,7 +47,12 @@ from stillframe.contract.signals import TORQUE, Sample, actuator_of
 from stillframe.control.factory import make_controller
 from stillframe.control.lqg import LQGLaw
 from stillframe.control.supervisor import Controller
-from stillframe.design.identified import storeys, storeys_frame
+from stillframe.design.identified import (
+    load_identified_structure,
+    resolve_model_file,
+    storeys,
+    storeys_frame,
+)
 from stillframe.dynamics.models.frame import FrameModel
 from stillframe.dynamics.models.structure import Structure
 from stillframe.errors import InputError, StillframeError
@@ -53,9 +61,13 @@ from stillframe.estimation.factory import initial_physical, make_estimator
 from stillframe.estimation.kalman import SteadyStateKalman
 from stillframe.identification.change_detection import ChangeDetector, CusumSettings
 from stillframe.identification.loop_structure import identify_loop_modes, identify_loop_structure
+from stillframe.loop.wiring import design_model
 
-__all__ = ["Adaptation", "DesignCheck", "Handover", "check_adaptation", "check_design",
-           "design_frequencies"]
+__all__ = ["SCENE_DESIGN", "Adaptation", "DesignCheck", "DesignRequest", "DesignSwitch",
+           "Handover", "check_adaptation", "check_design", "design_frequencies"]
+
+#: the ``design`` parameter's value for the scene's own design model (``design`` section)
+SCENE_DESIGN = "scene"
 
 #: the largest pole magnitude of a design that passes (strictly inside the unit circle)
 STABLE_RADIUS = 1.0 - 1e-9
@@ -63,13 +75,17 @@ STABLE_RADIUS = 1.0 - 1e-9
 REFUSED = (StillframeError, np.linalg.LinAlgError, ValueError)
 
 
-def check_adaptation(scene: Scene) -> None:
-    """``adaptation``'s cross-checks with the rest of the scene (InputError naming the key):
-    what :class:`Adaptation` needs, checked by launch before any process starts
-    (:func:`stillframe.loop.parts.check_loop`)."""
+def check_adaptation(scene: Scene, *, mode: str = "lockstep") -> None:
+    """``adaptation``'s cross-checks with the rest of the scene and the loop's ``mode``
+    (InputError naming the key): what :class:`Adaptation` needs, checked by launch before any
+    process starts (:func:`stillframe.loop.parts.check_loop`)."""
     a = scene.adaptation
     if not a.enabled:
         return
+    if mode != "lockstep":
+        raise InputError(
+            "adaptation.enabled: lock-step only; estimator_node identifies and designs inside "
+            "its sample, which in real time would hold the loop for a second")
     if scene.controller.type != "lqg" or scene.estimator.type not in ("kf", "tvkf"):
         raise InputError(
             "adaptation.enabled: hands over an LQG design; needs controller.type: lqg with "
@@ -215,11 +231,13 @@ class Adaptation:
         try:
             modes = identify_loop_modes(*self._window(k, self.detection), self.period).modes
         except REFUSED as exc:
-            self.updates.append({"t": t, "frequency_hz": [], "error": str(exc)})
+            self.updates.append({"t": t, "frequency_hz": [], "error": str(exc),
+                                 "statistic": self.detector.statistic()})
             return
         frequencies = np.sort(modes.frequency_hz)
-        self.updates.append({"t": t, "frequency_hz": frequencies.tolist(), "error": None})
         found = self.detector.update(t, frequencies)
+        self.updates.append({"t": t, "frequency_hz": frequencies.tolist(), "error": None,
+                             "statistic": self.detector.statistic()})
         if found is None:
             return
         self.identify_from = round(found.onset_t / self.period) + 1
@@ -277,3 +295,94 @@ class Adaptation:
         with their checks, refusals), in order: the result's ``adaptation``."""
         return {"updates": self.updates, "events": self.events,
                 "skipped_updates": self.detector.skipped}
+
+
+# -- the nodes' ``design`` parameter ---------------------------------------------------------
+@dataclass(frozen=True)
+class DesignRequest:
+    """A value of the nodes' ``design`` parameter: ``SOURCE`` or ``SOURCE@T``. SOURCE is
+    :data:`SCENE_DESIGN` (the scene's design model) or a model file (``format: stillframe-mkr``
+    or an identified ``.npz``: storeys with the rig's pendulum, as ``design.model: file``); T
+    the sample time [s] from which it holds (none: from the next sample)."""
+
+    source: str
+    from_s: float | None
+
+    @classmethod
+    def parse(cls, value: str) -> DesignRequest:
+        """InputError (text without the parameter's name) on a malformed value."""
+        source, at, when = value.rpartition("@")
+        if not at:
+            source, when = value, ""
+        if not source.strip():
+            raise InputError(f"give {SCENE_DESIGN!r} or a model file, optionally @T (got "
+                             f"{value!r})")
+        if not when:
+            return cls(source, None)
+        try:
+            from_s = float(when)
+        except ValueError:
+            raise InputError(f"@{when}: the sample time [s] the design holds from") from None
+        if not (math.isfinite(from_s) and from_s >= 0):
+            raise InputError(f"@{when}: a sample time >= 0")
+        return cls(source, from_s)
+
+    def design(self, scene: Scene) -> FrameModel:
+        """The design model it names (InputError when the file does not load)."""
+        if self.source == SCENE_DESIGN:
+            return design_model(scene)
+        path = resolve_model_file(self.source, "design")
+        return storeys_frame(load_identified_structure(Path(path)), scene.rig)
+
+
+def design_check(value: Any) -> str | None:
+    """The ``design`` parameter's declared check (the form; the file and the design are
+    checked when it is set, with the scene)."""
+    try:
+        DesignRequest.parse(value)
+    except InputError as exc:
+        return str(exc)
+    return None
+
+
+Part = TypeVar("Part")
+
+
+class DesignSwitch(Generic[Part]):
+    """A node's design, switched by its ``design`` parameter at a sample boundary: a request
+    is checked when it is set (:func:`check_design`: refused with the reason, the running
+    design stays), and its part (the estimator or the controller, ``pick``) is taken at the
+    first sample stamped at or after its time. Both nodes switch at the same sample when set
+    with the same ``@T``."""
+
+    def __init__(self, scene: Scene,
+                 pick: Callable[[tuple[Filter, Controller, DesignCheck]], Part]) -> None:
+        self.scene = scene
+        self.pick = pick
+        self.pending: tuple[int, str, FrameModel, Part] | None = None
+        self.current = SCENE_DESIGN
+        self.taken = 0
+
+    def request(self, value: str, last_ns: int) -> DesignCheck:
+        """Check ``value`` and hold it until its sample; InputError when it cannot be taken
+        (a file that does not load, a design that fails its checks, a time already past the
+        node's last sample ``last_ns``)."""
+        wanted = DesignRequest.parse(value)
+        due_ns = last_ns + 1 if wanted.from_s is None else round(wanted.from_s * 1e9)
+        if due_ns <= last_ns:
+            raise InputError(f"@{wanted.from_s:g}: the node has passed that sample "
+                             f"(t = {last_ns * 1e-9:g} s)")
+        design = wanted.design(self.scene)
+        built = check_design(self.scene, design)
+        self.pending = (due_ns, wanted.source, design, self.pick(built))
+        return built[2]
+
+    def due(self, ns: int) -> tuple[FrameModel, Part] | None:
+        """The design and part to take at the sample stamped ``ns`` (None: keep the running
+        one)."""
+        if self.pending is None or ns < self.pending[0]:
+            return None
+        _, self.current, design, part = self.pending
+        self.pending = None
+        self.taken += 1
+        return design, part

@@ -54,4 +54,4 @@ def check_loop(scene: Scene, *, mode: str = "lockstep") -> None:
               else design_model(scene))
     estimator_of(scene, design)
     controller_of(scene, design)
-    check_adaptation(scene)
+    check_adaptation(scene, mode=mode)
