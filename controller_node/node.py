@@ -58,7 +58,6 @@ from stillframe.contract.signals import Command, Estimate
 from stillframe.control.factory import make_controller
 from stillframe.control.supervisor import RUNAWAY_FACTOR
 from stillframe.design.coordinates import design_map
-from stillframe.errors import InputError
 from stillframe.loop import fast_inputs
 from stillframe.loop.adaptation import DesignSwitch
 from stillframe.loop.matching import ForceMatching
@@ -123,12 +122,9 @@ class ControllerNode(base.LoopNode):
             elif p.name == "command_limit":
                 self.controller.set_limit(p.value)
             elif p.name == "design":
-                try:
-                    self.designs.request(p.value, self.matching.last_ns)
-                except InputError as exc:
-                    self.node.get_logger().warning(f"design {p.value!r} refused: {exc}")
-                    return SetParametersResult(False, str(exc))
-                self.node.get_logger().info(f"design {p.value!r} taken at its sample")
+                reason = self.designs.set(p.value, self.matching.last_ns, self.node.get_logger())
+                if reason is not None:
+                    return SetParametersResult(False, reason)
         return SetParametersResult(True)
 
     def activate(self) -> None:

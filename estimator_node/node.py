@@ -205,12 +205,9 @@ class EstimatorNode(base.LoopNode):
         declarations): the filter redesigned with them (all or nothing)."""
         for p in parameters:
             if p.name == "design" and self.designs is not None:
-                try:
-                    self.designs.request(p.value, self.assembly.last_ns)
-                except InputError as exc:
-                    self.node.get_logger().warning(f"design {p.value!r} refused: {exc}")
-                    return SetParametersResult(False, str(exc))
-                self.node.get_logger().info(f"design {p.value!r} taken at its sample")
+                reason = self.designs.set(p.value, self.assembly.last_ns, self.node.get_logger())
+                if reason is not None:
+                    return SetParametersResult(False, reason)
         noisy = [p for p in parameters if p.name in self.noise]
         if not noisy:
             return SetParametersResult(True)

@@ -377,6 +377,17 @@ class DesignSwitch(Generic[Part]):
         self.pending = (due_ns, wanted.source, design, self.pick(built))
         return built[2]
 
+    def set(self, value: str, last_ns: int, log: Any) -> str | None:
+        """:meth:`request` as the node's parameter callback does it, logged on ``log`` (a
+        node's logger): None when taken, else the refusal's reason."""
+        try:
+            self.request(value, last_ns)
+        except InputError as exc:
+            log.warning(f"design {value!r} refused: {exc}")
+            return str(exc)
+        log.info(f"design {value!r} taken at its sample")
+        return None
+
     def due(self, ns: int) -> tuple[FrameModel, Part] | None:
         """The design and part to take at the sample stamped ``ns`` (None: keep the running
         one)."""
