@@ -95,6 +95,12 @@ def test_bad_adaptation_settings_are_refused_where_launch_checks(sets, message) 
         check_adaptation(scene)
 
 
+def test_real_time_is_refused_where_launch_checks() -> None:
+    scene = thesis_scene("change_mass_floor2", ["adaptation.enabled=true"])
+    with pytest.raises(InputError, match=r"adaptation\.enabled: lock-step only"):
+        check_loop(scene, mode="realtime")
+
+
 def test_closed_loop_refuses_a_window_longer_than_the_run_in_one_line() -> None:
     done = subprocess.run(
         [sys.executable, "-m", "stillframe", "closed-loop", "scenes/change_mass_floor2.yaml",
