@@ -484,6 +484,12 @@ class LaunchOptions:
     def tracked_file(self) -> Path:
         return self.result_file.with_name("tracked_modes.jsonl")
 
+    @property
+    def adaptation_file(self) -> Path:
+        """estimator_node's adaptation record (``adaptation.enabled``); its designs' model files
+        go to ``designs/`` beside it."""
+        return self.result_file.with_name("adaptation.json")
+
 
 class Launcher:
     """Runs one :class:`LaunchOptions` to its end; ``node`` (a hidden DDS node on the same
@@ -501,6 +507,10 @@ class Launcher:
             load_scene(options.scene.resolve(), options.overrides))[0]
         # what a node would refuse, refused here, before any process starts
         check_loop(self.scene, mode=options.mode)
+        if self.scene.adaptation.enabled and options.compose:
+            raise InputError("--compose: with adaptation.enabled the estimator waits for the "
+                             "controller to take each design, which one process cannot serve "
+                             "while it waits; run without --compose")
         self.status = StatusLine()
         default = recorded_default(options.backends, record=options.record_dir is not None,
                                    mode=options.mode,
@@ -574,11 +584,15 @@ class Launcher:
         sim = self.simulator()
         timing = {**({"phase_log": str(o.phase_log.resolve())} if o.phase_log else {}),
                   **({} if o.phase_timing else {"phase_timing": False})}
+        adaptation = ({"adaptation_dir": str(o.adaptation_file.with_name("designs")),
+                       "adaptation_record": str(o.adaptation_file)}
+                      if self.scene.adaptation.enabled else {})
         children += [(name, [*o.hosts.get("estimator_node" if name == CONTAINER else name, []),
                              *node_command(name, scene, [], o.mode, params={
                                  **shared, **timing,
                                  **(rt if name in (sim, *LOOP) else {}),
                                  **(sim_params if name == sim else {}),
+                                 **(adaptation if name == "estimator_node" else {}),
                                  **({"autostart": False} if name in MANAGED else {})},
                                  args=["all"] if name == sim == CONTAINER else [])])
                      for name in reversed(nodes)]
@@ -621,6 +635,7 @@ class Launcher:
         or KeyboardInterrupt after a clean stop when SIGINT/SIGTERM reached the launcher."""
 
         self.options.result_file.unlink(missing_ok=True)
+        self.options.adaptation_file.unlink(missing_ok=True)
         try:
             running_graph.refuse_if_running(self.node, self.created, (*NODES, CONTAINER))
             self.write_scene()
@@ -801,6 +816,11 @@ class Launcher:
             raise InputError(f"sim_node's result file {path}: cannot read it ({exc})") from None
         if self.options.record_dir is not None:
             evaluation["bag"] = _bag_state(self.options.record_dir)
+        if self.scene.adaptation.enabled:
+            try:
+                evaluation["adaptation"] = json.loads(self.options.adaptation_file.read_text())
+            except (OSError, ValueError) as exc:
+                evaluation["adaptation"] = {"error": f"no adaptation record ({exc})"}
         return LaunchResult(evaluation, path, path.with_suffix(".npz"), dict(self.statuses),
                             read_tracked(self.options.tracked_file) if self.options.track else [])
 

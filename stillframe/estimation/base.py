@@ -60,6 +60,14 @@ class Filter(ABC):
         nothing changed, if the filter cannot be designed with them)."""
         self.Q, self.R = self.noise_covariances(process_std, measurement_std)
 
+    def continue_from(self, previous: Filter) -> None:
+        """Go on from ``previous``, a filter of the same run on another design model (a
+        hand-over at a sample boundary): its physical estimate mapped into this design's state
+        (inner DOFs in static equilibrium), its time, its last force and its counters; the
+        covariance stays this filter's own (the stationary one, or the initial one)."""
+        self.x = self.T @ (previous.S @ previous.x)
+        self.t, self.force, self.counters = previous.t, previous.force, previous.counters
+
     def step(self, sample: Sample, control: np.ndarray) -> Estimate | None:
         """Use one sample; ``control`` = [torque, force] applied since the previous sample.
 

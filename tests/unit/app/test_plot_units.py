@@ -133,6 +133,26 @@ def test_bench_plots(figures: dict, tmp_path: Path) -> None:
     assert_units(figures, 1 + len(METHODS) * len(bench_identify.FIGURES))
 
 
+def test_adapt_timeline_plot(figures: dict, tmp_path: Path) -> None:
+    from stillframe.app.adaptation_plot import plot_timeline
+
+    t = np.linspace(0.0, 10.0, 50)
+    results = {}
+    for name in ("fixed", "adaptive", "oracle"):
+        np.savez(tmp_path / f"{name}.npz", fine_t=t, fine_floors=np.zeros((50, 3)))
+        results[name] = SimpleNamespace(history_file=tmp_path / f"{name}.npz", evaluation={})
+    results["adaptive"].evaluation = {"adaptation": {
+        "updates": [{"t": 4.0 + i, "frequency_hz": [1.1, 1.98, 5.79, 8.82 - 0.1 * i],
+                     "statistic": None if i < 2 else 3.0 * i} for i in range(5)],
+        "events": [{"kind": "detection", "t": 8.0, "reference_hz": [1.1, 1.98, 5.79, 8.82],
+                    "reference_std_hz": [0.01, 0.01, 0.01, 0.01]}]}}
+    doc = {"scene": "s", "adaptation": {"change_at_s": 6.0, "detected_at_s": 8.0,
+                                        "true_hz": [1.1, 1.91, 5.76, 8.07]},
+           "details": {"handover_s": 9.0, "threshold": 40.0}}
+    plot_timeline(tmp_path / "timeline.png", doc, results)
+    assert_units(figures, 1)
+
+
 def test_the_checker_refuses_a_bare_key_and_a_missing_unit() -> None:
     import matplotlib.pyplot as plt
 
