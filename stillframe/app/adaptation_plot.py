@@ -12,6 +12,7 @@ from typing import Any
 import numpy as np
 
 from stillframe.app.launcher import LaunchResult
+from stillframe.files import save_figure
 
 #: the reference's spread drawn around each update: ± this many of its standard deviations
 SPREAD = 1.96
@@ -83,5 +84,5 @@ def plot_timeline(path: Path, doc: dict[str, Any], results: dict[str, LaunchResu
             ax.axvline(d["handover_s"], color="g", lw=1)
     axes[0].text(0.99, 0.95, "red: change, orange: detection, green: hand-over",
                  transform=axes[0].transAxes, ha="right", va="top", fontsize=8)
-    fig.savefig(path, dpi=110)
+    save_figure(fig, path, dpi=110)
     plt.close(fig)
