@@ -18,8 +18,8 @@ import json
 import sys
 from pathlib import Path
 
-from stillframe.app.commands.common import add_scene_arguments, check_output, emit_json
-from stillframe.files import write_text
+from stillframe.app.commands.common import add_scene_arguments, emit_json
+from stillframe.files import check_output, write_text
 from stillframe.text_table import format_table
 
 
