@@ -847,39 +847,15 @@ def _bag_state(bag: Path) -> dict[str, Any]:
 
 
 def run_scene(scene: Path, overrides: Sequence[str] = (), *, out: Path,
-              mode: str = "lockstep", record: Path | None = None,
-              lockstep_timeout_s: float | None = None,
-              prepare: Callable[[Any], None] | None = None,
-              record_topics: Sequence[str] = (), backends: Sequence[str] = (),
-              monitor_args: Sequence[str] | None = None, compose: str = "",
-              rt: str | None = None, rt_cpus: Sequence[int] = (),
-              hosts: dict[str, list[str]] | None = None,
-              resolved: Scene | None = None, track: bool = False,
-              recorder_args: Sequence[str] | None = None, phase_log: Path | None = None,
-              phase_timing: bool = True) -> LaunchResult:
+              prepare: Callable[[Any], None] | None = None, **options: Any) -> LaunchResult:
     """Launch ``scene`` with ``overrides`` through the three nodes to its end; sim_node's
     results go to ``out`` (``result.json``, ``result.npz``, beside the resolved scene the nodes
-    read); ``record`` records ``record_topics`` (default all) into a bag; ``backends`` are
-    ``--backend`` values (:func:`parse_backends`); ``monitor_args`` (e.g. ports) start
-    ``stillframe monitor`` beside the nodes; ``compose`` runs nodes in one process
-    (``container_node``: "pair" the estimator and controller, "all" every node); ``rt`` and
-    ``rt_cpus`` are the loop nodes' real-time practices and CPUs
-    (:mod:`stillframe.node_runtime.realtime`; ``rt`` None: :func:`practices_default`);
-    ``hosts`` runs nodes on other hosts (:attr:`LaunchOptions.hosts`); ``resolved``: the scene
-    already loaded and resolved (else it is done here, once); ``track`` adds the modal tracker;
-    ``recorder_args``: the recorder's priority (:func:`recorder_priority`); ``phase_log`` and
-    ``phase_timing``: the nodes' phase timing (:attr:`LaunchOptions.phase_log`).
-    ``prepare(node)`` may subscribe the launcher's hidden node to more topics before the
-    children start."""
+    read). ``options`` are the other fields of :class:`LaunchOptions` (the mode, the recorder,
+    the backends, …), checked there. ``prepare(node)`` may subscribe the launcher's hidden node
+    to more topics before the children start."""
     out.mkdir(parents=True, exist_ok=True)
-    launcher = Launcher(LaunchOptions(
-        scene, list(overrides), resolved, mode=mode, result_file=out / "result.json",
-        record_dir=record, lockstep_timeout_s=lockstep_timeout_s,
-        record_topics=list(record_topics), backends=list(backends),
-        monitor_args=None if monitor_args is None else list(monitor_args), compose=compose,
-        rt=rt, rt_cpus=list(rt_cpus), hosts=dict(hosts or {}), track=track,
-        recorder_args=None if recorder_args is None else list(recorder_args),
-        phase_log=phase_log, phase_timing=phase_timing))
+    launcher = Launcher(LaunchOptions(scene, list(overrides), result_file=out / "result.json",
+                                      **options))
     if prepare is not None:
         prepare(launcher.node)
     return launcher.run()

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from stillframe.app.commands.bench_soak import GROWTH_LIMIT_PCT, soak
+from stillframe.app.bench.soak import GROWTH_LIMIT_PCT, soak
 
 
 @pytest.mark.long

@@ -18,7 +18,7 @@ import json
 import sys
 from pathlib import Path
 
-from stillframe.app.commands.common import add_scene_arguments, emit_json
+from stillframe.app.arguments import add_scene_arguments, emit_json
 from stillframe.files import check_output, write_text
 from stillframe.text_table import format_table
 
@@ -79,7 +79,7 @@ def print_report(doc: dict) -> None:
 def run(args: argparse.Namespace) -> int:
     from stillframe.app.adaptation_experiment import run_adaptation_experiment
     from stillframe.app.adaptation_plot import plot_timeline
-    from stillframe.app.commands.launch import report_death
+    from stillframe.app.launch_cli import report_death
     from stillframe.app.launcher import NodeDiedError
 
     check_output("--out", args.out)

@@ -25,8 +25,8 @@ from pathlib import Path
 import numpy as np
 
 from stillframe import interrupts
-from stillframe.app.commands.common import whole
-from stillframe.app.commands.launch import add_launch_arguments, print_evaluation, report_death
+from stillframe.app.arguments import whole
+from stillframe.app.launch_cli import add_launch_arguments, print_evaluation, report_death
 from stillframe.config import environment
 from stillframe.config.environment import MAX_DOMAIN_ID
 from stillframe.config.scene import Scene
@@ -126,8 +126,9 @@ def run(args: argparse.Namespace) -> int:
     print(f"demo: {scene.name} through sim_node, estimator_node and controller_node "
           f"({args.mode}), recording to {out / 'bag'}", file=sys.stderr)
     try:
-        result = run_scene(DEMO_SCENE, args.overrides, out=out, mode=args.mode, record=out / "bag",
-                           lockstep_timeout_s=args.lockstep_timeout, backends=args.backends)
+        result = run_scene(DEMO_SCENE, args.overrides, out=out, mode=args.mode,
+                           record_dir=out / "bag", lockstep_timeout_s=args.lockstep_timeout,
+                           backends=args.backends)
     except NodeDiedError as exc:
         return report_death("demo", exc)
     except KeyboardInterrupt as exc:

@@ -119,7 +119,8 @@ def test_demo_experiment_and_ph_plots(figures: dict, tmp_path: Path) -> None:
 
 
 def test_bench_plots(figures: dict, tmp_path: Path) -> None:
-    from stillframe.app.commands import bench_fidelity, bench_identify
+    from stillframe.app.bench import fidelity as bench_fidelity
+    from stillframe.app.bench import identify as bench_identify
     from stillframe.identification.sweep import METHODS
 
     point = {"scene": "s", "model": "lumped", "method": "midpoint", "cpu_per_s": 0.1,
