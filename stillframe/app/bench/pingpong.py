@@ -191,7 +191,7 @@ def drive(pinger: Any, rate: float, seconds: float) -> int:
     return sent
 
 
-# -- the echoing side (``python -m stillframe.bench.pingpong --peer VARIANT``) ---------
+# -- the echoing side (``python -m stillframe.app.bench.pingpong --peer VARIANT``) ---------
 def raw_peer() -> None:
     ping, pong = topics("raw")
     end = CycloneEnd(pong, ping, own_domain=True)
@@ -257,7 +257,7 @@ def measure(rate: float, duration: float,
     figures of :func:`_summary`."""
     env = dict(os.environ, PYTHONPATH=str(REPO_ROOT))
     peers = [
-        subprocess.Popen([sys.executable, "-m", "stillframe.bench.pingpong",
+        subprocess.Popen([sys.executable, "-m", "stillframe.app.bench.pingpong",
                           "--peer", variant], env=env, stderr=subprocess.DEVNULL)
         for variant in variants
     ]
