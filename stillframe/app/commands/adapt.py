@@ -82,7 +82,7 @@ def run(args: argparse.Namespace) -> int:
     from stillframe.app.launch_cli import report_death
     from stillframe.app.launcher import NodeDiedError
 
-    check_output("--out", args.out)
+    check_output("--out", args.out, folder=True)
     try:
         doc, results = run_adaptation_experiment(Path(args.scene), args.overrides, out=args.out,
                                                  progress=_progress)
