@@ -64,8 +64,8 @@ class Container(Cycle):
         return any(published)
 
     def finish(self) -> None:
-        self.estimator.publish_status()
-        self.controller.publish_status()
+        self.estimator.finish()
+        self.controller.finish()
 
     def start(self) -> None:
         """Wait for the simulator in lock-step, then take the inputs."""

@@ -4,14 +4,17 @@ A thin shell around :func:`stillframe.control.factory.make_controller`. For ever
 ``state_estimate`` stamped t_k it calls ``command(t_k, estimate, load cell at t_k)`` and
 publishes the command stamped t_k on ``pendulum/torque_cmd`` (``torque.z``) or
 ``floor3/force_cmd`` (``force.x``). The load cell comes from ``excitation/wrench``: in
-lock-step the controller waits (at most a quarter of ``lockstep_timeout_s``, so that the command
-still reaches the simulator before its timeout) for the reading stamped t_k;
-in real time it uses the newest one.
+lock-step the controller waits for the reading stamped t_k, as long as it takes (no wall time
+enters a lock-step run); in real time it uses the newest one.
 
 Parameters settable at run time (``stillframe param set`` or ``ros2 param set``; refused with a
 reason, and the loop goes on, when the value is wrong): ``enabled`` (bool; false: zero command
-from the next sample on) and ``command_limit`` (the saturation ±limit [N m or N], finite and
-≥ 0, 0: none; starts at ``controller.limit``). Every other parameter is read-only.
+from the next sample on) and ``command_limit`` (the controller's limit ±limit [N m or N], finite
+and ≥ 0, 0: none; starts at ``controller.limit``; every law takes it at its next sample, the MPC
+and the anti-windup LQG plan with it), and ``design`` (``scene`` or a model file, optionally
+``@T``: checked when set, refused with the reason and the running design kept when it fails,
+else the law of the LQG designed on it taken from the estimate stamped at or after T:
+:class:`stillframe.loop.adaptation.DesignSwitch`). Every other parameter is read-only.
 
 Watchdog (``/diagnostics`` level ERROR while it holds the command at zero): once armed by a
 first estimate, when the newest estimate is ``watchdog_periods``
@@ -21,17 +24,19 @@ supervisor's zero command stamped with that time, once per sample time, and coun
 time rather than wall time: in lock-step the simulator then applies the zero command instead of
 timing out, and it needs no ``/clock``.
 
-Inputs are taken from one writer node per topic (:class:`stillframe.loop.writer_gate.WriterGate`):
-``state_estimate`` from the node ``estimate_writer`` names, the load cell and (with
-``use_sim_time``, read by the node itself for its watchdog) ``/clock`` from ``sensor_writer``'s
-("": the first writer seen); other writers' samples are refused, counted per topic and reason
-and named in ``/diagnostics``.
+Inputs are taken from the loop's own writer per topic
+(:class:`stillframe.loop.writer_gate.WriterGate`): with the run's token (``run_token``), the
+samples that carry it; without one (and for ``/clock``, which has no header: read with
+``use_sim_time`` by the node itself for its watchdog) ``state_estimate`` from the node
+``estimate_writer`` names, the load cell and ``/clock`` from ``sensor_writer``'s ("": the first
+writer seen). Other writers' samples are refused, counted per topic and reason and named in
+``/diagnostics``.
 
 When the loop's time goes back (a restarted simulator: an estimate stamped before the last one,
 with a load-cell reading of that stamp; :mod:`stillframe.loop.matching`) the watchdog is disarmed
 until the next estimate, and counted (``time_jumps``). With no load-cell reading for
-``5 · lockstep_timeout_s`` (at least 1 s) after one came (simulator gone) ``/diagnostics`` says
-ERROR; the node idles.
+``stale_input_s`` (:class:`stillframe.node_runtime.support.LoopParameters`) after one came
+(simulator gone) ``/diagnostics`` says ERROR; the node idles.
 """
 
 from __future__ import annotations
@@ -55,7 +60,9 @@ from stillframe.contract.signals import Command, Estimate
 from stillframe.control.factory import make_controller
 from stillframe.control.supervisor import RUNAWAY_FACTOR
 from stillframe.design.coordinates import design_map
+from stillframe.durations import Durations
 from stillframe.loop import fast_inputs
+from stillframe.loop.adaptation import DesignSwitch
 from stillframe.loop.matching import ForceMatching
 from stillframe.loop.watchdog import EstimateWatchdog
 from stillframe.loop.wiring import design_model
@@ -69,7 +76,6 @@ from stillframe.node_runtime.support import (
     ERROR,
     OK,
     WARN,
-    Durations,
     LoopParameters,
     RateMeter,
     reaches_peer,
@@ -94,10 +100,10 @@ class ControllerNode(base.LoopNode):
         self.grid = SampleGrid(params.period)
         spec = COMMAND_TOPICS[self.controller.actuator]
         self.pub = TappedPublisher(node, spec.type_name, spec.name, spec.qos)
-        self.out = CommandMessage(self.controller.actuator)
+        self.out = CommandMessage(self.controller.actuator, params.run_token)
         self.sim_time = bool(node.get_parameter("use_sim_time").value)
         self.clock_ns = 0                   # the newest /clock of the simulator (sim time)
-        self.matching = ForceMatching(round(params.lockstep_timeout_s / 4 * 1e9), params.lockstep)
+        self.matching = ForceMatching(None, params.lockstep)
         self.watchdog = EstimateWatchdog(self.controller, self.grid)
         self.last_command = Command(0.0)
         self.input_at: float | None = None   # when the last load-cell reading arrived
@@ -105,7 +111,8 @@ class ControllerNode(base.LoopNode):
         self.rate = RateMeter()
         settings = self.setting(ControllerParameterValues)
         self.enabled = settings.enabled
-        self.controller.limit = settings.command_limit or None
+        self.controller.set_limit(settings.command_limit)
+        self.designs = DesignSwitch(scene, lambda built: built[1])
 
     def apply(self, parameters: list[Parameter]) -> SetParametersResult:
         """``enabled`` and ``command_limit`` (checked by their declarations) in effect from the
@@ -115,7 +122,11 @@ class ControllerNode(base.LoopNode):
                 self.enabled = p.value
                 self.controller.enabled = self.enabled and self.activated
             elif p.name == "command_limit":
-                self.controller.limit = p.value or None
+                self.controller.set_limit(p.value)
+            elif p.name == "design":
+                reason = self.designs.set(p.value, self.matching.last_ns, self.node.get_logger())
+                if reason is not None:
+                    return SetParametersResult(False, reason)
         return SetParametersResult(True)
 
     def activate(self) -> None:
@@ -133,22 +144,24 @@ class ControllerNode(base.LoopNode):
         """A new controller from the scene (``cleanup``), its settings kept."""
         limit, enabled = self.controller.limit, self.controller.enabled
         self.controller = make_controller(self.params.scene, design_model(self.params.scene))
-        self.controller.limit, self.controller.enabled = limit, enabled
+        self.controller.set_limit(limit)
+        self.controller.enabled = enabled
         self.watchdog = EstimateWatchdog(self.controller, self.grid)
 
     def subscribe_inputs(self) -> None:
         est, wrench, clock = topics.STATE_ESTIMATE, topics.EXCITATION_WRENCH, topics.CLOCK
+        token = self.params.run_token
         fast_inputs.subscribe(self.node, est.type_name, est.name, self.params.reader_qos(est),
-                              state_reader(), self.on_estimate,
+                              state_reader(token), self.on_estimate,
                               self.gates.add(est.name, "estimate_writer"))
         fast_inputs.subscribe(self.node, wrench.type_name, wrench.name,
                               self.params.reader_qos(wrench),
-                              wrench_reader("floor1", "wrench.force.x"), self.on_force,
+                              wrench_reader("floor1", "wrench.force.x", token), self.on_force,
                               self.gates.add(wrench.name, "sensor_writer"))
         if self.sim_time:       # the watchdog follows the simulator's /clock (module docstring)
             fast_inputs.subscribe(self.node, clock.type_name, clock.name, clock.qos,
                                   clock_reader(), self.on_clock,
-                                  self.gates.add(clock.name, "sensor_writer"))
+                                  self.gates.add(clock.name, "sensor_writer", stamped=False))
 
     def on_force(self, ns: int, force: float) -> None:
         self.input_at = time.monotonic()
@@ -167,18 +180,38 @@ class ControllerNode(base.LoopNode):
             self.controller.latest = None
             self.watchdog = EstimateWatchdog(self.controller, self.grid)
         answered = 0
-        while (m := self.matching.pop_ready(time.monotonic_ns())) is not None:
+        timing, slot = self.timing, self.slot
+        while (m := self.matching.pop_ready(now := time.monotonic_ns())) is not None:
             started = time.perf_counter()
+            timing.begin(m.ns)
+            timing.mark_at(slot["estimate_in"], m.arrival_ns)
+            timing.mark_at(slot["ready"], now)
+            self.sample_start_ns = m.arrival_ns
+            if (due := self.designs.due(m.ns)) is not None:
+                design, taken = due
+                self.controller.take_law(taken)
+                self.to_design = design_map(design)
+                self.node.get_logger().info(f"design {self.designs.current!r} taken at "
+                                            f"t = {self.grid.seconds(m.ns):.6g} s")
             t = self.grid.seconds(m.ns)
             estimate = Estimate(t, self.to_design @ m.physical, m.physical)
-            self.send(self.controller.command(t, estimate, m.force))
+            command = self.controller.command(t, estimate, m.force)
+            timing.mark(slot["computed"])
+            self.send(command)
             self.compute.add(time.perf_counter() - started)
             self.rate.tick()
             answered += 1
         return answered
 
     def send(self, command: Command) -> None:
-        self.pub.publish(self.out.cdr(command, self.grid.ns(command.t)))
+        """Publish ``command``; the law's (not the watchdog's) marks the sample's phases."""
+        timing = self.timing if not command.watchdog else None
+        cdr = self.out.cdr(command, self.grid.ns(command.t))
+        if timing is not None:
+            timing.mark(self.slot["serialized"])
+        self.pub.publish(cdr)
+        if timing is not None:
+            timing.mark(self.slot["written"])
         self.last_command = command
 
     def check(self) -> None:
@@ -202,7 +235,8 @@ class ControllerNode(base.LoopNode):
                   "commands": c.commands, "saturated": c.saturated, "singular": c.singular,
                   "watchdog": c.watchdog, "watchdog_active": cmd.watchdog,
                   "runaway": c.runaway, "fallback": c.fallback,
-                  "enabled": cmd.enabled,
+                  "enabled": cmd.enabled, "design": self.designs.current,
+                  "designs_taken": self.designs.taken,
                   "last_command": float(cmd.vector[self.controller.actuator]),
                   **self.matching.counts,
                   "refused_writers": self.gates.refused(), **self.gates.values(),
@@ -238,6 +272,14 @@ class ControllerNode(base.LoopNode):
             self.node.get_logger().info("lock-step: waiting for the simulator")
             wait_for_peers(self.node, self.peers_ready)
         self.subscribe_inputs()
+
+    def mid_sample(self) -> bool:
+        """The load cell of the sample after the last estimate is in, less than a period ago,
+        and its estimate not yet (estimates further behind are the watchdog's: not a sample in
+        progress)."""
+        m, period = self.matching, self.params.period
+        return (m.last_ns >= 0 and 0 < m.sample_ns - m.last_ns <= round(period * 1e9)
+                and self.input_at is not None and time.monotonic() - self.input_at < period)
 
     def next_wait(self) -> float:
         left = self.matching.wait_ns_left(time.monotonic_ns())

@@ -1,5 +1,5 @@
 """modal_tracker: the structure's modes, identified again every few seconds from a sliding window
-of live samples (issue 27; docs/identification-tool.md, "Live modal tracking").
+of live samples (docs/identification-tool.md, "Live modal tracking").
 
 A thin shell around :class:`stillframe.identification.tracker.ModalTracker`. Parameters:
 

@@ -8,7 +8,9 @@
 - :class:`IdentificationError` (5): data that cannot identify a model (too short, unusable,
   rank-deficient);
 - :class:`DegradedRunError` (6): a real-time run whose control path was degraded, with
-  ``--strict`` (without it, a warning line).
+  ``--strict`` (without it, a warning line);
+- :class:`LoopError` (7): a lock-step run that could not go on: a peer of the loop left the
+  graph, or did not answer one sample within ``lockstep_timeout_s``.
 
 The message names what is wrong (the key, the file, the time) and is printed without a traceback
 by :func:`stillframe.app.cli.main` and by the node executables.
@@ -48,7 +50,23 @@ class IdentificationError(StillframeError):
 
 
 class DegradedRunError(StillframeError):
-    """A real-time run whose result cannot be trusted (``launch --strict``); the message gives the
-    reasons (:mod:`stillframe.app.run_verdict`)."""
+    """A run ``launch --strict`` refuses: a real-time run whose result cannot be trusted, or one
+    beside a foreign writer; the message gives the reasons (:mod:`stillframe.app.run_verdict`)."""
 
     exit_code = 6
+
+
+class LoopError(StillframeError):
+    """A lock-step run ended before its end: the simulator never advances without the command of
+    the current sample, and the peer that owes it left the graph or did not answer within
+    ``lockstep_timeout_s``. The message names the peer and the sample; the result written is
+    partial (``"complete": false``)."""
+
+    exit_code = 7
+
+
+#: the kinds of error by exit code, for a process that reports one of another's (a launch's
+#: node): its one line and its code are passed on
+BY_EXIT_CODE: dict[int, type[StillframeError]] = {
+    kind.exit_code: kind for kind in (InputError, BagError, IntegrationError, IdentificationError,
+                                      DegradedRunError, LoopError)}

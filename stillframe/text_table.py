@@ -1,4 +1,4 @@
-"""Plain aligned text tables for terminal output."""
+"""Plain aligned text tables for terminal output, and generated references kept in the docs."""
 
 from __future__ import annotations
 
@@ -19,3 +19,12 @@ def format_table(headers: Sequence[str], rows: Sequence[Sequence[Any]]) -> str:
     lines.append("  ".join("-" * w for w in widths))
     lines += ["  ".join(c.rjust(w) for c, w in zip(r, widths, strict=True)) for r in text]
     return "\n".join(lines)
+
+
+def with_section(text: str, markers: tuple[str, str], body: str) -> str:
+    """``text`` (a page of the docs) with ``body`` between its two marker lines, in place of
+    what was there: a generated reference kept in its page."""
+    start, end = markers
+    head, _, rest = text.partition(start + "\n")
+    _, _, tail = rest.partition(end)
+    return f"{head}{start}\n{body}{end}{tail}"

@@ -23,7 +23,8 @@ import sys
 from pathlib import Path
 from typing import Any, NoReturn
 
-from stillframe.app.ros_tools import VERBOSE_ENV
+from stillframe import interrupts
+from stillframe.config.environment import check_environment
 from stillframe.errors import InputError, StillframeError
 
 COMMANDS: tuple[str, ...] = (
@@ -44,6 +45,7 @@ COMMANDS: tuple[str, ...] = (
     "stillframe.app.commands.reproduce",
     "stillframe.app.commands.demo",
     "stillframe.app.commands.experiment",
+    "stillframe.app.commands.adapt",
     "stillframe.app.commands.ph",
     "stillframe.app.commands.montecarlo",
     "stillframe.app.commands.netns",
@@ -133,25 +135,50 @@ def _quiet_stdout() -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Run the command of ``argv`` and return its exit code. Without ``argv`` (the ``stillframe``
+    executable, ``python -m stillframe``) this is the process's entry point: Ctrl-C is answered
+    from here on, and the process ends here (:mod:`stillframe.interrupts`)."""
+    process = argv is None
     argv = sys.argv[1:] if argv is None else argv
+    module = _module_of(argv)
+    prog = f"stillframe {command_name(module)}" if module else "stillframe"
+    if process:
+        interrupts.starting(prog)
     args = build_parser(argv).parse_args(argv)
+    if process:
+        interrupts.working()
+    code = interrupts.run_work(prog, lambda: _run(args))
+    if process:
+        interrupts.finish(prog, code)
+    return code
+
+
+def _run(args: argparse.Namespace) -> int:
+    """The command's ``run``, after the environment's checks: its exit code; a StillframeError,
+    a broken pipe or an OSError on a named file as one line and its code (unless it came after
+    an interruption, which :func:`stillframe.interrupts.run_work` answers)."""
     if args.verbose:
+        from stillframe.app.ros_tools import VERBOSE_ENV
+
         os.environ[VERBOSE_ENV] = "1"  # read by the tools' own nodes
     try:
+        check_environment()
         code = int(args.func(args) or 0)
         sys.stdout.flush()
         return code
     except StillframeError as exc:
+        if interrupts.received():
+            raise
         print(f"stillframe {args.command}: error: {exc}", file=sys.stderr)
         return exc.exit_code
     except BrokenPipeError:
         _quiet_stdout()
         return BROKEN_PIPE
-    except KeyboardInterrupt:
-        return 130
     except OSError as exc:
         # a file named on the command line (or under a directory named there) that cannot be
         # written or read: read-only, a full disk (no file name then), a parent that is a file
+        if interrupts.received():
+            raise
         where = f"{exc.filename}: " if exc.filename is not None else ""
         print(f"stillframe {args.command}: error: {where}{exc.strerror or exc}",
               file=sys.stderr)

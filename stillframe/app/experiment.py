@@ -38,12 +38,13 @@ import numpy as np
 from stillframe.app.experiment_test_force import test_force
 from stillframe.app.launcher import run_scene
 from stillframe.bags.channels import Channel, read_record
-from stillframe.config.scene import load_scene
+from stillframe.config.scene import load_scene, steps_in
 from stillframe.config.schema import Section
 from stillframe.contract import topics
 from stillframe.design.identified import load_identified_structure, resolve_model_file
 from stillframe.dynamics.models import build_model
 from stillframe.errors import IdentificationError, InputError
+from stillframe.files import write_text
 from stillframe.identification.structure_model import (
     IdentifiedStructure,
     identify_structure,
@@ -105,10 +106,9 @@ class ExperimentResult:
 def integrator_override(scene: Section) -> list[str]:
     """``integrator.dt`` lowered to divide the sample period, when it does not already."""
     period = 1.0 / scene.sensors.rate_hz
-    ratio = period / scene.integrator.dt
-    if abs(ratio - round(ratio)) <= 1e-6 * ratio:
+    if steps_in(period, scene.integrator.dt) is not None:
         return []
-    return [f"integrator.dt={period / math.ceil(ratio):.17g}"]
+    return [f"integrator.dt={period / math.ceil(period / scene.integrator.dt):.17g}"]
 
 
 def identification_test_overrides(scene: Section, user: Sequence[str],
@@ -203,7 +203,7 @@ def run_experiment(scene_path: Path, user: Sequence[str], out: Path, test: Ident
     progress(f"[1/5] identification test: white noise {test.force_std:g} N on floor 1 held at "
              f"{scene.sensors.rate_hz:g} Hz, {test.duration:g} s, through sim_node ({mode}), "
              f"recorded to {out / 'bag'}")
-    run_scene(scene_path, ident_set, out=out / "test", mode=mode, record=out / "bag",
+    run_scene(scene_path, ident_set, out=out / "test", mode=mode, record_dir=out / "bag",
               lockstep_timeout_s=lockstep_timeout_s, record_topics=[INPUT_TOPIC, *OUTPUT_TOPICS],
               backends=backends)
     progress("[2/5] OKID + ERA/DC (order 6) + MKR on the bag")
@@ -232,4 +232,4 @@ def run_experiment(scene_path: Path, user: Sequence[str], out: Path, test: Ident
 
 def write_summary(out: Path, document: dict[str, Any]) -> None:
     """``experiment.json`` in ``out`` (also the marker that lets the next run clear ``out``)."""
-    (out / MARKER).write_text(json.dumps(document, indent=2) + "\n")
+    write_text(out / MARKER, json.dumps(document, indent=2) + "\n", what="experiment summary")

@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 
 from stillframe.app.experiment import ExperimentResult
+from stillframe.files import save_figure
 from stillframe.text_table import format_table
 
 RATIO_GOAL = 0.9
@@ -161,5 +162,5 @@ def plot_comparison(path: Path, result: ExperimentResult, doc: dict[str, Any]) -
     axes[3].set_xticks(x, [f"floor {i + 1}" for i in range(3)])
     axes[3].set_ylabel("peak reduction [%]")
     axes[3].legend(fontsize="small", ncol=2, loc="lower right")
-    fig.savefig(path, dpi=110)
+    save_figure(fig, path, dpi=110)
     plt.close(fig)

@@ -1,5 +1,5 @@
-"""The identification test's force, chosen before anything runs (issue 27: ``experiment`` on every
-closed-loop scene).
+"""The identification test's force, chosen before anything runs, so that ``experiment`` works on
+every closed-loop scene.
 
 A plant with process noise (``plant.process_noise_std``, eq. 5.215: increments added to the
 physical state once per sample) is driven by that noise as well as by the test's force. The

@@ -29,13 +29,13 @@ import time
 from pathlib import Path
 from typing import Any
 
+from stillframe.config.environment import value
 from stillframe.locations import PACKAGE_DIR
 from stillframe.middleware.backend_choice import backend_name
 from stillframe.middleware.graph import Graph
 
-#: seconds without a request after which the daemon exits (ros2 daemon: two hours)
+#: seconds without a request after which the daemon exits (default two hours, as ros2 daemon)
 IDLE_ENV = "STILLFRAME_DAEMON_IDLE_S"
-DEFAULT_IDLE_S = 2 * 60 * 60
 #: how long a tool waits for a daemon it started to answer [s]
 START_TIMEOUT_S = 30.0
 #: the environment that decides which graph a node sees
@@ -48,11 +48,11 @@ NODE_PREFIX = "_stillframe_daemon"
 def socket_path() -> Path:
     """The daemon's socket for this user, environment and backend, and this installation (the
     interpreter and the package: two checkouts never talk to each other's daemon)."""
-    setting = {name: os.environ.get(name, "") for name in GRAPH_ENV}
+    setting = {name: value(name) for name in GRAPH_ENV}
     setting["backend"] = backend_name()
     setting["installation"] = f"{sys.executable} {PACKAGE_DIR}"
     digest = hashlib.sha1(json.dumps(setting, sort_keys=True).encode()).hexdigest()[:12]
-    domain = setting["ROS_DOMAIN_ID"] or "0"
+    domain = setting["ROS_DOMAIN_ID"]
     return (Path(tempfile.gettempdir()) / f"stillframe-daemon-{os.getuid()}"
             / f"d{domain}-{setting['backend']}-{digest}.sock")
 
@@ -155,7 +155,7 @@ def serve(path: Path, idle_s: float) -> None:
                     reply: dict[str, Any] = answer.to_json()
                 else:
                     reply = {"pid": os.getpid(), "backend": node.backend, "started": started,
-                             "domain": os.environ.get("ROS_DOMAIN_ID", "0")}
+                             "domain": value("ROS_DOMAIN_ID")}
                 with contextlib.suppress(OSError):
                     conn.sendall(json.dumps(reply).encode() + b"\n")
                 if op == "stop":
@@ -169,4 +169,4 @@ def serve(path: Path, idle_s: float) -> None:
 
 
 if __name__ == "__main__":
-    serve(Path(sys.argv[1]), float(os.environ.get(IDLE_ENV, DEFAULT_IDLE_S)))
+    serve(Path(sys.argv[1]), float(value(IDLE_ENV)))

@@ -17,6 +17,8 @@ import contextlib
 import ctypes
 import json
 import os
+import re
+import secrets
 import shutil
 import signal
 import subprocess
@@ -33,15 +35,23 @@ import yaml
 
 from stillframe.app import running_graph
 from stillframe.app.tracking import TRACKER, TRACKER_STOP_S, read_tracked, tracker_command
+from stillframe.bags.metadata import load_metadata
+from stillframe.config import environment
 from stillframe.config.scene import Scene, load_scene
 from stillframe.contract import messages
 from stillframe.contract.topics import DEFAULT_NAMESPACE, STATUS_KEYS
-from stillframe.errors import InputError
+from stillframe.errors import BY_EXIT_CODE, BagError, InputError, StillframeError
 from stillframe.fidelity.auto_model import resolve_model
+from stillframe.files import write_text
 from stillframe.identification.tracker import TRACKER_READY
 from stillframe.locations import REPO_ROOT
+from stillframe.loop.parts import check_loop
+from stillframe.loop.spec import MODES
 from stillframe.middleware import api, discovery, names
-from stillframe.node_runtime.declarations import MODES, NODE_PARAMETERS, ManagedParameterValues
+from stillframe.middleware.graph import UNNAMED_NODES, fqn
+from stillframe.node_runtime.declarations import NODE_PARAMETERS, ManagedParameterValues
+from stillframe.node_runtime.realtime import RealtimeOptions, parse_practices, permissions_line
+from stillframe.recording.recorder import MISSING_KEY, STALLS_KEY
 
 NODES: tuple[str, ...] = tuple(NODE_PARAMETERS)
 #: the process that hosts the estimator and the controller with ``--compose``
@@ -66,6 +76,9 @@ PROBE_S = 1.0
 TRANSITION_TIMEOUT_S = 20.0
 #: the resolved scene the launch hands every node, beside the result file
 RESOLVED_SCENE = "scene.resolved.yaml"
+#: how a child asked to stop may end: cleanly, by the signal, or interrupted in its start-up
+#: (:func:`stillframe.interrupts.exit_code`)
+STOPPED_CODES = (0, -signal.SIGINT, -signal.SIGTERM, 128 + signal.SIGINT, 128 + signal.SIGTERM)
 #: seconds a child gets to exit after SIGINT, then after SIGTERM, before SIGKILL
 STOP_GRACE_S = 10.0
 #: children that get longer to exit after SIGINT: the tracker finishes the windows due
@@ -79,15 +92,21 @@ READY_LINES: dict[str, str] = {"recorder": "Recording to", "monitor": "Monitor r
                                TRACKER: TRACKER_READY}
 #: lines of a child's output kept to explain its death
 TAIL_LINES = 15
+#: how long the launch waits at the end of a run for its graph to name a writer a node reported
+#: by GID only (across DDS vendors a node's name follows its writer by seconds) [s]
+NAME_WAIT_S = 10.0
+#: a writer GID as a node reports a writer its graph had not named (32 hex digits)
+GID_TEXT = re.compile(r"\b[0-9a-f]{32}\b")
 _PR_SET_PDEATHSIG = 1
 
 
 class NodeDiedError(RuntimeError):
     """A child process ended before the run was over, or with a failure code."""
 
-    def __init__(self, name: str, how: str, tail: Sequence[str]) -> None:
+    def __init__(self, name: str, how: str, tail: Sequence[str], code: int | None = None
+                 ) -> None:
         super().__init__(f"{name} died ({how})")
-        self.name, self.how, self.tail = name, how, list(tail)
+        self.name, self.how, self.tail, self.code = name, how, list(tail), code
         #: what the run still wrote (:meth:`Launcher.run` fills it in): ``"complete": false``
         self.partial: LaunchResult | None = None
 
@@ -96,17 +115,35 @@ class NodeDiedError(RuntimeError):
         code = child.proc.returncode
         how = (f"killed by {signal.Signals(-code).name}" if code < 0 else f"exit code {code}"
                + (" before the end of the run" if code == 0 else ""))
-        return cls(child.name, how, child.tail)
+        return cls(child.name, how, child.tail, code)
+
+    def reported(self) -> StillframeError | None:
+        """The error the node itself reported as it ended: its one ``error:`` line, of the
+        kind its exit code says (:data:`stillframe.errors.BY_EXIT_CODE`); None when it ended
+        otherwise (a signal, a crash)."""
+        kind = BY_EXIT_CODE.get(self.code or 0)
+        line = next((t for t in reversed(self.tail) if ": error: " in t), None)
+        if kind is None or line is None:
+            return None
+        return kind(f"{self.name}: {line.split(': error: ', 1)[1]}")
+
+
+def new_run_token() -> str:
+    """A new run's token (64 random bits, hex): what its nodes write in every stamped sample
+    and require of every sample they take (docs/nodes.md, writer identity)."""
+    return secrets.token_hex(8)
 
 
 def node_command(package: str, scene: Path, overrides: Sequence[str], mode: str, *,
                  params: dict[str, Any] | None = None, args: Sequence[str] = ()) -> list[str]:
-    """``python -m PACKAGE.node ARGS --ros-args -p scene:=... -p overrides:=[...] -p mode:=...``.
+    """``python -m PACKAGE ARGS --ros-args -p scene:=... -p overrides:=[...] -p mode:=...``
+    (the package's ``__main__``: Ctrl-C answered from the process's first line,
+    :func:`stillframe.interrupts.run_module`).
 
     Overrides go as a JSON list of strings (JSON is YAML, so rcl-style parsing keeps each
     ``key=value`` whole even when the value is itself a list); an empty list is left out
     because ROS parameters cannot be empty arrays."""
-    argv = [sys.executable, "-m", f"{package}.node", *args, "--ros-args",
+    argv = [sys.executable, "-m", package, *args, "--ros-args",
             "-p", f"scene:={scene}", "-p", f"mode:={mode}"]
     if overrides:
         argv += ["-p", f"overrides:={json.dumps(list(overrides))}"]
@@ -115,16 +152,14 @@ def node_command(package: str, scene: Path, overrides: Sequence[str], mode: str,
     return argv
 
 
-#: a real-time run recorded above this rate gets :data:`RECORDED_PRACTICES`,
-#: :data:`RECORDED_RECORDER_ARGS` and ``dds`` where the user did not choose (issue 32,
-#: docs/realtime.md "Recording beside a 1 kHz loop"): measured at 1 kHz on a quiet 2-core
-#: machine; at the thesis's 32 Hz a recorded loop holds without them. Between the two it was not
-#: measured.
+#: a real-time run recorded above this rate gets :data:`RECORDED_RECORDER_ARGS` and ``dds``
+#: where the user did not choose: a recorder beside a loop this fast costs it deadlines unless it
+#: runs below the loop, and at the thesis's 32 Hz it costs nothing (docs/realtime.md,
+#: "Recording beside a 1 kHz loop", has the measurements)
 RECORDED_ABOVE_HZ = 200.0
-#: the loop nodes' real-time practices in such a run, unless ``--rt`` says otherwise: with them
-#: and the recorder below the loop, the recorded loop missed fewer deadlines than the unrecorded
-#: one without them, on both backends (docs/realtime.md)
-RECORDED_PRACTICES = "all"
+#: the loop nodes' real-time practices in a real-time run unless ``--rt`` says otherwise, each
+#: where the user may (:func:`stillframe.node_runtime.realtime.may`; docs/realtime.md)
+REALTIME_PRACTICES = "all"
 
 
 def recorded_default(specs: Sequence[str], *, record: bool, mode: str,
@@ -135,7 +170,7 @@ def recorded_default(specs: Sequence[str], *, record: bool, mode: str,
     child chose one; None otherwise."""
     if (not fast_recorded(record=record, mode=mode, rate_hz=rate_hz)
             or any("=" not in spec for spec in specs)
-            or os.environ.get(api.BACKEND_ENV, "").strip() or api.backend_name() == "dds"):
+            or environment.value(api.BACKEND_ENV) or api.backend_name() == "dds"):
         return None
     return "dds"
 
@@ -152,13 +187,12 @@ def fast_recorded(*, record: bool, mode: str, rate_hz: float) -> bool:
     return record and mode == "realtime" and rate_hz > RECORDED_ABOVE_HZ
 
 
-def practices_default(given: str | None, *, record: bool, mode: str, rate_hz: float) -> str:
+def practices_default(given: str | None, *, mode: str) -> str:
     """The loop nodes' practices: ``given`` (``--rt``) when the user gave it, else
-    :data:`RECORDED_PRACTICES` for a recorded real-time run above :data:`RECORDED_ABOVE_HZ`,
-    else none (issue 10: opt-in)."""
+    :data:`REALTIME_PRACTICES` in real time and none in lock-step (which keeps no deadline)."""
     if given is not None:
         return given
-    return RECORDED_PRACTICES if fast_recorded(record=record, mode=mode, rate_hz=rate_hz) else ""
+    return REALTIME_PRACTICES if mode == "realtime" else ""
 
 
 def recorder_priority(given: Sequence[str] | None, *, mode: str, rate_hz: float) -> list[str]:
@@ -204,10 +238,30 @@ def nodes_for(scene: Scene) -> list[str]:
     return [name for name in NODES if used[name]]
 
 
-def _die_with_parent() -> None:
-    """In the child before exec: SIGTERM when the launcher dies (Linux prctl)."""
-    with contextlib.suppress(OSError, AttributeError):
-        ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGTERM)
+def _prepare_child() -> None:
+    """In the child before exec: SIGINT ignored until the child's own code installs its handler,
+    and on Linux SIGTERM when the launcher dies (prctl). Python installs no KeyboardInterrupt
+    handler for a SIGINT its parent ignored (the signal module's documentation), so a SIGINT
+    forwarded while the child's interpreter is still starting (importing ``site``) cannot
+    print a traceback from there; the node executables install theirs on their first line
+    (:func:`stillframe.interrupts.run_module`), and :meth:`ProcessSet.stop` sends SIGTERM
+    to a child that has none yet."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    if sys.platform == "linux":
+        with contextlib.suppress(OSError, AttributeError):
+            ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGTERM)
+
+
+def catches_sigint(pid: int) -> bool:
+    """Whether process ``pid`` has a handler of its own for SIGINT (``SigCgt`` in
+    ``/proc/PID/status``); True where the kernel does not say."""
+    try:
+        status = Path(f"/proc/{pid}/status").read_text()
+    except OSError:
+        return True
+    caught = next((line.split()[1] for line in status.splitlines()
+                   if line.startswith("SigCgt:")), None)
+    return caught is None or bool(int(caught, 16) & (1 << (signal.SIGINT - 1)))
 
 
 @dataclass
@@ -261,7 +315,7 @@ class ProcessSet:
         proc = subprocess.Popen(
             argv, env=env, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
             stderr=subprocess.STDOUT, text=True, errors="replace", process_group=0,
-            preexec_fn=_die_with_parent if sys.platform == "linux" else None)
+            preexec_fn=_prepare_child)
         child = Child(name, proc, grace_s=grace_s)
         self.children.append(child)
         self.echo(f"started {name} (pid {proc.pid})")
@@ -281,14 +335,17 @@ class ProcessSet:
             code = child.proc.poll()
             if code is None:
                 continue
-            if not child.stop_requested or code not in (0, -signal.SIGINT, -signal.SIGTERM):
+            if not child.stop_requested or code not in STOPPED_CODES:
                 return child
         return None
 
     def stop(self, child: Child) -> None:
-        """SIGINT, wait (the child's grace); SIGTERM, wait; SIGKILL. Always reaps the process."""
+        """SIGINT (SIGTERM to a child still starting: one without a SIGINT handler yet,
+        :func:`_prepare_child`), wait (the child's grace); SIGTERM, wait; SIGKILL. Always reaps
+        the process."""
         child.stop_requested = True
-        for sig, grace in ((signal.SIGINT, child.grace_s), (signal.SIGTERM, STOP_GRACE_S),
+        first = signal.SIGINT if catches_sigint(child.pid) else signal.SIGTERM
+        for sig, grace in ((first, child.grace_s), (signal.SIGTERM, STOP_GRACE_S),
                            (signal.SIGKILL, STOP_GRACE_S)):
             if child.exited():
                 break
@@ -417,10 +474,21 @@ class LaunchOptions:
     hosts: dict[str, list[str]] = field(default_factory=dict)
     #: run the modal tracker beside the nodes (:mod:`stillframe.app.tracking`)
     track: bool = False
+    #: where the loop nodes write their per-sample phase rings
+    #: (:mod:`stillframe.node_runtime.phase_timing`); None: nowhere
+    phase_log: Path | None = None
+    #: False: the nodes time no phases (a twin run measuring the timing's own cost)
+    phase_timing: bool = True
 
     @property
     def tracked_file(self) -> Path:
         return self.result_file.with_name("tracked_modes.jsonl")
+
+    @property
+    def adaptation_file(self) -> Path:
+        """estimator_node's adaptation record (``adaptation.enabled``); its designs' model files
+        go to ``designs/`` beside it."""
+        return self.result_file.with_name("adaptation.json")
 
 
 class Launcher:
@@ -437,6 +505,12 @@ class Launcher:
         self.options = options
         self.scene = options.resolved or resolve_model(
             load_scene(options.scene.resolve(), options.overrides))[0]
+        # what a node would refuse, refused here, before any process starts
+        check_loop(self.scene, mode=options.mode)
+        if self.scene.adaptation.enabled and options.compose:
+            raise InputError("--compose: with adaptation.enabled the estimator waits for the "
+                             "controller to take each design, which one process cannot serve "
+                             "while it waits; run without --compose")
         self.status = StatusLine()
         default = recorded_default(options.backends, record=options.record_dir is not None,
                                    mode=options.mode,
@@ -451,19 +525,19 @@ class Launcher:
         rate_hz, record = self.scene.sensors.rate_hz, options.record_dir is not None
         self.recorder_args = recorder_priority(options.recorder_args, mode=options.mode,
                                                rate_hz=rate_hz)
-        self.rt = practices_default(options.rt, record=record, mode=options.mode,
-                                    rate_hz=rate_hz)
-        if options.rt is None and self.rt:
-            self.status.echo(
-                f"real-time practices '{self.rt}' for the loop nodes: a recorded real-time "
-                f"loop at {rate_hz:g} Hz keeps its deadlines with them (docs/realtime.md); "
-                "--rt none runs without them")
+        self.rt = practices_default(options.rt, mode=options.mode)
+        if self.rt:
+            self.status.echo(permissions_line(RealtimeOptions(
+                parse_practices(self.rt), cpus=tuple(options.rt_cpus)))
+                + ("; --rt none runs without them" if options.rt is None else ""))
         if record and options.recorder_args is None and self.recorder_args:
             self.status.echo(
                 f"recorder run as `stillframe record {' '.join(self.recorder_args)}`: below "
                 "the loop's nodes, it takes no CPU they want (docs/realtime.md); "
                 "--recorder-nice 0 runs it as ros2 bag record does")
         self.processes = ProcessSet(self.status.echo)
+        #: the run's token: every stamped sample of its nodes carries it, and they take no other
+        self.token = new_run_token()
         self.node = api.create_node(running_graph.launcher_name(), argv=["stillframe"])
         self.created = time.monotonic()
         self.statuses: dict[str, dict[str, str]] = {}
@@ -483,9 +557,10 @@ class Launcher:
         if o.record_dir is not None:     # in real time too: the bag misses no first sample
             sim_params["await_recorder"] = [
                 names.resolve_topic(t) for t in o.record_topics] or ["*"]
-        # every loop node: the estimator's and controller's lock-step waits are parts of it
-        shared = ({} if o.lockstep_timeout_s is None
-                  else {"lockstep_timeout_s": float(o.lockstep_timeout_s)})
+        if o.lockstep_timeout_s is not None:
+            sim_params["lockstep_timeout_s"] = float(o.lockstep_timeout_s)
+        # the run's token, which only this launch's nodes know (docs/nodes.md, writer identity)
+        shared: dict[str, Any] = {"run_token": self.token}
         scene = self.scene_file()
         children = []
         if o.record_dir is not None:
@@ -507,10 +582,17 @@ class Launcher:
         rt = ({"rt": self.rt, **({"rt_cpus": o.rt_cpus} if o.rt_cpus else {})}
               if self.rt else {})
         sim = self.simulator()
+        timing = {**({"phase_log": str(o.phase_log.resolve())} if o.phase_log else {}),
+                  **({} if o.phase_timing else {"phase_timing": False})}
+        adaptation = ({"adaptation_dir": str(o.adaptation_file.with_name("designs")),
+                       "adaptation_record": str(o.adaptation_file)}
+                      if self.scene.adaptation.enabled else {})
         children += [(name, [*o.hosts.get("estimator_node" if name == CONTAINER else name, []),
                              *node_command(name, scene, [], o.mode, params={
-                                 **shared, **(rt if name in (sim, *LOOP) else {}),
+                                 **shared, **timing,
+                                 **(rt if name in (sim, *LOOP) else {}),
                                  **(sim_params if name == sim else {}),
+                                 **(adaptation if name == "estimator_node" else {}),
                                  **({"autostart": False} if name in MANAGED else {})},
                                  args=["all"] if name == sim == CONTAINER else [])])
                      for name in reversed(nodes)]
@@ -525,7 +607,8 @@ class Launcher:
         ``repr`` writes them: the same numbers)."""
         path = self.scene_file()
         path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(yaml.safe_dump(self.scene.to_dict(), sort_keys=False))
+        write_text(path, yaml.safe_dump(self.scene.to_dict(), sort_keys=False),
+                   what="resolved scene")
         return path
 
     def nodes(self) -> list[str]:
@@ -552,6 +635,7 @@ class Launcher:
         or KeyboardInterrupt after a clean stop when SIGINT/SIGTERM reached the launcher."""
 
         self.options.result_file.unlink(missing_ok=True)
+        self.options.adaptation_file.unlink(missing_ok=True)
         try:
             running_graph.refuse_if_running(self.node, self.created, (*NODES, CONTAINER))
             self.write_scene()
@@ -590,6 +674,7 @@ class Launcher:
             self.node.spin_once(0.0)    # the nodes' last statuses, written as they stopped
             if (dead := self.processes.first_failure()) is not None:
                 raise NodeDiedError.exited(dead)
+            self._name_writers()
         except NodeDiedError as exc:
             exc.partial = self._partial(exc)
             raise
@@ -695,10 +780,33 @@ class Launcher:
                       "stopped": stopped, "diagnostics": dict(self.statuses)}
         if self.options.record_dir is not None:
             evaluation["bag"] = _bag_state(self.options.record_dir)
-        with contextlib.suppress(OSError):
-            path.write_text(json.dumps(evaluation, indent=2) + "\n")
+        with contextlib.suppress(OSError, InputError):
+            write_text(path, json.dumps(evaluation, indent=2) + "\n", what="result file")
         history = path.with_suffix(".npz")
         return LaunchResult(evaluation, path, history, dict(self.statuses))
+
+    def _name_writers(self) -> None:
+        """Name, in the nodes' reports, the writers a node could give by GID only (its graph had
+        not named them yet: across DDS vendors a node's name comes seconds after its writer,
+        longer than a short run), from the launch's own graph, waiting for it at most
+        :data:`NAME_WAIT_S`: the result file and the statuses then name every writer."""
+        path = self.options.result_file
+        text = path.read_text() if path.is_file() else ""
+        gids = set(GID_TEXT.findall(text + json.dumps(self.statuses)))
+        names: dict[str, str] = {}
+        deadline = time.monotonic() + NAME_WAIT_S
+        while gids - names.keys() and time.monotonic() < deadline and api.ok():
+            self.node.spin_once(0.1)
+            for topic, _ in self.node.get_topic_names_and_types():
+                names.update({ep.endpoint_gid.hex(): fqn(ep.node_namespace, ep.node_name)
+                              for ep in self.node.get_publishers_info_by_topic(topic)
+                              if ep.endpoint_gid.hex() in gids
+                              and ep.node_name not in UNNAMED_NODES})
+        for gid, name in names.items():
+            text = text.replace(gid, name)
+            self.statuses = json.loads(json.dumps(self.statuses).replace(gid, name))
+        if names:
+            path.write_text(text)
 
     def _result(self) -> LaunchResult:
         path = self.options.result_file
@@ -706,6 +814,13 @@ class Launcher:
             evaluation = json.loads(path.read_text())
         except (OSError, ValueError) as exc:
             raise InputError(f"sim_node's result file {path}: cannot read it ({exc})") from None
+        if self.options.record_dir is not None:
+            evaluation["bag"] = _bag_state(self.options.record_dir)
+        if self.scene.adaptation.enabled:
+            try:
+                evaluation["adaptation"] = json.loads(self.options.adaptation_file.read_text())
+            except (OSError, ValueError) as exc:
+                evaluation["adaptation"] = {"error": f"no adaptation record ({exc})"}
         return LaunchResult(evaluation, path, path.with_suffix(".npz"), dict(self.statuses),
                             read_tracked(self.options.tracked_file) if self.options.track else [])
 
@@ -717,46 +832,30 @@ def _how_stopped(code: int | None) -> str:
 
 
 def _bag_state(bag: Path) -> dict[str, Any]:
-    """Whether the recorder closed its bag (metadata written) and how many messages it holds."""
+    """Whether the recorder closed its bag (metadata written), how many messages it holds, and
+    what the recorder found missing (samples per topic, its stalls; its ``custom_data``)."""
     try:
-        meta = yaml.safe_load((bag / "metadata.yaml").read_text())
-        count = int(meta["rosbag2_bagfile_information"]["message_count"])
-    except (OSError, ValueError, KeyError, TypeError, yaml.YAMLError):
+        meta = load_metadata(bag)
+    except BagError:
         return {"path": str(bag), "closed": False,
                 "note": f"not closed: recover it with stillframe bag reindex {bag}"}
-    return {"path": str(bag), "closed": True, "messages": count}
+    state: dict[str, Any] = {"path": str(bag), "closed": True, "messages": meta.message_count}
+    for name, key in (("missing_samples", MISSING_KEY), ("recorder_stalls", STALLS_KEY)):
+        with contextlib.suppress(KeyError, ValueError):
+            state[name] = json.loads(meta.custom_data[key])
+    return state
 
 
 def run_scene(scene: Path, overrides: Sequence[str] = (), *, out: Path,
-              mode: str = "lockstep", record: Path | None = None,
-              lockstep_timeout_s: float | None = None,
-              prepare: Callable[[Any], None] | None = None,
-              record_topics: Sequence[str] = (), backends: Sequence[str] = (),
-              monitor_args: Sequence[str] | None = None, compose: str = "",
-              rt: str | None = None, rt_cpus: Sequence[int] = (),
-              hosts: dict[str, list[str]] | None = None,
-              resolved: Scene | None = None, track: bool = False,
-              recorder_args: Sequence[str] | None = None) -> LaunchResult:
+              prepare: Callable[[Any], None] | None = None, **options: Any) -> LaunchResult:
     """Launch ``scene`` with ``overrides`` through the three nodes to its end; sim_node's
     results go to ``out`` (``result.json``, ``result.npz``, beside the resolved scene the nodes
-    read); ``record`` records ``record_topics`` (default all) into a bag; ``backends`` are
-    ``--backend`` values (:func:`parse_backends`); ``monitor_args`` (e.g. ports) start
-    ``stillframe monitor`` beside the nodes; ``compose`` runs nodes in one process
-    (``container_node``: "pair" the estimator and controller, "all" every node); ``rt`` and
-    ``rt_cpus`` are the loop nodes' real-time practices and CPUs
-    (:mod:`stillframe.node_runtime.realtime`; ``rt`` None: :func:`practices_default`);
-    ``hosts`` runs nodes on other hosts (:attr:`LaunchOptions.hosts`); ``resolved``: the scene
-    already loaded and resolved (else it is done here, once); ``track`` adds the modal tracker;
-    ``recorder_args``: the recorder's priority (:func:`recorder_priority`). ``prepare(node)``
-    may subscribe the launcher's hidden node to more topics before the children start."""
+    read). ``options`` are the other fields of :class:`LaunchOptions` (the mode, the recorder,
+    the backends, …), checked there. ``prepare(node)`` may subscribe the launcher's hidden node
+    to more topics before the children start."""
     out.mkdir(parents=True, exist_ok=True)
-    launcher = Launcher(LaunchOptions(
-        scene, list(overrides), resolved, mode=mode, result_file=out / "result.json",
-        record_dir=record, lockstep_timeout_s=lockstep_timeout_s,
-        record_topics=list(record_topics), backends=list(backends),
-        monitor_args=None if monitor_args is None else list(monitor_args), compose=compose,
-        rt=rt, rt_cpus=list(rt_cpus), hosts=dict(hosts or {}), track=track,
-        recorder_args=None if recorder_args is None else list(recorder_args)))
+    launcher = Launcher(LaunchOptions(scene, list(overrides), result_file=out / "result.json",
+                                      **options))
     if prepare is not None:
         prepare(launcher.node)
     return launcher.run()

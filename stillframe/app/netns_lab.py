@@ -1,6 +1,6 @@
 """Three hosts on one host: a network namespace per loop node, joined by veth pairs to a bridge.
 
-The CI stand-in for three machines on a lab network (issue 11). Needs root and iproute2.
+The CI stand-in for three machines on a lab network. Needs root and iproute2.
 For a prefix P (letters and digits, at most 10, unique per run so that parallel runs never
 clash) it makes:
 

@@ -10,6 +10,7 @@ import os
 import sys
 from typing import Any
 
+from stillframe.config.environment import check_environment, value
 from stillframe.contract.topics import DEFAULT_NAMESPACE
 from stillframe.errors import InputError
 from stillframe.middleware import names
@@ -37,22 +38,12 @@ def add_strategy_arguments(parser: argparse.ArgumentParser) -> None:
                              f"(default {SETTLE_LIMIT_S:g}; it usually settles well before)")
 
 
-def check_environment() -> None:
-    """``ROS_DOMAIN_ID`` and the discovery range as the tools read them: one line, exit 2, before
-    any middleware (rcl only warns of an unknown range and assumes LOCALHOST; we refuse to
-    guess, docs/middleware.md)."""
-    from stillframe.middleware.discovery import discovery_range, domain_id
-
-    domain_id()
-    discovery_range()
-
-
 def tool_node(kind: str, verbose: bool | None = None) -> Any:
     """A hidden node for a command-line tool; it logs its backend only with ``--verbose``."""
     from stillframe.middleware import api
 
     check_environment()
-    verbose = os.environ.get(VERBOSE_ENV) == "1" if verbose is None else verbose
+    verbose = value(VERBOSE_ENV) == "1" if verbose is None else verbose
     quiet = [] if verbose else ["--ros-args", "--log-level", "warn"]
     return api.create_node(f"_stillframe_{kind}_{os.getpid()}", argv=["stillframe", *quiet])
 

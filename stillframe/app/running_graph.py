@@ -1,4 +1,4 @@
-"""Two launches on one ROS domain (issue 26): the second refuses at start, naming the first.
+"""Two launches on one ROS domain: the second refuses at start, naming the first.
 
 The loop's nodes have fixed names in ``/frame`` and share ``/clock`` and ``/diagnostics``, so two
 loops on one domain would each take the other's samples and commands (refused by their writer
@@ -17,6 +17,7 @@ from __future__ import annotations
 import os
 import time
 
+from stillframe.config.environment import value
 from stillframe.contract import topics
 from stillframe.errors import InputError
 from stillframe.middleware import api
@@ -71,6 +72,6 @@ def check(node: api.Node, loop_nodes: tuple[str, ...] = ()) -> None:
     (a launch whose own nodes run), only an earlier launch: discovered late, under load, by
     the launch's watch during its run (:data:`WATCH_S`)."""
     if found := others(node, loop_nodes):
-        domain = os.environ.get("ROS_DOMAIN_ID", "0")
+        domain = value("ROS_DOMAIN_ID")
         raise InputError(f"another stillframe loop is running on ROS_DOMAIN_ID={domain}: "
                          f"{', '.join(found)}; stop it or launch on another ROS_DOMAIN_ID")

@@ -1,4 +1,4 @@
-"""``stillframe launch SCENE --track``: the modal tracker beside the loop (issue 27).
+"""``stillframe launch SCENE --track``: the modal tracker beside the loop.
 
 The tracker (``identification``'s ``modal_tracker``) subscribes to the excitation's load cell
 and the three floor accelerometers, identifies its window every few seconds and appends each
@@ -23,7 +23,7 @@ from stillframe.contract import topics
 from stillframe.loop.decimated_taps import decimated_topic, decimation_factor
 
 TRACKER = "modal_tracker"
-TRACKER_MODULE = "identification.node"
+TRACKER_MODULE = "identification"
 #: the tracker's window and update period, as fractions of the scene's duration (at most 60 s
 #: and 5 s)
 WINDOW_S, UPDATE_S = 60.0, 5.0
@@ -34,7 +34,7 @@ TRACKER_STOP_S = 300.0
 
 
 def tracker_command(scene: Scene, record_file: Path, *, lockstep: bool) -> list[str]:
-    """``python -m identification.node --ros-args -p …`` for the scene's rate and channels: the
+    """``python -m identification --ros-args -p …`` for the scene's rate and channels: the
     simulator's decimated taps at their rate where it publishes them, else the topics; in real
     time (not ``lockstep``) at SCHED_IDLE (only CPU time the nodes leave), in lock-step reading
     reliably (every sample, as the loop's readers)."""

@@ -3,8 +3,10 @@
 A channel is ``TOPIC[:FIELD]``: FIELD is a dotted path into the message, with ``[i]`` for an
 element of an array (``wrench.force.x``, ``position[0]``). Without FIELD the topic contract's
 quantity for the topic's type is taken (docs/architecture.md, topic contract). Bags are read with
-``rosbags.highlevel.AnyReader``, so sqlite3 and MCAP bags, including ones written by
+:func:`stillframe.bags.storage.open_bag`, so sqlite3 and MCAP bags, including ones written by
 ``ros2 bag record``, are read alike; a lone ``.mcap`` file with :mod:`stillframe.bags.lone_mcap`.
+A bag with a damaged part (a chunk whose CRC fails, a damaged index) is refused, naming it:
+identification needs every sample.
 Each sample is placed at its header stamp (the measurement time in the contract), or at its log
 time when the message has no header or all its stamps are zero. Channels must be uniformly
 sampled at one rate without gaps; they are aligned sample by sample on their common time span.
@@ -24,7 +26,7 @@ import numpy as np
 from scipy import signal
 
 from stillframe.bags.lone_mcap import is_lone_mcap, open_lone_mcap
-from stillframe.bags.storage import open_bag
+from stillframe.bags.storage import open_bag, refuse_damage
 from stillframe.contract.messages import TYPESTORE
 from stillframe.contract.topics import CONDITIONAL, CONTRACT
 from stillframe.errors import BagError, IdentificationError, InputError
@@ -172,6 +174,7 @@ def read_series(bag: str | Path, channels: Sequence[Channel]) -> list[Series]:
     """Read each channel's samples from the bag (one pass over the needed topics)."""
     opener = open_lone_mcap if is_lone_mcap(bag) else open_bag
     with opener(bag, TYPESTORE) as reader:
+        refuse_damage(reader)
         types: dict[str, set[str]] = {}
         for c in reader.connections:
             types.setdefault(c.topic, set()).add(c.msgtype)

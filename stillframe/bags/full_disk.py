@@ -1,35 +1,43 @@
-"""A bag on a filesystem that fills up (issue 31): keep every chunk that reached the file, close
-the bag with them, say so in one line.
+"""A bag on a filesystem that fills up: keep every chunk that reached the file, close the bag with
+them, say so in one line.
 
-rosbags' MCAP writer (:class:`stillframe.bags.storage.BagWriter` uses it) touches the disk only
-when it writes a full chunk and when it closes (summary, footer, ``metadata.yaml``); a write that
-fails with ``ENOSPC`` leaves a partial chunk in the file, and closing then fails again (no room
-for the summary). :class:`DiskLedger` makes that end cleanly:
+The ``mcap`` package's writer (:class:`stillframe.bags.storage.BagWriter` drives it) touches the
+disk only when it writes a full chunk and when it finishes (summary, footer); it writes through
+:class:`DiskLedger`, the file-like object this module gives it. A write that fails with
+``ENOSPC`` leaves a partial chunk in the file and the writer in a state it cannot go on from. The
+ledger makes that end cleanly:
 
-- it keeps the offset where the last chunk that was written and flushed completely ends, and that
-  chunk's message counts and time range (what the summary and ``metadata.yaml`` must say);
+- it keeps the offset where the last chunk that was written completely ends (:attr:`durable_end`;
+  the writer has then also written that chunk's message indexes);
 - it holds a small *reserve* file (:data:`RESERVE_BYTES`) in the bag directory while recording
   and frees it when the bag closes, so that the summary and ``metadata.yaml`` find room on a full
   disk (a database's trick: space set aside before it is needed);
-- on a failed write it cuts the file back to the end of the last complete chunk and closes the bag
-  from there (:meth:`DiskLedger.close_after_failure`): first with the chunk that failed (it may
-  fit once the reserve is free), then without it.
+- on a failed write the bag is closed by :func:`close_after_failure`: the file is cut back to its
+  complete chunks, and a fresh ``mcap`` writer is driven again with the same calls, chunk by
+  chunk, from the records those chunks hold (read back with the ``mcap`` package's reader). A
+  writer given the same calls writes the same bytes, so over the part of the file that is already
+  there the replay writes nothing and only compares (a difference ends it); past it, it writes
+  what the first writer could not: the chunk that failed, again as chunks of
+  :data:`SALVAGE_CHUNK_BYTES` as far as they fit, then the summary and the footer. If the summary
+  does not fit, the salvaged chunks are taken back one by one.
 
-What is lost is what never reached the file whole: the chunk being written when the disk filled
-(at most 1 MiB) and the messages received after. If even the summary does not fit, the file is
-cut back to its complete chunks and ``stillframe bag reindex`` recovers them once there is room.
+What is lost is what never reached the file whole: the part of the failed chunk that does not fit
+and the messages received after. If even the summary does not fit, the file is cut back to its
+complete chunks and ``stillframe bag reindex`` recovers them once there is room.
 """
 
 from __future__ import annotations
 
 import contextlib
 import os
-import struct
-from collections import defaultdict
-from collections.abc import Callable
-from io import BytesIO
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import Any
+
+from mcap.exceptions import EndOfFile, McapError
+from mcap.records import Channel, Chunk, Message, Schema
+from mcap.stream_reader import StreamReader, breakup_chunk
+from mcap.writer import CompressionType, Writer
 
 from stillframe.errors import BagError
 
@@ -42,190 +50,221 @@ SALVAGE_CHUNK_BYTES = 64 * 1024
 #: room left for the summary, the footer and ``metadata.yaml`` when salvaging [bytes] (the
 #: salvaged chunks are taken back one by one if that was too little)
 SUMMARY_ROOM = 96 * 1024
-MESSAGE_OPCODE = 0x05
-#: a Message record's header (MCAP specification): opcode, record length, channel id, sequence,
-#: log time, publish time; the length counts the fields after it and the data
-_MESSAGE = struct.Struct("<BQHIQQ")
-_MESSAGE_FIELDS = 2 + 4 + 8 + 8
-#: rosbags' chunk size: a chunk is written once it holds more
+#: the size of a chunk: the writer ends a chunk once its records take more [bytes]
 CHUNK_BYTES = 2**20
-_NO_TIME = 2**63 - 1
+#: a message record's bytes besides its data (opcode, length, channel, sequence, two times)
+MESSAGE_OVERHEAD = 31
+#: a chunk's open records in order, as the writer was given them: ``(channel id, log time,
+#: data)`` for a message, a ``Schema`` or ``Channel`` record for a registration
+Event = Any
+
+
+class ReplayDivergedError(Exception):
+    """A replay would write other bytes than the file holds."""
+
+
+def mcap_writer(stream: Any) -> Writer:
+    """The ``mcap`` package's writer as bags use it: uncompressed chunks of
+    :data:`CHUNK_BYTES` (rosbag2's default: no compression), every CRC (each chunk's, the data
+    section's, the summary's), every index and the statistics."""
+    return Writer(stream, chunk_size=CHUNK_BYTES, compression=CompressionType.NONE,
+                  enable_crcs=True, enable_data_crcs=True)
+
+
+def replay(writer: Writer, events: Sequence[Event]) -> None:
+    """Give ``writer`` the calls that made ``events`` (messages and registrations)."""
+    for event in events:
+        if isinstance(event, tuple):
+            writer.add_message(event[0], event[1], event[2], event[1])
+        elif isinstance(event, Schema):
+            writer.register_schema(event.name, event.encoding, event.data)
+        else:
+            writer.register_channel(event.topic, event.message_encoding, event.schema_id,
+                                    event.metadata)
+
+
+def events_of(chunk: Chunk) -> list[Event]:
+    """The records of a chunk read back, as :data:`Event`."""
+    return [(r.channel_id, r.log_time, r.data) if isinstance(r, Message) else r
+            for r in breakup_chunk(chunk, validate_crc=True) if isinstance(
+                r, Message | Schema | Channel)]
 
 
 class DiskLedger:
-    """The durable part of a rosbags ``Writer``'s MCAP file (module docstring), and the
-    recorder's per-message write into it (:meth:`message_writer`): the one place that works on
-    rosbags' ``McapWriter`` from outside."""
+    """The stream the ``mcap`` writer writes to (``write``, ``tell``, ``flush``): the bag's
+    file, its reserve, and what of the file is durable (module docstring)."""
 
-    def __init__(self, writer: Any, bag: Path) -> None:
-        self.writer = writer
-        self.storage = writer.storage
+    def __init__(self, bag: Path, path: Path) -> None:
+        self.path = path
         self.reserve = bag / RESERVE_NAME
-        self.counts: dict[int, int] = defaultdict(int)
-        self.start, self.end = _NO_TIME, 0
         #: the write that failed (None while the disk took every chunk)
         self.failure: OSError | None = None
+        self.position = 0
+        #: where the last complete chunk (and its message indexes) ends
+        self.durable_end = 0
+        #: set by every write, cleared by :meth:`settle`: the writer wrote a chunk
+        self.wrote = False
         try:
-            self.storage.bio.flush()
             self.reserve.write_bytes(bytes(RESERVE_BYTES))
+            self.file = path.open("xb", buffering=0)
         except OSError as exc:
+            self.reserve.unlink(missing_ok=True)
             raise BagError(f"{bag}: cannot create bag: {exc.strerror or exc} (the bag keeps "
                            f"{RESERVE_BYTES // 1024} KiB free for its index)") from None
-        self.durable_end = self.storage.bio.tell()
-        # every chunk goes through the ledger (an instance attribute shadows the method)
-        self.storage.close_chunk = self._close_chunk
 
-    def _close_chunk(self) -> None:
-        """rosbags' ``close_chunk``, flushed to the file; counted only when it got there."""
-        storage, chunk = self.storage, self.storage.chunk
+    def write(self, data: bytes | memoryview) -> int:
         if self.failure is not None:
-            raise BagError(f"{storage.path}: not written after a failed write")
-        indexed = len(storage.chunks)
+            raise BagError(f"{self.path}: not written after a failed write")
         try:
-            type(storage).close_chunk(storage)
-            storage.bio.flush()
+            _write_all(self.file, data)
         except OSError as exc:
             self.failure = exc
-            del storage.chunks[indexed:]
-            storage.chunk = chunk       # kept for one more try once the reserve is free
-            raise BagError(f"{storage.path}: write failed: {exc.strerror or exc}") from None
-        self.durable_end = storage.bio.tell()
-        for cid, msgs in chunk.msgs.items():
-            self.counts[cid] += len(msgs)
-        self.start = min(self.start, chunk.message_start_time)
-        self.end = max(self.end, chunk.message_end_time)
+            raise
+        self.position += len(data)
+        self.wrote = True
+        return len(data)
 
-    def message_writer(self, cid: int) -> Callable[[int, bytes | memoryview], None]:
-        """``write(stamp_ns, cdr)`` on channel ``cid``: the MCAP Message record appended to the
-        open chunk with one ``struct.pack``, the chunk's message index and the counts kept as
-        rosbags' ``McapWriter.write`` keeps them (it builds a ``BytesIO`` and four integers'
-        bytes per message: 3.1 times as long, measured in one run); the bag's time range is
-        taken per chunk (:meth:`fold_times`), not per message."""
-        storage, counts, stats = self.storage, self.writer.counts, self.storage.channel_stats
-        pack = _MESSAGE.pack
+    def tell(self) -> int:
+        return self.position
 
-        def write(stamp_ns: int, data: bytes | memoryview) -> None:
-            chunk = storage.chunk
-            bio = chunk.bio
-            chunk.msgs[cid].append((stamp_ns, bio.tell()))
-            if stamp_ns < chunk.message_start_time:
-                chunk.message_start_time = stamp_ns
-            if stamp_ns > chunk.message_end_time:
-                chunk.message_end_time = stamp_ns
-            bio.write(pack(MESSAGE_OPCODE, _MESSAGE_FIELDS + len(data), cid, 0, stamp_ns,
-                           stamp_ns))
-            bio.write(data)
-            counts[cid] += 1
-            stats[cid] += 1
-            if bio.tell() > CHUNK_BYTES:
-                storage.close_chunk()
+    def flush(self) -> None:
+        """Nothing to do: every write went to the file unbuffered."""
 
-        return write
-
-    def fold_times(self) -> None:
-        """The bag's time range (``metadata.yaml`` and the MCAP statistics) over the chunks
-        written and the open one; before closing."""
-        writer, storage, chunk = self.writer, self.storage, self.storage.chunk
-        start = min(writer.min_timestamp, self.start, chunk.message_start_time)
-        end = max(writer.max_timestamp, self.end, chunk.message_end_time)
-        writer.min_timestamp, writer.max_timestamp = start, end
-        storage.message_start_time, storage.message_end_time = start, end
-
-    @property
-    def written(self) -> int:
-        """Messages in complete chunks in the file."""
-        return sum(self.counts.values())
-
-    def pending(self) -> int:
-        """Messages in the chunk not yet in the file."""
-        return sum(len(msgs) for msgs in self.storage.chunk.msgs.values())
+    def settle(self) -> None:
+        """What was written so far is durable: complete chunks."""
+        self.durable_end = self.position
+        self.wrote = False
 
     def release_reserve(self) -> None:
         self.reserve.unlink(missing_ok=True)
 
-    def close_after_failure(self) -> bool:
-        """Cut the file back to its complete chunks, write what fits of the chunk that failed
-        as smaller chunks (:meth:`_salvage`), and close the bag, taking salvaged chunks back
-        one by one while the summary does not fit. True if the bag is closed (summary, footer,
-        ``metadata.yaml``); False if the file was left as its complete chunks."""
-        self.release_reserve()
-        failed = self.storage.chunk
-        self._cut()
-        states = self._salvage(failed)
-        while True:
-            if self._try_close():
-                return True
-            if not states:
-                break
-            self.durable_end, counts, self.start, self.end = states.pop()
-            self.counts = defaultdict(int, counts)
-            self._cut()
-        self._cut()
-        self.writer.storage = None
+    def close(self) -> None:
         with contextlib.suppress(OSError):
-            self.storage.bio.close()
-        self.writer.metapath.with_suffix(".yaml.tmp").unlink(missing_ok=True)
-        return False
+            self.file.close()
 
-    def _try_close(self) -> bool:
-        try:
-            self.writer.close()
-        except (OSError, BagError):
-            return False
-        return True
-
-    def _salvage(self, failed: Any) -> list[tuple[int, dict[int, int], int, int]]:
-        """The records of the chunk that failed, written again as chunks of
-        :data:`SALVAGE_CHUNK_BYTES` while the filesystem has room for one more and
-        :data:`SUMMARY_ROOM` beside it (the messages of a 1 MiB chunk are not all lost because
-        the disk had room for half of them). The ledger's state before each chunk written, to
-        take them back if the summary does not fit."""
-        data, at = failed.bio.getvalue(), 0
-        chunk = self.storage.chunk
-        states = []
-        while at < len(data):
-            length = int.from_bytes(data[at + 1:at + 9], "little")
-            record, opcode = data[at:at + 9 + length], data[at]
-            at += 9 + length
-            if opcode == MESSAGE_OPCODE:
-                stamp = int.from_bytes(record[15:23], "little")
-                chunk.msgs[int.from_bytes(record[9:11], "little")].append(
-                    (stamp, chunk.bio.tell()))
-                chunk.message_start_time = min(chunk.message_start_time, stamp)
-                chunk.message_end_time = max(chunk.message_end_time, stamp)
-            chunk.bio.write(record)
-            if chunk.bio.tell() >= SALVAGE_CHUNK_BYTES or at >= len(data):
-                if self._room() < chunk.bio.tell() + SUMMARY_ROOM:
-                    break
-                states.append((self.durable_end, dict(self.counts), self.start, self.end))
-                try:
-                    self._close_chunk()
-                except BagError:
-                    states.pop()
-                    break
-                chunk = self.storage.chunk
-        self._cut()
-        return states
-
-    def _room(self) -> int:
+    def room(self) -> int:
         """Bytes the filesystem of the bag still takes."""
-        stats = os.statvfs(self.storage.path)
+        stats = os.statvfs(self.path)
         return stats.f_bavail * stats.f_frsize
 
-    def _cut(self) -> None:
-        """The file cut at the end of its last complete chunk and opened there again, an empty
-        chunk pending; the summary's figures those of the complete chunks."""
-        storage, writer = self.storage, self.writer
-        with contextlib.suppress(OSError):
-            storage.bio.close()     # its buffer may hold bytes the disk refused
-        with storage.path.open("r+b") as stream:
-            stream.truncate(self.durable_end)
-        storage.bio = storage.path.open("ab")
-        writer.storage = storage
-        self.failure = None
-        storage.chunk = type(storage.chunk)(_NO_TIME, 0, BytesIO(), defaultdict(list))
-        counts = {cid: self.counts.get(cid, 0) for cid in storage.channel_stats}
-        storage.channel_stats.update(counts)     # in place: the message writers hold them
-        writer.counts.update(counts)
-        storage.message_start_time, storage.message_end_time = self.start, self.end
-        writer.min_timestamp, writer.max_timestamp = self.start, self.end
+
+def _write_all(file: Any, data: bytes | memoryview) -> None:
+    view = memoryview(data)
+    while view:
+        written = file.write(view)
+        view = view[written:]
+
+
+class _ReplayStream:
+    """Compares what a replaying writer writes with the file up to ``until``, writes the rest."""
+
+    def __init__(self, path: Path, until: int) -> None:
+        self.file = path.open("r+b", buffering=0)
+        self.until = until
+        self.position = 0
+
+    def write(self, data: bytes | memoryview) -> int:
+        size = len(data)
+        head = max(0, min(size, self.until - self.position))
+        if head:
+            self.file.seek(self.position)
+            if self.file.read(head) != bytes(data[:head]):
+                raise ReplayDivergedError(f"byte {self.position}")
+        if head < size:
+            self.file.seek(self.position + head)
+            _write_all(self.file, memoryview(data)[head:])
+        self.position += size
+        return size
+
+    def tell(self) -> int:
+        return self.position
+
+    def flush(self) -> None:
+        """Nothing to do: unbuffered."""
+
+
+def _groups(events: Sequence[Event]) -> list[list[Event]]:
+    """The failed chunk's events in groups of about :data:`SALVAGE_CHUNK_BYTES`."""
+    groups: list[list[Event]] = [[]]
+    size = 0
+    for event in events:
+        groups[-1].append(event)
+        if isinstance(event, tuple):
+            size += len(event[2]) + MESSAGE_OVERHEAD
+            if size >= SALVAGE_CHUNK_BYTES:
+                groups.append([])
+                size = 0
+    return [g for g in groups if any(isinstance(e, tuple) for e in g)]
+
+
+def close_after_failure(ledger: DiskLedger, start: Callable[[Writer], None],
+                        failed: Sequence[Event],
+                        finish: Callable[[Writer, list[Event]], None]) -> list[Event] | None:
+    """Close the bag whose write failed (module docstring): ``start(writer)`` starts a fresh
+    writer as the first was, ``finish(writer, salvaged)`` writes what closes it given the
+    events salvaged. The salvaged events (the bag is closed), or None (the file was left as its
+    complete chunks)."""
+    ledger.close()
+    ledger.release_reserve()
+    groups = _groups(failed)
+    keep = len(groups)
+    while True:
+        with ledger.path.open("r+b") as stream:
+            stream.truncate(ledger.durable_end)
+        outcome = _attempt(ledger, start, groups[:keep], finish)
+        if outcome is True:
+            return [e for group in groups[:keep] for e in group]
+        if outcome is None or keep == 0:
+            break
+        keep = min(keep - 1, outcome)
+    with contextlib.suppress(OSError), ledger.path.open("r+b") as stream:
+        stream.truncate(ledger.durable_end)
+    return None
+
+
+def _complete_chunks(path: Path) -> Iterator[Chunk]:
+    """The chunks of a file cut back to its complete chunks (it has no footer: the reader's
+    end-of-file after the last one is the end)."""
+    with path.open("rb") as source:
+        records = StreamReader(source, emit_chunks=True).records
+        while True:
+            try:
+                record = next(records)
+            except (StopIteration, EndOfFile):
+                return
+            if isinstance(record, Chunk):
+                yield record
+
+
+def _attempt(ledger: DiskLedger, start: Callable[[Writer], None], groups: list[list[Event]],
+             finish: Callable[[Writer, list[Event]], None]) -> bool | int | None:
+    """One replay with ``groups`` salvaged: True when the bag closed; else how many groups were
+    written before a write failed (or there was no room for one more), or None when the replay
+    cannot reproduce the file."""
+    stream = _ReplayStream(ledger.path, ledger.durable_end)
+    written = 0
+    try:
+        writer = mcap_writer(stream)
+        start(writer)
+        for chunk in _complete_chunks(ledger.path):
+            replay(writer, events_of(chunk))
+            writer.flush()
+        for group in groups:
+            size = sum(len(e[2]) + MESSAGE_OVERHEAD for e in group if isinstance(e, tuple))
+            if ledger.room() < size + SUMMARY_ROOM:
+                return written
+            replay(writer, group)
+            writer.flush()
+            written += 1
+        finish(writer, [e for group in groups for e in group])
+    except OSError:
+        return written
+    except (ReplayDivergedError, McapError, ValueError):
+        return None
+    finally:
+        stream.file.close()
+    return True
+
+
+__all__ = ["CHUNK_BYTES", "RESERVE_BYTES", "RESERVE_NAME", "DiskLedger", "Event",
+           "close_after_failure", "events_of", "mcap_writer", "replay"]

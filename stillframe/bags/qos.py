@@ -1,11 +1,14 @@
-"""QoS between the middleware and bags: conversion to and from rosbag2's metadata form, and
+"""QoS between the middleware and bags: conversion to and from rosbag2's metadata form (the
+profiles as rosbag2 writes them into ``metadata.yaml`` v9 and into each MCAP channel), and
 rosbag2's rules for adapting a recorder's request and a player's offer to recorded offers
 (``rosbag2_transport/qos.cpp``: ``adapt_request_to_offers``, ``adapt_offer_to_recorded_offers``).
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from enum import IntEnum
+from typing import Any
 
 from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability
 from rosbags.interfaces import QosTime as BagTime
@@ -46,6 +49,74 @@ def to_bag(profile: QoSProfile) -> Qos:
         QosLiveliness(int(profile.liveliness)), _to_time(profile.liveliness_lease_duration_ns),
         False,
     )
+
+
+#: the enumerated policies of a profile as rosbag2 writes them (lower-case names)
+_POLICIES: dict[str, type[IntEnum]] = {
+    "history": QosHistory, "reliability": QosReliability, "durability": QosDurability,
+    "liveliness": QosLiveliness}
+_TIMES = ("deadline", "lifespan", "liveliness_lease_duration")
+
+
+def qos_to_yaml(profiles: Sequence[Qos]) -> list[dict[str, Any]]:
+    """Profiles as rosbag2 writes them in ``metadata.yaml`` v9 (and, as YAML text, in an MCAP
+    channel's ``offered_qos_profiles``): policy names in lower case, times as sec/nsec."""
+    return [{
+        "history": q.history.name.lower(), "depth": q.depth,
+        "reliability": q.reliability.name.lower(), "durability": q.durability.name.lower(),
+        "deadline": {"sec": q.deadline.sec, "nsec": q.deadline.nsec},
+        "lifespan": {"sec": q.lifespan.sec, "nsec": q.lifespan.nsec},
+        "liveliness": q.liveliness.name.lower(),
+        "liveliness_lease_duration": {"sec": q.liveliness_lease_duration.sec,
+                                      "nsec": q.liveliness_lease_duration.nsec},
+        "avoid_ros_namespace_conventions": q.avoid_ros_namespace_conventions,
+    } for q in profiles]
+
+
+def qos_from_yaml(items: list[Any], error: Callable[[str], Exception]) -> list[Qos]:
+    """Profiles from their rosbag2 form (:func:`qos_to_yaml`; policies also as numbers, as
+    rosbag2 before v9 wrote them); ``error(text)`` is raised naming the first field that is
+    missing or of the wrong type."""
+
+    def whole(where: str, value: Any) -> int:
+        if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value < 2**64:
+            raise error(f"{where}: expected an integer >= 0, got {value!r}"[:160])
+        return value
+
+    def policy(where: str, enum: type[IntEnum], value: Any) -> Any:
+        if isinstance(value, str) and value.upper() in enum.__members__:
+            return enum.__members__[value.upper()]
+        if isinstance(value, int) and not isinstance(value, bool) \
+                and value in {m.value for m in enum}:
+            return enum(value)
+        raise error(f"{where}: expected one of {', '.join(n.lower() for n in enum.__members__)}, "
+                    f"got {value!r}"[:200])
+
+    profiles = []
+    for i, item in enumerate(items):
+        if not isinstance(item, dict):
+            raise error(f"[{i}]: expected a mapping, got {item!r}"[:160])
+        missing = [k for k in (*_POLICIES, "depth", *_TIMES, "avoid_ros_namespace_conventions")
+                   if k not in item]
+        if missing:
+            raise error(f"[{i}]: missing key {missing[0]!r}")
+        times = {}
+        for key in _TIMES:
+            value = item[key]
+            if not isinstance(value, dict) or not {"sec", "nsec"} <= value.keys():
+                raise error(f"[{i}].{key}: expected a mapping of sec and nsec, got {value!r}"[:160])
+            times[key] = BagTime(whole(f"[{i}].{key}.sec", value["sec"]),
+                                 whole(f"[{i}].{key}.nsec", value["nsec"]))
+        avoid = item["avoid_ros_namespace_conventions"]
+        if not isinstance(avoid, bool):
+            raise error(f"[{i}].avoid_ros_namespace_conventions: expected true or false, got "
+                        f"{avoid!r}"[:160])
+        enums = {key: policy(f"[{i}].{key}", enum, item[key]) for key, enum in _POLICIES.items()}
+        profiles.append(Qos(enums["history"], whole(f"[{i}].depth", item["depth"]),
+                            enums["reliability"], enums["durability"], times["deadline"],
+                            times["lifespan"], enums["liveliness"],
+                            times["liveliness_lease_duration"], avoid))
+    return profiles
 
 
 def _member(enum: type, value: object, fallback: object) -> object:

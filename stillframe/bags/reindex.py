@@ -1,25 +1,26 @@
-"""Recover a bag whose recorder died or whose file was cut: ``stillframe bag reindex DIR``.
+"""Recover a bag whose recorder died or whose file was cut or damaged: ``stillframe bag reindex
+DIR``.
 
 A killed recorder leaves an MCAP file without its summary and footer, and no ``metadata.yaml``
 (:mod:`stillframe.bags.storage`: both are written on close); a copy or a disk that ran out of
-space leaves a file cut anywhere, inside a record, a chunk, the summary or the footer. Like
-``ros2 bag reindex`` (and the Go ``mcap recover``, which is not on PyPI) this keeps every
-message that is whole in the file:
+space leaves a file cut anywhere, inside a record, a chunk, the summary or the footer; a damaged
+disk or copy flips bytes. Like ``ros2 bag reindex`` (and the Go ``mcap recover``, which is not on
+PyPI) this keeps every message that is whole and intact in the file:
 
-1. the ``mcap`` package's :class:`~mcap.stream_reader.StreamReader` reads the file front to back
-   and yields every complete record (chunks whole, with their CRCs checked), until the cut;
-2. the record the cut fell in, if it is a chunk, is read with the package's own
+1. :func:`stillframe.bags.checked_mcap.check_mcap` reads the file front to back with every CRC
+   checked: chunks whose CRC fails are skipped and counted; a damaged record length does not end
+   the recovery (the chunks after it are found from the summary's index, or by their own CRC);
+2. the record the cut fell in, if it is a chunk, is read with the ``mcap`` package's own
    :meth:`mcap.records.Chunk.read` (which returns the bytes there are), its compressed stream
    (none, zstd or lz4) decoded as far as it goes with a streaming decompressor, and the records
-   inside it read again with ``StreamReader`` up to the last whole one.
+   inside it read with the package's ``StreamReader`` up to the last whole one.
 
-The mcap package has no recovery routine, so step 2 is ours; it is the only part written here.
-A chunk whose CRC does not match (a damaged, not a cut, file) is skipped and counted. The
-recovered schemas, channels and messages are written again with
+The recovered schemas, channels and messages are written again with
 :class:`stillframe.bags.storage.BagWriter` into a complete bag in DIR (the damaged file kept
-beside it as ``*.damaged``), which ``ros2 bag``, rosbags and ``mcap`` read. Messages whose
-channel or schema was lost, or whose type the typestore cannot learn from the schema, are counted
-as dropped, never silently.
+beside it as ``*.damaged``), which ``ros2 bag``, rosbags and ``mcap`` read. Nothing is dropped
+silently: messages whose channel or schema was lost, or whose type the typestore cannot learn
+from the schema, are counted, and so are damaged chunks; and the result is never called complete
+while the file's own summary counts more messages than were kept.
 """
 
 from __future__ import annotations
@@ -34,19 +35,22 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import lz4.frame
+import yaml
 import zstandard
 from mcap.data_stream import ReadDataStream
 from mcap.exceptions import McapError
 from mcap.opcode import Opcode
-from mcap.records import Channel, Chunk, Footer, Message, Schema
-from mcap.stream_reader import MAGIC_SIZE, StreamReader, breakup_chunk
-from rosbags.rosbag2.metadata import parse_qos
+from mcap.records import Channel, Chunk, Message, Schema
+from mcap.stream_reader import MAGIC_SIZE, StreamReader
 from rosbags.typesys import get_types_from_msg
 from rosbags.typesys.store import Typestore
 
+from stillframe.bags.checked_mcap import check_mcap
 from stillframe.bags.full_disk import RESERVE_NAME
+from stillframe.bags.qos import qos_from_yaml
 from stillframe.bags.storage import BagWriter
 from stillframe.errors import BagError
+from stillframe.files import directory, open_input
 
 MAGIC = b"\x89MCAP0\r\n"
 #: what reading a cut or damaged MCAP stream can raise (struct.error: a cut inside a field;
@@ -58,7 +62,7 @@ RECORD_PREFIX = 9
 
 @dataclass
 class Salvage:
-    """What a front-to-back read of a (possibly cut) MCAP file found."""
+    """What a checked read of a (possibly cut or damaged) MCAP file found."""
 
     schemas: dict[int, Schema] = field(default_factory=dict)
     channels: dict[int, Channel] = field(default_factory=dict)
@@ -67,29 +71,51 @@ class Salvage:
     truncated: bool = False
     #: messages read from the chunk the cut fell in
     from_partial_chunk: int = 0
-    #: whole chunks skipped because their CRC or compression failed
+    #: whole chunks skipped because their CRC, compression or records failed
     bad_chunks: int = 0
+    #: the damage found besides a cut (:meth:`.checked_mcap.McapFile.problems`)
+    problems: list[str] = field(default_factory=list)
+    #: messages the file's own summary counts, when its summary is intact
+    indexed: int | None = None
 
 
 @dataclass(frozen=True)
 class Recovered:
-    """What reindexing kept: messages per topic, whether the file was cut short, and what was
-    dropped (by reason)."""
+    """What reindexing kept: messages per topic, whether the file was cut short, what was
+    dropped (by reason), the damage found, and what the file's own summary counted."""
 
     path: Path
     counts: dict[str, int]
     truncated: bool
     from_partial_chunk: int = 0
     dropped: dict[str, int] = field(default_factory=dict)
+    problems: list[str] = field(default_factory=list)
+    indexed: int | None = None
 
     @property
     def total(self) -> int:
         return sum(self.counts.values())
 
+    @property
+    def complete(self) -> bool:
+        """Nothing lost: not cut, nothing damaged or dropped, every message the summary
+        counts kept."""
+        return not (self.truncated or self.dropped or self.problems) and (
+            self.indexed is None or self.total >= self.indexed)
+
+    @property
+    def state(self) -> str:
+        """One phrase: complete, cut short, or damaged."""
+        if self.complete:
+            return "complete"
+        if not (self.dropped or self.problems) and (self.indexed is None
+                                                    or self.total >= self.indexed):
+            return "cut short; kept every whole message"
+        return "damaged; kept the intact messages"
+
 
 def _mcap_file(bag: Path) -> Path:
-    if not bag.is_dir():
-        raise BagError(f"{bag}: not a bag directory (no such directory)")
+    directory(bag, what="bag directory", error=BagError)
     files = sorted(bag.glob("*.mcap"))
     if len(files) != 1:
         raise BagError(f"{bag}: expected one .mcap file to reindex, found {len(files)}")
@@ -107,8 +133,7 @@ def _take(salvage: Salvage, record: object) -> None:
 
 def whole_records(stream: io.BufferedIOBase, *, skip_magic: bool = False) -> Iterator[object]:
     """The complete records of an MCAP stream, in order, chunks not broken up; stops quietly at
-    the first record the stream does not hold whole (``stream.tell()`` is then the end of the
-    last one yielded)."""
+    the first record the stream does not hold whole."""
     try:
         yield from StreamReader(stream, skip_magic=skip_magic, emit_chunks=True,
                                 validate_crcs=False).records
@@ -134,7 +159,7 @@ def decoded_prefix(chunk: Chunk) -> bytes:
 
 
 def _partial_chunk(tail: bytes) -> Chunk | None:
-    """The chunk the file was cut in, from the bytes after the last whole record, or None."""
+    """The chunk the file was cut in, from its bytes to the end of the file, or None."""
     if len(tail) < RECORD_PREFIX or tail[0] != Opcode.CHUNK:
         return None
     try:
@@ -144,38 +169,32 @@ def _partial_chunk(tail: bytes) -> Chunk | None:
 
 
 def salvage(path: Path) -> Salvage:
-    """Every whole schema, channel and message of the MCAP file at ``path`` (module docstring).
-    A file that does not start as MCAP (beyond a cut inside the magic) is a :class:`BagError`."""
-    found = Salvage()
-    with path.open("rb") as stream:
+    """Every intact schema, channel and message of the MCAP file at ``path`` (module
+    docstring). A file that does not start as MCAP (beyond a cut inside the magic) is a
+    :class:`BagError`."""
+    with open_input(path, what="storage file (MCAP)", error=BagError) as stream:
         head = stream.read(MAGIC_SIZE)
-        if not MAGIC.startswith(head) or not head:
-            raise BagError(f"{path}: not an MCAP file (its first bytes are not the MCAP magic)")
-        stream.seek(0)
-        end = MAGIC_SIZE if len(head) == MAGIC_SIZE else 0
-        footer = False
-        for record in whole_records(stream):
-            end = stream.tell()
-            if isinstance(record, Chunk):
-                try:
-                    inner = breakup_chunk(record, validate_crc=True)
-                except (*READ_ERRORS, zstandard.ZstdError, RuntimeError):
-                    found.bad_chunks += 1
-                    continue
-                for item in inner:
-                    _take(found, item)
-            else:
-                footer = footer or isinstance(record, Footer)
+    if not head or not MAGIC.startswith(head):
+        raise BagError(f"{path}: not an MCAP file (its first bytes are not the MCAP magic)")
+    if len(head) < MAGIC_SIZE:
+        return Salvage(truncated=True)
+    checked = check_mcap(path)
+    found = Salvage(schemas=dict(checked.schemas), channels=dict(checked.channels),
+                    truncated=not checked.complete, bad_chunks=len(checked.bad_chunks))
+    found.messages = [Message(channel_id=cid, log_time=stamp, data=data, publish_time=stamp,
+                              sequence=0) for cid, stamp, data in checked.messages()]
+    found.problems = checked.problems(cut=False)
+    if checked.statistics is not None and checked.summary_crc in ("ok", "absent"):
+        found.indexed = checked.statistics.message_count
+    if checked.cut_at is not None:
+        with open_input(path, what="storage file (MCAP)", error=BagError) as stream:
+            stream.seek(checked.cut_at)
+            chunk = _partial_chunk(stream.read())
+        if chunk is not None:
+            before = len(found.messages)
+            for record in whole_records(io.BytesIO(decoded_prefix(chunk)), skip_magic=True):
                 _take(found, record)
-        stream.seek(end)
-        tail = stream.read()
-    found.truncated = not (footer and tail[-MAGIC_SIZE:] == MAGIC)
-    chunk = _partial_chunk(tail) if found.truncated else None
-    if chunk is not None:
-        before = len(found.messages)
-        for record in whole_records(io.BytesIO(decoded_prefix(chunk)), skip_magic=True):
-            _take(found, record)
-        found.from_partial_chunk = len(found.messages) - before
+            found.from_partial_chunk = len(found.messages) - before
     return found
 
 
@@ -193,9 +212,11 @@ def _learn_type(typestore: Typestore, schema: Schema) -> bool:
 
 
 def _qos(channel: Channel) -> list:
+    """The channel's offered QoS; a damaged QoS text costs the QoS, not the topic."""
     try:
-        return parse_qos(channel.metadata.get("offered_qos_profiles", ""))
-    except Exception:   # a damaged QoS text costs the QoS, not the topic
+        items = yaml.safe_load(channel.metadata.get("offered_qos_profiles", "")) or []
+        return qos_from_yaml(items if isinstance(items, list) else [], ValueError)
+    except (yaml.YAMLError, ValueError):
         return []
 
 
@@ -249,7 +270,8 @@ def reindex(bag: str | Path, typestore: Typestore) -> Recovered:
                 shutil.move(str(item), bag / item.name)
     except OSError as exc:
         raise BagError(f"{bag}: cannot write the reindexed bag: {exc.strerror or exc}") from None
-    return Recovered(bag, counts, found.truncated, found.from_partial_chunk, dropped)
+    return Recovered(bag, counts, found.truncated, found.from_partial_chunk, dropped,
+                     found.problems, found.indexed)
 
 
 __all__ = ["READ_ERRORS", "Recovered", "Salvage", "decoded_prefix", "reindex", "salvage",

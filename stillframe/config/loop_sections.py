@@ -36,8 +36,20 @@ MAX_HORIZON_S = 60.0
 MAX_PREDICTION_STEPS = 1000
 
 
+#: the bound [N m or N] on a command for an actuator without a saturation limit of its own: far
+#: beyond any rig's actuator, it keeps values like 1e308 from reaching the integrator. The
+#: controller clips its commands to it and the simulator refuses commands beyond it
+#: (:attr:`Actuators.bounds`); no saturation limit of a scene may exceed it.
+COMMAND_BOUND = 1e6
+
+
 def _limit(doc: str) -> Any:
     return key(None, up_to(1e12), doc=doc)
+
+
+def _saturation(doc: str) -> Any:
+    return key(None, up_to(COMMAND_BOUND), doc=f"{doc}; null: none (commands bounded by "
+                                                 f"{COMMAND_BOUND:g})")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -77,10 +89,17 @@ class Actuators(Section):
     delay_periods: int = key(0, in_range(0, MAX_DELAY_PERIODS), doc=(
         "the command stamped t_k is applied from t_k+d on (a playout buffer: network delay and "
         "jitter up to d periods cost nothing more; LQG predicts d periods ahead)"))
-    torque_limit: float | None = _limit("pendulum torque saturation [N m]")
+    torque_limit: float | None = _saturation("pendulum torque saturation [N m]")
     torque_rate_limit: float | None = _limit("pendulum torque slew limit [N m/s]")
-    force_limit: float | None = _limit("floor-3 force saturation [N]")
+    force_limit: float | None = _saturation("floor-3 force saturation [N]")
     force_rate_limit: float | None = _limit("floor-3 force slew limit [N/s]")
+
+    @property
+    def bounds(self) -> tuple[float, float]:
+        """The largest command [torque, floor-3 force] the loop passes on: each actuator's
+        saturation limit, or :data:`COMMAND_BOUND` without one."""
+        return (COMMAND_BOUND if self.torque_limit is None else self.torque_limit,
+                COMMAND_BOUND if self.force_limit is None else self.force_limit)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -92,6 +111,10 @@ class Design(Section):
         "scene's rig, or the identified structure of design.file with the rig's pendulum "
         "(eq. 5.200–5.205)"))
     file: str = key("thesis_mkr", doc="identified model: a bundled name or a path")
+    after_events: int = key(0, in_range(0, 100), doc=(
+        "scene or lumped: design on the structure after the first this many of the scene's "
+        "events (0: the structure the run starts with); the oracle of an adaptation, which "
+        "knows the change before it happens"))
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -156,8 +179,43 @@ class Controller(Section):
     singular_margin: float = key(0.02, in_range(1e-6, 1.0), doc=(
         "EUK pendulum: damping of the singularity-robust inverse, as a fraction of the "
         "gain at rest"))
-    limit: float | None = _limit("command saturation [N m or N]")
+    limit: float | None = _saturation("command saturation [N m or N]")
     watchdog_periods: int = key(3, up_to(1_000_000), doc="periods without a fresh estimate")
+
+
+@dataclass(frozen=True, kw_only=True)
+class Adaptation(Section):
+    """adaptation: the loop notices a change of the structure, identifies it again from its own
+    records and hands the controller and the estimator a new LQG design (docs/adaptation.md)."""
+
+    enabled: bool = key(False, doc=(
+        "watch the structure's frequencies, identify it again after a change and hand over a new "
+        "design (LQG with a kf or tvkf estimator on the torque)"))
+    probe_std: float = key(0.003, in_range(0.0, 10.0), doc=(
+        "std of the white probe torque added to the command from controller.start [N m]: what "
+        "makes closed-loop records identify the plant (0: none, and the identification fails)"))
+    probe_seed: int = key(2, in_range(*SEED_RANGE), doc="the probe's random seed")
+    detection_window: float = key(10.0, in_range(1.0, 1e4), doc=(
+        "the window of records each detection update identifies [s]"))
+    update_period: float = key(4.0, in_range(0.1, 1e4), doc=(
+        "sample time between detection updates [s]"))
+    reference_updates: int = key(8, in_range(2, 1000), doc=(
+        "updates that set each mode's reference frequency and spread (after controller.start "
+        "and after each hand-over)"))
+    drift: float = key(2.0, in_range(0.0, 1e3), doc=(
+        "CUSUM drift nu: the deviation an update may show without accumulating [reference "
+        "std]"))
+    threshold: float = key(40.0, in_range(1e-3, 1e6), doc=(
+        "CUSUM threshold h: a change is declared once a mode's statistic exceeds it"))
+    min_relative_std: float = key(1e-3, in_range(1e-6, 1.0), doc=(
+        "the smallest reference spread of a mode, relative to its frequency [-]"))
+    identification_window: float = key(30.0, in_range(1.0, 1e4), doc=(
+        "the records after the change's estimated onset that the structure is identified "
+        "from [s]"))
+    handover_periods: int = key(4, in_range(1, 100_000), doc=(
+        "sample periods from the end of the identification window to the hand-over: the time "
+        "the identification and the design may take while the loop runs (lock-step waits for "
+        "them)"))
 
 
 @dataclass(frozen=True, kw_only=True)

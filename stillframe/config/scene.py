@@ -7,6 +7,7 @@ with its type, default, check and doc; every value can be overridden with
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -14,8 +15,18 @@ from typing import Any, Literal
 
 import yaml
 
+from stillframe.config.events import (
+    FACTOR_RANGE,
+    MAX_EVENTS,
+    Event,
+    changed_keys,
+    check_event,
+    damping_changes,
+    first_sample_at,
+)
 from stillframe.config.loop_sections import (
     Actuators,
+    Adaptation,
     Controller,
     Design,
     Estimator,
@@ -38,14 +49,24 @@ from stillframe.config.schema import (
     up_to,
     validate,
 )
-from stillframe.config.yamlio import load_yaml, problem
+from stillframe.config.yamlio import MAX_YAML_BYTES, load_yaml, problem
 from stillframe.errors import InputError
+from stillframe.files import read_bytes
 
 #: the finite-element mesh and the modal model's modes at most (matrices of 3 * 2 * n + 1)
 MAX_ELEMENTS = 200
 #: integrator steps of one run at most (duration / integrator.dt): the simulator keeps a row
 #: of 7 values per step (1e7 steps: 560 MB)
 MAX_STEPS = 10_000_000
+#: a floor's mass [kg]: rig.floor_masses, and an identified model's masses (its mass matrix's
+#: diagonal, contract/model_file.py)
+FLOOR_MASS = in_range(1e-6, 1e7)
+#: a frequency of the rig [Hz]: excitation.frequencies_hz, and an identified model's natural
+#: frequencies
+FREQUENCY_HZ = in_range(0.0, 1e5)
+#: a damping coefficient [N m s/rad, N s/m]: rig.pendulum.hinge_damping, and an identified
+#: model's damping matrix's diagonal
+DAMPING_COEFFICIENT = in_range(0.0, 1e9)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -58,6 +79,9 @@ class Columns(Section):
     density: float = key(7860.0, in_range(0.0, 1e5), doc="rho [kg/m^3]")
     youngs_modulus: float = key(207e9, in_range(1e3, 1e13), doc="E [Pa]")
     per_story: int = key(2, up_to(100), doc="blades per story")
+    stiffness_factors: Floats3 = key((1.0, 1.0, 1.0), in_range(*FACTOR_RANGE), doc=(
+        "stories 1..3: the blades' bending stiffness EJ times this (a loosened clamp or a "
+        "cracked blade: < 1), their mass unchanged [-]"))
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -68,14 +92,14 @@ class Pendulum(Section):
     mass: float = key(0.083, in_range(1e-6, 1e6), doc="m4 [kg]")
     inertia: float = key(8.32e-4, in_range(1e-12, 1e9),
                          doc="Izz,4 about the centre of mass [kg m^2]")
-    hinge_damping: float = key(2.432e-3, in_range(0.0, 1e9), doc="r4 [N m s/rad]")
+    hinge_damping: float = key(2.432e-3, DAMPING_COEFFICIENT, doc="r4 [N m s/rad]")
 
 
 @dataclass(frozen=True, kw_only=True)
 class Rig(Section):
     """rig: the test rig; defaults are the thesis's (§5.2)."""
 
-    floor_masses: Floats3 = key((1.281, 0.814, 1.380), in_range(1e-6, 1e7), doc="m1..m3 [kg]")
+    floor_masses: Floats3 = key((1.281, 0.814, 1.380), FLOOR_MASS, doc="m1..m3 [kg]")
     columns: Columns = section(Columns)
     pendulum: Pendulum = section(Pendulum)
     gravity: float = key(9.81, in_range(0.0, 100.0), doc="g [m/s^2]")
@@ -102,7 +126,7 @@ class Excitation(Section):
     type: Literal["none", "harmonics", "hammer", "white_noise", "chirp"] = key("none")
     floor: int = key(1, in_range(1, 3), doc="floor the force acts on")
     amplitudes: Floats = key((0.1, 0.1, 0.1), magnitude(1e9), doc="harmonics: force amplitudes [N]")
-    frequencies_hz: Floats = key((1.9, 5.7, 8.8), in_range(0.0, 1e5), doc="harmonics [Hz]")
+    frequencies_hz: Floats = key((1.9, 5.7, 8.8), FREQUENCY_HZ, doc="harmonics [Hz]")
     phases: Floats = key((), magnitude(1e6), doc="harmonics: phases [rad], zeros when empty")
     impulse: float = key(0.05, magnitude(1e9), doc="hammer: impulse [N s]")
     time: float = key(0.0, in_range(0.0, 1e6), doc="hammer: time of the blow [s]")
@@ -180,20 +204,15 @@ class Scene(Section):
     estimator: Estimator = section(Estimator)
     controller: Controller = section(Controller)
     evaluation: Evaluation = section(Evaluation)
-
-
-#: a scene file's size at most (a scene is a page of YAML; this keeps /dev/zero out)
-MAX_SCENE_BYTES = 1 << 20
+    adaptation: Adaptation = section(Adaptation)
+    events: tuple[Event, ...] = key((), lambda v: None if len(v) <= MAX_EVENTS else (
+        f"at most {MAX_EVENTS} events"), doc=(
+            "changes of the structure while the run goes on, in time order "
+            "(stillframe/config/events.py)"))
 
 
 def _read(path: Path) -> dict[str, Any]:
-    try:
-        with path.open("rb") as stream:
-            raw = stream.read(MAX_SCENE_BYTES + 1)
-    except OSError as exc:
-        raise InputError(f"{path}: cannot read scene ({exc.strerror})") from None
-    if len(raw) > MAX_SCENE_BYTES:
-        raise InputError(f"{path}: more than {MAX_SCENE_BYTES >> 20} MiB; not a scene")
+    raw = read_bytes(path, what="scene file", max_bytes=MAX_YAML_BYTES)
     try:
         data = load_yaml(raw)
     except yaml.YAMLError as exc:
@@ -238,6 +257,32 @@ def _check_consistency(scene: Scene) -> None:
     if abs(scene.initial.phi) > 100 * math.pi:
         raise InputError("initial.phi: more than 50 turns; give the angle in rad")
     _check_loop(scene)
+    _check_events(scene)
+
+
+#: how far ``period / integrator.dt`` may lie from a whole number, relative: the two are decimal
+#: values in a scene, so a step that divides the period gives a ratio within rounding of one
+DIVIDES_TOLERANCE = 1e-6
+
+
+def steps_in(period: float, dt: float) -> int | None:
+    """How many steps of ``dt`` make ``period``; None when ``dt`` does not divide it (within
+    :data:`DIVIDES_TOLERANCE`)."""
+    ratio = period / dt
+    steps = round(ratio)
+    return steps if steps >= 1 and abs(ratio - steps) <= DIVIDES_TOLERANCE * ratio else None
+
+
+def sample_grid(scene: Scene) -> tuple[float, int]:
+    """The loop's sample period 1/``sensors.rate_hz`` and the integrator steps in one period;
+    InputError naming ``integrator.dt`` when it does not divide the period."""
+    period = 1.0 / scene.sensors.rate_hz
+    steps = steps_in(period, scene.integrator.dt)
+    if steps is None:
+        raise InputError(
+            f"integrator.dt: {scene.integrator.dt:g} s does not divide the sample period "
+            f"{period:g} s (1/sensors.rate_hz)")
+    return period, steps
 
 
 def _check_loop(scene: Scene) -> None:
@@ -248,17 +293,24 @@ def _check_loop(scene: Scene) -> None:
     period = 1.0 / scene.sensors.rate_hz
     if period > scene.duration:
         raise InputError(f"sensors.rate_hz: one period ({period:g} s) is longer than duration")
-    ratio = period / scene.integrator.dt
-    if abs(ratio - round(ratio)) > 1e-6 * ratio:
+    sample_grid(scene)
+    before = scene.evaluation.baseline == "before_start"
+    if (before and c.start - window < -1e-9) or c.start + window > scene.duration + 1e-9:
+        where = "before controller.start ({c.start:g} s) and " if before else ""
         raise InputError(
-            f"integrator.dt: {scene.integrator.dt:g} s does not divide the sample period "
-            f"{period:g} s (1/sensors.rate_hz)"
-        )
-    if c.start - window < -1e-9 or c.start + window > scene.duration + 1e-9:
+            f"evaluation.window: {window:g} s does not fit {where.format(c=c)}after "
+            f"controller.start ({c.start:g} s) within duration {scene.duration:g} s")
+    if window < scene.integrator.dt * (1.0 - 1e-9):
         raise InputError(
-            f"evaluation.window: {window:g} s does not fit before controller.start ({c.start:g} s) "
-            f"and after it within duration {scene.duration:g} s"
-        )
+            f"evaluation.window: {window:g} s is shorter than one integrator step "
+            f"(integrator.dt {scene.integrator.dt:g} s): a peak needs at least one state in it")
+    acting = c.start + scene.actuators.delay_periods * period
+    if acting > scene.duration - 1e-9:
+        raise InputError(
+            f"actuators.delay_periods: {scene.actuators.delay_periods} periods of {period:g} s "
+            f"after controller.start ({c.start:g} s) the first command acts at {acting:g} s, "
+            f"when the run has ended (duration {scene.duration:g} s): no controlled state to "
+            "evaluate")
     if c.type == "mpc" and c.horizon_s < period * (1.0 - 1e-9):
         raise InputError(
             f"controller.horizon_s: {c.horizon_s:g} s is shorter than one sample period "
@@ -267,6 +319,88 @@ def _check_loop(scene: Scene) -> None:
         raise InputError("estimator.type: LQG works on a linear model; use kf, tvkf or truth")
     if scene.estimator.type == "none":
         raise InputError(f"estimator.type: {c.type} needs a state (kf, tvkf, ekf or truth)")
+
+
+def _check_events(scene: Scene) -> None:
+    """The events' checks that need the rest of the scene (:mod:`stillframe.config.events`)."""
+    period = 1.0 / scene.sensors.rate_hz
+    last = round(scene.duration / period) - 1      # the run's last sample (LoopSpec.samples)
+    previous = 0.0
+    for i, event in enumerate(scene.events):
+        name = f"events[{i}]"
+        if first_sample_at(event.time, period) > last:
+            raise InputError(
+                f"{name}.time: {event.time:g} s is past the run's last sample boundary "
+                f"({last * period:g} s; duration {scene.duration:g} s)")
+        if event.time < previous:
+            raise InputError(f"{name}.time: {event.time:g} s is before events[{i - 1}] "
+                             f"({previous:g} s); list the events in time order")
+        previous = event.time
+        check_event(name, event, scene.damping.model)
+        rig = changed_scene(scene, i + 1).rig
+        try:                  # the structure after it within the rig section's own bounds
+            validate(Rig, rig.to_dict(), prefix="rig.")
+        except InputError as exc:
+            raise InputError(f"{name}: the structure after it: {exc}") from None
+    after = scene.design.after_events
+    if after > len(scene.events):
+        raise InputError(f"design.after_events: {after}, but the scene has "
+                         f"{len(scene.events)} events")
+    if after and scene.design.model == "file":
+        raise InputError("design.after_events: the design is the identified model of "
+                         "design.file, which no event changes; use design.model: scene or lumped")
+    if not scene.events:
+        return
+    if scene.plant.model == "file":
+        raise InputError(
+            "events: plant.model: file is a fixed identified linear model; events change the "
+            "scene's lumped or fe plant (plant.model: scene)")
+    if scene.model.type not in ("lumped", "fe"):
+        raise InputError(
+            f"events: model.type: {scene.model.type}: events change the lumped and fe plants "
+            "(a modal plant's reduced basis and a ph plant's constraints belong to one "
+            "structure, and auto may choose either)")
+
+
+def changed_scene(scene: Scene, count: int) -> Scene:
+    """``scene`` with the changes of its first ``count`` events made and no events: the scene a
+    plant of the structure after event ``count`` − 1 is built from. Factors are of the scene's
+    own values; a later event overrides the keys it names (:mod:`stillframe.config.events`)."""
+    rig, damping = scene.rig, scene.damping
+    masses = list(rig.floor_masses)
+    factors: tuple[float, ...] = rig.columns.stiffness_factors
+    pendulum_mass = rig.pendulum.mass
+    damping_values: dict[str, Any] = {}
+    for event in scene.events[:count]:
+        if event.floor is not None:
+            i, given = event.floor - 1, event.mass
+            masses[i] = given if given is not None else rig.floor_masses[i] * (
+                event.mass_factor or 1.0)
+        if event.story_stiffness is not None:
+            factors = tuple(f * g for f, g in zip(rig.columns.stiffness_factors,
+                                                  event.story_stiffness, strict=True))
+        if event.pendulum_mass is not None:
+            pendulum_mass = event.pendulum_mass
+        damping_values |= damping_changes(event)
+    replace = dataclasses.replace
+    rig = replace(rig, floor_masses=tuple(masses),
+                  columns=replace(rig.columns, stiffness_factors=factors),
+                  pendulum=replace(rig.pendulum, mass=pendulum_mass))
+    return replace(scene, rig=rig, damping=replace(damping, **damping_values), events=())
+
+
+def event_changes(scene: Scene, index: int) -> dict[str, Any]:
+    """What event ``index`` of ``scene`` changes: each key it changes (dotted) with its value
+    after the event, lists as lists (the record of the run's result and of the simulator's
+    topic)."""
+    after: Any = changed_scene(scene, index + 1)
+    values = {}
+    for dotted in changed_keys(scene.events[index]):
+        value = after
+        for part in dotted.split("."):
+            value = getattr(value, part)
+        values[dotted] = list(value) if isinstance(value, tuple) else value
+    return values
 
 
 def scene_from_dict(data: dict[str, Any], overrides: list[str] | None = None) -> Scene:

@@ -8,7 +8,9 @@ the physical check and the documentation::
 
 The annotations understood: ``float``, ``int``, ``bool``, ``str``, ``Literal["a", "b"]`` (one of
 these strings), ``tuple[float, ...]`` (a list of numbers), ``tuple[float, float, float]`` (a list
-of exactly three), ``float | None`` (may be null) and another section (a nested mapping).
+of exactly three), ``float | None`` (may be null), another section (a nested mapping) and
+``tuple[Section, ...]`` (a list of mappings, each validated as that section; its entries are
+named ``key[i]`` in the errors).
 :func:`validate` fills defaults, converts numbers, runs each check and builds the instances;
 every problem raises :class:`~stillframe.errors.InputError` naming the dotted key.
 """
@@ -17,6 +19,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import reprlib
 import types
 from collections.abc import Callable, Mapping
 from dataclasses import MISSING, dataclass
@@ -63,7 +66,7 @@ class Section:
 def _plain(value: Any) -> Any:
     if isinstance(value, Section):
         return value.to_dict()
-    return list(value) if isinstance(value, tuple) else value
+    return [_plain(v) for v in value] if isinstance(value, tuple) else value
 
 
 def _values(value: Any) -> tuple:
@@ -114,6 +117,7 @@ class _Spec(NamedTuple):
     nullable: bool = False
     choices: tuple[str, ...] | None = None
     length: int | None = None
+    entry: type[Section] | None = None  # a list of sections: the section of each entry
 
 
 def _is_section(kind: Any) -> bool:
@@ -129,6 +133,8 @@ def _spec(f: dataclasses.Field, hint: Any) -> _Spec:
     if get_origin(hint) is Literal:
         return spec._replace(kind=str, choices=args)
     if get_origin(hint) is tuple:
+        if _is_section(args[0]):
+            return spec._replace(kind=tuple, entry=args[0])
         length = None if args[-1] is Ellipsis else len(args)
         return spec._replace(kind=tuple, length=length)
     if hint in (float, int, bool, str) or _is_section(hint):
@@ -147,12 +153,26 @@ def _specs(cls: type[Section]) -> tuple[_Spec, ...]:
     return _SPECS[cls]
 
 
+def _shortener(width: int) -> reprlib.Repr:
+    short = reprlib.Repr()
+    short.maxlevel, short.maxstring, short.maxlong, short.maxother = 3, width, width, width
+    for name in ("maxtuple", "maxlist", "maxarray", "maxdict", "maxset", "maxfrozenset",
+                 "maxdeque"):
+        setattr(short, name, 6)
+    return short
+
+
 def show(value: Any, width: int = 60, *, quote: bool = True) -> str:
     """``repr(value)`` (text as it is without ``quote``) cut to ``width`` characters, for
-    one-line messages (a 3000-deep list or a 4000-digit number stays one short line)."""
+    one-line messages. Cut while it is made (:mod:`reprlib`: the first elements, levels and
+    characters), so that a value of a billion elements (a YAML alias bomb), a 3000-deep list or
+    a 4000-digit number costs no more than its first ``width`` characters."""
     try:
-        text = repr(value) if quote or not isinstance(value, str) else value
-    except (ValueError, RecursionError):     # an int beyond Python's digit limit; deep nesting
+        if quote or not isinstance(value, str):
+            text = _shortener(width).repr(value)
+        else:
+            text = value[:width + 1]
+    except (ValueError, RecursionError):     # an int beyond Python's digit limit
         text = f"<{type(value).__name__}>"
     return text if len(text) <= width else text[: width - 1] + "…"
 
@@ -173,11 +193,21 @@ def _number(key: str, value: Any, kind: type) -> float | int:
     return value
 
 
+def _entries(key: str, spec: _Spec, value: Any) -> tuple[Section, ...]:
+    """A list of sections: each entry validated as ``spec.entry``, named ``key[i]``."""
+    if not isinstance(value, list | tuple):
+        raise InputError(f"{key}: expected a list of mappings, got {show(value)}")
+    assert spec.entry is not None
+    return tuple(validate(spec.entry, v, prefix=f"{key}[{i}].") for i, v in enumerate(value))
+
+
 def _leaf(key: str, spec: _Spec, value: Any) -> Any:
     if value is None and spec.nullable:
         return None
-    if spec.kind in (float, int):
-        out: Any = _number(key, value, spec.kind)
+    if spec.entry is not None:
+        out: Any = _entries(key, spec, value)
+    elif spec.kind in (float, int):
+        out = _number(key, value, spec.kind)
     elif spec.kind is tuple:
         if not isinstance(value, list | tuple):
             raise InputError(f"{key}: expected a list of numbers, got {show(value)}")
@@ -209,10 +239,11 @@ def validate(cls: type[S], data: Any, prefix: str = "") -> S:
     if not isinstance(data, Mapping):
         raise InputError(f"{where}: expected a mapping of keys, got {show(data)}")
     keys = _specs(cls)
-    unknown = sorted(set(data) - {s.name for s in keys}, key=str)
+    unknown = sorted(set(data) - {s.name for s in keys}, key=lambda k: show(k, quote=False))
     if unknown:
         known = ", ".join(sorted(s.name for s in keys))
-        raise InputError(f"{prefix}{unknown[0]}: unknown key (known here: {known})")
+        raise InputError(f"{prefix}{show(unknown[0], quote=False)}: unknown key (known here: "
+                         f"{known})")
     values: dict[str, Any] = {}
     for spec in keys:
         dotted = f"{prefix}{spec.name}"

@@ -6,6 +6,11 @@ and refuses what strict loaders refuse.
   silently. Merge keys (``<<``) may still be overridden.
 - Text nested more deeply than :data:`MAX_DEPTH` levels, and integers beyond Python's digit
   limit, are :class:`yaml.YAMLError` too, so every caller reports them as bad YAML in one line.
+- Aliases are expanded in the count: a document that, expanded, holds more than
+  :data:`MAX_NODES` values or nests more than :data:`MAX_DEPTH` levels, or that refers to
+  itself, is refused before anything is built from it. PyYAML builds an alias as a reference to
+  the one object, so a few hundred bytes (the "billion laughs") load at once into a value whose
+  first walk (a check, a message, a copy) takes minutes and all the memory there is.
 - Bytes are decoded as the YAML spec says: UTF-8, or UTF-16 with its byte-order mark.
 """
 
@@ -20,9 +25,59 @@ from yaml.constructor import ConstructorError
 
 #: nesting depth of mappings and lists at most (PyYAML composes recursively)
 MAX_DEPTH = 200
+#: the size of a YAML file a person writes (a scene, a parameter file, a model in YAML) at most
+MAX_YAML_BYTES = 1 << 20
+#: values (scalars, lists, mappings) of a document with its aliases expanded, at most: more than
+#: a file of :data:`MAX_YAML_BYTES` holds without aliases (two bytes a value: ``1,``)
+MAX_NODES = MAX_YAML_BYTES
+
+
+def _children(node: yaml.Node) -> list[yaml.Node]:
+    if isinstance(node, yaml.MappingNode):
+        return [part for pair in node.value for part in pair]
+    return list(node.value) if isinstance(node, yaml.SequenceNode) else []
+
+
+def check_expansion(root: yaml.Node) -> None:
+    """ComposerError when ``root`` with its aliases expanded holds more than :data:`MAX_NODES`
+    values, nests deeper than :data:`MAX_DEPTH`, or holds itself. Each node is visited once
+    (its expanded size and depth kept), without recursion."""
+    size: dict[int, int] = {}
+    depth: dict[int, int] = {}
+    open_ids: set[int] = set()              # the nodes on the current path
+    stack: list[tuple[yaml.Node, bool]] = [(root, False)]
+    while stack:
+        node, finished = stack.pop()
+        key = id(node)
+        kids = _children(node)
+        if finished:
+            open_ids.discard(key)
+            size[key] = 1 + sum(size[id(k)] for k in kids)
+            depth[key] = 1 + max((depth[id(k)] for k in kids), default=0)
+            problem = (f"more than {MAX_NODES} values with its aliases expanded"
+                       if size[key] > MAX_NODES else
+                       f"nested more than {MAX_DEPTH} levels deep with its aliases expanded"
+                       if depth[key] > MAX_DEPTH else None)
+            if problem:
+                raise yaml.composer.ComposerError(None, None, problem, node.start_mark)
+            continue
+        if key in size:
+            continue
+        open_ids.add(key)
+        stack.append((node, True))
+        for kid_id, kid in {id(kid): kid for kid in kids}.items():
+            if kid_id in open_ids:
+                raise yaml.composer.ComposerError(None, None, "an alias that holds itself",
+                                                  kid.start_mark)
+            if kid_id not in size:
+                stack.append((kid, False))
 
 
 class _Loader(yaml.SafeLoader):
+    def construct_document(self, node: Any) -> Any:
+        check_expansion(node)
+        return super().construct_document(node)
+
     def compose_node(self, parent: Any, index: Any) -> Any:
         self._depth = getattr(self, "_depth", 0) + 1
         try:
@@ -95,6 +150,8 @@ def load_yaml(text: str | bytes) -> Any:
                              f"{sys.getrecursionlimit()})") from None
     except ValueError as exc:      # an integer beyond Python's digit limit
         raise yaml.YAMLError(str(exc).split(";")[0]) from None
+    except MemoryError:
+        raise yaml.YAMLError("does not fit in the memory this process may take") from None
 
 
 def problem(exc: yaml.YAMLError) -> str:

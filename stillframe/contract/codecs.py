@@ -11,6 +11,7 @@ what :func:`stillframe.loop.closed_loop.run_closed_loop` computes.
 
 from __future__ import annotations
 
+import struct
 from typing import Any
 
 import numpy as np
@@ -33,6 +34,40 @@ ENCODER_CHANNEL = SENSOR_TOPICS.index(topics.PENDULUM_JOINT_STATES)
 SAMPLE_TOPICS = (*SENSOR_TOPICS, topics.FLOOR3_LOAD_CELL)
 #: Command topics in the order of ``Command.vector`` = [pendulum torque, floor-3 force].
 COMMAND_TOPICS = (topics.TORQUE_CMD, topics.FORCE_CMD)
+
+
+#: what joins a stamped message's frame and the run's token in ``header.frame_id``
+TOKEN_MARK = "#"
+#: the offset of ``header.frame_id``'s length in a stamped message's CDR: the 4-byte
+#: encapsulation, then the stamp's ``sec`` and ``nanosec``
+FRAME_ID_AT = 12
+
+
+def stamped_frame(frame: str, token: str) -> str:
+    """The ``header.frame_id`` a loop node writes: the frame, and the run's token after
+    :data:`TOKEN_MARK` when the run has one (``floor1#3f9a0c2e5b7d1a64``; docs/nodes.md, writer
+    identity)."""
+    return f"{frame}{TOKEN_MARK}{token}" if token else frame
+
+
+def token_suffix(token: str) -> bytes:
+    """The bytes every ``frame_id`` of the run ends with (empty without a token)."""
+    return (TOKEN_MARK + token).encode() if token else b""
+
+
+_FRAME_ID_LENGTH = struct.Struct("<I").unpack_from
+
+
+def carries_token(data: bytes | memoryview, suffix: bytes) -> bool:
+    """Whether the CDR ``data`` of a stamped message (little-endian, as the loop's nodes write
+    it) has a ``header.frame_id`` ending in ``suffix``: a length read and one slice compared,
+    before anything is decoded (a slice past the end is short, so never equal)."""
+    try:
+        length = _FRAME_ID_LENGTH(data, FRAME_ID_AT)[0]     # the string's, with its NUL
+    except struct.error:                                    # too short for a header
+        return False
+    end = FRAME_ID_AT + 3 + length
+    return data[1] == 1 and length > len(suffix) and data[end - len(suffix):end] == suffix
 
 
 class SampleGrid:
@@ -73,26 +108,28 @@ def fill_joint_state(msg: Any, ns: int, physical: np.ndarray) -> None:
 
 class SensorMessages:
     """The rig's sensor messages for one :class:`Sample`: floor IMUs, encoder, load cell, and
-    the ground truth (``state_truth``); covariances from the scene's ``sensors`` section."""
+    the ground truth (``state_truth``); covariances from the scene's ``sensors`` section; every
+    ``frame_id`` with the run's ``token`` (:func:`stamped_frame`)."""
 
-    def __init__(self, sensors: Sensors) -> None:
+    def __init__(self, sensors: Sensors, token: str = "") -> None:
         var_a = float(sensors.accelerometer_noise_std) ** 2
         self.imus = []
         for n in (1, 2, 3):
             imu = messages.new("sensor_msgs/msg/Imu")
-            imu.header.frame_id = f"floor{n}"
+            imu.header.frame_id = stamped_frame(f"floor{n}", token)
             imu.orientation_covariance[0] = -1.0      # not measured
             imu.angular_velocity_covariance[0] = -1.0
             imu.linear_acceleration_covariance[0] = var_a
             self.imus.append(imu)
         self.encoder = _joint_state([PENDULUM_JOINT])
-        self.encoder.header.frame_id = "pendulum"
+        self.encoder.header.frame_id = stamped_frame("pendulum", token)
         self.encoder.position, self.encoder.effort = np.zeros(1), np.zeros(1)
         self.load_cell = messages.new("geometry_msgs/msg/WrenchStamped")
-        self.load_cell.header.frame_id = "floor1"
+        self.load_cell.header.frame_id = stamped_frame("floor1", token)
         self.actuator_load_cell = messages.new("geometry_msgs/msg/WrenchStamped")
-        self.actuator_load_cell.header.frame_id = "floor3"
+        self.actuator_load_cell.header.frame_id = stamped_frame("floor3", token)
         self.truth = _joint_state(list(STATE_NAMES))
+        self.truth.header.frame_id = stamped_frame("", token)
         self.truth.position, self.truth.velocity = np.zeros(4), np.zeros(4)
         self._imu_cdr = [FixedWriter(imu, (*STAMP, "linear_acceleration.x"))
                          for imu in self.imus]
@@ -175,10 +212,12 @@ def physical_state(msg: Any) -> np.ndarray:
 
 
 class EstimateMessages:
-    """``state_estimate`` and its 8×8 covariance (zeros for the exact ``truth`` estimator)."""
+    """``state_estimate`` (its ``frame_id`` the run's ``token``) and its 8×8 covariance (zeros
+    for the exact ``truth`` estimator; a ``Float64MultiArray`` has no header)."""
 
-    def __init__(self) -> None:
+    def __init__(self, token: str = "") -> None:
         self.state = _joint_state(list(STATE_NAMES))
+        self.state.header.frame_id = stamped_frame("", token)
         dims = [messages.new("std_msgs/msg/MultiArrayDimension", label=label, size=8,
                              stride=stride) for label, stride in (("rows", 64), ("cols", 8))]
         self.covariance = messages.new("std_msgs/msg/Float64MultiArray")
@@ -227,12 +266,13 @@ def energy_values(msg: Any) -> dict[str, float]:
 
 
 class CommandMessage:
-    """The command on its topic: ``torque.z`` (pendulum) or ``force.x`` (floor 3)."""
+    """The command on its topic: ``torque.z`` (pendulum) or ``force.x`` (floor 3), its
+    ``frame_id`` with the run's ``token``."""
 
-    def __init__(self, actuator: int) -> None:
+    def __init__(self, actuator: int, token: str = "") -> None:
         self.actuator = actuator
         self.msg = messages.new("geometry_msgs/msg/WrenchStamped")
-        self.msg.header.frame_id = "pendulum" if actuator == 0 else "floor3"
+        self.msg.header.frame_id = stamped_frame("pendulum" if actuator == 0 else "floor3", token)
         self.field = "wrench.torque.z" if actuator == 0 else "wrench.force.x"
         self._cdr = FixedWriter(self.msg, (*STAMP, self.field))
 
@@ -281,10 +321,11 @@ def _stamped(v: tuple[Any, ...]) -> tuple[Any, ...]:
     return (v[0] * 1_000_000_000 + v[1], *v[2:])
 
 
-def sensor_reader(channel: int, sensors: Sensors) -> TopicReader:
+def sensor_reader(channel: int, sensors: Sensors, token: str = "") -> TopicReader:
     """(stamp ns, reading, applied torque or NaN) of sensor channel ``channel``
-    (:func:`sensor_reading`, :func:`applied_torque`)."""
-    out = SensorMessages(sensors)
+    (:func:`sensor_reading`, :func:`applied_torque`), read in place from the layout the
+    simulator of the run with ``token`` writes."""
+    out = SensorMessages(sensors, token)
     template = [*out.imus, out.encoder, out.load_cell][channel]
     field = {3: ("position", "effort"), 4: ("wrench.force.x",)}.get(
         channel, ("linear_acceleration.x",))
@@ -300,10 +341,10 @@ def sensor_reader(channel: int, sensors: Sensors) -> TopicReader:
     return TopicReader(template, (*STAMP, *field), from_values, from_msg)
 
 
-def wrench_reader(frame_id: str, field: str) -> TopicReader:
-    """(stamp ns, ``field``) of a WrenchStamped (load cells, commands)."""
+def wrench_reader(frame: str, field: str, token: str = "") -> TopicReader:
+    """(stamp ns, ``field``) of a WrenchStamped (load cells, commands) in ``frame``."""
     template = messages.new("geometry_msgs/msg/WrenchStamped")
-    template.header.frame_id = frame_id
+    template.header.frame_id = stamped_frame(frame, token)
     parts = field.split(".")
 
     def from_msg(msg: Any) -> tuple[Any, ...]:
@@ -315,10 +356,10 @@ def wrench_reader(frame_id: str, field: str) -> TopicReader:
     return TopicReader(template, (*STAMP, field), _stamped, from_msg)
 
 
-def state_reader() -> TopicReader:
+def state_reader(token: str = "") -> TopicReader:
     """(stamp ns, [x1, x2, x3, φ, ẋ1, ẋ2, ẋ3, φ̇]) of ``state_estimate`` or ``state_truth``
     (:func:`physical_state`)."""
-    template = EstimateMessages().state
+    template = EstimateMessages(token).state
 
     def from_values(v: tuple[Any, ...]) -> tuple[Any, ...]:
         return v[0] * 1_000_000_000 + v[1], np.array(v[2:])
@@ -329,12 +370,12 @@ def state_reader() -> TopicReader:
     return TopicReader(template, (*STAMP, "position", "velocity"), from_values, from_msg)
 
 
-def command_reader(actuator: int) -> TopicReader:
+def command_reader(actuator: int, token: str = "") -> TopicReader:
     """(stamp ns, command value) of a command topic (:func:`command_value`)."""
     def from_msg(msg: Any) -> tuple[Any, ...]:
         return messages.stamp_ns(msg.header.stamp), command_value(actuator, msg)
 
-    out = CommandMessage(actuator)
+    out = CommandMessage(actuator, token)
     return TopicReader(out.msg, (*STAMP, out.field), _stamped, from_msg)
 
 

@@ -32,14 +32,19 @@ add ``rayleigh_alpha``/``rayleigh_beta`` and ``mkr`` (sensor/actuator DOFs, outp
 from __future__ import annotations
 
 import json
+import math
 import zipfile
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
+import scipy.linalg
 
+from stillframe.config.scene import DAMPING_COEFFICIENT, FLOOR_MASS, FREQUENCY_HZ
+from stillframe.config.schema import Check, show
 from stillframe.errors import InputError
+from stillframe.files import open_input, open_output, size_text
 
 FORMAT = "stillframe-identified-model"
 VERSION = 1
@@ -48,6 +53,62 @@ MKR_KEYS = ("M", "K", "R")
 ALLOWED_KEYS = {"A", "B", "C", "D", "G", "meta", *MKR_KEYS, *MODAL_KEYS}
 #: ``meta`` keys with a meaning of their own; any other key is kept as extra metadata
 META_KEYS = ("format", "version", "dt", "inputs", "outputs", "provenance")
+#: a model file's size at most, on disk and unpacked (a model of 200 states takes under 1 MiB)
+MAX_MODEL_BYTES = 16 << 20
+#: relative tolerance of symmetry and of a semidefinite matrix's least eigenvalue
+SYMMETRY_TOLERANCE = 1e-9
+
+
+@dataclass(frozen=True)
+class Physical:
+    """A matrix of an identified structure: what it is, the check of its diagonal (the scene
+    key's own, config/scene.py) and the definiteness physics asks of it (symmetric always)."""
+
+    doc: str
+    diagonal: Check | None
+    definite: Literal["positive definite", "positive semidefinite"]
+
+
+#: the matrices of an identified structure, by their keys in a ``.npz`` model file (``mass``,
+#: ``stiffness`` and ``damping`` in a YAML one); the natural frequencies of M and K must lie
+#: where the scene's frequencies may (:data:`~stillframe.config.scene.FREQUENCY_HZ`), which
+#: bounds a huge stiffness
+STRUCTURE = {
+    "M": Physical("mass [kg]", FLOOR_MASS, "positive definite"),
+    "K": Physical("stiffness [N/m]", None, "positive semidefinite"),
+    "R": Physical("damping [N s/m]", DAMPING_COEFFICIENT, "positive semidefinite"),
+}
+
+
+def check_structure(matrices: dict[str, np.ndarray], name: str,
+                    labels: dict[str, str] | None = None) -> None:
+    """InputError naming the file and the entry unless the structure's M, K, R (``labels``: the
+    file's own names for them) are finite square matrices of one size, symmetric, as definite
+    as :data:`STRUCTURE` says, with diagonals within their checks and natural frequencies
+    within :data:`~stillframe.config.scene.FREQUENCY_HZ`."""
+    labels = labels or {key: key for key in STRUCTURE}
+    size = np.asarray(matrices["M"]).shape[:1] * 2
+    for key, physical in STRUCTURE.items():
+        where = f"{name}: {labels[key]!r} ({physical.doc})"
+        matrix = np.asarray(matrices[key])
+        _matrix(name, labels[key], matrix, size)
+        scale = float(np.max(np.abs(matrix), initial=0.0))
+        if np.max(np.abs(matrix - matrix.T), initial=0.0) > SYMMETRY_TOLERANCE * scale:
+            raise InputError(f"{where}: not symmetric")
+        diagonal = tuple(float(v) for v in np.diag(matrix))
+        problem = physical.diagonal(diagonal) if physical.diagonal else None
+        if problem:
+            raise InputError(f"{where}: its diagonal {problem} (got {show(diagonal)})")
+        least = float(np.min(np.linalg.eigvalsh(matrix)))
+        floor = 0.0 if physical.definite == "positive definite" else -SYMMETRY_TOLERANCE * scale
+        if least < floor or (physical.definite == "positive definite" and least <= 0.0):
+            raise InputError(f"{where}: not {physical.definite} (least eigenvalue {least:.6g})")
+    squares = scipy.linalg.eigh(matrices["K"], matrices["M"], eigvals_only=True)
+    hz = tuple(float(np.sqrt(max(w, 0.0)) / (2 * np.pi)) for w in squares)
+    problem = FREQUENCY_HZ(hz)
+    if problem:
+        raise InputError(f"{name}: {labels['K']!r} ({STRUCTURE['K'].doc}) with "
+                         f"{labels['M']!r}: natural frequencies {problem} Hz (got {show(hz)})")
 
 
 @dataclass(frozen=True)
@@ -70,23 +131,44 @@ def write_archive(path: str | Path, arrays: dict[str, Any], meta: dict[str, Any]
         encoded = np.array(json.dumps(meta))
     except TypeError as exc:
         raise InputError(f"{path}: model metadata is not JSON-serialisable: {exc}") from None
-    with open(path, "wb") as handle:
+    with open_output(path, what="model file") as handle:
         np.savez(handle, **arrays, meta=encoded)
+
+
+def _check_members(archive: np.lib.npyio.NpzFile, name: str) -> None:
+    """Before any array is read: the archive unpacks to at most :data:`MAX_MODEL_BYTES`, and no
+    array's header claims more data than its member holds (numpy allocates what the header
+    claims before it reads)."""
+    members = archive.zip.infolist()
+    unpacked = sum(info.file_size for info in members)
+    if unpacked > MAX_MODEL_BYTES:
+        raise InputError(f"{name}: unpacks to {size_text(unpacked)}, more than the "
+                         f"{size_text(MAX_MODEL_BYTES)} a model file may have")
+    for info in members:
+        with archive.zip.open(info) as member:
+            version = np.lib.format.read_magic(member)
+            header = (np.lib.format.read_array_header_1_0 if version == (1, 0)
+                      else np.lib.format.read_array_header_2_0)
+            shape, _, dtype = header(member)
+            if math.prod(shape) * dtype.itemsize > info.file_size:
+                raise InputError(f"{name}: '{info.filename.removesuffix('.npy')}' claims "
+                                 f"shape {shape} of {dtype}, more than its "
+                                 f"{size_text(info.file_size)} hold")
 
 
 def read_archive(path: str | Path) -> ModelArchive:
     """Read and validate a model file; any defect raises :class:`InputError` naming it."""
     name = str(path)
-    try:
-        archive = np.load(path, allow_pickle=False)
-        if not isinstance(archive, np.lib.npyio.NpzFile):
-            raise InputError(f"{name}: not a .npz model file (a single array)")
-        with archive:
-            data = {key: archive[key] for key in archive.files}
-    except FileNotFoundError:
-        raise InputError(f"{name}: model file not found") from None
-    except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
-        raise InputError(f"{name}: not a readable .npz model file ({exc})") from None
+    with open_input(path, what="model file", max_bytes=MAX_MODEL_BYTES) as stream:
+        try:
+            archive = np.load(stream, allow_pickle=False)
+            if not isinstance(archive, np.lib.npyio.NpzFile):
+                raise InputError(f"{name}: not a .npz model file (a single array)")
+            with archive:
+                _check_members(archive, name)
+                data = {key: archive[key] for key in archive.files}
+        except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
+            raise InputError(f"{name}: not a readable .npz model file ({exc})") from None
     unknown = set(data) - ALLOWED_KEYS
     if unknown:
         raise InputError(f"{name}: unknown arrays {sorted(unknown)}")

@@ -58,13 +58,16 @@ class Command:
 
     @property
     def vector(self) -> np.ndarray:
-        """[torque, floor-3 force], the order of :class:`stillframe.plant.frame_plant.Plant`
+        """[torque, floor-3 force], the order of :class:`stillframe.plant.frame_plant.FramePlant`
         inputs."""
         return np.array([self.torque, self.force])
 
 
-#: The actuator each controller type drives, an index into :attr:`Command.vector`.
-ACTUATOR = {"lqg": 0, "euk_pendulum": 0, "euk_floor": 1, "passivity": 0, "mpc": 0}
+#: the actuators, as indices into :attr:`Command.vector`: the pendulum torque, the floor-3 force
+TORQUE, FORCE = 0, 1
+#: The actuator each controller type drives.
+ACTUATOR = {"lqg": TORQUE, "euk_pendulum": TORQUE, "euk_floor": FORCE, "passivity": TORQUE,
+            "mpc": TORQUE}
 
 
 def actuator_of(scene: Scene) -> int | None:

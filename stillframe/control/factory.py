@@ -2,6 +2,10 @@
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
+import numpy as np
+
 from stillframe.config.scene import Scene
 from stillframe.contract.signals import ACTUATOR
 from stillframe.control.euk import EUKLaw
@@ -12,6 +16,9 @@ from stillframe.control.prediction import DelayPredictor
 from stillframe.control.supervisor import Controller
 from stillframe.dynamics.models import FrameModel
 from stillframe.errors import InputError
+
+if TYPE_CHECKING:
+    from stillframe.control.mpc import MPCLaw
 
 TORQUE_INPUT = 3  # index of the hinge torque in u = [f1, f2, f3, torque]
 
@@ -28,6 +35,20 @@ def check_sampled_injection(damping: float, period: float, inertia: float) -> No
             f"{2 * inertia / period:.3g} or a higher sensors.rate_hz")
 
 
+def check_solve_time(law: MPCLaw, horizon_s: float, period: float) -> None:
+    """InputError naming ``controller.prediction_steps`` when the MPC's QP cannot be solved
+    within the sample period on this machine (:meth:`MPCLaw.least_solve_s`: the least a
+    solve takes, measured at load): every sample would miss its command, and the one-process
+    loop would take that long per sample."""
+    least = law.least_solve_s()
+    if least > period:
+        raise InputError(
+            f"controller.prediction_steps: {law.grid.steps} steps over controller.horizon_s "
+            f"{horizon_s:g} s ({law.grid.samples} samples each) make a QP that takes at least "
+            f"{least * 1e3:.3g} ms to solve here, longer than the sample period "
+            f"{period * 1e3:.3g} ms (1/sensors.rate_hz): fewer steps or a shorter horizon")
+
+
 def make_controller(scene: Scene, design: FrameModel) -> Controller:
     """The controller of ``scene.controller.type`` (not ``none``)."""
     c = scene.controller
@@ -35,9 +56,9 @@ def make_controller(scene: Scene, design: FrameModel) -> Controller:
     floor = scene.excitation.floor
     delay = scene.actuators.delay_periods
     predictor = None
+    limits = CommandLimits.of(scene)
     if c.type in ("lqg", "mpc"):
         lqr = design_lqr(design, period, c.state_weights, c.input_weight, TORQUE_INPUT, floor)
-        limits = CommandLimits.of(scene)
         if c.type == "mpc":
             from stillframe.control.mpc import (  # OSQP where MPC runs
                 MPCLaw,
@@ -53,6 +74,7 @@ def make_controller(scene: Scene, design: FrameModel) -> Controller:
                          limits=limits, grid=grid, angle_index=design.phi_index,
                          rate_weight=c.rate_weight, angle_penalty=c.angle_penalty,
                          max_iter=iteration_limit(c.max_iter, period))
+            check_solve_time(law, c.horizon_s, period)
         elif c.anti_windup:
             law = ConditionedLQGLaw(lqr, c.feedforward, limits, design.phi_index)
         else:
@@ -68,7 +90,16 @@ def make_controller(scene: Scene, design: FrameModel) -> Controller:
         check_sampled_injection(c.injection_damping, period, design.pendulum_inertia)
     else:
         raise InputError(f"controller.type: {c.type!r} computes no command")
-    actuators = scene.actuators
-    actuator_limit = (actuators.torque_limit, actuators.force_limit)[ACTUATOR[c.type]]
-    return Controller(law, ACTUATOR[c.type], period, c.start, c.limit, c.watchdog_periods,
-                      actuator_limit, predictor)
+    return Controller(law, actuator=ACTUATOR[c.type], period=period, limits=limits,
+                      start=c.start, watchdog_periods=c.watchdog_periods, predictor=predictor,
+                      probe=probe_of(scene))
+
+
+def probe_of(scene: Scene) -> np.ndarray | None:
+    """The probe torque of each sample of the run (``adaptation.probe_std``; None without an
+    adaptation or with a probe of 0): white, from ``adaptation.probe_seed``."""
+    a = scene.adaptation
+    if not a.enabled or a.probe_std == 0.0:
+        return None
+    samples = round(scene.duration * scene.sensors.rate_hz) + 1
+    return a.probe_std * np.random.default_rng(a.probe_seed).standard_normal(samples)

@@ -103,3 +103,7 @@ class ConditionedLQGLaw(LQGLaw):
         self.conditioned += changed
         self.previous = u
         return u, False
+
+    def set_limits(self, limits: CommandLimits) -> None:
+        """Condition on ``limits`` from the next call on (the controller's limit changed)."""
+        self.limits = limits

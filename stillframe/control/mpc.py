@@ -45,11 +45,12 @@ them) falls back to the anti-windup LQG command of the grid's model
 (:class:`~stillframe.control.lqg.ConditionedLQGLaw`, within the torque and rate limits by
 construction; the unconstrained MPC's own first move); ``fallbacks`` counts them, and
 controller_node reports the count in ``/diagnostics``. ``solve_s`` keeps the solver's own time of
-every solve (``stillframe bench controllers`` prints its p50 and p99 against the period).
+the last 10⁵ solves (``stillframe bench controllers`` prints its p50 and p99 against the period).
 """
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -58,6 +59,7 @@ import scipy.sparse as sp
 
 from stillframe.control.limits import CommandLimits
 from stillframe.control.lqg import ConditionedLQGLaw, LQRDesign
+from stillframe.durations import Durations
 from stillframe.errors import InputError
 
 SOLVED = osqp.SolverStatus.OSQP_SOLVED
@@ -74,10 +76,13 @@ def iteration_limit(max_iter: int | None, period: float) -> int:
     return int(min(MAX_ITER, max(MIN_ITER, round(period * ITERATIONS_PER_S))))
 
 
-#: OSQP settings: its default tolerances, checked every 10 iterations (not 25: a warm-started
-#: solve at 1 kHz ends after 30 to 40), polished solutions
-SETTINGS = {"eps_abs": 1e-3, "eps_rel": 1e-3, "check_termination": 10, "polishing": True,
-            "verbose": False, "warm_starting": True}
+#: OSQP checks whether it has converged every this many iterations (not 25: a warm-started
+#: solve at 1 kHz ends after 30 to 40), so a solve takes at least this many
+CHECK_EVERY = 10
+#: OSQP settings: its default tolerances, checked every :data:`CHECK_EVERY` iterations,
+#: polished solutions
+SETTINGS = {"eps_abs": 1e-3, "eps_rel": 1e-3, "check_termination": CHECK_EVERY,
+            "polishing": True, "verbose": False, "warm_starting": True}
 
 
 @dataclass(frozen=True)
@@ -160,23 +165,50 @@ class MPCLaw:
         self._l = np.full(A.shape[0], -np.inf)
         self._u = np.full(A.shape[0], np.inf)
         self._l[-1] = 0.0
-        if limits.torque is not None:
-            self._l[:N], self._u[:N] = -limits.torque, limits.torque
+        self._bound_inputs(limits)
         if limits.step is not None:
             steps = np.full(N, limits.step * grid.samples)     # a ramp over one grid step …
             steps[0] = limits.step                              # … but u_0 within one sample
             self._l[N:2 * N], self._u[N:2 * N] = -steps, steps
         #: the QP ½ xᵀ P x + qᵀ x, l ≤ A x ≤ u as given to OSQP (q, l, u: :meth:`bounds`)
         self.qp_hessian, self.qp_matrix = P, A
+        self.max_iter = max_iter
         self.solver = osqp.OSQP()
         self.solver.setup(sp.csc_matrix(np.triu(P)), self._q, sp.csc_matrix(A), self._l,
                           self._u, max_iter=max_iter, **SETTINGS)
         self.previous = 0.0
         self.fallbacks = 0
-        self.solve_s: list[float] = []
-        self.iterations: list[int] = []
+        self.solve_s = Durations()
         self.last: np.ndarray | None = None                     # the last solution (N + 1)
         self.dual: np.ndarray | None = None                     # … and its multipliers
+
+    def _bound_inputs(self, limits: CommandLimits) -> None:
+        """The QP's rows of u_0 … u_{N−1} bounded by ``limits.magnitude`` (unbounded: None)."""
+        N = self.grid.steps
+        bound = np.inf if limits.magnitude is None else limits.magnitude
+        self._l[:N], self._u[:N] = -bound, bound
+
+    def set_limits(self, limits: CommandLimits) -> None:
+        """Plan with ``limits`` from the next call on (the controller's limit changed): the
+        QP's input bounds, the clip of its answer and the fallback law's."""
+        self.limits = limits
+        self._bound_inputs(limits)
+        self.fallback_law.set_limits(limits)
+
+    def least_solve_s(self) -> float:
+        """The least CPU time a solve of this QP takes here: :data:`CHECK_EVERY` iterations (or
+        ``max_iter``, if fewer), measured on a solver of its own (this one keeps its cold
+        start) that checks no termination (it does them all) and adapts no rho (no
+        factorisation among the iterations measured)."""
+        iterations = min(CHECK_EVERY, self.max_iter)
+        probe = osqp.OSQP()
+        q, lo, hi = self.bounds(np.zeros(self.design.A.shape[0]))
+        probe.setup(sp.csc_matrix(np.triu(self.qp_hessian)), q, sp.csc_matrix(self.qp_matrix),
+                    lo, hi, **{**SETTINGS, "check_termination": 0, "polishing": False,
+                               "adaptive_rho": False, "max_iter": iterations})
+        started = time.thread_time()
+        probe.solve(raise_error=False)
+        return time.thread_time() - started
 
     def inputs(self, z: np.ndarray, solution: np.ndarray) -> np.ndarray:
         """The planned commands u_0 … u_{N−1} of a QP solution [V, s] at the estimate z."""
@@ -210,8 +242,7 @@ class MPCLaw:
             f = 1.0 / self.grid.samples                         # … one sample later
             self.solver.warm_start(x=np.append((1.0 - f) * v + f * ahead, self.last[-1]))
         result = self.solver.solve(raise_error=False)
-        self.solve_s.append(result.info.solve_time)
-        self.iterations.append(result.info.iter)
+        self.solve_s.add(result.info.solve_time)
         if result.info.status_val != SOLVED.value:
             self.fallbacks += 1
             self.last = None

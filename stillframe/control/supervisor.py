@@ -4,12 +4,19 @@ Called once per control period with the newest estimate (or None when none arriv
 command before ``start`` and while ``enabled`` is False (switched at run time); zero command
 and the ``watchdog`` flag when the newest estimate is ``watchdog_periods`` periods old or more;
 a non-finite law output also gives zero (flagged ``singular``); otherwise the law's command
-clipped to ±``limit`` and to ±``actuator_limit`` (the scene's actuator saturation: a command the
-actuator cannot apply is never sent). A law output more than :data:`RUNAWAY_FACTOR` times the
-tighter of the two limits is flagged ``runaway`` (counted, and ``/diagnostics`` warns): the sign of
-an estimate or a design that no longer matches the plant. A law that can fall back to a safe
-command (MPC: a solve that did not finish) keeps its count in ``fallbacks``; ``fallback`` here
-follows it (``/diagnostics`` warns).
+clipped to ±:attr:`~stillframe.control.limits.CommandLimits.magnitude` (the tighter of the
+controller's limit and the actuator's saturation: a command the actuator cannot apply is never
+sent), or to ±:data:`~stillframe.config.loop_sections.COMMAND_BOUND` without either (a command
+the simulator would refuse is never sent). A law output more than :data:`RUNAWAY_FACTOR` times
+that bound is flagged ``runaway`` (counted, and ``/diagnostics`` warns): the sign of an estimate
+or a design that no longer matches the plant. The controller's limit can change while it runs
+(:meth:`Controller.set_limit`): the law takes the new limits at its next sample. A law that can
+fall back to a safe command (MPC: a solve that did not finish) keeps its count in ``fallbacks``;
+``fallback`` here follows it (``/diagnostics`` warns). A ``probe`` (``adaptation.probe_std``) is
+added to the law's command before the clip: entry k at the sample k · period, the white torque
+that lets the loop's own records identify the plant
+(:mod:`stillframe.identification.loop_structure`).
+:meth:`Controller.take_law` hands the supervisor another design's law at a sample boundary.
 """
 
 from __future__ import annotations
@@ -17,16 +24,34 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Protocol, runtime_checkable
 
 import numpy as np
 
+from stillframe.config.loop_sections import COMMAND_BOUND
 from stillframe.contract.signals import Command, Estimate
+from stillframe.control.limits import CommandLimits
 from stillframe.control.prediction import DelayPredictor
+from stillframe.durations import Durations
 
 #: A law output beyond this multiple of the command's limit is flagged ``runaway``.
 RUNAWAY_FACTOR = 10.0
 
 Law = Callable[[np.ndarray, float], tuple[float, bool]]
+"""A control law: ``law(z, force) -> (command, singular)`` on the design model's state z."""
+
+#: no limit of the controller's nor of an actuator's
+NO_LIMITS = CommandLimits()
+
+
+@runtime_checkable
+class LimitedLaw(Protocol):
+    """A law that plans with the command's limits (the anti-windup LQG, the MPC): told when the
+    controller's limit changes, it takes the new limits at its next call."""
+
+    def __call__(self, z: np.ndarray, force: float) -> tuple[float, bool]: ...
+
+    def set_limits(self, limits: CommandLimits) -> None: ...
 
 
 @dataclass
@@ -42,23 +67,43 @@ class ControllerCounters:
 class Controller:
     """A law acting on one actuator (0: pendulum torque, 1: floor-3 force)."""
 
-    def __init__(self, law: Law, actuator: int, period: float, start: float = 0.0,
-                 limit: float | None = None, watchdog_periods: int = 3,
-                 actuator_limit: float | None = None,
-                 predictor: DelayPredictor | None = None) -> None:
+    def __init__(self, law: Law, *, actuator: int, period: float,
+                 limits: CommandLimits = NO_LIMITS, start: float = 0.0,
+                 watchdog_periods: int = 3, predictor: DelayPredictor | None = None,
+                 probe: np.ndarray | None = None) -> None:
         self.law = law
+        self.probe = probe
         self.predictor = predictor
         self.actuator = actuator
         self.period = period
         self.start = start
-        self.limit = limit
-        self.actuator_limit = actuator_limit
+        self.limits = limits
         self.watchdog_periods = watchdog_periods
         self.enabled = True
         self.latest: Estimate | None = None
         self.counters = ControllerCounters()
-        self.law_s: list[float] = []       # wall time of every law evaluation (compute_stats)
-        self.law_cpu_s: list[float] = []   # … and this thread's CPU time for it
+        self.law_s = Durations()           # wall time of each law evaluation (compute_stats)
+        self.law_cpu_s = Durations()       # … and this thread's CPU time for it
+
+    @property
+    def limit(self) -> float | None:
+        """The controller's own limit (None: none), besides the actuator's saturation."""
+        return self.limits.limit
+
+    def set_limit(self, limit: float | None) -> None:
+        """A new controller limit (None or 0: none), for the supervisor's clip and for a law
+        that plans with the limits (:class:`LimitedLaw`) from the next sample on."""
+        self.limits = self.limits.with_limit(limit)
+        if isinstance(self.law, LimitedLaw):
+            self.law.set_limits(self.limits)
+
+    def take_law(self, other: Controller) -> None:
+        """From the next command on, the law (and the delay predictor) of ``other``, a controller
+        of another design for this actuator; this supervisor's limits, enable state, watchdog,
+        probe and counters stay."""
+        self.law, self.predictor = other.law, other.predictor
+        if isinstance(self.law, LimitedLaw):
+            self.law.set_limits(self.limits)
 
     def compute_stats(self) -> dict[str, float]:
         """p50, p99 and max of the law's wall time per sample [s], ``cpu_…`` of its CPU time
@@ -66,11 +111,9 @@ class Controller:
         wall time for a law that keeps it (MPC); empty before the first command."""
         stats: dict[str, float] = {}
         for name, times in (("", self.law_s), ("cpu_", self.law_cpu_s),
-                            ("solve_", getattr(self.law, "solve_s", []))):
-            if len(times):
-                p50, p99 = np.percentile(times, [50, 99])
-                stats.update({f"{name}p50": float(p50), f"{name}p99": float(p99),
-                              f"{name}max": float(np.max(times))})
+                            ("solve_", getattr(self.law, "solve_s", None))):
+            if times is not None and times.count:
+                stats.update({f"{name}{key}": 1e-3 * ms for key, ms in times.summary().items()})
         return stats
 
     def stale(self, t: float) -> bool:
@@ -103,16 +146,19 @@ class Controller:
         out.enabled = True
         z = latest.z if self.predictor is None else self.predictor.ahead(latest.t, latest.z)
         started, started_cpu = time.perf_counter(), time.thread_time()
-        value, out.singular = self.law(z, force)
-        self.law_s.append(time.perf_counter() - started)
-        self.law_cpu_s.append(time.thread_time() - started_cpu)
+        value, singular = self.law(z, force)
+        value, out.singular = float(value), bool(singular)
+        if self.probe is not None:
+            k = round(t / self.period)
+            value += float(self.probe[k]) if k < self.probe.size else 0.0
+        self.law_s.add(time.perf_counter() - started)
+        self.law_cpu_s.add(time.thread_time() - started_cpu)
         c.fallback = getattr(self.law, "fallbacks", 0)   # laws with a safe fallback count it
         if not np.isfinite(value):
             value, out.singular = 0.0, True
-        bounds = [b for b in (self.limit, self.actuator_limit) if b]
-        bound = min(bounds) if bounds else None
-        out.runaway = out.singular or (bound is not None and abs(value) > RUNAWAY_FACTOR * bound)
-        if bound is not None and abs(value) > bound:
+        bound = self.limits.magnitude or COMMAND_BOUND
+        out.runaway = out.singular or bool(abs(value) > RUNAWAY_FACTOR * bound)
+        if abs(value) > bound:
             value, out.saturated = float(np.clip(value, -bound, bound)), True
         c.saturated += out.saturated
         c.runaway += out.runaway

@@ -20,12 +20,14 @@ import numpy as np
 import yaml
 
 from stillframe.config.scene import Rig, Scene
-from stillframe.config.yamlio import load_yaml
-from stillframe.contract.model_file import read_archive
+from stillframe.config.schema import show
+from stillframe.config.yamlio import MAX_YAML_BYTES, load_yaml, problem
+from stillframe.contract.model_file import STRUCTURE, check_structure, read_archive
 from stillframe.dynamics.models import build_model
 from stillframe.dynamics.models.frame import FrameModel
 from stillframe.dynamics.models.structure import Structure
 from stillframe.errors import InputError
+from stillframe.files import read_bytes, write_text
 from stillframe.locations import DATA_DIR
 
 
@@ -35,58 +37,85 @@ def resolve_model_file(name: str, key: str) -> Path:
     if "/" not in name and "." not in name and bundled.exists():
         return bundled
     path = Path(name)
-    if not path.is_file():
+    if not path.exists():       # a FIFO or a directory is named as such by the reader
         known = ", ".join(sorted(p.stem for p in DATA_DIR.glob("*.yaml")))
         raise InputError(f"{key}: {name!r} is neither a file nor a bundled model ({known})")
     return path
 
 
-def _matrices_from_yaml(path: Path) -> tuple[dict[str, np.ndarray], str]:
+#: the YAML format's names of the structure's matrices (the .npz format's are M, K, R)
+YAML_NAMES = {"M": "mass", "K": "stiffness", "R": "damping"}
+
+
+def _matrices_from_yaml(path: Path) -> tuple[dict[str, np.ndarray], dict[str, str], str]:
+    raw = read_bytes(path, what="model file", max_bytes=MAX_YAML_BYTES)
     try:
-        data = load_yaml(path.read_text())
-    except (OSError, yaml.YAMLError) as exc:
-        raise InputError(f"{path}: cannot read the model file ({exc})") from None
+        data = load_yaml(raw)
+    except yaml.YAMLError as exc:
+        raise InputError(f"{path}: not a model file: not valid YAML: {problem(exc)}") from None
     if not isinstance(data, dict) or data.get("format") != "stillframe-mkr":
         raise InputError(f"{path}: not a model file (expected 'format: stillframe-mkr')")
-    try:
-        arrays = {k: np.asarray(data[k], dtype=float) for k in ("mass", "stiffness", "damping")}
-    except KeyError as exc:
-        raise InputError(f"{path}: missing {exc.args[0]}") from None
-    except (TypeError, ValueError):
-        raise InputError(f"{path}: mass, stiffness and damping must be numeric matrices") from None
-    return arrays, str(data.get("source", path.name))
+    arrays = {}
+    for key, name in YAML_NAMES.items():
+        if name not in data:
+            raise InputError(f"{path}: missing {name}")
+        try:
+            arrays[key] = np.asarray(data[name], dtype=float)
+        except (TypeError, ValueError):
+            raise InputError(f"{path}: {name!r} must be a numeric matrix, got "
+                             f"{show(data[name])}") from None
+    return arrays, YAML_NAMES, str(data.get("source", path.name))
 
 
-def _matrices_from_npz(path: Path) -> tuple[dict[str, np.ndarray], str]:
+def _matrices_from_npz(path: Path) -> tuple[dict[str, np.ndarray], dict[str, str], str]:
     archive = read_archive(path)
     if not archive.has_mkr:
         raise InputError(f"{path}: the identified model holds no MKR matrices M, K, R")
-    arrays = {"mass": archive.arrays["M"], "stiffness": archive.arrays["K"],
-              "damping": archive.arrays["R"]}
-    return arrays, json.dumps(archive.meta["provenance"])
+    arrays = {key: archive.arrays[key] for key in STRUCTURE}
+    return arrays, {key: key for key in STRUCTURE}, json.dumps(archive.meta["provenance"])
 
 
 def load_identified_structure(path: Path) -> Structure:
-    """The identified floors-only structure with its damping; InputError on a bad file."""
+    """The identified floors-only structure with its damping: 3x3 matrices that pass the
+    model file's physical checks (:func:`~stillframe.contract.model_file.check_structure`);
+    InputError naming the file and the entry otherwise."""
     reader = _matrices_from_npz if path.suffix == ".npz" else _matrices_from_yaml
-    arrays, source = reader(path)
-    for name, matrix in arrays.items():
-        if matrix.shape != (3, 3) or not np.all(np.isfinite(matrix)):
-            raise InputError(f"{path}: {name} must be a finite 3x3 matrix (floors 1-3)")
-        if not np.allclose(matrix, matrix.T, rtol=0, atol=1e-9 * np.max(np.abs(matrix))):
-            raise InputError(f"{path}: {name} is not symmetric")
-    if np.min(np.linalg.eigvalsh(arrays["mass"])) <= 0:
-        raise InputError(f"{path}: mass is not positive definite")
-    return Structure(f"identified({source})", arrays["mass"], arrays["stiffness"], (0, 1, 2),
-                     ("x1", "x2", "x3"), arrays["damping"])
+    arrays, labels, source = reader(path)
+    for key, matrix in arrays.items():
+        if matrix.shape != (3, 3):
+            raise InputError(f"{path}: {labels[key]!r} must be a 3x3 matrix (floors 1-3), got "
+                             f"shape {matrix.shape}")
+    check_structure(arrays, str(path), labels)
+    return storeys(arrays["M"], arrays["K"], arrays["R"], source)
 
 
 def identified_frame(name: str, rig: Rig, key: str) -> FrameModel:
     """Identified structure + the rig's nonlinear pendulum on floor 3 (eq. 5.200–5.205)."""
-    structure = load_identified_structure(resolve_model_file(name, key))
+    return storeys_frame(load_identified_structure(resolve_model_file(name, key)), rig)
+
+
+def storeys_frame(structure: Structure, rig: Rig) -> FrameModel:
+    """An identified floors-only ``structure`` with the rig's pendulum: the design model."""
     model = FrameModel(structure, rig)
     model.name = "identified"
     return model
+
+
+def storeys(mass: np.ndarray, stiffness: np.ndarray, damping: np.ndarray,
+            source: str) -> Structure:
+    """The floors-only structure of M, K, R (3×3, floors 1–3), named after its ``source``."""
+    return Structure(f"identified({source})", mass, stiffness, (0, 1, 2), ("x1", "x2", "x3"),
+                     damping)
+
+
+def write_mkr_file(path: Path, structure: Structure, source: str) -> None:
+    """``structure`` as a model file ``format: stillframe-mkr`` (what ``design.model: file`` and
+    the nodes' ``design`` parameter read; floats written to the last bit)."""
+    data = {"format": "stillframe-mkr", "source": source,
+            **{name: np.asarray(matrix, dtype=float).tolist() for name, matrix in (
+                ("mass", structure.mass), ("stiffness", structure.stiffness),
+                ("damping", structure.damping))}}
+    write_text(path, yaml.safe_dump(data, sort_keys=False), what="model file")
 
 
 def frame_for(source: str, file: str, scene: Scene, key: str) -> FrameModel:

@@ -23,6 +23,7 @@ from stillframe.dynamics.models import FrameModel, build_model
 from stillframe.dynamics.ph import scene_model as ph_scene
 from stillframe.dynamics.stability import check_rk4_step, drift_warning
 from stillframe.dynamics.systems import MechanicalSystem
+from stillframe.errors import InputError
 
 log = logging.getLogger("stillframe.dynamics.simulation")
 
@@ -86,7 +87,11 @@ class _Recorder:
 
 def simulate(scene: Scene, duration: float | None = None,
              progress: Progress | None = None) -> History:
-    """Integrate the scene open loop and record floor motion, φ, the load and the energy."""
+    """Integrate the scene open loop and record floor motion, φ, the load and the energy. One
+    structure: a scene with ``events`` is refused (the loop's plant applies them)."""
+    if scene.events:
+        raise InputError("events: simulate integrates one structure; the loop's plant applies "
+                         "structure events (stillframe closed-loop, launch)")
     duration = scene.duration if duration is None else duration
     if scene.model.type == "ph":
         return _ph_history(scene, duration, progress)

@@ -39,7 +39,11 @@ def initial_physical(scene: Scene) -> np.ndarray:
     return np.array([*i.floors, i.phi, *i.floor_velocities, i.phi_rate], dtype=float)
 
 
-def make_estimator(scene: Scene, design: FrameModel) -> TruthEstimator | Filter:
+#: what estimates the state: the simulator's truth, or a filter
+Estimator = TruthEstimator | Filter
+
+
+def make_estimator(scene: Scene, design: FrameModel) -> Estimator:
     """The estimator of ``scene.estimator.type`` (not ``none``)."""
     kind = scene.estimator.type
     if kind == "truth":

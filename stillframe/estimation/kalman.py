@@ -141,6 +141,10 @@ class TimeVaryingKalman(LinearFilter):
         super().initialise_from(sample, control)
         self.kf.x = self.x
 
+    def continue_from(self, previous: Filter) -> None:
+        super().continue_from(previous)
+        self.kf.x = self.x
+
     def predict(self, dt: float, force0: float, force1: float, control: np.ndarray) -> None:
         d = self.discrete(dt)
         u0 = full_inputs(control, force0, self.excited_floor)

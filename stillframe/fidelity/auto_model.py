@@ -36,6 +36,7 @@ from stillframe.dynamics.models import build_model
 from stillframe.dynamics.ph import scene_model as ph_scene
 from stillframe.errors import InputError
 from stillframe.fidelity.work_precision import MODELS, REFERENCE_MODEL, SCENE_BANDS_HZ
+from stillframe.files import write_text
 from stillframe.locations import DATA_DIR
 
 TABLE = DATA_DIR / "fidelity_table.json"
@@ -79,7 +80,7 @@ def write_table(result: dict, path: Path, argv: list[str]) -> None:
         "runs": list(runs.values()),
     }
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(table, indent=1) + "\n")
+    write_text(path, json.dumps(table, indent=1) + "\n", what="fidelity table")
 
 
 def load_table(path: Path = TABLE) -> dict:

@@ -30,7 +30,6 @@ FRF), among modes with damping ratio below 0.2.
 from __future__ import annotations
 
 import math
-import os
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -40,7 +39,9 @@ import numpy as np
 import scipy.io
 from scipy import signal
 
+from stillframe.config.environment import value
 from stillframe.errors import IdentificationError, InputError
+from stillframe.files import open_input
 from stillframe.identification.frf import h1_frf
 from stillframe.identification.modal import modal_parameters
 from stillframe.identification.n4sid import identify_n4sid
@@ -49,12 +50,18 @@ from stillframe.identification.pipeline import identify
 from stillframe.identification.validation import fit_percent, simulate_fitted
 from stillframe.locations import DATASETS_DIR
 
-DATASETS_VARIABLE = "STILLFRAME_DATASETS"
-"""Environment variable naming another datasets folder (default: ``datasets/`` of the checkout,
-which ships the record with its licence)."""
-DEFAULT_PATH = (Path(os.environ.get(DATASETS_VARIABLE) or DATASETS_DIR)
-                / "daisy" / "flexible_structure_dat.mat")
+#: the record's file under a datasets folder
+RECORD = Path("daisy") / "flexible_structure_dat.mat"
+
+
+def default_path() -> Path:
+    """The record in ``STILLFRAME_DATASETS``, else in ``datasets/`` of the checkout (which
+    ships it with its licence)."""
+    return Path(value("STILLFRAME_DATASETS") or DATASETS_DIR) / RECORD
+
 DT = 1 / 1024
+#: the data file's size at most (the record, 8523 samples of 30 channels, takes 2 MB)
+MAX_BYTES = 64 << 20
 ORDER = 20
 BLOCK_ROWS = 21
 OUTPUTS = 4
@@ -79,14 +86,16 @@ class Model:
     only)."""
 
 
-def load(path: str | Path = DEFAULT_PATH) -> tuple[np.ndarray, np.ndarray]:
-    """Detrended inputs (N, 2) and outputs (N, 28)."""
-    path = Path(path)
-    if not path.is_file():
+def load(path: str | Path | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Detrended inputs (N, 2) and outputs (N, 28) of the record at ``path`` (None:
+    :func:`default_path`)."""
+    path = Path(path) if path is not None else default_path()
+    if not path.exists():
         raise InputError(f"DaISy file {path} not found (flexible_structure_dat.mat, DaISy 96-013; "
                          "give its path with --data)")
     try:
-        data = scipy.io.loadmat(path)["flexible_structure_dat"]
+        with open_input(path, what="DaISy data file", max_bytes=MAX_BYTES) as stream:
+            data = scipy.io.loadmat(stream)["flexible_structure_dat"]
     except (KeyError, ValueError, OSError) as exc:
         raise InputError(f"{path}: not the DaISy flexible-structure .mat file ({exc})") from None
     if data.ndim != 2 or data.shape[1] != 30:
@@ -168,7 +177,7 @@ def dominant_modes(model: Model) -> list[dict[str, float]]:
     return sorted(rows, key=lambda r: -r["peak"])
 
 
-def report(path: str | Path = DEFAULT_PATH,
+def report(path: str | Path | None = None,
            progress: Callable[[str], None] = lambda _: None) -> dict:
     """Identify on the first half, validate on the second; everything the report prints."""
     u, y_all = load(path)

@@ -1,4 +1,4 @@
-"""Order selection with the prediction-error refinement (issue 12): the Hankel gap proposes, the
+"""Order selection with the prediction-error refinement: the Hankel gap proposes, the
 refined models' fit decides, and a disagreement between criteria is reported.
 
 The Hankel gap (largest σ_n / σ_{n+1}, :func:`stillframe.identification.era.auto_order`) gives n.

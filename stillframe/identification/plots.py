@@ -15,6 +15,7 @@ import numpy as np
 from matplotlib.ticker import MaxNLocator
 
 from stillframe.bags.channels import Record
+from stillframe.files import save_figure
 from stillframe.identification.frf import h1_frf, model_frf, segment_length
 from stillframe.identification.pipeline import Identification
 from stillframe.identification.ssi_cov import OutputOnlyIdentification
@@ -23,7 +24,7 @@ from stillframe.identification.stabilization import stabilization_diagram as sta
 
 def _save(fig: plt.Figure, path: Path) -> Path:
     path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
+    save_figure(fig, path, dpi=110)
     plt.close(fig)
     return path
 

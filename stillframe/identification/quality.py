@@ -13,7 +13,7 @@ from the one Hankel factorization (thesis §3.6):
   order (:func:`persists`): ERA's own modes are biased at low SNR, the refined ones are not;
 - **stability**: a mode with a negative damping ratio makes the model unstable, which a passive
   structure is not;
-- **modes left out** (issue 12): a mode that is stable (1 % frequency, 20 % damping, MAC 0.9)
+- **modes left out**: a mode that is stable (1 % frequency, 20 % damping, MAC 0.9)
   through :data:`STABLE_RUN` successive higher orders up to twice the chosen order, but has no
   counterpart within 1 % in the chosen model, is a physical candidate the order dropped;
 - **uncertain modes** (with the prediction-error refinement, :mod:`stillframe.identification.pem`):

@@ -1,4 +1,4 @@
-"""Residual analysis of a refined model: are its one-step prediction errors white? (issue 12)
+"""Residual analysis of a refined model: are its one-step prediction errors white?
 
 A model that has every mode the record resolves leaves innovations ``e(k)`` that are white
 (Ljung, *System Identification*, 2nd ed. 1999, §16.6). A physical mode the order left out stays in

@@ -1,4 +1,4 @@
-"""The identification benchmark sweep (issue 12): random shear buildings, three methods, errors.
+"""The identification benchmark sweep : random shear buildings, three methods, errors.
 
 A *case* is one random building, one record length, one signal-to-noise ratio and one seed.
 :func:`run_case` simulates it and identifies it with stillframe's default path
@@ -62,11 +62,11 @@ excitation)."""
 PYOMA2_BLOCK_ROWS = 20
 
 FREQUENCY_LIMIT, DAMPING_LIMIT = 0.01, 0.30
-"""A run is wrong beyond these relative errors (issue 12)."""
+"""A run is wrong beyond these relative errors."""
 MISSED_DISTANCE = 0.05
 """A true mode whose paired identified mode is further than this (relative) is missed."""
 N4SID_FACTOR = 1.5
-"""A stillframe run whose worst error exceeds N4SID's by this factor must warn (issue 27)..."""
+"""A stillframe run whose worst error exceeds N4SID's by this factor must warn..."""
 COMPARISON_FLOOR = 0.1
 """... unless the error is below this share of the wrong-run limits (0.1 % in frequency, 3 % in
 damping): both methods are then right and the ratio of two small errors is noise."""

@@ -1,4 +1,4 @@
-"""Live modal tracking: a sliding window of samples, identified again every few seconds (issue 27).
+"""Live modal tracking: a sliding window of samples, identified again every few seconds.
 
 :class:`ModalTracker` keeps the last ``window_s`` of input and output samples (aligned by stamp
 by its caller) and, on :meth:`~ModalTracker.update`, identifies the window: with inputs by the

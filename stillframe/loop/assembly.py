@@ -61,6 +61,8 @@ class Ready:
     sample: Sample
     control: np.ndarray
     complete: bool
+    first_ns: int = 0
+    """When the stamp's first message arrived (the caller's ``now_ns``)."""
 
 
 class SampleAssembly:
@@ -71,7 +73,8 @@ class SampleAssembly:
     """
 
     def __init__(self, inputs: tuple[topics.TopicSpec, ...], active: int | None,
-                 grid: SampleGrid, wait_ns: int, lockstep: bool, delay_periods: int = 0) -> None:
+                 grid: SampleGrid, wait_ns: int | None, lockstep: bool,
+                 delay_periods: int = 0) -> None:
         self.needs_truth = topics.STATE_TRUTH in inputs
         self.needs_force = topics.FLOOR3_LOAD_CELL in inputs
         self.active = active
@@ -179,7 +182,7 @@ class SampleAssembly:
             return None
         p = self.pending[min(self.pending)]
         newer = len(self.pending) > 1
-        timed_out = now_ns - p.first_ns >= self.wait_ns
+        timed_out = self.wait_ns is not None and now_ns - p.first_ns >= self.wait_ns
         complete = self.complete(p)
         command_in = self.command_in()
         if not (newer or timed_out or (complete and command_in)):
@@ -189,7 +192,7 @@ class SampleAssembly:
         del self.pending[p.ns]
         return Ready(p.ns, Sample(self.grid.seconds(p.ns), p.values[:4].copy(), float(p.values[4]),
                                   p.present.copy(), p.truth),
-                     self._control(p), complete)
+                     self._control(p), complete, p.first_ns)
 
     def _control(self, p: Pending) -> np.ndarray:
         """The actuation in effect over the period before ``p``: what the simulator reports it
@@ -221,8 +224,9 @@ class SampleAssembly:
         self.last_ns = ns
 
     def wait_ns_left(self, now_ns: int) -> int | None:
-        """Nanoseconds until the first pending stamp times out (None: nothing pending)."""
-        if not self.pending:
+        """Nanoseconds until the first pending stamp times out (None: nothing pending, or no
+        time limit)."""
+        if not self.pending or self.wait_ns is None:
             return None
         first = min(p.first_ns for p in self.pending.values())
         return max(0, first + self.wait_ns - now_ns)

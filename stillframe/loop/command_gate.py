@@ -1,12 +1,14 @@
-"""Command-path integrity: which actuator commands the simulator takes (issue 11, item 4).
+"""Command-path integrity: which actuator commands the simulator takes.
 
-One :class:`CommandGate` per command topic. A command is taken only from *the* command writer:
-the writers of one node, decided by a :class:`stillframe.loop.writer_gate.WriterGate` (the first
-writer seen, or the node ``command_writer`` names; any other writer is reported and its samples
-are ignored). Commands from the command writer are rejected, and counted by reason, when their
-value is not finite or beyond the actuator's limit (:data:`HARD_LIMIT` without one), or their
-stamp lies in the future of the current sample or before the command already held; commands for
-an actuator the scene's controller does not drive are refused.
+One :class:`CommandGate` per command topic. A command is taken only from *the* command writer,
+decided by a :class:`stillframe.loop.writer_gate.WriterGate`: with the run's token, the commands
+that carry it (the loop's controller's); without one, the writers of one node (the first writer
+seen, or the node ``command_writer`` names). Any other writer is reported and its samples are
+ignored. Commands from the command writer are rejected, and counted by reason, when their value
+is not finite or beyond the command's bound (the actuator's limit, or
+:data:`stillframe.config.loop_sections.COMMAND_BOUND` without one), or their stamp lies in the
+future of the current sample or before the command already held; commands for an actuator the
+scene's controller does not drive are refused.
 """
 
 from __future__ import annotations
@@ -22,31 +24,28 @@ from stillframe.loop.writer_gate import WriterGate
 REASONS = ("inactive_actuator", *writer_gate.REASONS, "non_finite", "beyond_limit",
            "future_stamp", "past_stamp")
 
-#: the bound on a command when the actuator has no limit (N m or N; far beyond any rig's
-#: actuator, it keeps values like 1e308 from reaching the integrator)
-HARD_LIMIT = 1e6
-
 
 @dataclass
 class CommandGate:
     """The accept/reject decision for one command topic.
 
-    ``limit``: the actuator's saturation (None: :data:`HARD_LIMIT`); ``writer``: the topic's
-    writer gate; ``active``: whether the scene's controller drives this actuator (commands for
-    the other one are refused).
+    ``bound``: the largest magnitude taken; ``writer``: the topic's writer gate (None: every
+    writer is the command writer, as in the one-process loop); ``active``: whether the scene's
+    controller drives this actuator (commands for the other one are refused).
     """
 
-    limit: float | None
-    writer: WriterGate
+    bound: float
+    writer: WriterGate | None
     active: bool = True
     rejected: Counter = field(default_factory=Counter)
 
-    def admits(self, gid: bytes, sequence: int = 0) -> bool:
+    def admits(self, gid: bytes, sequence: int = 0, data: bytes | memoryview = b"") -> bool:
         """Whether writer ``gid`` (or, without one, the writer that numbered the sample
-        ``sequence``) may command this actuator (checked before the sample is decoded); counts
-        the reason if not (the writer's reasons in the writer gate)."""
+        ``sequence``; with the run's token, the sample's CDR ``data`` carrying it) may command
+        this actuator (checked before the sample is decoded); counts the reason if not (the
+        writer's reasons in the writer gate)."""
         if self.active:
-            return self.writer.admits(gid, sequence)
+            return self.writer is None or self.writer.admits(gid, sequence, data)
         self.rejected["inactive_actuator"] += 1
         return False
 
@@ -56,7 +55,7 @@ class CommandGate:
         not."""
         if not math.isfinite(value):
             reason = "non_finite"
-        elif abs(value) > (HARD_LIMIT if self.limit is None else self.limit):
+        elif abs(value) > self.bound:
             reason = "beyond_limit"
         elif stamp_ns > now_ns:
             reason = "future_stamp"
@@ -70,4 +69,4 @@ class CommandGate:
     def report(self) -> dict[str, object]:
         """For ``/diagnostics``: the writer taken, the writers ignored, rejections by reason."""
         own = {f"rejected_{r}": self.rejected[r] for r in REASONS if r not in writer_gate.REASONS}
-        return {**self.writer.report(), **own}
+        return {**(self.writer.report() if self.writer is not None else {}), **own}

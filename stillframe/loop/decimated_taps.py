@@ -1,6 +1,6 @@
 """Decimated taps: the simulator's sample topics anti-alias filtered and thinned at the writer,
 on hidden twin topics, for readers that want the structure's band but not every sample (the
-modal tracker, issue 27).
+modal tracker).
 
 Every reader of a topic costs its writer one send per sample (:mod:`stillframe.middleware.taps`),
 and a reader that takes every sample of a 1 kHz loop pays for 4000 messages a second to identify

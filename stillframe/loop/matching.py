@@ -2,9 +2,11 @@
 docs/nodes.md, lock-step protocol, step 4). No clock is read here: the caller passes ``now_ns``
 (monotonic nanoseconds in the node, any integer in a test).
 
-In lock-step an estimate waits for the load-cell reading of its stamp, at most ``wait_ns`` after
-it arrived (then it takes the newest reading, counted in ``force_waits_timed_out``); in real time
-it takes the reading of its stamp if there is one, else the newest at once.
+In lock-step an estimate waits for the load-cell reading of its stamp, as long as it takes (the
+simulator publishes the next sample only once this one is answered, so the reading comes unless
+the simulator is gone); with a ``wait_ns`` it waits at most that long after the estimate arrived,
+then takes the newest reading (counted in ``force_waits_timed_out``). In real time it takes the
+reading of its stamp if there is one, else the newest at once.
 
 A load-cell stamp that is negative or more than :data:`~stillframe.loop.assembly.JUMP_NS` after
 the newest stamp seen is rejected and counted (``rejected_force_stamps``). An estimate stamped
@@ -33,12 +35,14 @@ class Matched:
     ns: int
     physical: np.ndarray
     force: float
+    arrival_ns: int = 0
+    """When the estimate arrived (the caller's ``now_ns``)."""
 
 
 class ForceMatching:
     """Estimates waiting for their load-cell reading, answered in stamp order."""
 
-    def __init__(self, wait_ns: int, lockstep: bool, kept: int = FORCES_KEPT) -> None:
+    def __init__(self, wait_ns: int | None, lockstep: bool, kept: int = FORCES_KEPT) -> None:
         self.wait_ns = wait_ns
         self.lockstep = lockstep
         self.kept = kept
@@ -99,17 +103,17 @@ class ForceMatching:
             return None
         ns, physical, arrival = self.pending[0]
         if ns not in self.forces:
-            if self.lockstep and now_ns - arrival < self.wait_ns:
+            if self.lockstep and (self.wait_ns is None or now_ns - arrival < self.wait_ns):
                 return None
             self.counts["force_waits_timed_out"] += self.lockstep
         self.pending.pop(0)
         force = self.forces.get(ns, self.force)
         self.forces = {k: v for k, v in self.forces.items() if k > ns}
-        return Matched(ns, physical, force)
+        return Matched(ns, physical, force, arrival)
 
     def wait_ns_left(self, now_ns: int) -> int | None:
         """Nanoseconds until the oldest estimate stops waiting for its force (None: none waits
         for a force)."""
-        if not self.pending or not self.lockstep:
+        if not self.pending or not self.lockstep or self.wait_ns is None:
             return None
         return max(0, self.pending[0][2] + self.wait_ns - now_ns)

@@ -4,17 +4,21 @@ take these from here, so that they cannot disagree."""
 
 from __future__ import annotations
 
+from stillframe.config.scene import changed_scene
 from stillframe.config.schema import Section
 from stillframe.contract import topics
 from stillframe.contract.codecs import COMMAND_TOPICS, SENSOR_TOPICS
-from stillframe.contract.signals import actuator_of
+from stillframe.contract.signals import FORCE, actuator_of
 from stillframe.design.identified import frame_for
 from stillframe.dynamics.models.frame import FrameModel
 
 
 def design_model(scene: Section) -> FrameModel:
-    """The model the estimator and the controller are designed on (``design.model``)."""
-    return frame_for(scene.design.model, scene.design.file, scene, "design.file")
+    """The model the estimator and the controller are designed on (``design.model``, on the
+    structure after ``design.after_events`` of the scene's events)."""
+    after = scene.design.after_events
+    return frame_for(scene.design.model, scene.design.file,
+                     changed_scene(scene, after) if after else scene, "design.file")
 
 
 def estimator_inputs(scene: Section) -> tuple[topics.TopicSpec, ...]:
@@ -23,7 +27,7 @@ def estimator_inputs(scene: Section) -> tuple[topics.TopicSpec, ...]:
     the ``truth`` estimator."""
     if scene.estimator.type == "none":
         return ()
-    extra = [topics.FLOOR3_LOAD_CELL] if actuator_of(scene) == 1 else []
+    extra = [topics.FLOOR3_LOAD_CELL] if actuator_of(scene) == FORCE else []
     if scene.estimator.type == "truth":
         extra.append(topics.STATE_TRUTH)
     return (*SENSOR_TOPICS, *extra)

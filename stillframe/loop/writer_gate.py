@@ -1,14 +1,24 @@
-"""Writer identity on the loop's input topics (issue 11): which writer a node takes samples from.
+"""Writer identity on the loop's input topics: which writer a node takes samples from.
 
-One :class:`WriterGate` per input topic. Samples are taken only from the writers of *one* node,
-each identified by its writer GID (the DDS publication GUID the middleware hands with each
-sample, ``MessageInfo.publisher_gid``): the node of the first writer seen, or, when ``pinned``
-names a node, the node of that name in the ROS graph. A writer of another node is a second
-writer: it is reported (:meth:`WriterGate.report`) and its samples are ignored, counted by
-reason. A new writer of the same node (a restarted simulator, estimator or controller: a new
-GUID under the old name) is taken; so is, when the node is not pinned, a writer that the graph
-cannot name yet once every writer taken so far has left the graph (a restart before its name
-arrived).
+One :class:`WriterGate` per input topic. With the run's token (``run_token``, docs/nodes.md
+"Writer identity"), a sample is the loop's own when its ``header.frame_id`` ends with the token
+(:func:`stillframe.contract.codecs.carries_token`: a length read and a slice compared, before the
+sample is decoded), whatever its writer, its order of arrival or its node's name; every other
+sample is a foreign writer's, refused and counted (``foreign_writer``), and the writer named from
+the graph: by its GID where the middleware hands one, else as the topic's writers other than the
+loop's own node (by its fully qualified name). ``/clock`` carries no header, so no token: its
+gate (the controller's, with ``use_sim_time``) decides as below.
+
+Without a token (nodes started by hand without one), samples are taken only from the writers of
+*one* node, each identified by its writer GID (the DDS publication GUID the middleware hands
+with each sample, ``MessageInfo.publisher_gid``): the node of the first writer seen, or, when
+``pinned`` names a node, the node of that name in the ROS graph (a relative name resolved in the
+gate's namespace, as ROS resolves it: ``controller_node`` is ``/frame/controller_node``, never
+``/controller_node``). A writer of another node is a second writer: it is reported
+(:meth:`WriterGate.report`) and its samples are ignored, counted by reason. A new writer of the
+same node (a restarted simulator, estimator or controller: a new GUID under the old name) is
+taken; so is, when the node is not pinned, a writer that the graph cannot name yet once every
+writer taken so far has left the graph (a restart before its name arrived).
 
 The hot path is a set lookup: a GID already taken or already refused is decided without the
 graph, and so is an unpinned gate's first writer (reading the graph costs about 9 ms in a running
@@ -28,7 +38,8 @@ shows a new writer of that node (a restart). Its node is named from the graph: t
 writers that are not the taken node's. Two writers whose numbers run side by side cannot be told
 apart: a sample as near to two streams is refused (``ambiguous_writer``). Only where a backend
 gives neither GID nor sequence number is the count of writers asked for, every
-:data:`RECHECK_NS`, and every sample refused while it is above one.
+:data:`RECHECK_NS`, and every sample refused while it is above one. Order of arrival decides
+here, which is why a launch gives its nodes a token.
 """
 
 from __future__ import annotations
@@ -39,11 +50,14 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
+from stillframe.contract.codecs import carries_token, token_suffix
+from stillframe.contract.topics import DEFAULT_NAMESPACE
 from stillframe.middleware import api
 from stillframe.middleware.graph import UNNAMED_NODES, fqn
 
-#: why a sample is refused for its writer
-REASONS = ("second_writer", "unknown_writer", "ambiguous_writer")
+#: why a sample is refused for its writer: without the run's token, or (without a token) another
+#: node's, a node the graph does not name yet, as near to two writers' numbers
+REASONS = ("foreign_writer", "second_writer", "unknown_writer", "ambiguous_writer")
 
 #: how often [ns] the graph is asked again about a writer it could not name, or, without writer
 #: GIDs, how many writers a topic has
@@ -107,24 +121,36 @@ class SequenceStreams:
         return key
 
 
-def same_node(name: str, wanted: str) -> bool:
-    """Whether the graph's ``/namespace/name`` is the node ``wanted`` (``name`` or the full
-    name)."""
-    return name == wanted or name.rsplit("/", 1)[-1] == wanted
+def resolve_node(name: str, namespace: str) -> str:
+    """A node name as ROS resolves it: a relative one in ``namespace`` (``controller_node`` in
+    ``/frame`` is ``/frame/controller_node``), a fully qualified one as it is."""
+    return name if name.startswith("/") else fqn(namespace, name)
+
+
+def same_node(name: str, wanted: str, namespace: str) -> bool:
+    """Whether the graph's ``/namespace/name`` is the node ``wanted`` resolved in ``namespace``
+    (:func:`resolve_node`): never a node of the same name in another namespace."""
+    return name == resolve_node(wanted, namespace)
 
 
 @dataclass
 class WriterGate:
     """The writer decision for one topic.
 
-    ``pinned``: the node (``name`` or ``/namespace/name``) whose writers are taken, empty for
-    the first writer seen; ``writers``: the topic's writers in the graph; ``clock``: monotonic
-    nanoseconds (for :data:`RECHECK_NS`).
+    ``pinned``: the node (``name`` in ``namespace``, or ``/namespace/name``) whose writers are
+    taken, empty for the first writer seen; ``writers``: the topic's writers in the graph;
+    ``clock``: monotonic nanoseconds (for :data:`RECHECK_NS`); ``token``: the suffix every
+    ``frame_id`` of the run ends with (:func:`~stillframe.contract.codecs.token_suffix`; empty:
+    no token); ``own``: the node expected to write the topic (the pin, else the loop's node of
+    that input), by which the foreign writers are told apart in the graph without GIDs.
     """
 
     pinned: str
     writers: GraphWriters
     clock: Callable[[], int] = time.monotonic_ns
+    namespace: str = DEFAULT_NAMESPACE
+    token: bytes = b""
+    own: str = ""
     #: how many writers the topic has in the graph (None: ``len(writers())``), asked every
     #: :data:`RECHECK_NS` inside the loop for samples without a GID, so it must be cheap
     count_writers: Callable[[], int] | None = None
@@ -141,10 +167,26 @@ class WriterGate:
     stream_recheck: dict[bytes, int] = field(default_factory=dict)
     #: refusals not yet announced (:meth:`InputGates.announce`)
     news: bool = False
+    #: with a token: the GIDs of the writers whose samples lacked it, and whether a sample of
+    #: the run came
+    foreign: set[bytes] = field(default_factory=set)
+    seen: bool = False
 
-    def admits(self, gid: bytes, sequence: int = 0) -> bool:
+    def __post_init__(self) -> None:
+        self.pinned = resolve_node(self.pinned, self.namespace) if self.pinned else ""
+        self.own = resolve_node(self.own, self.namespace) if self.own else self.pinned
+
+    def admits(self, gid: bytes, sequence: int = 0, data: bytes | memoryview = b"") -> bool:
         """Whether a sample from writer ``gid`` (or, without one, numbered ``sequence`` by its
-        writer) is taken; counts the reason if not."""
+        writer) is taken; with a token, whether its CDR ``data`` carries it; counts the reason
+        if not."""
+        if self.token:
+            if carries_token(data, self.token):
+                self.seen = True
+                return True
+            if gid:
+                self.foreign.add(gid)
+            return self._refuse("foreign_writer")
         if not gid and sequence:
             if self.streams is None:
                 self.streams = SequenceStreams(self.clock)
@@ -183,7 +225,7 @@ class WriterGate:
         wanted = self.pinned or self.owner or next(
             (graph[g] for g in self.taken if g in graph), "")
         if name is not None and wanted:
-            if not same_node(name, wanted):
+            if name != wanted:
                 self.intruders.add(gid)
                 self.unresolved.pop(gid, None)
                 return "second_writer"
@@ -207,7 +249,7 @@ class WriterGate:
         if not wanted and not self.taken:   # the one node writing the topic, if one
             nodes = {name for _, name in listed if name.strip("/")}
             wanted = next(iter(nodes)) if len(nodes) == 1 else ""
-        own = {g for g, name in listed if wanted and same_node(name, wanted)}
+        own = {g for g, name in listed if wanted and name == wanted}
         self.owner_gids = self.owner_gids or own     # taken before the graph named its node
         alone = bool(wanted) and all(g in own for g, _ in listed)
         if self.taken and not alone and not own - self.owner_gids:
@@ -216,20 +258,33 @@ class WriterGate:
             return "second_writer"
         self.intruders.discard(key)
         self.taken = {key}
-        self.owner = wanted if wanted.startswith("/") else next(
-            (name for g, name in listed if g in own), self.owner)
+        self.owner = wanted
         self.owner_gids = own
         return None
 
     def suspects(self) -> list[str]:
-        """Without GIDs: the nodes writing the topic other than the taken one."""
-        wanted = self.pinned or self.owner
+        """Without GIDs: the nodes writing the topic other than the taken one (with a token:
+        than the loop's own)."""
+        wanted = self.own if self.token else self.pinned or self.owner
         return sorted({name for _, name in self.writers()
-                       if name.strip("/") and not (wanted and same_node(name, wanted))})
+                       if name.strip("/") and not (wanted and name == wanted)})
 
     def has_seen_samples(self) -> bool:
-        """Whether samples came: from a writer taken, or without a GID (its writers counted)."""
-        return bool(self.taken) or self.blind_until >= 0
+        """Whether samples came: of the run, from a writer taken, or without a GID (its writers
+        counted)."""
+        return self.seen or bool(self.taken) or self.blind_until >= 0
+
+    def foreign_names(self) -> list[str]:
+        """With a token: the writers whose samples lacked it, by their GIDs' nodes where the
+        middleware gave GIDs, else the topic's writers other than the loop's own node (``a or
+        b`` when more than one: an idle publisher cannot be told from a writing one), or a second
+        writer under the loop's own name."""
+        if self.foreign:
+            return sorted({self.name_of(gid) for gid in self.foreign})
+        if others := self.suspects():
+            return [" or ".join(others)]
+        doubles = sum(name == self.own for _, name in self.writers())
+        return [f"another writer named {self.own}" if doubles > 1 else "unnamed"]
 
     def name_of(self, gid: bytes) -> str:
         """The node of writer ``gid`` in the graph, its GID in hex while the graph has none; a
@@ -242,6 +297,8 @@ class WriterGate:
 
     def ignored(self) -> list[str]:
         """The other writers seen (refused, or not named yet), by node name or GID."""
+        if self.token:
+            return self.foreign_names() if self.rejected["foreign_writer"] else []
         ambiguous = " or ".join(self.suspects()) if self.rejected["ambiguous_writer"] else ""
         return sorted({self.name_of(gid) for gid in (*self.intruders, *self.unresolved)}
                       | ({ambiguous or "unnamed"} if self.rejected["ambiguous_writer"] else set()))
@@ -251,8 +308,10 @@ class WriterGate:
         if not self.owner and self.taken:   # the first writer was taken without its name
             listed = [(g, name) for g, name in self.writers() if name.strip("/")]
             self.owner = next((name for g, name in listed if g in self.taken or (
-                self.pinned and same_node(name, self.pinned))), "")
-        if self.owner or not self.taken:
+                self.pinned and name == self.pinned)), "")
+        if self.token:
+            taken = self.own
+        elif self.owner or not self.taken:
             taken = self.owner
         elif self.pinned and any(g.startswith(STREAM_KEY) for g in self.taken):
             taken = self.pinned                 # no GID: the pin, until the graph names it
@@ -267,21 +326,30 @@ class WriterGate:
 class InputGates:
     """The :class:`WriterGate` of each input topic of a node, reported together; ``pins`` maps
     the node's parameters that name the node a gate takes to their values ("": the first writer
-    seen; declared by the node runtime, :mod:`stillframe.node_runtime.declarations`)."""
+    seen; declared by the node runtime, :mod:`stillframe.node_runtime.declarations`),
+    ``defaults`` to the loop's node each names by default; ``token``: the run's (empty: none)."""
 
-    def __init__(self, node: api.Node, pins: dict[str, str]) -> None:
+    def __init__(self, node: api.Node, pins: dict[str, str],
+                 defaults: dict[str, str] | None = None, token: str = "") -> None:
         self.node = node
         self.gates: dict[str, WriterGate] = {}
         self.pins = dict(pins)
+        self.defaults = defaults or {}
+        self.token = token_suffix(token)
         self.samples_seen = False       # a gate has seen samples (:meth:`keep_graph_read`)
         self.next_graph_read = 0
         self.next_announce = 0
         self.announced: dict[str, list[str]] = {}     # topic -> the writers last logged
 
-    def add(self, topic: str, parameter: str) -> WriterGate:
-        """The gate of ``topic``, taking the writers of the node ``parameter`` names."""
+    def add(self, topic: str, parameter: str, *, stamped: bool = True) -> WriterGate:
+        """The gate of ``topic``, taking the writers of the node ``parameter`` names, or, for a
+        ``stamped`` topic (its messages have a header) of a run with a token, the samples that
+        carry it."""
         gate = WriterGate(self.pins[parameter], graph_writers(self.node, topic),
-                          count_writers=lambda: self.node.count_publishers(topic))
+                          count_writers=lambda: self.node.count_publishers(topic),
+                          namespace=self.node.get_namespace(),
+                          token=self.token if stamped else b"",
+                          own=self.pins[parameter] or self.defaults.get(parameter, ""))
         self.gates[topic] = gate
         return gate
 
@@ -329,12 +397,16 @@ class InputGates:
             if names and names != self.announced.get(topic):
                 self.announced[topic] = names
                 refused = sum(gate.rejected.values())
-                log.warning(f"{topic}: refusing the samples of another writer: "
+                kind = "a foreign writer (without the run's token)" if gate.token else (
+                    "another writer")
+                log.warning(f"{topic}: refusing the samples of {kind}: "
                             f"{', '.join(names)} ({refused} so far)")
                 logged = True
         return logged
 
     def message(self) -> str:
         """Which second writers are being ignored, for the status message."""
-        return "; ".join(f"second writer on {topic} ignored: {', '.join(names)}"
-                         for topic, gate in self.gates.items() if (names := gate.ignored()))
+        return "; ".join(
+            f"{'foreign' if gate.token else 'second'} writer on {topic} ignored: "
+            f"{', '.join(names)}" for topic, gate in self.gates.items()
+            if (names := gate.ignored()))

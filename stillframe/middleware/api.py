@@ -22,9 +22,12 @@ from __future__ import annotations
 
 import functools
 import sys
+import threading
 from collections.abc import Callable
 from pathlib import Path
 
+from stillframe import interrupts
+from stillframe.config.environment import check_environment
 from stillframe.errors import StillframeError
 from stillframe.middleware.backend_choice import (
     BACKEND_ENV,
@@ -34,9 +37,9 @@ from stillframe.middleware.backend_choice import (
     has_rclpy,
 )
 from stillframe.middleware.clock import Clock, Time
+from stillframe.middleware.cyclone_log import DROPPED as CYCLONE_DROPPED
 from stillframe.middleware.cyclone_log import count_deserialization_failures
 from stillframe.middleware.interface import (
-    MALFORMED,
     ManagedNode,
     MessageInfo,
     Node,
@@ -47,12 +50,13 @@ from stillframe.middleware.interface import (
     deliver,
     freeze_setup_objects,
     install_signal_handlers,
+    node_created,
     ok,
     shutdown,
 )
 from stillframe.middleware.params import Parameter, SetParametersResult
 
-__all__ = ["BACKENDS", "BACKEND_ENV", "MALFORMED", "ManagedNode", "MessageInfo", "Node",
+__all__ = ["BACKENDS", "BACKEND_ENV", "CYCLONE_DROPPED", "ManagedNode", "MessageInfo", "Node",
            "Parameter", "Publisher", "SetParametersResult", "Subscription", "Timer",
            "TopicEndpointInfo", "backend_name",
            "check_backend", "create_node", "deliver", "freeze_setup_objects", "has_rclpy",
@@ -78,6 +82,7 @@ def create_node(name: str, namespace: str | None = None, argv: list[str] | None 
         from stillframe.middleware.rclpy_backend import RclpyNode as NodeClass
     node = NodeClass(name, namespace or "/", args, **(
         {"managed": True} if managed and backend == "rclpy" else {}))
+    node_created(node)
     install_signal_handlers()
     node.get_logger().info(f"middleware backend: {backend}", once=True)
     return node
@@ -86,17 +91,31 @@ def create_node(name: str, namespace: str | None = None, argv: list[str] | None 
 def node_main(main: Callable[[], int | None]) -> Callable[[], int]:
     """Wrap a node executable's ``main`` (a ``console_scripts`` entry point): a
     :class:`~stillframe.errors.StillframeError` (e.g. a wrong parameter, exit code 2) prints one
-    line and exits with its code."""
+    line and exits with its code; so does an interruption the node's own handlers did not turn
+    into a clean stop (a second Ctrl-C, one before the node exists: 130, 143), and a signal
+    after the node's work ends it at once (:mod:`stillframe.interrupts`)."""
 
     @functools.wraps(main)
     def wrapped() -> int:
-        if backend_name() == "dds":     # Cyclone's dropped samples counted (cyclone_log)
-            count_deserialization_failures()
-        try:
-            return int(main() or 0)
-        except StillframeError as exc:
-            print(f"{Path(sys.argv[0]).name}: error: {exc}", file=sys.stderr)
-            return exc.exit_code
+        prog = Path(sys.argv[0]).name
+
+        def work() -> int:
+            try:
+                check_environment()
+                if backend_name() == "dds":     # Cyclone's dropped samples counted
+                    count_deserialization_failures()
+                return int(main() or 0)
+            except StillframeError as exc:
+                if interrupts.received():
+                    raise
+                print(f"{prog}: error: {exc}", file=sys.stderr)
+                return exc.exit_code
+
+        code = interrupts.run_work(prog, work)
+        sys.stdout.flush()
+        if threading.current_thread() is threading.main_thread():
+            interrupts.ending(prog)
+        return code
 
     return wrapped
 

@@ -1,4 +1,4 @@
-"""Samples Cyclone DDS drops as undecodable, counted (issue 31, item 6).
+"""Samples Cyclone DDS drops as undecodable, counted.
 
 A sample whose CDR Cyclone's receive path refuses (truncated, garbage under a valid type name,
 as an rclpy peer can publish) never reaches a ``dds``-backend reader: Cyclone drops it and logs
@@ -6,11 +6,13 @@ as an rclpy peer can publish) never reaches a ``dds``-backend reader: Cyclone dr
 (``dds_set_log_sink`` is not in its symbol table) and its reader statistics
 (``dds_create_statistics``: ``discarded_bytes``) stay 0 for these samples, measured. So
 :func:`count_deserialization_failures` taps the process's stderr (file descriptor 2): a thread
-passes every byte on to the real stderr unchanged and counts each such line in
-:data:`~stillframe.middleware.interface.MALFORMED` under its ROS topic, beside the samples our
-own delivery path drops, so they appear as ``malformed_samples`` in ``/diagnostics`` and in the
-simulator's result. Only node executables turn it on (:func:`stillframe.middleware.api.node_main`
-on the ``dds`` backend), never a process whose stderr others capture (pytest).
+passes every byte on to the real stderr unchanged and counts each such line in :data:`DROPPED`
+under its ROS topic. Cyclone drops these before any node of the process sees them, so they are
+the process's, not a node's: the loop nodes add them to the samples their own subscriptions
+dropped (:attr:`stillframe.middleware.interface.Node.malformed`) as ``malformed_samples`` in
+``/diagnostics`` and in the simulator's result. Only node executables turn it on
+(:func:`stillframe.middleware.api.node_main` on the ``dds`` backend), never a process whose
+stderr others capture (pytest).
 """
 
 from __future__ import annotations
@@ -20,13 +22,16 @@ import contextlib
 import os
 import re
 import threading
+from collections import Counter
 
-from stillframe.middleware.interface import MALFORMED
+from stillframe import interrupts
 
 #: Cyclone's line for a refused sample: ``... deserialization rt/frame/floor1/imu/sensor_msgs::
 #: msg::dds_::Imu_ failed (for reasons unknown)``
 FAILED = re.compile(rb"deserialization rt(/\S+)/[\w:]+::dds_::\w+ failed")
 _tapped: list[threading.Thread] = []
+#: samples per topic Cyclone refused to deserialize in this process (module docstring)
+DROPPED: Counter[str] = Counter()
 
 
 def _write_all(fd: int, data: bytes) -> None:
@@ -42,7 +47,7 @@ def _pump(read: int, real: int) -> None:
             *lines, pending = (pending + data).split(b"\n")
             for line in lines:
                 if found := FAILED.search(line):
-                    MALFORMED[found.group(1).decode(errors="replace")] += 1
+                    DROPPED[found.group(1).decode(errors="replace")] += 1
     os.close(read)
 
 
@@ -66,3 +71,4 @@ def count_deserialization_failures() -> None:
         thread.join(10.0)
 
     atexit.register(restore)
+    interrupts.at_finish(restore)       # a node executable ends without atexit

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import itertools
 import time
+from collections import Counter
 from collections.abc import Callable
 from typing import Any, ClassVar
 
@@ -174,8 +175,15 @@ class Context:
     def __init__(self, domain: int) -> None:
         self.domain_id = domain
         config = discovery.cyclone_config()
-        self.domain = Domain(domain, config) if config else None
-        self.participant = DomainParticipant(domain, qos=Qos(Policy.Userdata(data=b"enclave=/;")))
+        try:
+            self.domain = Domain(domain, config) if config else None
+            self.participant = DomainParticipant(domain,
+                                                 qos=Qos(Policy.Userdata(data=b"enclave=/;")))
+        except DDSException as exc:     # the configuration: the user's, or the variables'
+            source = "CYCLONEDDS_URI" if discovery.value("CYCLONEDDS_URI") else \
+                "the discovery variables"
+            raise InputError(f"Cyclone DDS refuses the configuration of {source} (domain "
+                             f"{domain}): {str(exc).splitlines()[0]}") from None
         self.gid = self.participant.guid.bytes
         self.nodes: list[DdsNode] = []
         self.topics: dict[str, Topic] = {}
@@ -409,6 +417,7 @@ class DdsSubscription:
         self.qos_profile = qos
         self.raw = raw
         self.callback = callback
+        self.malformed = node.malformed
         #: the process's own writers hand their samples over (:mod:`.intra_process`) and the
         #: reader ignores them
         self.intra = intra
@@ -482,7 +491,8 @@ class DdsSubscription:
             if self.raw:
                 self.callback(bytes(data), self._info(info))
             else:
-                interface.deliver(self.callback, data, self.msg_type, self.topic_name)
+                interface.deliver(self.callback, data, self.msg_type, self.topic_name,
+                                  self.malformed)
         return len(samples)
 
 
@@ -546,6 +556,7 @@ class DdsNode:
         self._params = params.Parameters(fqn, params.node_overrides(ros_args, fqn))
         self.user_args = ros_args.user_args
         self.context = Context.get()
+        self.malformed: Counter[str] = Counter()
         self._publishers: list[DdsPublisher] = []
         self._subscriptions: list[DdsSubscription] = []
         self._polled: list[DdsSubscription] = []    # readers outside the wait set
@@ -584,9 +595,11 @@ class DdsNode:
         self._clock.set_sim_time(messages.stamp_ns(msg.clock))
 
     def declare_parameter(
-        self, name: str, default: Any = None, read_only: bool = False
+        self, name: str, default: Any = None, read_only: bool = False, *,
+        descriptor: params.ParameterDescriptor | None = None,
     ) -> params.Parameter:
-        return params.Parameter(name, self._params.declare(name, default, read_only))
+        descriptor = params.described(descriptor, read_only=read_only)
+        return params.Parameter(name, self._params.declare(name, default, descriptor))
 
     def get_parameter(self, name: str) -> params.Parameter:
         return params.Parameter(name, self._params.get(name))
@@ -738,6 +751,7 @@ class DdsNode:
         """Release every entity of the node and drop it from the node list."""
         if self not in self.context.nodes:
             return
+        interface.node_destroyed(self)
         delete(self._waitset)
         for entity in (*self._publishers, *self._subscriptions, *self._polled):
             entity.release()

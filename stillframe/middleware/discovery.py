@@ -18,7 +18,7 @@ from __future__ import annotations
 import os
 from enum import Enum
 
-from stillframe.errors import InputError
+from stillframe.config.environment import DISCOVERY_RANGES, is_set, value
 
 RANGE_ENV = "ROS_AUTOMATIC_DISCOVERY_RANGE"
 PEERS_ENV = "ROS_STATIC_PEERS"
@@ -32,37 +32,30 @@ LOOPBACK_INTERFACE = ('<Interfaces><NetworkInterface address="127.0.0.1"/>'
                       '<NetworkInterface autodetermine="true" multicast="false"/></Interfaces>')
 
 
-class DiscoveryRange(Enum):
-    SUBNET = "SUBNET"
-    LOCALHOST = "LOCALHOST"
-    OFF = "OFF"
-    SYSTEM_DEFAULT = "SYSTEM_DEFAULT"
+#: the ranges, each its own value (declared once, with the variable, in config.environment)
+DiscoveryRange = Enum("DiscoveryRange", [(name, name) for name in DISCOVERY_RANGES])
 
 
 def discovery_range() -> DiscoveryRange:
-    """The range the environment asks for (``SUBNET`` when unset)."""
-    text = os.environ.get(RANGE_ENV, "").strip()
-    if not text:
-        localhost_only = os.environ.get("ROS_LOCALHOST_ONLY", "").strip() == "1"
-        return DiscoveryRange.LOCALHOST if localhost_only else DiscoveryRange.SUBNET
-    try:
-        return DiscoveryRange(text)
-    except ValueError:
-        choices = ", ".join(r.value for r in DiscoveryRange)
-        raise InputError(f"{RANGE_ENV}={text!r}: expected one of {choices}") from None
+    """The range the environment asks for (``SUBNET`` when unset; ``LOCALHOST`` with
+    ``ROS_LOCALHOST_ONLY=1``); InputError for a range there is not."""
+    if not is_set(RANGE_ENV) and value("ROS_LOCALHOST_ONLY") == "1":
+        return DiscoveryRange.LOCALHOST
+    return DiscoveryRange(value(RANGE_ENV))
+
+
+#: the highest domain id rcl takes (its UDP ports must fit: rmw's 0..232)
 
 
 def domain_id() -> int:
-    """``ROS_DOMAIN_ID`` (default 0); InputError unless an integer 0..232."""
-    text = os.environ.get("ROS_DOMAIN_ID", "").strip() or "0"
-    if not text.isdigit() or int(text) > 232:
-        raise InputError(f"ROS_DOMAIN_ID={text!r}: expected an integer 0..232")
-    return int(text)
+    """``ROS_DOMAIN_ID`` (default 0); InputError unless an integer 0..
+    :data:`stillframe.config.environment.MAX_DOMAIN_ID`."""
+    return int(value("ROS_DOMAIN_ID"))
 
 
 def static_peers() -> list[str]:
     """``ROS_STATIC_PEERS`` as a list of hosts."""
-    return [p.strip() for p in os.environ.get(PEERS_ENV, "").split(";") if p.strip()]
+    return [p.strip() for p in value(PEERS_ENV).split(";") if p.strip()]
 
 
 def cyclone_config() -> str:
@@ -92,7 +85,7 @@ def cyclone_config() -> str:
             "</Discovery>"
         )
     parts = [f"<CycloneDDS><Domain>{fragment}</Domain></CycloneDDS>"] if fragment else []
-    user = os.environ.get("CYCLONEDDS_URI", "").strip()
+    user = value("CYCLONEDDS_URI")
     if user:
         parts.append(user)
     return ",".join(parts)

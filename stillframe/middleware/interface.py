@@ -19,7 +19,7 @@ from stillframe.contract import messages
 from stillframe.middleware.clock import Clock
 from stillframe.middleware.graph import TopicEndpointInfo
 from stillframe.middleware.logger import Logger
-from stillframe.middleware.params import Parameter, SetCallback
+from stillframe.middleware.params import Parameter, ParameterDescriptor, SetCallback
 from stillframe.middleware.qos import QoSProfile
 
 #: how often a service call that may give up (``call_service(..., give_up=...)``) asks [s]
@@ -81,6 +81,10 @@ class Node(Protocol):
     """What every backend's node offers."""
 
     backend: str
+    #: samples per topic that did not decode (malformed CDR), dropped by this node's
+    #: subscriptions (:func:`deliver`, and the loop's raw readers); the loop nodes report them in
+    #: ``/diagnostics``
+    malformed: Counter[str]
 
     def get_name(self) -> str: ...
     def get_namespace(self) -> str: ...
@@ -101,7 +105,8 @@ class Node(Protocol):
         self, period_s: float, callback: Callable[[], None], clock: Clock | None = None
     ) -> Timer: ...
     def declare_parameter(
-        self, name: str, default: Any = None, read_only: bool = False
+        self, name: str, default: Any = None, read_only: bool = False, *,
+        descriptor: ParameterDescriptor | None = None,
     ) -> Parameter: ...
     def get_parameter(self, name: str) -> Parameter: ...
     def add_on_set_parameters_callback(self, callback: SetCallback) -> None: ...
@@ -130,23 +135,22 @@ class ManagedNode(Node, Protocol):
     def trigger(self, transition: str) -> str: ...
 
 
-#: samples per topic that did not decode (malformed CDR), dropped by the subscriptions of this
-#: process; the loop nodes report them in ``/diagnostics``
-MALFORMED: Counter[str] = Counter()
-
-
 def deliver(callback: Callable[[Any], None], data: bytes | memoryview, type_name: str,
-            topic: str) -> None:
-    """Decode ``data`` and hand it to ``callback``; a malformed sample is dropped and counted."""
+            topic: str, malformed: Counter[str]) -> None:
+    """Decode ``data`` and hand it to ``callback``; a malformed sample is dropped and counted in
+    ``malformed`` (its node's :attr:`Node.malformed`)."""
     msg = messages.decode_sample(data, type_name)
     if msg is None:
-        MALFORMED[topic] += 1
+        malformed[topic] += 1
     else:
         callback(msg)
 
 
 _shutdown = threading.Event()
-_handlers_installed = False
+#: the handlers :func:`install_signal_handlers` replaced (empty: its own are not installed)
+_replaced: dict[int, Any] = {}
+#: the nodes of this process not destroyed yet (by id)
+_live_nodes: set[int] = set()
 _gc_frozen = False
 
 
@@ -167,13 +171,30 @@ def _on_signal(signum: int, frame: Any) -> None:
 
 
 def install_signal_handlers() -> None:
-    """Make SIGINT and SIGTERM request a clean shutdown (main thread only; idempotent)."""
-    global _handlers_installed
-    if _handlers_installed or threading.current_thread() is not threading.main_thread():
+    """Make SIGINT and SIGTERM request a clean shutdown (main thread only; idempotent) while
+    this process has nodes (:func:`node_destroyed`)."""
+    if _replaced or threading.current_thread() is not threading.main_thread():
         return
-    signal.signal(signal.SIGINT, _on_signal)
-    signal.signal(signal.SIGTERM, _on_signal)
-    _handlers_installed = True
+    for signum in (signal.SIGINT, signal.SIGTERM):
+        _replaced[signum] = signal.signal(signum, _on_signal)
+
+
+def node_created(node: object) -> None:
+    """A node of this process exists (the node API counts them)."""
+    _live_nodes.add(id(node))
+
+
+def node_destroyed(node: object) -> None:
+    """A node was destroyed. With the process's last node gone, the handlers from before
+    :func:`install_signal_handlers` are back: no loop reads the shutdown request any more, so a
+    signal from then on is the process's own again (:mod:`stillframe.interrupts`: one line and
+    its exit code) rather than a request nobody sees."""
+    _live_nodes.discard(id(node))
+    if _live_nodes or not _replaced or threading.current_thread() is not threading.main_thread():
+        return
+    for signum, handler in _replaced.items():
+        signal.signal(signum, handler)
+    _replaced.clear()
 
 
 def freeze_setup_objects() -> None:

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import statistics
 import sys
+import time
 from collections import deque
 from collections.abc import Callable
 from typing import Any
@@ -14,29 +15,40 @@ import yaml
 from stillframe.contract import messages
 from stillframe.errors import InputError
 from stillframe.middleware import api, names
+from stillframe.middleware.graph import ANNOUNCE_S
 from stillframe.middleware.qos import DEFAULT, Durability, QoSProfile, Reliability
 
 
 def wait_for_publisher(
     node: api.Node, topic: str, timeout: float | None,
-    on_missing: Callable[[str], None] | None = None,
+    on_missing: Callable[[str], bool | None] | None = None,
 ) -> tuple[str, QoSProfile]:
     """The type of ``topic`` and a QoS compatible with all its publishers (like ``ros2 topic``:
     reliable/transient-local only if every publisher offers it). ``on_missing(full_name)`` is
-    called once if no publisher was found in the first half second (it may raise)."""
+    called once if this node found no publisher in the first half second (it may raise): whether
+    a settled graph (the daemon's) shows one, or None when it cannot say, and this node's own
+    discovery is then given one announcement period (:data:`.graph.ANNOUNCE_S`). ros2's ``does
+    not appear to be published yet`` is printed only when neither shows a publisher: a fresh
+    node finds a running topic's publishers only after a second or more."""
     full = names.resolve_topic(topic)
     found: list[api.TopicEndpointInfo] = []
+    deadline = time.monotonic() + (1e9 if timeout is None else timeout)
 
     def discovered() -> bool:
         found[:] = node.get_publishers_info_by_topic(full)
         return bool(found)
 
-    if not api.spin_until(node, discovered, 0.5 if timeout is None else min(timeout, 0.5)):
-        if on_missing is not None:
-            on_missing(full)
-        print(f"WARNING: topic [{full}] does not appear to be published yet", file=sys.stderr)
-        remaining = 1e9 if timeout is None else max(timeout - 0.5, 0.0)
-        if not api.spin_until(node, discovered, remaining):
+    def left(at_most: float = 1e9) -> float:
+        return max(min(deadline - time.monotonic(), at_most), 0.0)
+
+    if not api.spin_until(node, discovered, left(0.5)):
+        published = on_missing(full) if on_missing is not None else None
+        if published is None:
+            published = api.spin_until(node, discovered, left(ANNOUNCE_S))
+        if not published:
+            print(f"WARNING: topic [{full}] does not appear to be published yet",
+                  file=sys.stderr)
+        if not api.spin_until(node, discovered, left()):
             if api.ok():
                 raise InputError(f"no publisher of topic {full} appeared within {timeout:g} s")
             return "", DEFAULT

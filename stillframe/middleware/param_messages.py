@@ -8,13 +8,20 @@ and one filled field; what ``ListParameters``, ``GetParameters``, ``SetParameter
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
 
 from stillframe.contract import messages
 from stillframe.errors import InputError
-from stillframe.middleware.params import Parameters, SetParametersResult, check_value
+from stillframe.middleware.params import (
+    ParameterDescriptor,
+    Parameters,
+    Range,
+    SetParametersResult,
+    check_value,
+)
 
 NOT_SET, BOOL, INTEGER, DOUBLE, STRING = 0, 1, 2, 3, 4
 BYTE_ARRAY, BOOL_ARRAY, INTEGER_ARRAY, DOUBLE_ARRAY, STRING_ARRAY = 5, 6, 7, 8, 9
@@ -28,8 +35,9 @@ FIELDS: dict[tuple[type, bool], tuple[int, str]] = {
     (str, True): (STRING_ARRAY, "string_array_value"),
 }
 FIELD_OF_CODE = {code: field for code, field in FIELDS.values()} | {BYTE_ARRAY: "byte_array_value"}
-TYPE_NAMES = {NOT_SET: "not set", BOOL: "bool", INTEGER: "integer", DOUBLE: "double",
-              STRING: "string", BYTE_ARRAY: "byte array", BOOL_ARRAY: "bool array",
+#: the types' names as ros2param prints them (``ros2 param describe``)
+TYPE_NAMES = {NOT_SET: "not set", BOOL: "boolean", INTEGER: "integer", DOUBLE: "double",
+              STRING: "string", BYTE_ARRAY: "byte array", BOOL_ARRAY: "boolean array",
               INTEGER_ARRAY: "integer array", DOUBLE_ARRAY: "double array",
               STRING_ARRAY: "string array"}
 VALUE_TYPE = "rcl_interfaces/msg/ParameterValue"
@@ -99,10 +107,38 @@ def answer_set(params: Parameters, request: Any) -> Any:
     return messages.new("rcl_interfaces/srv/SetParameters_Response", results=results)
 
 
+#: the bounds of an ``IntegerRange`` (int64) that stand for an infinite bound
+INT64 = (-(2**63), 2**63 - 1)
+
+
+def range_fields(value: Any, limits: Range | None) -> dict[str, Any]:
+    """The ``floating_point_range`` or ``integer_range`` of a descriptor for a parameter of
+    ``value``'s type (none for other types, as rcl gives ranges to scalars only)."""
+    if limits is None or isinstance(value, bool) or not isinstance(value, int | float):
+        return {}
+    if isinstance(value, float):
+        return {"floating_point_range": [messages.new(
+            "rcl_interfaces/msg/FloatingPointRange", from_value=float(limits.low),
+            to_value=float(limits.high), step=float(limits.step))]}
+    low, high = (int(b) if math.isfinite(b) else INT64[b > 0] for b in (limits.low, limits.high))
+    return {"integer_range": [messages.new("rcl_interfaces/msg/IntegerRange", from_value=low,
+                                           to_value=high, step=int(limits.step))]}
+
+
+def descriptor_msg(name: str, value: Any, descriptor: ParameterDescriptor) -> Any:
+    """The ``ParameterDescriptor`` message of a declared parameter (``value``: its value now)."""
+    return messages.new("rcl_interfaces/msg/ParameterDescriptor", name=name,
+                        type=type_code(value), description=descriptor.description,
+                        additional_constraints=descriptor.additional_constraints,
+                        read_only=descriptor.read_only,
+                        **range_fields(value, descriptor.range))
+
+
 def answer_describe(params: Parameters, request: Any) -> Any:
+    """Every name's descriptor; an undeclared one's is empty but for the name, as rclpy's."""
     return messages.new("rcl_interfaces/srv/DescribeParameters_Response", descriptors=[
-        messages.new("rcl_interfaces/msg/ParameterDescriptor", name=n,
-                     type=type_code(params.values.get(n)), read_only=n in params.read_only)
+        descriptor_msg(n, params.values.get(n),
+                       params.descriptors.get(n, ParameterDescriptor()))
         for n in request.names
     ])
 

@@ -15,14 +15,15 @@ from __future__ import annotations
 import math
 import re
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 import yaml
 
-from stillframe.config.yamlio import load_yaml
+from stillframe.config.yamlio import MAX_YAML_BYTES, load_yaml, problem
 from stillframe.errors import InputError
+from stillframe.files import read_bytes
 
 #: Types a ROS parameter may hold (arrays are homogeneous lists of the scalar types).
 SCALAR_TYPES = (bool, int, float, str)
@@ -117,7 +118,7 @@ def _flatten(prefix: str, tree: Any, where: str) -> dict[str, Any]:
 WILDCARD = "/**"
 
 
-def _node_key_matches(key: str, node_fqn: str) -> bool:
+def key_matches(key: str, node_fqn: str) -> bool:
     key = key if key.startswith("/") else "/" + key
     pattern = "".join(
         "(/[^/]+)*" if token == "**" else "/[^/]+" if token == "*" else "/" + re.escape(token)
@@ -126,16 +127,13 @@ def _node_key_matches(key: str, node_fqn: str) -> bool:
     return re.fullmatch(pattern, node_fqn) is not None
 
 
-def _param_file_entries(path: Path) -> list[tuple[str, dict[str, Any]]]:
+def param_file_entries(path: Path) -> list[tuple[str, dict[str, Any]]]:
     """(node key, flattened parameters) of each entry of a ROS 2 parameter file, in file order."""
+    raw = read_bytes(path, what="parameter file", max_bytes=MAX_YAML_BYTES)
     try:
-        tree = load_yaml(Path(path).read_text())
-    except OSError as exc:
-        raise InputError(f"parameter file {path}: {exc.strerror}") from exc
+        tree = load_yaml(raw)
     except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        line = f" (line {mark.line + 1})" if mark else ""
-        raise InputError(f"parameter file {path}: not valid YAML{line}") from exc
+        raise InputError(f"parameter file {path}: not valid YAML: {problem(exc)}") from None
     if not isinstance(tree, dict):
         raise InputError(f"parameter file {path}: expected 'node_name: {{ros__parameters: ...}}'")
     entries = []
@@ -146,7 +144,7 @@ def _param_file_entries(path: Path) -> list[tuple[str, dict[str, Any]]]:
     return entries
 
 
-def _resolve(entries: list[tuple[str, dict[str, Any]]], node_fqn: str) -> dict[str, Any]:
+def resolve_entries(entries: list[tuple[str, dict[str, Any]]], node_fqn: str) -> dict[str, Any]:
     """What rcl and rclpy make of ``entries`` for ``node_fqn``: entries under the same key merge
     in order (later wins), then the ``/**`` key applies first and every other matching key after
     it, so a key naming the node wins over ``/**`` (where ``-p`` goes) whatever the order."""
@@ -155,26 +153,26 @@ def _resolve(entries: list[tuple[str, dict[str, Any]]], node_fqn: str) -> dict[s
         by_key.setdefault(key, {}).update(params)
     merged: dict[str, Any] = {}
     for key, params in by_key.items():
-        if _node_key_matches(key, node_fqn):
+        if key_matches(key, node_fqn):
             merged.update(params)
     return merged
 
 
 def load_param_file(path: Path, node_fqn: str) -> dict[str, Any]:
     """The parameters a ROS 2 parameter file gives the node ``node_fqn`` (flattened names)."""
-    return _resolve(_param_file_entries(path), node_fqn)
+    return resolve_entries(param_file_entries(path), node_fqn)
 
 
 def node_overrides(ros_args: RosArgs, node_fqn: str) -> dict[str, Any]:
     """All parameter overrides for node ``node_fqn``: ``--params-file`` entries and ``-p``
-    (which rcl files under ``/**``), resolved as rclpy resolves them (:func:`_resolve`)."""
+    (which rcl files under ``/**``), resolved as rclpy resolves them (:func:`resolve_entries`)."""
     entries: list[tuple[str, dict[str, Any]]] = []
     for kind, value in ros_args.overrides:
         if kind == "file":
-            entries += _param_file_entries(value)
+            entries += param_file_entries(value)
         else:
             entries.append((WILDCARD, {value[0]: value[1]}))
-    return _resolve(entries, node_fqn)
+    return resolve_entries(entries, node_fqn)
 
 
 def _kind(value: Any) -> str:
@@ -189,6 +187,46 @@ class Parameter:
 
     name: str
     value: Any
+
+
+#: the relative tolerance of a range's edges (rclpy's ``Node.PARAM_REL_TOL``)
+PARAM_REL_TOL = 1e-6
+
+
+@dataclass(frozen=True)
+class Range:
+    """A numeric parameter's closed range [``low``, ``high``], as ``rcl_interfaces``'
+    ``FloatingPointRange`` / ``IntegerRange`` give it (``step`` 0: any value between; an
+    infinite bound: none on that side, an integer range then stops at the int64 limits)."""
+
+    low: float
+    high: float
+    step: float = 0
+
+    def holds(self, value: float) -> bool:
+        """Whether ``value`` lies in the range, its edges within rclpy's relative tolerance."""
+        edge = any(math.isclose(value, b, rel_tol=PARAM_REL_TOL) for b in (self.low, self.high))
+        return edge or self.low < value < self.high
+
+
+@dataclass(frozen=True)
+class ParameterDescriptor:
+    """What ``rcl_interfaces/msg/ParameterDescriptor`` tells of a parameter besides its name and
+    type: its description, a range (scalar integers and doubles), the constraints a range cannot
+    say (choices, an open bound, a list's length), and whether it is read-only."""
+
+    description: str = ""
+    additional_constraints: str = ""
+    read_only: bool = False
+    range: Range | None = None
+
+
+def described(descriptor: ParameterDescriptor | None, *,
+              read_only: bool = False) -> ParameterDescriptor:
+    """``descriptor`` (an empty one if None), read-only also when ``read_only``: what a node's
+    ``declare_parameter(name, default, read_only, descriptor=...)`` declares."""
+    descriptor = descriptor or ParameterDescriptor()
+    return replace(descriptor, read_only=True) if read_only else descriptor
 
 
 @dataclass(frozen=True)
@@ -221,11 +259,15 @@ class Parameters:
         self.node_fqn = node_fqn
         self.overrides = overrides
         self.values: dict[str, Any] = {}
-        self.read_only: set[str] = set()
+        self.descriptors: dict[str, ParameterDescriptor] = {}
         self.callbacks: list[SetCallback] = []
 
-    def declare(self, name: str, default: Any, read_only: bool = False) -> Any:
-        """Declare ``name``: the override if one was given (same type), else ``default``."""
+    def declare(self, name: str, default: Any,
+                descriptor: ParameterDescriptor = ParameterDescriptor()) -> Any:
+        """Declare ``name`` with ``descriptor``: the override if one was given (same type),
+        else ``default``. The start value is not held to the descriptor's range (the caller
+        checks it, as :func:`stillframe.node_runtime.parameters.declare` does, in its own
+        words); every later :meth:`set` is."""
         where = f"parameter {name!r} of node {self.node_fqn}"
         if name in self.values:
             raise InputError(f"{where} is already declared")
@@ -235,9 +277,13 @@ class Parameters:
         if default is not None and value is not default:
             value = _coerce(value, default, where)
         self.values[name] = value
-        if read_only:
-            self.read_only.add(name)
+        self.descriptors[name] = descriptor
         return value
+
+    @property
+    def read_only(self) -> set[str]:
+        """The names declared read-only."""
+        return {n for n, d in self.descriptors.items() if d.read_only}
 
     def get(self, name: str) -> Any:
         if name not in self.values:
@@ -259,7 +305,8 @@ class Parameters:
     def _refusal(self, name: str, value: Any) -> str:
         if name not in self.values:
             return f"parameter {name!r} is not declared"
-        if name in self.read_only:
+        descriptor = self.descriptors[name]
+        if descriptor.read_only:
             return f"parameter {name!r} is read-only"
         try:
             check_value(value, name)
@@ -268,6 +315,10 @@ class Parameters:
         if _kind(value) != _kind(self.values[name]):
             return (f"wrong parameter type for {name!r}: expected "
                     f"{_ros_kind(self.values[name])}, got {_ros_kind(value)}")
+        limits = descriptor.range
+        if limits is not None and isinstance(value, int | float) and not limits.holds(value):
+            return (f"parameter {name!r} out of range [{limits.low:g}, {limits.high:g}]: "
+                    f"{value!r}")
         return ""
 
 

@@ -13,15 +13,18 @@ from __future__ import annotations
 import array
 import importlib
 import time
+from collections import Counter
 from collections.abc import Callable
+from dataclasses import replace
 from typing import Any
 
 import rclpy
-from rcl_interfaces.msg import ParameterDescriptor
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 from rcl_interfaces.msg import SetParametersResult as RclpySetParametersResult
-from rclpy._rclpy_pybind11 import NodeNameNonExistentError
+from rclpy._rclpy_pybind11 import NodeNameNonExistentError, RCLError
 from rclpy.clock import ClockType
 from rclpy.duration import Duration
+from rclpy.exceptions import InvalidParameterValueException
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 from rclpy.qos import (
@@ -37,7 +40,7 @@ from rosbags.typesys.base import Nodetype
 
 from stillframe.contract import messages
 from stillframe.errors import InputError
-from stillframe.middleware import interface, lifecycle
+from stillframe.middleware import interface, lifecycle, param_messages, params
 from stillframe.middleware.clock import SYSTEM_CLOCK, Clock, Time
 from stillframe.middleware.params import Parameter, SetCallback
 from stillframe.middleware.qos import (
@@ -101,6 +104,21 @@ def ros_qos(qos: RclpyQoS) -> QoSProfile:
         liveliness=Liveliness(int(qos.liveliness)),
         liveliness_lease_duration_ns=ns(qos.liveliness_lease_duration),
     )
+
+
+#: rclpy's message class of each range field of a descriptor
+RANGE_CLASSES = {"floating_point_range": FloatingPointRange, "integer_range": IntegerRange}
+
+
+def rclpy_descriptor(descriptor: params.ParameterDescriptor, default: Any) -> Any:
+    """rclpy's ``ParameterDescriptor`` of ours, for a parameter of ``default``'s type (the
+    fields of the message :func:`.param_messages.descriptor_msg` makes on the dds backend)."""
+    ranges = {key: [RANGE_CLASSES[key](from_value=r.from_value, to_value=r.to_value,
+                                       step=r.step) for r in value]
+              for key, value in param_messages.range_fields(default, descriptor.range).items()}
+    return ParameterDescriptor(description=descriptor.description,
+                               additional_constraints=descriptor.additional_constraints,
+                               read_only=descriptor.read_only, **ranges)
 
 
 def plain_value(value: Any) -> Any:
@@ -260,9 +278,15 @@ class RclpyNode:
     def __init__(self, name: str, namespace: str, args: list[str], managed: bool = False) -> None:
         if not rclpy.ok():
             rclpy.init(args=["stillframe", *args], signal_handler_options=SignalHandlerOptions.NO)
-        self._node = (ManagedNode(name, namespace=namespace) if managed
-                      else rclpy.create_node(name, namespace=namespace))
+        try:
+            self._node = (ManagedNode(name, namespace=namespace) if managed
+                          else rclpy.create_node(name, namespace=namespace))
+        except RCLError as exc:
+            reason = str(exc).splitlines()[0].removeprefix("error creating node: ")
+            where = "ROS_STATIC_PEERS: " if "peer" in reason else ""
+            raise InputError(f"{where}rcl cannot create node {name!r}: {reason}") from None
         self.user_args = rclpy.utilities.remove_ros_args(["stillframe", *args])[1:]
+        self.malformed: Counter[str] = Counter()
         self._clock = RclpyClock(self._node.get_clock())
         if RclpyNode._wait is None:
             RclpyNode._wait = SubscriptionWait(SingleThreadedExecutor())
@@ -303,11 +327,21 @@ class RclpyNode:
         return self._clock
 
     def declare_parameter(
-        self, name: str, default: Any = None, read_only: bool = False
+        self, name: str, default: Any = None, read_only: bool = False, *,
+        descriptor: params.ParameterDescriptor | None = None,
     ) -> Parameter:
-        declared = self._node.declare_parameter(
-            name, default, ParameterDescriptor(read_only=read_only)
-        )
+        """rclpy's declaration with the descriptor as rclpy's own (description, constraints,
+        range, read-only). A start value outside the range is declared without the range, as
+        the dds backend declares it: the caller checks the start value in its own words
+        (:func:`stillframe.node_runtime.parameters.declare`), rclpy holds every later set to
+        the range."""
+        descriptor = params.described(descriptor, read_only=read_only)
+        try:
+            declared = self._node.declare_parameter(
+                name, default, rclpy_descriptor(descriptor, default))
+        except InvalidParameterValueException:
+            declared = self._node.declare_parameter(name, default, rclpy_descriptor(
+                replace(descriptor, range=None), default))
         return Parameter(name, plain_value(declared.value))
 
     def get_parameter(self, name: str) -> Parameter:
@@ -365,7 +399,7 @@ class RclpyNode:
             if raw:
                 callback(data, message_info(info, self._clock))
             else:
-                interface.deliver(callback, data, name, topic)
+                interface.deliver(callback, data, name, topic, self.malformed)
 
         return self._node.create_subscription(
             ros_message_class(name), topic, on_data, rclpy_qos(as_profile(qos)),
@@ -438,6 +472,7 @@ class RclpyNode:
             RclpyNode._wait.spin_once(round(wait * 1e9))
 
     def destroy_node(self) -> None:
+        interface.node_destroyed(self)
         RclpyNode._wait.remove_node(self._node)
         self._node.destroy_node()
         if not RclpyNode._wait.executor.get_nodes():

@@ -3,7 +3,8 @@ container that composes them: the cycle, the parameters, ``/diagnostics``, the w
 real-time practices and the lifecycle.
 
 - :class:`Cycle`: spin → process → idle → housekeeping, until shutdown, then a last status;
-  a node (or the container) says what each step is.
+  a node (or the container) says what each step is; idle and housekeeping wait while a sample
+  is partly in (:meth:`Cycle.mid_sample`).
 - :class:`LoopNode`: a :class:`Cycle` on one node, with its declared parameters
   (:data:`.declarations.NODE_PARAMETERS`, checked at start and at every set), ``/diagnostics``
   from :meth:`LoopNode.status`, the writer gates named by its ``*_writer`` parameters and the
@@ -15,6 +16,7 @@ real-time practices and the lifecycle.
 
 from __future__ import annotations
 
+import time
 from typing import Any, ClassVar, TypeVar
 
 from stillframe.contract.topics import DEFAULT_NAMESPACE
@@ -24,8 +26,10 @@ from stillframe.middleware import api, lifecycle
 from stillframe.middleware.params import Parameter, SetParametersResult
 from stillframe.node_runtime.declarations import (
     NODE_PARAMETERS,
+    WRITER_DEFAULTS,
     ManagedParameterValues,
     RealtimeParameterValues,
+    TimingParameterValues,
 )
 from stillframe.node_runtime.parameters import (
     NodeParameters,
@@ -34,6 +38,7 @@ from stillframe.node_runtime.parameters import (
     defaults,
     set_check,
 )
+from stillframe.node_runtime.phase_timing import MARKS, PhaseLog
 from stillframe.node_runtime.realtime import (
     NO_PINNING,
     Realtime,
@@ -77,11 +82,16 @@ class Cycle:
     def finish(self) -> None:
         """After the last cycle (a last status)."""
 
+    def mid_sample(self) -> bool:
+        """Whether a sample is partly in (some of its messages taken, not yet handled): the idle
+        work and the housekeeping then wait until it is, off the sample's path."""
+        return False
+
     def cycle(self) -> None:
         self.spin(self.next_wait())
-        self.process_ready()
-        self.idle()
-        self.housekeeping()
+        if self.process_ready() or not self.mid_sample():
+            self.idle()
+            self.housekeeping()
 
     def run(self) -> None:
         self.start()
@@ -116,10 +126,18 @@ class LoopNode(Cycle):
         self.values = values or {}
         pins = {name: getattr(v, name) for v in self.values.values()
                 for name in self.WRITER_PINS if hasattr(v, name)}
-        self.gates = InputGates(node, {name: pins.get(name, "") for name in self.WRITER_PINS})
+        self.gates = InputGates(node, {name: pins.get(name, "") for name in self.WRITER_PINS},
+                                WRITER_DEFAULTS, params.run_token)
         self.diagnostics = Diagnostics(node, params.diagnostics_period_s)
         self.rt = Realtime(RealtimeOptions())   # enter_realtime() applies what was asked
         self.activated = True                      # lifecycle: inactive nodes do not act
+        timing = self.setting(TimingParameterValues)
+        #: the phases of every sample (:mod:`.phase_timing`), written to ``phase_log`` at the end
+        self.timing = PhaseLog(self.NAME, MARKS[self.NAME], enabled=timing.phase_timing)
+        self.slot = self.timing.slots
+        self.phase_log = timing.phase_log
+        #: when the last sample began in this node (monotonic ns): its first message
+        self.sample_start_ns = 0
 
     # -- parameters ----------------------------------------------------------------------
     @classmethod
@@ -159,9 +177,10 @@ class LoopNode(Cycle):
         return SetParametersResult(True)
 
     def enter_realtime(self) -> None:
-        """Apply the real-time practices the parameters ask for, and log what took effect."""
+        """Apply the real-time practices the parameters ask for, hold the collector (always:
+        :meth:`.realtime.Realtime.hold_collector`), and log what took effect."""
         self.rt = start_realtime(self.node, realtime_options(
-            self.setting(RealtimeParameterValues)))
+            self.setting(RealtimeParameterValues)), collector=True)
 
     # -- lifecycle -----------------------------------------------------------------------
     def activate(self) -> None:
@@ -178,18 +197,33 @@ class LoopNode(Cycle):
         self.node.spin_once(timeout_s)
 
     def idle(self) -> None:
-        self.rt.idle()
+        """The collector's work when the next sample leaves time for it (:meth:`slack_ns`)."""
+        self.rt.idle(self.slack_ns(time.monotonic_ns()))
+        self.timing.mark(self.slot["collected"])
+
+    def slack_ns(self, now_ns: int) -> int | None:
+        """Real time: how long before the next sample is due here, one period after the start
+        of the last one (:attr:`sample_start_ns`); None in lock-step (no deadline) or when no
+        sample came for two periods (the loop is not running)."""
+        period_ns = round(self.params.period * 1e9)
+        if self.params.lockstep or now_ns - self.sample_start_ns > 2 * period_ns:
+            return None
+        return self.sample_start_ns + period_ns - now_ns
 
     def housekeeping(self) -> bool:
+        """The watchdog, the graph reads and ``/diagnostics`` when due; the sample's phase row
+        closes after them."""
         self.gates.keep_graph_read()
         self.check()
-        if not (self.gates.announce(self.node.get_logger()) or self.diagnostics.due()):
-            return False
-        self.publish_status()
-        return True
+        published = self.gates.announce(self.node.get_logger()) or self.diagnostics.due()
+        if published:
+            self.publish_status()
+        self.timing.end(self.slot["done"])
+        return published
 
     def check(self) -> None:
-        """Every cycle, before the status (the controller's watchdog)."""
+        """Every cycle not in the middle of a sample, before the status (the controller's
+        watchdog)."""
 
     def status(self) -> tuple[dict[str, Any], int, str]:
         """``/diagnostics``: the values, the level and the message."""
@@ -210,6 +244,14 @@ class LoopNode(Cycle):
 
     def finish(self) -> None:
         self.publish_status()
+        self.write_phases()
+
+    def write_phases(self) -> None:
+        """The phase ring to ``phase_log`` (when given), with the practices in effect."""
+        if self.phase_log:
+            self.timing.write(self.phase_log, {
+                "mode": self.params.mode, "period_ns": round(self.params.period * 1e9),
+                "rt_applied": self.rt.applied, "rt_refused": self.rt.refused})
 
 
 class Managed(Cycle):

@@ -13,9 +13,16 @@ from pathlib import Path
 from typing import Any, Literal
 
 from stillframe.errors import InputError
+from stillframe.loop.adaptation import SCENE_DESIGN, design_check
+from stillframe.loop.spec import (
+    COMMAND_MISS_LIMIT,
+    COMMAND_TIMEOUT_PERIODS,
+    LOCKSTEP_TIMEOUT_S,
+)
 from stillframe.node_runtime.parameters import (
     FromScene,
     NodeParameters,
+    at_least,
     between,
     limited,
     non_negative,
@@ -25,9 +32,7 @@ from stillframe.node_runtime.parameters import (
     reference,
 )
 from stillframe.node_runtime.realtime import NO_PINNING, PRACTICES, parse_cpus, parse_practices
-
-#: the modes of the loop, one constant for every process (launch, nodes, benchmarks)
-MODES = ("lockstep", "realtime")
+from stillframe.text_table import with_section
 
 
 def _refusal(parse: Callable[[Any], object], name: str) -> Callable[[Any], str | None]:
@@ -40,6 +45,15 @@ def _refusal(parse: Callable[[Any], object], name: str) -> Callable[[Any], str |
         return None
 
     return check
+
+
+#: what a run token may hold (it ends every ``frame_id`` the loop writes)
+TOKEN_LIMITS = "letters, digits, - and _; at most 64"
+
+
+def _token(value: str) -> str | None:
+    ok = len(value) <= 64 and all(c.isascii() and (c.isalnum() or c in "-_") for c in value)
+    return None if ok else f"expected {TOKEN_LIMITS}"
 
 
 def _scene_file(value: str) -> str | None:
@@ -61,11 +75,13 @@ class LoopParameterValues(NodeParameters):
         "parameter cannot be an empty list), e.g. `-p 'overrides:=[\"duration=6\"]'`"))
     mode: Literal["lockstep", "realtime"] = param("lockstep", doc=(
         "lock-step (the one-process numbers, bit for bit) or real time (below)"))
-    lockstep_timeout_s: float = param(1.0, positive, unit="s", doc=(
-        "wall time the simulator waits for a command in lock-step (the estimator waits half of "
-        "it, the controller a quarter; see the protocol)"))
     diagnostics_period_s: float = param(1.0, positive, unit="s", doc=(
         "wall time between `/diagnostics` messages"))
+    run_token: str = param("", limited(_token, TOKEN_LIMITS), doc=(
+        "the run's token: every stamped sample the node writes carries it in "
+        "`header.frame_id` (`floor1#TOKEN`), and it takes only the samples that do (writer "
+        "identity, below); `stillframe launch` and the launch file give each run a new one; "
+        "empty: none, the `*_writer` parameters decide"))
 
 
 @dataclass(frozen=True)
@@ -82,6 +98,18 @@ class RealtimeParameterValues(NodeParameters):
                                doc="the CPUs of `affinity`; `[-1]`: no pinning")
     spin_margin_us: float = param(200.0, between(0, 10_000), unit="us", doc=(
         "with `spin`, sim_node polls instead of sleeping for this long before a due time"))
+
+
+@dataclass(frozen=True)
+class TimingParameterValues(NodeParameters):
+    """Every loop node: the per-sample phase timing (:mod:`.phase_timing`)."""
+
+    phase_timing: bool = param(True, doc=(
+        "time the phases of every sample into a preallocated ring (a few µs a sample); false: "
+        "not at all"))
+    phase_log: str = param("", doc=(
+        "at the end, write the ring to `<phase_log>/<node>.npz` (`stillframe bench loop` "
+        "reads it); empty: kept in memory only"))
 
 
 @dataclass(frozen=True)
@@ -108,13 +136,17 @@ class SimParameterValues(NodeParameters):
         "topics the launch's recorder must subscribe before lock-step starts (`*`: every topic "
         "of the loop); empty: none"))
     command_writer: str = param("", doc=(
-        "the node allowed to command (`controller_node` under `stillframe launch`); empty: the "
-        "first writer seen; other writers are ignored and reported"))
-    command_timeout_periods: int = param(3, limited(
-        lambda v: None if v >= 1 else "must be >= 1", ">= 1"), unit="periods", doc=(
+        "without a `run_token`: the node allowed to command (relative names in the node's "
+        "namespace); empty: the first writer seen; other writers are ignored and reported"))
+    lockstep_timeout_s: float = param(LOCKSTEP_TIMEOUT_S, positive, unit="s", doc=(
+        "lock-step: the longest wall time one sample waits for its command while the estimator "
+        "and the controller are on the graph; past it (or once one has left the graph) the run "
+        "ends, incomplete, exit code 7 (the simulator never advances without the command)"))
+    command_timeout_periods: int = param(COMMAND_TIMEOUT_PERIODS, at_least(1), unit="periods",
+                                         doc=(
         "zero actuation (the safe state, `safe_state_samples`) once the newest command is this "
         "many periods old"))
-    command_miss_limit: float = param(0.25, between(0.0, 1.0, high_open=True), doc=(
+    command_miss_limit: float = param(COMMAND_MISS_LIMIT, between(0.0, 1.0, high_open=True), doc=(
         "real time: zero actuation while more than this share of the last second's samples "
         "missed their command (`degraded_samples`); 0: never"))
 
@@ -132,8 +164,8 @@ class EstimatorParameterValues(NodeParameters):
         "real time: how long after a stamp's first message the estimator updates with the "
         "channels that have arrived"))
     sensor_writer: str = param("", doc=(
-        "the node whose sensor samples (and `state_truth`) are taken, e.g. `sim_node`; empty: "
-        "the first writer seen"))
+        "without a `run_token`: the node whose sensor samples (and `state_truth`) are taken, "
+        "e.g. `sim_node`; empty: the first writer seen"))
     command_writer: str = param("", doc=(
         "as sim_node's, for the commands the estimator reads (the actuation in effect where a "
         "report was lost)"))
@@ -157,15 +189,46 @@ class NoiseParameterValues(NodeParameters):
 
 
 @dataclass(frozen=True)
+class AdaptationParameterValues(NodeParameters):
+    """estimator_node with ``adaptation.enabled``: where its designs and its record go."""
+
+    adaptation_dir: str = param("", doc=(
+        "the directory the adaptation writes each design's model file into (`design_N.yaml`); "
+        "empty: a new temporary directory"))
+    adaptation_record: str = param("", doc=(
+        "write the adaptation's updates and events as JSON here at each event and at the end; "
+        "empty: none"))
+    design_timeout_s: float = param(60.0, positive, unit="s", doc=(
+        "the longest wait for controller_node to take or refuse a design; no answer: the "
+        "design is refused, the running one stays"))
+
+
+@dataclass(frozen=True)
+class DesignParameterValues(NodeParameters):
+    """estimator_node with a filter, and controller_node: the design they run, switched at a
+    sample boundary (docs/adaptation.md)."""
+
+    design: str = param(SCENE_DESIGN, limited(design_check, "`scene` or a model file, "
+                                              "optionally `@T`"), dynamic=True, doc=(
+        "the design model: `scene` (the scene's design section) or a model file (`format: "
+        "stillframe-mkr` or an identified `.npz`: storeys with the rig's pendulum); `@T`: from "
+        "the sample stamped T [s] on (none: the next sample). Checked when set (the model "
+        "loads, the LQG designed on it has finite gains and stable poles) and refused with the "
+        "reason otherwise, the running design kept; set both nodes with the same T to switch "
+        "them at the same sample; `scene@T` rolls back"))
+
+
+@dataclass(frozen=True)
 class ControllerParameterValues(NodeParameters):
     """controller_node."""
 
     estimate_writer: str = param("", doc=(
-        "the node whose `state_estimate` is taken, e.g. `estimator_node`; empty: the first "
-        "writer seen"))
+        "without a `run_token`: the node whose `state_estimate` is taken, e.g. "
+        "`estimator_node`; empty: the first writer seen"))
     sensor_writer: str = param("", doc=(
-        "the node whose load cell (`excitation/wrench`) and, with `use_sim_time`, `/clock` are "
-        "taken, e.g. `sim_node`; empty: the first writer seen"))
+        "without a `run_token` (and for `/clock`, which carries none): the node whose load cell "
+        "(`excitation/wrench`) and, with `use_sim_time`, `/clock` are taken, e.g. `sim_node`; "
+        "empty: the first writer seen"))
     enabled: bool = param(True, dynamic=True, doc=(
         "false: the command is 0 from the next sample on (published as usual); true: the law "
         "again"))
@@ -175,17 +238,22 @@ class ControllerParameterValues(NodeParameters):
             "the command is clipped to ±limit; 0: no limit"))
 
 
-_COMMON = (LoopParameterValues, RealtimeParameterValues)
+_COMMON = (LoopParameterValues, RealtimeParameterValues, TimingParameterValues)
 #: the parameter declarations of each node, in the order they are declared
 #: the loop's nodes by their default names (a node waits for its peers by these names, or by
 #: the writer pins when set: docs/nodes.md, lock-step protocol)
 LOOP_NODES = SIM, ESTIMATOR, CONTROLLER = ("sim_node", "estimator_node", "controller_node")
+#: the loop's node each ``*_writer`` parameter names when it is empty: the node whose samples
+#: carry the run's token on those inputs, and the peer a node waits for in lock-step
+WRITER_DEFAULTS = {"command_writer": CONTROLLER, "sensor_writer": SIM,
+                   "estimate_writer": ESTIMATOR}
 
 NODE_PARAMETERS: dict[str, tuple[type[NodeParameters], ...]] = {
     SIM: (*_COMMON, SimParameterValues),
     ESTIMATOR: (*_COMMON, ManagedParameterValues, EstimatorParameterValues,
-                NoiseParameterValues),
-    CONTROLLER: (*_COMMON, ManagedParameterValues, ControllerParameterValues),
+                NoiseParameterValues, DesignParameterValues, AdaptationParameterValues),
+    CONTROLLER: (*_COMMON, ManagedParameterValues, ControllerParameterValues,
+                 DesignParameterValues),
 }
 
 #: the lines between which docs/nodes.md holds :func:`.parameters.reference`
@@ -196,10 +264,7 @@ REFERENCE_MARKERS = ("<!-- parameter reference: generated from "
 
 def with_reference(text: str) -> str:
     """``text`` (docs/nodes.md) with the reference between its markers made anew."""
-    start, end = REFERENCE_MARKERS
-    head, _, rest = text.partition(start + "\n")
-    _, _, tail = rest.partition(end)
-    return f"{head}{start}\n{reference(NODE_PARAMETERS)}{end}{tail}"
+    return with_section(text, REFERENCE_MARKERS, reference(NODE_PARAMETERS))
 
 
 if __name__ == "__main__":

@@ -28,7 +28,12 @@ from typing import Any, Literal, NamedTuple, TypeVar, get_args, get_origin, get_
 
 from stillframe.config.schema import Check
 from stillframe.errors import InputError
-from stillframe.middleware.params import Parameter, SetParametersResult
+from stillframe.middleware.params import (
+    Parameter,
+    ParameterDescriptor,
+    Range,
+    SetParametersResult,
+)
 
 P = TypeVar("P", bound="NodeParameters")
 
@@ -42,6 +47,24 @@ class FromScene:
 
 
 @dataclass(frozen=True)
+class Bounds:
+    """The interval a numeric check holds a value to: ``low`` .. ``high``, either side open (the
+    value itself refused) or infinite (no bound). A descriptor's range is its closure; an open
+    side is said in words (:meth:`ParamSpec.descriptor`)."""
+
+    low: float = -math.inf
+    high: float = math.inf
+    low_open: bool = False
+    high_open: bool = False
+
+    def open_sides(self) -> list[tuple[str, float]]:
+        """The finite open bounds: (``> 0`` or ``< 1``, the bound)."""
+        return [(f"{sign} {bound:g}", bound) for is_open, bound, sign in (
+            (self.low_open, self.low, ">"), (self.high_open, self.high, "<"))
+            if is_open and math.isfinite(bound)]
+
+
+@dataclass(frozen=True)
 class ParamField:
     """What a parameter's annotation cannot say."""
 
@@ -51,6 +74,11 @@ class ParamField:
     dynamic: bool = False
     #: the range or choices as the reference shows them (a check's own text otherwise)
     limits: str = ""
+
+    @property
+    def bounds(self) -> Bounds | None:
+        """The interval the check holds each value to (None: the check is no interval)."""
+        return getattr(self.check, "bounds", None)
 
 
 def param(default: Any, check: Check | None = None, *, doc: str, unit: str = "",
@@ -64,27 +92,34 @@ def param(default: Any, check: Check | None = None, *, doc: str, unit: str = "",
         check, doc, unit, dynamic, limits or getattr(check, "limits", ""))})
 
 
-def limited(check: Check, limits: str) -> Check:
-    """``check`` with the text the reference shows for it (``> 0``, ``[0, 1)``...)."""
+def limited(check: Check, limits: str, bounds: Bounds | None = None) -> Check:
+    """``check`` with the text the reference shows for it (``> 0``, ``[0, 1)``...) and, when
+    it holds each value to an interval, that interval (a descriptor's range)."""
     check.limits = limits  # type: ignore[attr-defined]
+    check.bounds = bounds  # type: ignore[attr-defined]
     return check
 
 
-def positive_number(value: Any) -> str | None:
-    return None if all(v > 0 for v in _items(value)) else "must be > 0"
+def at_least(low: float, *, open_: bool = False) -> Check:
+    """``value >= low`` (``> low`` with ``open_``), for each value of a list."""
+    sign = ">" if open_ else ">="
 
+    def check(value: Any) -> str | None:
+        ok = all(v > low if open_ else v >= low for v in _items(value))
+        return None if ok else f"must be {sign} {low:g}"
 
-def non_negative_number(value: Any) -> str | None:
-    return None if all(v >= 0 for v in _items(value)) else "must be >= 0"
+    return limited(check, f"{sign} {low:g}", Bounds(low, low_open=open_))
 
 
 def between(low: float, high: float, *, high_open: bool = False) -> Check:
     """``low <= value <= high`` (``< high`` with ``high_open``)."""
+    text = f"[{low:g}, {high:g}{')' if high_open else ']'}"
+
     def check(value: Any) -> str | None:
         ok = all(low <= v and (v < high if high_open else v <= high) for v in _items(value))
-        return None if ok else f"must lie in [{low:g}, {high:g}{')' if high_open else ']'}"
+        return None if ok else f"must lie in {text}"
 
-    return limited(check, f"[{low:g}, {high:g}{')' if high_open else ']'}")
+    return limited(check, text, Bounds(low, high, high_open=high_open))
 
 
 def of_length(n: int, check: Check) -> Check:
@@ -92,11 +127,12 @@ def of_length(n: int, check: Check) -> Check:
     def checked(value: Any) -> str | None:
         return f"expected {n} values" if len(value) != n else check(value)
 
-    return limited(checked, f"{n} values {getattr(check, 'limits', '')}".strip())
+    return limited(checked, f"{n} values {getattr(check, 'limits', '')}".strip(),
+                   getattr(check, "bounds", None))
 
 
-positive = limited(positive_number, "> 0")
-non_negative = limited(non_negative_number, ">= 0")
+positive = at_least(0, open_=True)
+non_negative = at_least(0)
 
 
 def _items(value: Any) -> list[Any]:
@@ -124,6 +160,32 @@ class ParamSpec(NamedTuple):
         value = self.default.value(scene) if isinstance(self.default, FromScene) else self.default
         return list(value) if isinstance(value, tuple) else value
 
+    def descriptor(self) -> ParameterDescriptor:
+        """The parameter as rclpy describes its own (``ros2 param describe``): the doc with its
+        unit and a scene default's origin; the range of a scalar number (closed, step 0: any
+        value); in ``additional_constraints`` what a range cannot say: the choices, an open
+        bound, a list's length and items, a check that is no interval; read-only unless set at
+        run time."""
+        doc = self.field.doc + (f"; unit: {self.field.unit}" if self.field.unit else "")
+        if isinstance(self.default, FromScene):
+            doc += f"; default from the scene: {self.default.doc}"
+        bounds = self.field.bounds
+        scalar = self.kind in (int, float)
+        if self.choices:
+            constraints = "one of " + ", ".join(self.choices)
+        elif bounds is not None and scalar:
+            constraints = "; ".join(f"{side} ({bound:g} itself is refused; a range is closed)"
+                                    for side, bound in bounds.open_sides())
+        else:
+            constraints = self.field.limits + (
+                " (no range: a range holds a single number)" if bounds is not None else "")
+        if self.kind is float or self.item is float:
+            constraints = "; ".join(c for c in (constraints, "finite") if c)
+        return ParameterDescriptor(
+            description=_plain(doc), additional_constraints=_plain(constraints),
+            read_only=not self.field.dynamic,
+            range=Range(bounds.low, bounds.high) if bounds is not None and scalar else None)
+
     def problem(self, value: Any) -> str | None:
         """Why ``value`` is not a valid value of this parameter (None: it is)."""
         if self.kind is list:
@@ -142,6 +204,12 @@ class ParamSpec(NamedTuple):
         if problem and ", got " not in problem:
             problem += f" (got {value!r})"
         return problem
+
+
+def _plain(text: str) -> str:
+    """Markdown's code marks taken out, for a descriptor's text (ros2 param describe prints it
+    as it is)."""
+    return text.replace("`", "")
 
 
 def _is(value: Any, kind: type) -> bool:
@@ -183,13 +251,14 @@ def _spec(f: dataclasses.Field, hint: Any) -> ParamSpec:
 
 
 def declare(node: Any, cls: type[P], scene: Any = None) -> P:
-    """Declare every parameter of ``cls`` on ``node`` (read-only unless dynamic) and return their
-    values, each checked by its declaration (InputError naming the first wrong one). ``scene``
+    """Declare every parameter of ``cls`` on ``node`` (described by its declaration,
+    :meth:`ParamSpec.descriptor`: read-only unless dynamic) and return their values, each
+    checked by its declaration (InputError naming the first wrong one). ``scene``
     gives the defaults taken from it."""
     values = {}
     for spec in cls.specs():
         value = node.declare_parameter(spec.name, spec.default_for(scene),
-                                       read_only=not spec.field.dynamic).value
+                                       descriptor=spec.descriptor()).value
         if spec.kind is float and isinstance(value, int) and not isinstance(value, bool):
             value = float(value)
         if problem := spec.problem(value):

@@ -4,7 +4,9 @@ The node parameter ``rt`` names the practices to apply (``all``, or a comma list
 
 - ``mlock``: ``mlockall(MCL_CURRENT | MCL_FUTURE)``, no page faults in the loop;
 - ``gc``: the objects made while setting up frozen (``gc.freeze``) and the collector off inside the
-  loop; the node collects the young generations itself between periods (:meth:`Realtime.idle`);
+  loop; the node collects the young generations itself between periods, when the next sample
+  leaves time for it (:meth:`Realtime.idle`). The loop nodes hold the collector so whether asked
+  or not (:meth:`Realtime.hold_collector`): it needs no privilege and changes no number;
 - ``fifo``: ``SCHED_FIFO`` at ``rt_priority`` for the main thread and the DDS receive and
   delivery threads (not inherited by child processes), a timer slack of 1 ns, and the BLAS
   libraries (numpy's and scipy's OpenBLAS, through ``threadpoolctl``) on the calling thread
@@ -19,8 +21,13 @@ The node parameter ``rt`` names the practices to apply (``all``, or a comma list
   message wakes its reader without an idle exit (on a VM, without the host rescheduling the
   virtual CPU). It holds for the whole machine and ends when the process does.
 
-A practice the OS refuses (no root, no ``CAP_SYS_NICE``, no ``RLIMIT_MEMLOCK``) is skipped with one
-warning naming it and why; the node runs on without it.
+What the user may (:func:`may`), no root needed: ``SCHED_FIFO`` with ``CAP_SYS_NICE`` or up to
+``RLIMIT_RTPRIO`` (the ``rtprio`` of ``/etc/security/limits.conf``; the priority asked is lowered
+to it), memory locking with ``CAP_IPC_LOCK`` or an ``RLIMIT_MEMLOCK`` with room for the process to
+double (a finite limit under ``MCL_FUTURE`` would otherwise fail its later allocations), the PM QoS
+request with write access to its device. A process first raises its soft limits to the hard ones
+(which needs no privilege). A practice it may not apply is skipped with one warning naming it and
+why; the node runs on without it.
 """
 
 from __future__ import annotations
@@ -29,6 +36,7 @@ import contextlib
 import ctypes
 import gc
 import os
+import resource
 import struct
 from dataclasses import dataclass, field
 from typing import Any
@@ -50,8 +58,119 @@ NO_PINNING = -1
 GC_YOUNG = 700
 #: generation-0 collections before :meth:`Realtime.idle` collects generation 1
 GC_OLDER = 10
+#: the least time [ns] before the next sample in which :meth:`Realtime.idle` collects: about ten
+#: times a generation-0 collection of :data:`GC_YOUNG` objects (17 – 34 µs measured on the
+#: loaded 2-core machine)
+GC_SLACK_NS = 300_000
+#: young objects past which :meth:`Realtime.idle` collects even without slack (bounded memory)
+GC_LIMIT = 20 * GC_YOUNG
 #: the PM QoS interface for the CPUs' wake-up latency (kernel: Documentation/power/pm_qos_interface)
 CPU_LATENCY_DEVICE = "/dev/cpu_dma_latency"
+#: capability bits (linux/capability.h)
+CAP_IPC_LOCK, CAP_SYS_NICE = 14, 23
+#: a finite RLIMIT_MEMLOCK allows locking when it holds this many times the process's mapped size
+MEMLOCK_ROOM = 2
+#: what the docs tell a user to add to /etc/security/limits.conf (docs/realtime.md)
+LIMITS_HINT = ("add yourself to a `realtime` group with `@realtime - rtprio 98` and "
+               "`@realtime - memlock unlimited` in /etc/security/limits.conf (docs/realtime.md)")
+
+
+def capable(bit: int) -> bool:
+    """Whether this process has capability ``bit`` in its effective set."""
+    with open("/proc/self/status") as status:
+        for line in status:
+            if line.startswith("CapEff:"):
+                return bool(int(line.split()[1], 16) >> bit & 1)
+    return False
+
+
+def raise_soft_limits() -> None:
+    """The soft RLIMIT_RTPRIO and RLIMIT_MEMLOCK up to their hard limits (``limits.conf``'s
+    ``-`` sets both; a ``hard`` line alone leaves the soft one low), which needs no privilege."""
+    for limit in (resource.RLIMIT_RTPRIO, resource.RLIMIT_MEMLOCK):
+        soft, hard = resource.getrlimit(limit)
+        if soft != hard:
+            with contextlib.suppress(ValueError, OSError):
+                resource.setrlimit(limit, (hard, hard))
+
+
+def _mapped_bytes() -> int:
+    """This process's mapped size (VmSize)."""
+    with open("/proc/self/status") as status:
+        for line in status:
+            if line.startswith("VmSize:"):
+                return int(line.split()[1]) * 1024
+    return 0
+
+
+def _mib(n: int) -> str:
+    return f"{n / 2**20:.0f} MiB"
+
+
+@dataclass(frozen=True)
+class Permission:
+    """Whether this process may apply a practice, and on what grounds (or why not)."""
+
+    allowed: bool
+    why: str
+
+
+def fifo_priority(asked: int) -> int:
+    """The ``SCHED_FIFO`` priority this process may take for ``asked``: ``asked`` with
+    ``CAP_SYS_NICE``, else at most the soft RLIMIT_RTPRIO (0: none)."""
+    return asked if capable(CAP_SYS_NICE) else min(asked, resource.getrlimit(
+        resource.RLIMIT_RTPRIO)[0])
+
+
+def may(practice: str) -> Permission:
+    """Whether this process may apply ``practice``, from its capabilities and limits (module
+    docstring); the practices that need nothing are always allowed."""
+    if practice == "fifo":
+        if capable(CAP_SYS_NICE):
+            return Permission(True, "CAP_SYS_NICE")
+        rtprio = resource.getrlimit(resource.RLIMIT_RTPRIO)[0]
+        return (Permission(True, f"RLIMIT_RTPRIO {rtprio}") if rtprio > 0 else
+                Permission(False, "RLIMIT_RTPRIO 0 and no CAP_SYS_NICE"))
+    if practice == "mlock":
+        if capable(CAP_IPC_LOCK):
+            return Permission(True, "CAP_IPC_LOCK")
+        limit = resource.getrlimit(resource.RLIMIT_MEMLOCK)[0]
+        if limit == resource.RLIM_INFINITY:
+            return Permission(True, "RLIMIT_MEMLOCK unlimited")
+        mapped = _mapped_bytes()
+        if limit >= MEMLOCK_ROOM * mapped:
+            return Permission(True, f"RLIMIT_MEMLOCK {_mib(limit)}")
+        return Permission(False, f"RLIMIT_MEMLOCK {_mib(limit)}, less than {MEMLOCK_ROOM} times "
+                                 f"the {_mib(mapped)} this process maps")
+    if practice == "cpu_latency":
+        return (Permission(True, f"{CPU_LATENCY_DEVICE} writable")
+                if os.access(CPU_LATENCY_DEVICE, os.W_OK)
+                else Permission(False, f"{CPU_LATENCY_DEVICE} not writable (root)"))
+    return Permission(True, "no privilege needed")
+
+
+def permissions_line(options: RealtimeOptions) -> str:
+    """One line: the practices of ``options`` this process (and so the nodes it starts as the
+    same user) may apply and those it may not, with why and, for the latter, the fix."""
+    raise_soft_limits()
+    labels = {"mlock": "memory locked", "gc": "collector held", "fifo": "SCHED_FIFO",
+              "affinity": "pinned", "spin": "sleep/spin", "cpu_latency": "CPUs out of idle"}
+    got, not_got = [], []
+    for practice in PRACTICES:
+        if practice not in options.practices or (practice == "affinity" and not options.cpus):
+            continue
+        allowed = may(practice)
+        label = labels[practice]
+        if not allowed.allowed:
+            not_got.append(f"{label} ({allowed.why})")
+        elif practice == "fifo":
+            got.append(f"{label} {fifo_priority(options.priority)} ({allowed.why})")
+        else:
+            got.append(label if practice in ("gc", "spin", "affinity")
+                       else f"{label} ({allowed.why})")
+    return ("real-time practice: " + (", ".join(got) or "nothing")
+            + (f"; not permitted: {', '.join(not_got)}; to allow them, {LIMITS_HINT}"
+               if not_got else ""))
 
 
 @dataclass
@@ -158,6 +277,9 @@ class Realtime:
     refused: list[str] = field(default_factory=list)
     gc_off: bool = False
     young_collections: int = 0
+    #: collections :meth:`idle` put off for want of slack, and those it made without slack
+    deferred_collections: int = 0
+    forced_collections: int = 0
     cpu_latency_fd: int | None = None
     blas_limits: threadpool_limits | None = None
 
@@ -170,6 +292,8 @@ class Realtime:
         """Apply every practice asked for (call once, after the node's entities exist, so the
         DDS threads are there to be scheduled)."""
         asked = self.options.practices
+        if asked & {"fifo", "mlock"}:
+            raise_soft_limits()
         if "mlock" in asked:
             self._mlock()
         if "fifo" in asked:
@@ -179,15 +303,22 @@ class Realtime:
                                            for tid in _threads()],
                       f"CPUs {','.join(map(str, self.options.cpus))}")
         if "gc" in asked:
-            gc.collect()
-            gc.freeze()
-            gc.disable()
-            self.gc_off = True
-            self.applied.append("gc frozen and off in the loop")
+            self.hold_collector()
         if "spin" in asked:
             self.applied.append(f"sleep/spin timing ({self.options.spin_margin_us:g} us)")
         if "cpu_latency" in asked:
             self._cpu_latency()
+
+    def hold_collector(self) -> None:
+        """Collect once, freeze what survives (the setup's objects, never scanned again) and
+        turn the collector off: :meth:`idle` collects between samples instead."""
+        if self.gc_off:
+            return
+        gc.collect()
+        gc.freeze()
+        gc.disable()
+        self.gc_off = True
+        self.applied.append("gc frozen and off in the loop")
 
     def _try(self, name: str, call: Any, done: str) -> bool:
         try:
@@ -199,9 +330,13 @@ class Realtime:
         return True
 
     def _mlock(self) -> None:
+        allowed = may("mlock")
+        if not allowed.allowed:
+            self.refused.append(f"memory not locked: {allowed.why}")
+            return
         libc = ctypes.CDLL(None, use_errno=True)
         if libc.mlockall(MCL_CURRENT | MCL_FUTURE) == 0:
-            self.applied.append("memory locked")
+            self.applied.append(f"memory locked ({allowed.why})")
         else:
             self.refused.append(f"mlockall refused: {_errno_text(ctypes.get_errno())} "
                                 "(needs CAP_IPC_LOCK or a larger RLIMIT_MEMLOCK)")
@@ -216,7 +351,12 @@ class Realtime:
         self.applied.append("CPUs kept out of idle states (PM QoS 0 us)")
 
     def _fifo(self) -> None:
-        param = os.sched_param(self.options.priority)
+        allowed = may("fifo")
+        if not allowed.allowed:
+            self.refused.append(f"SCHED_FIFO not permitted: {allowed.why}")
+            return
+        priority = fifo_priority(self.options.priority)
+        param = os.sched_param(priority)
         threads = _loop_threads()
         try:
             for tid in threads:   # children started later do not inherit it
@@ -227,7 +367,7 @@ class Realtime:
             return
         ctypes.CDLL(None, use_errno=True).prctl(PR_SET_TIMERSLACK, 1, 0, 0, 0)
         self.blas_limits = threadpool_limits(limits=1, user_api="blas")
-        self.applied.append(f"SCHED_FIFO {self.options.priority} on {len(threads)} threads; "
+        self.applied.append(f"SCHED_FIFO {priority} on {len(threads)} threads ({allowed.why}); "
                             "BLAS on one thread")
 
     def leave(self) -> None:
@@ -254,17 +394,32 @@ class Realtime:
         for text in self.refused:
             logger.warning(f"real-time: {text}; going on without it")
 
-    def idle(self) -> None:
-        """Between periods, with the collector off: collect the young generation when it has
-        grown, the middle one every :data:`GC_OLDER` times (never the frozen setup objects)."""
-        if self.gc_off and gc.get_count()[0] > GC_YOUNG:
-            self.young_collections += 1
-            gc.collect(1 if self.young_collections % GC_OLDER == 0 else 0)
+    def idle(self, slack_ns: int | None = None) -> None:
+        """Between samples, with the collector held: collect the young generation once it has
+        grown past :data:`GC_YOUNG` objects, the middle one every :data:`GC_OLDER` times
+        (never the frozen setup objects), when ``slack_ns`` (the time left before the next
+        sample is due; None: no deadline) is at least :data:`GC_SLACK_NS`, or when it has
+        grown past :data:`GC_LIMIT` whatever the slack."""
+        if not self.gc_off:
+            return
+        young = gc.get_count()[0]
+        if young <= GC_YOUNG:
+            return
+        if slack_ns is not None and slack_ns < GC_SLACK_NS:
+            if young <= GC_LIMIT:
+                self.deferred_collections += 1
+                return
+            self.forced_collections += 1
+        self.young_collections += 1
+        gc.collect(1 if self.young_collections % GC_OLDER == 0 else 0)
 
 
-def start_realtime(node: Any, options: RealtimeOptions) -> Realtime:
-    """Enter the practices of ``options`` and log what took effect."""
+def start_realtime(node: Any, options: RealtimeOptions, *, collector: bool = False) -> Realtime:
+    """Enter the practices of ``options`` (and, with ``collector``, hold the collector whether
+    asked or not: :meth:`Realtime.hold_collector`) and log what took effect."""
     rt = Realtime(options)
     rt.enter()
+    if collector:
+        rt.hold_collector()
     rt.report(node.get_logger())
     return rt

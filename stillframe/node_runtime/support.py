@@ -13,8 +13,6 @@ from collections.abc import Callable
 from dataclasses import dataclass, replace
 from typing import Any
 
-import numpy as np
-
 from stillframe.config.scene import Scene, load_scene
 from stillframe.contract import messages, topics
 from stillframe.fidelity.auto_model import resolve_model
@@ -44,6 +42,10 @@ FLOOD_DEPTH = 1000
 #: the node name of ``stillframe record`` (it subscribes every topic at once)
 RECORDER_NODE = "stillframe_recorder"
 OK, WARN, ERROR = 0, 1, 2
+#: wall seconds without input after which a loop node reports its input stale (the simulator
+#: stale or gone); a lock-step sample waits on its slowest peer, so it is well above a sample's
+#: round trip on a loaded machine
+STALE_INPUT_S = 2.0
 
 
 @dataclass(frozen=True)
@@ -52,8 +54,9 @@ class LoopParameters:
 
     scene: Scene
     mode: str
-    lockstep_timeout_s: float
     diagnostics_period_s: float
+    #: the run's token (docs/nodes.md, writer identity; "": none)
+    run_token: str = ""
 
     @property
     def period(self) -> float:
@@ -66,9 +69,8 @@ class LoopParameters:
     @property
     def stale_input_s(self) -> float:
         """Wall seconds without input after which the estimator and controller report the
-        simulator stale or gone: 5 lock-step timeouts (a lock-step sim may wait one per
-        sample), at least 1 s."""
-        return max(1.0, 5 * self.lockstep_timeout_s)
+        simulator stale or gone: :data:`STALE_INPUT_S`, or five sample periods if longer."""
+        return max(STALE_INPUT_S, 5 * self.period)
 
     def qos(self, spec: topics.TopicSpec) -> QoSProfile | str:
         """The contract's QoS, except that sensor topics are RELIABLE and TRANSIENT_LOCAL in
@@ -112,8 +114,13 @@ def declare_loop_parameters(node: api.Node) -> LoopParameters:
     InputError naming a wrong one), with the scene loaded and its model resolved."""
     values = declare(node, LoopParameterValues)
     scene, _ = resolve_model(load_scene(values.scene, [v for v in values.overrides if v]))
-    return LoopParameters(scene, values.mode, values.lockstep_timeout_s,
-                          values.diagnostics_period_s)
+    return LoopParameters(scene, values.mode, values.diagnostics_period_s, values.run_token)
+
+
+def malformed_samples(node: api.Node) -> int:
+    """The samples that did not decode: those ``node``'s subscriptions dropped, and those
+    Cyclone dropped in this process before any node saw them (:mod:`.cyclone_log`)."""
+    return sum(node.malformed.values()) + sum(api.CYCLONE_DROPPED.values())
 
 
 class Diagnostics:
@@ -123,6 +130,7 @@ class Diagnostics:
     def __init__(self, node: api.Node, period_s: float) -> None:
         self.pub = node.create_publisher(topics.DIAGNOSTICS.type_name, topics.DIAGNOSTICS.name,
                                          topics.DIAGNOSTICS.qos)
+        self.node = node
         self.name = f"{node.get_namespace().rstrip('/')}/{node.get_name()}"
         self.period_s = period_s
         self.next = time.monotonic() + period_s
@@ -133,7 +141,7 @@ class Diagnostics:
     def publish(self, stamp_ns: int, values: dict[str, Any], level: int = OK,
                 message: str = "") -> None:
         kv = messages.msg_class("diagnostic_msgs/msg/KeyValue")
-        values = {**values, "malformed_samples": sum(api.MALFORMED.values())}
+        values = {**values, "malformed_samples": malformed_samples(self.node)}
         status = messages.new(
             "diagnostic_msgs/msg/DiagnosticStatus", level=level, name=self.name,
             message=message or ("OK" if level == OK else "degraded"), hardware_id="stillframe",
@@ -152,44 +160,6 @@ def _text(value: Any) -> str:
 def diagnostic_values(msg: Any) -> dict[str, str]:
     """The key/value pairs of the first status of a DiagnosticArray (for tools and tests)."""
     return {kv.key: kv.value for kv in msg.status[0].values} if msg.status else {}
-
-
-class Durations:
-    """Wall-clock durations [s] (latencies, compute times) kept in a preallocated ring of the
-    last ``keep``: percentiles in ms over all of them (:meth:`summary`, for a run's result) or
-    over those added since the last report (:meth:`recent`, for ``/diagnostics``). A report
-    costs what its window holds, not the whole run: at 1 kHz a summary over the run's 10⁵
-    values took milliseconds, once a second, inside the loop."""
-
-    def __init__(self, keep: int = 100_000) -> None:
-        self.values = np.empty(keep)
-        self.count = 0              # values added, ever
-        self.reported = 0           # ``count`` at the last :meth:`recent`
-
-    def add(self, seconds: float) -> None:
-        self.values[self.count % len(self.values)] = seconds
-        self.count += 1
-
-    def summary(self) -> dict[str, float]:
-        """Over every value kept."""
-        return self._percentiles(self.values[:min(self.count, len(self.values))])
-
-    def recent(self) -> dict[str, float]:
-        """Over the values added since the last call (at most ``keep``)."""
-        n = min(self.count - self.reported, len(self.values))
-        self.reported = self.count
-        end = self.count % len(self.values)
-        window = (self.values[end - n:end] if n <= end
-                  else np.concatenate([self.values[end - n:], self.values[:end]]))
-        return self._percentiles(window)
-
-    @staticmethod
-    def _percentiles(seconds: np.ndarray) -> dict[str, float]:
-        if not len(seconds):
-            return {"p50": float("nan"), "p99": float("nan"), "max": float("nan")}
-        p50, p99 = np.percentile(seconds, (50, 99))
-        return {"p50": 1e3 * float(p50), "p99": 1e3 * float(p99),
-                "max": 1e3 * float(seconds.max())}
 
 
 class RateMeter:
@@ -222,31 +192,43 @@ def wait_for_peers(node: api.Node, ready: Callable[[], bool],
 
 
 def has_publisher(node: api.Node, topic: str, peer: str) -> bool:
-    """The graph shows a publisher of ``topic`` in node ``peer`` (the reader side of a match)."""
-    return any(same_node(fqn(ep.node_namespace, ep.node_name), peer)
+    """The graph shows a publisher of ``topic`` in node ``peer`` (a relative name in ``node``'s
+    namespace; the reader side of a match)."""
+    return any(same_node(fqn(ep.node_namespace, ep.node_name), peer, node.get_namespace())
                for ep in node.get_publishers_info_by_topic(topic))
+
+
+def has_subscriber(node: api.Node, topic: str, peer: str) -> bool:
+    """The graph shows a subscription of ``topic`` in node ``peer`` (a relative name in
+    ``node``'s namespace; the writer side of a match)."""
+    return any(same_node(fqn(ep.node_namespace, ep.node_name), peer, node.get_namespace())
+               for ep in node.get_subscriptions_info_by_topic(topic))
 
 
 def reaches_peer(node: api.Node, publisher: api.Publisher, peer: str) -> bool:
     """``publisher`` has matched every subscription of its topic the graph shows, and one of them
-    belongs to node ``peer`` (``name`` or ``/namespace/name``).
+    belongs to node ``peer`` (``name`` in ``node``'s namespace, or ``/namespace/name``).
 
     A matched count alone is not enough in lock-step, nor is any named node: the recorder
     subscribes every topic at once and can match before the peer does; a tool's idle publisher
     on the command topic did the same for the simulator's reader (CI, and 3 of 30 runs beside a
     writing peer under load). The loop then started before the peer's side had matched, and
     the first command was lost (a lock-step timeout)."""
-    return _matched_with_peer(node.get_subscriptions_info_by_topic(publisher.topic_name),
+    return _matched_with_peer(node, node.get_subscriptions_info_by_topic(publisher.topic_name),
                               publisher.get_subscription_count(), peer)
 
 
 def hears_peer(node: api.Node, subscription: api.Subscription, peer: str) -> bool:
     """``subscription`` has matched every publisher of its topic the graph shows, one of them in
     node ``peer`` (the reader's side of :func:`reaches_peer`)."""
-    return _matched_with_peer(node.get_publishers_info_by_topic(subscription.topic_name),
+    return _matched_with_peer(node, node.get_publishers_info_by_topic(subscription.topic_name),
                               subscription.get_publisher_count(), peer)
 
 
-def _matched_with_peer(remote: list[api.TopicEndpointInfo], matched: int, peer: str) -> bool:
+def _matched_with_peer(node: api.Node, remote: list[api.TopicEndpointInfo], matched: int,
+                       peer: str) -> bool:
+    """Every remote endpoint matched, one of them in node ``peer`` (resolved in ``node``'s
+    namespace: a ``controller_node`` in another namespace is not the loop's)."""
     return matched >= len(remote) and any(
-        same_node(fqn(ep.node_namespace, ep.node_name), peer) for ep in remote)
+        same_node(fqn(ep.node_namespace, ep.node_name), peer, node.get_namespace())
+        for ep in remote)

@@ -7,13 +7,18 @@ plant is the scene's nonlinear model (``plant.model: scene``) or the thesis's LQ
 second-order model of an identified structure with the linearised pendulum
 (``plant.model: file``, eq. 5.199–5.207). Process noise (eq. 5.215) is added to the physical
 state once per period. Ground truth is kept at every integrator step for the evaluation.
+
+A scene's ``events`` (:mod:`stillframe.config.events`) change the structure of the lumped and FE
+plants while they run: the loop's step calls :meth:`FramePlant.change_structure` at the sample
+boundary of each event, and the plant goes on from its state with the model of the changed
+structure (built at load).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from stillframe.config.scene import Scene
+from stillframe.config.scene import Scene, changed_scene, sample_grid
 from stillframe.contract.signals import Sample
 from stillframe.design.identified import frame_for
 from stillframe.dynamics.excitation import floor_load
@@ -25,74 +30,65 @@ from stillframe.dynamics.integrators import (
     non_finite,
 )
 from stillframe.dynamics.kernels import CompiledFrame, compiles
+from stillframe.dynamics.models import FrameModel, build_model
 from stillframe.dynamics.simulation import initial_state
 from stillframe.dynamics.systems import LinearSystem, MechanicalSystem
 from stillframe.errors import InputError, IntegrationError
 from stillframe.plant.actuators import Actuators
 from stillframe.plant.linear_period import LinearPeriod, make_linear_period
 from stillframe.plant.ph_plant import PHPlant
+from stillframe.plant.protocol import Plant
 from stillframe.plant.sensors import Sensors
 
 #: the truth kept at every substep, in the physical state: floor displacements and velocities
 RECORDED = np.array([0, 1, 2, 4, 5, 6])
 
 
-def sample_period(scene: Scene) -> tuple[float, int]:
-    """The sample period 1/sensors.rate_hz and the integrator steps per period."""
-    period = 1.0 / scene.sensors.rate_hz
-    ratio = period / scene.integrator.dt
-    steps = round(ratio)
-    if steps < 1 or abs(ratio - steps) > 1e-6 * ratio:
-        raise InputError(
-            f"integrator.dt: {scene.integrator.dt:g} s does not divide the sample period "
-            f"{period:g} s (1/sensors.rate_hz)"
-        )
-    return period, steps
-
-
-def make_plant(scene: Scene) -> Plant | PHPlant:
+def make_plant(scene: Scene) -> Plant:
     """The scene's plant: the frame pHDAE for ``model.type: ph`` (``plant.model: scene``),
-    else :class:`Plant`."""
+    else :class:`FramePlant`."""
     if scene.model.type == "ph" and scene.plant.model == "scene":
-        return PHPlant(scene, *sample_period(scene))
-    return Plant(scene)
+        return PHPlant(scene, *sample_grid(scene))
+    return FramePlant(scene)
 
 
-class Plant:
+def _changed_model(scene: Scene, index: int) -> FrameModel:
+    """The model of ``scene``'s structure after its event ``index``; InputError naming the
+    event where the model refuses it (damping that turns negative, say)."""
+    try:
+        return build_model(changed_scene(scene, index + 1))
+    except InputError as exc:
+        raise InputError(f"events[{index}]: the structure after it: {exc}") from None
+
+
+class FramePlant:
     """Scene-driven plant with seeded sensor and process noise."""
 
     def __init__(self, scene: Scene) -> None:
-        self.period, self.substeps = sample_period(scene)
+        self.period, self.substeps = sample_grid(scene)
         self.h = self.period / self.substeps
-        model = frame_for(scene.plant.model, scene.plant.file, scene, "plant.file")
-        self.model = model
-        load = floor_load(scene.excitation, scene.duration + self.period)
-        self.load = load
+        self.load = floor_load(scene.excitation, scene.duration + self.period)
         self.excited_floor = scene.excitation.floor
-        self.system = (LinearSystem(model.linearized(), load) if scene.plant.model == "file"
-                       else MechanicalSystem(model, load))
-        subdivision = Subdivision.of(scene.integrator)
-        self.integrator = make_integrator(scene.integrator.method, subdivision)
+        self.linear_plant = scene.plant.model == "file"
+        self.discretization = scene.plant.discretization
+        self.subdivision = Subdivision.of(scene.integrator)
+        self.method_name = scene.integrator.method
+        if self.discretization == "zoh" and not self.linear_plant:
+            raise InputError("plant.discretization: zoh needs the linear plant "
+                             "(plant.model: file)")
+        #: integrator steps halved on the structures simulated before the current one
+        self.halved_before = 0
+        model = frame_for(scene.plant.model, scene.plant.file, scene, "plant.file")
+        self.take(model, self.compiled_for(model), np.zeros(4))
+        #: the model of the structure after each of the scene's events with its compiled
+        #: kernels, built at load (a change the model refuses is an error before the run, and
+        #: the sample of the event does not wait for them) and taken at the event
+        self.changed = [(changed, self.compiled_for(changed))
+                        for changed in (_changed_model(scene, i)
+                                        for i in range(len(scene.events)))]
         self.x = initial_state(model, scene.initial)
-        n = model.n_dof
-        self.n_dof = n
-        picks = [*model.floor_index, model.phi_index]
-        self.physical_index = np.array([*picks, *(n + i for i in picks)])
-        self._recorded_index = self.physical_index[RECORDED]
-        self._substep_times = np.arange(1, self.substeps + 1) * self.h   # after t_k
-        self.linear = self._linear_period(scene)
-        #: the nonlinear model's substeps on the compiled kernels where they handle its load
-        compiled = isinstance(self.system, MechanicalSystem) and compiles(load,
-                                                                          self.integrator.name)
-        self.compiled = CompiledFrame(model, subdivision) if compiled else None
-        self._acceleration_rows = None
-        if isinstance(self.system, LinearSystem):
-            rows = [n + i for i in model.floor_index]
-            E, A, B = self.system.E, self.system.A, self.system.B
-            self._acceleration_rows = np.linalg.solve(E, np.hstack([A, B]))[rows]
-            self._acceleration_input = np.zeros(self._acceleration_rows.shape[1])
         #: how a substep is taken: the integrator's name, or zoh
-        self.method = "zoh" if scene.plant.discretization == "zoh" else self.integrator.name
+        self.method = "zoh" if self.discretization == "zoh" else self.integrator.name
         self.process_std = np.asarray(scene.plant.process_noise_std, dtype=float)
         self.process_rng = np.random.default_rng(scene.plant.seed)
         self.sensors = Sensors(scene.sensors, np.random.default_rng(scene.sensors.seed))
@@ -103,13 +99,52 @@ class Plant:
         self._rows = 0
         self._record(0.0, self.x)
 
-    def _linear_period(self, scene: Scene) -> LinearPeriod | None:
+    def compiled_for(self, model: FrameModel) -> CompiledFrame | None:
+        """``model`` prepared for the compiled kernels, where they handle the plant: the
+        nonlinear model under a load and integrator they take (None: the integrator's steps)."""
+        if self.linear_plant or not compiles(self.load, self.method_name):
+            return None
+        return CompiledFrame(model, self.subdivision)
+
+    def take(self, model: FrameModel, compiled: CompiledFrame | None,
+             control: np.ndarray) -> None:
+        """Simulate ``model`` (on ``compiled``, its kernels) from now on, with ``control`` = u
+        held: everything else derived from a model (the system, a fresh integrator, the linear
+        period) is built here, once per structure."""
+        self.model = model
+        n = model.n_dof
+        self.n_dof = n
+        picks = [*model.floor_index, model.phi_index]
+        self.physical_index = np.array([*picks, *(n + i for i in picks)])
+        self._recorded_index = self.physical_index[RECORDED]
+        self._substep_times = np.arange(1, self.substeps + 1) * self.h   # after t_k
+        self.system = (LinearSystem(model.linearized(), self.load) if self.linear_plant
+                       else MechanicalSystem(model, self.load))
+        self.system.control = control
+        self.integrator = make_integrator(self.method_name, self.subdivision)
+        self.linear = self._linear_period()
+        #: the nonlinear model's substeps on the compiled kernels where they handle its load
+        self.compiled = compiled
+        self._acceleration_rows = None
+        if isinstance(self.system, LinearSystem):
+            rows = [n + i for i in model.floor_index]
+            E, A, B = self.system.E, self.system.A, self.system.B
+            self._acceleration_rows = np.linalg.solve(E, np.hstack([A, B]))[rows]
+            self._acceleration_input = np.zeros(self._acceleration_rows.shape[1])
+
+    def change_structure(self, index: int) -> None:
+        """From now on the structure after the scene's event ``index``: its model taken
+        (:meth:`take`) with the state as it is. The state's DOFs are the same for every
+        structure of one scene (the same floors and column nodes), so positions and velocities
+        carry over as they are: a mass added is bolted on at rest relative to its floor, a
+        stiffness or damping changes with the deformation as it is."""
+        self.halved_before = self.subdivisions
+        self.take(*self.changed[index], self.system.control)
+
+    def _linear_period(self) -> LinearPeriod | None:
         """The period as one matrix product (:mod:`stillframe.plant.linear_period`) for a
         linear plant stepped by the midpoint rule or exactly; None: the integrator's steps."""
-        discretization = scene.plant.discretization
-        if discretization == "zoh" and not isinstance(self.system, LinearSystem):
-            raise InputError("plant.discretization: zoh needs the linear plant "
-                             "(plant.model: file)")
+        discretization = self.discretization
         if not isinstance(self.system, LinearSystem) or (
                 discretization == "substeps" and self.integrator.name != "midpoint"):
             return None
@@ -119,8 +154,9 @@ class Plant:
 
     @property
     def subdivisions(self) -> int:
-        """How many steps were halved so far (:mod:`stillframe.dynamics.integrators`)."""
-        return (self.compiled or self.integrator).subdivisions
+        """How many steps were halved so far (:mod:`stillframe.dynamics.integrators`), over
+        every structure simulated."""
+        return self.halved_before + (self.compiled or self.integrator).subdivisions
 
     @property
     def t(self) -> float:
@@ -133,10 +169,18 @@ class Plant:
     def warm_up(self) -> None:
         """Load (or compile) the compiled kernels now, with one substep on a copy of the state
         that is thrown away: the first ``advance`` otherwise takes them in, about 0.2 s, inside
-        the loop (a late first sample in real time). The plant's state does not change."""
+        the loop (a late first sample in real time). The plant's state does not change. The
+        kernels of the structures after the scene's events too (the implicit midpoint rule's
+        banded step matrix is factored on the first step: 0.5 s on FE 40), their throwaway
+        substep not counted."""
         if self.compiled is not None:
             self.compiled.run(self.integrator.name, self.x.copy(), self.h, 1, self.load,
                               control=self.system.control, t0=self.t)
+        for _, compiled in self.changed:
+            if compiled is not None:
+                compiled.run(self.integrator.name, self.x.copy(), self.h, 1, self.load,
+                             control=self.system.control, t0=self.t)
+                compiled.subdivisions = 0
 
     def sample(self) -> Sample:
         """Sensor readings and ground truth at the current time t_k."""

@@ -2,7 +2,7 @@
 :mod:`stillframe.dynamics.ph.scene_model`), stepped by the compiled AVF midpoint rule
 (:class:`~stillframe.dynamics.ph.frame_step.CompiledFramePH`).
 
-Same interface and sample/advance protocol as :class:`stillframe.plant.frame_plant.Plant`: the
+Same interface and sample/advance protocol as :class:`stillframe.plant.frame_plant.FramePlant`: the
 actuators' [torque, floor-3 force] drive the input ports [f3, torque] held over the period; the
 floor accelerations the accelerometers read are those of the index-1 form at t_k.
 
@@ -38,7 +38,7 @@ BALANCE_TERMS = ("stored", *ENERGY_TERMS)
 class PHPlant:
     """The frame pHDAE with seeded sensor and process noise and limited actuators."""
 
-    #: steps halved so far (:attr:`Plant.subdivisions`): the AVF step at integrator.dt never is
+    #: steps halved so far (:attr:`.protocol.Plant.subdivisions`): the AVF step never is
     subdivisions = 0
 
     def __init__(self, scene: Scene, period: float, substeps: int) -> None:
@@ -149,6 +149,12 @@ class PHPlant:
         powers are zero before the first period. Layout: :data:`BALANCE_TERMS`."""
         return self.t, np.concatenate([[self.stepper.energy(self.z)],
                                        self._balance / self.period])
+
+    def change_structure(self, index: int) -> None:
+        """Refused: the pHDAE's constraints and energy ports belong to one structure (a scene
+        with events and ``model.type: ph`` is refused at load)."""
+        raise InputError(f"events[{index}]: the ph plant cannot change its structure while it "
+                         "runs; use model.type: lumped or fe")
 
     def truth_history(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         r = np.asarray(self._fine)

@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from stillframe.bags.qos import player_offer
-from stillframe.bags.storage import bag_summary, read_bag
+from stillframe.bags.storage import bag_summary, open_bag
 from stillframe.contract import messages
 from stillframe.errors import InputError
 from stillframe.middleware.api import ok
@@ -42,6 +42,8 @@ class Player:
         self.path = Path(path)
         self.rate = rate
         self.summary = bag_summary(self.path, messages.TYPESTORE)
+        #: what checking the bag found (damage, metadata disagreeing with the files)
+        self.problems = list(self.summary.problems)
         #: topics of the bag not played although selected, and why (for a note)
         self.skipped: dict[str, str] = {}
         played = self._select(topics, exclude, clock=bool(clock_hz))
@@ -99,15 +101,21 @@ class Player:
         if not self.publishers:
             return
         read = dict.fromkeys(self.publishers, 0)
-        for m in read_bag(self.path, messages.TYPESTORE, topics=list(self.publishers)):
-            if self._wall0 is None:  # the bag is open: time starts with its first message
-                self._wall0 = time.monotonic_ns()
-            self._sleep_until(self._wall0 + int((m.stamp - self.summary.start_ns) / self.rate))
-            if not ok():
-                return
-            self.publishers[m.topic].publish(m.data)
-            self.published += 1
-            read[m.topic] += 1
+        types = {t.name: t.type for t in self.summary.topics}
+        with open_bag(self.path, messages.TYPESTORE) as reader:
+            # each topic as the type metadata.yaml names (its publisher's): others are counted
+            wanted = [c for c in reader.connections
+                      if c.topic in self.publishers and c.msgtype == types[c.topic]]
+            for connection, stamp, data in reader.messages(wanted) if wanted else ():
+                if self._wall0 is None:  # the bag is open: time starts with its first message
+                    self._wall0 = time.monotonic_ns()
+                self._sleep_until(self._wall0 + int((stamp - self.summary.start_ns)
+                                                    / self.rate))
+                if not ok():
+                    return
+                self.publishers[connection.topic].publish(data)
+                self.published += 1
+                read[connection.topic] += 1
         self.dropped = {t.name: t.count - read[t.name] for t in self.summary.topics
                         if t.name in read and t.count > read[t.name]}
 

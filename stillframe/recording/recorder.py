@@ -6,7 +6,7 @@ seen on a topic goes into the bag; each message is stamped with its receive time
 time with ``sim_time``).
 
 The per-message path is as short as Python allows, so that a recorder beside a 1 kHz loop costs
-the loop nothing it would notice (issue 32). Nothing runs per sample as it arrives: the
+the loop nothing it would notice. Nothing runs per sample as it arrives: the
 subscriptions are *polled* (the middleware's polled subscriptions, KEEP_LAST of at least
 :data:`stillframe.middleware.qos.RECORD_DEPTH`): every :data:`POLL_PERIOD_S` the recorder wakes
 once, takes the CDR bytes waiting in each DDS reader and appends them to the open MCAP chunk;
@@ -21,17 +21,37 @@ the recorder does what a callback recorder's ``now()`` does under ``use_sim_time
 stamped with the latest ``/clock`` that had arrived before it (0 before the first), worked out
 from the arrival times of the ``/clock`` samples taken in the same poll. The node itself stays
 on system time, so rclpy does not run its ``/clock`` callback a thousand times a second.
+
+Nothing is lost in silence. A recorder that is stopped or starved (SIGSTOP, a loaded machine)
+receives nothing meanwhile, and the publishers keep only their last few samples for it: the
+samples sent meanwhile are gone. The recorder finds them from the stamps: a topic whose messages
+start with a time stamp (a ``std_msgs/Header``, or ``/clock``'s time) and whose stamps lie on a
+grid (every step between consecutive stamps a multiple of the smallest, as the simulator's
+samples at its period) misses ``step / period - 1`` samples at each step longer than the period
+(:class:`GapCounter`): lost on the way to the recorder, or never sent (a node that skipped a
+sample); the stamps cannot tell which, and the count says "missing". A poll that comes long
+after the one before says the recorder stalled. Both are logged as warnings when the recorder
+notices them, summed in its last line (:meth:`Recorder.summary`) and written into the bag's
+``metadata.yaml`` as ``custom_data`` (the map rosbag2 keeps for its users; ``ros2 bag info``
+does not show it): :data:`MISSING_KEY`, a JSON object of the samples missing per topic, one
+entry for every topic whose stamps were checked, and :data:`STALLS_KEY`. Publication sequence
+numbers are not used: the ``dds`` backend has none, and the ``rclpy`` backend's polled take does
+not pass them on and has no writer GID beside them, so two writers of one topic (``/rosout``,
+``/diagnostics``) could not be told apart.
 """
 
 from __future__ import annotations
 
 import bisect
+import json
 import struct
+import time
 from collections.abc import Sequence
 from typing import Any
 
 from stillframe.bags.qos import to_bag
 from stillframe.bags.storage import BagWriter
+from stillframe.contract import messages
 from stillframe.middleware.api import MessageInfo
 from stillframe.middleware.qos import CLOCK, QoSProfile, recorder_request
 from stillframe.middleware.topic_follower import RawCallback, TopicFollower
@@ -42,6 +62,74 @@ POLL_PERIOD_S = 0.02
 CLOCK_TOPIC = "/clock"
 CLOCK_TYPE = "rosgraph_msgs/msg/Clock"
 _CLOCK = struct.Struct("<iI")   # builtin_interfaces/Time, first in the CDR after its header
+_TIME = "builtin_interfaces/msg/Time"
+#: a poll this late after the one before says the recorder stalled [s]
+STALL_S = 0.5
+#: the smallest grid taken for a period [ns]: stamps closer than that are not a sample grid
+MIN_PERIOD_NS = 1000
+#: step sizes kept per topic: a stream of stamps with more is not on a grid (a grid with gaps
+#: of every length up to a few thousand periods stays under it)
+MAX_STEP_SIZES = 4096
+#: ``custom_data`` keys of the bag's metadata: samples missing per topic, and the stalls (JSON)
+MISSING_KEY = "stillframe.missing_samples"
+STALLS_KEY = "stillframe.recorder_stalls"
+
+
+def starts_with_stamp(msgtype: str) -> bool:
+    """Whether a message of ``msgtype`` starts with a ``builtin_interfaces/Time`` (directly,
+    as ``/clock``, or as the stamp of a leading ``std_msgs/Header``)."""
+    while msgtype in messages.TYPESTORE.fielddefs:
+        fields = messages.TYPESTORE.fielddefs[msgtype][1]
+        if not fields or fields[0][1][0].name != "NAME":
+            return False
+        msgtype = fields[0][1][1]
+        if msgtype == _TIME:
+            return True
+    return False
+
+
+class GapCounter:
+    """Samples missing from one topic's stream of stamps (module docstring). The steps between
+    consecutive stamps are kept by size (a grid has few sizes: the period, gaps of a few
+    periods); the period is the smallest step, and the stream is on a grid when every step is
+    a whole number n of periods within n ns (stamps rounded to the nanosecond from a period
+    that is not a whole number of them, as 1/1024 s). Stamps of a clock that jitters are not,
+    and when they take more than :data:`MAX_STEP_SIZES` sizes they are no longer kept. Repeated
+    and earlier stamps (a restarted simulator) are no steps."""
+
+    __slots__ = ("last", "off_grid", "steps")
+
+    def __init__(self) -> None:
+        self.last: int | None = None
+        #: step size [ns] -> how many steps of that size
+        self.steps: dict[int, int] = {}
+        self.off_grid = False
+
+    def add(self, stamp_ns: int) -> None:
+        last, self.last = self.last, stamp_ns
+        if last is None or stamp_ns <= last or self.off_grid:
+            return
+        steps = self.steps
+        step = stamp_ns - last
+        steps[step] = steps.get(step, 0) + 1
+        if len(steps) > MAX_STEP_SIZES:
+            self.off_grid = True
+
+    def missing(self) -> int | None:
+        """Samples missing between the first and the last stamp; None when the stamps are not
+        on a grid (or too few to tell)."""
+        if self.off_grid or not self.steps:
+            return None
+        period = min(self.steps)
+        if period < MIN_PERIOD_NS:
+            return None
+        total = 0
+        for step, count in self.steps.items():
+            periods = round(step / period)
+            if abs(step - periods * period) > periods:
+                return None
+            total += (periods - 1) * count
+        return total
 
 
 class SimStamps:
@@ -77,6 +165,13 @@ class Recorder(TopicFollower):
                  sim_time: bool = False, poll_period_s: float = POLL_PERIOD_S) -> None:
         self.bag = bag
         self.total = 0
+        #: per topic whose messages start with a stamp: its gaps
+        self.gaps: dict[str, GapCounter] = {}
+        self._said: dict[str, int] = {}
+        #: stalls: how many, and the longest [s]
+        self.stalls, self.longest_stall_s = 0, 0.0
+        self._polled_at: float | None = None
+        self._poll_period_s = poll_period_s
         self._sim = SimStamps() if sim_time else None
         # every /clock sample of a poll, not only the newest (the clock profile keeps one)
         self._clock = (node.create_polled_subscription(CLOCK_TYPE, CLOCK_TOPIC,
@@ -88,14 +183,53 @@ class Recorder(TopicFollower):
         self.bag.add_topic(topic, msgtype, [to_bag(q) for q in offers])
         write = self.bag.writer_of(topic)
         sim = self._sim
+        if not starts_with_stamp(msgtype):
+            def record(data: bytes, info: MessageInfo) -> None:
+                write(sim.stamp(info.received_timestamp) if sim else info.received_timestamp,
+                      data)
 
-        def record(data: bytes, info: MessageInfo) -> None:
+            return record
+        gaps = self.gaps[topic] = GapCounter()
+        add, unpack = gaps.add, _CLOCK.unpack_from
+
+        def record_stamped(data: bytes, info: MessageInfo) -> None:
             write(sim.stamp(info.received_timestamp) if sim else info.received_timestamp, data)
+            if len(data) >= 12:
+                sec, nanosec = unpack(data, 4)
+                add(sec * 1_000_000_000 + nanosec)
 
-        return record
+        return record_stamped
 
     def poll(self) -> int:
-        """Take what waits, ``/clock`` first (the stamps of the others come from it)."""
+        """Take what waits, ``/clock`` first (the stamps of the others come from it); then say
+        what went missing since the last poll, and whether the recorder stalled before it."""
+        now = time.monotonic()
+        if self._polled_at is not None and (late := now - self._polled_at) > STALL_S:
+            self.stalls += 1
+            self.longest_stall_s = max(self.longest_stall_s, late)
+            self.node.get_logger().warning(
+                f"recorder stalled: no poll for {late:.2f} s (every {self._poll_period_s:g} s "
+                "expected); samples sent meanwhile may be lost")
+        self._polled_at = now
+        handed = self._take()
+        self._say_losses()
+        return handed
+
+    def _say_losses(self) -> None:
+        """One warning line for the samples found missing since the last one."""
+        new = {}
+        for topic, gaps in self.gaps.items():
+            missing = gaps.missing() or 0
+            if missing > self._said.get(topic, 0):
+                new[topic] = missing - self._said.get(topic, 0)
+                self._said[topic] = missing
+        if new:
+            self.node.get_logger().warning(
+                f"the bag misses {sum(new.values())} samples more (gaps in their topics' stamp "
+                "grids: lost on the way or never sent): "
+                + ", ".join(f"{t} {n}" for t, n in sorted(new.items())))
+
+    def _take(self) -> int:
         if self._sim is not None:
             while taken := self._clock.take():
                 for data, info in taken:
@@ -109,3 +243,26 @@ class Recorder(TopicFollower):
     def counts(self) -> dict[str, int]:
         """Messages written per topic."""
         return {topic: self.bag.count(topic) for topic in sorted(self._subscriptions)}
+
+    def missing_samples(self) -> dict[str, int]:
+        """Samples missing per topic whose stamps lie on a grid (0 where none is; topics whose
+        stamps could not be checked are absent)."""
+        return {topic: missing for topic, gaps in sorted(self.gaps.items())
+                if (missing := gaps.missing()) is not None}
+
+    def summary(self) -> str:
+        """What is missing and how the recorder stalled, one phrase ("" when nothing)."""
+        missing = {t: n for t, n in self.missing_samples().items() if n}
+        parts = []
+        if missing:
+            parts.append(f"missing {sum(missing.values())} samples from the stamp grids: "
+                         + ", ".join(f"{t} {n}" for t, n in missing.items()))
+        if self.stalls:
+            parts.append(f"stalled {self.stalls} times, the longest {self.longest_stall_s:.2f} s")
+        return "; ".join(parts)
+
+    def write_losses(self) -> None:
+        """What is missing, and the stalls, into the bag's metadata (before it closes)."""
+        self.bag.custom_data[MISSING_KEY] = json.dumps(self.missing_samples())
+        self.bag.custom_data[STALLS_KEY] = json.dumps(
+            {"count": self.stalls, "longest_s": round(self.longest_stall_s, 3)})

@@ -29,9 +29,10 @@ from typing import Any
 
 import numpy as np
 
-from stillframe.config.scene import scene_from_dict
+from stillframe.config.scene import sample_grid, scene_from_dict
 from stillframe.config.schema import Section, set_dotted, show
 from stillframe.errors import InputError
+from stillframe.loop.parts import check_loop
 from stillframe.studies.executor import Outcome
 from stillframe.studies.vary import (
     Variation,
@@ -94,7 +95,9 @@ class Study:
 
 def plan(scene: Section, set_overrides: list[str], variations: list[Variation], seed: int,
          what: str) -> Study:
-    """Check the study before any run: known keys, numeric nominals for relative spreads."""
+    """Check the study before any run: known keys, numeric nominals for relative spreads, and
+    for ``closed-loop`` every part the loop builds from the nominal scene and from each listed
+    value (:func:`stillframe.loop.parts.check_loop`, what ``launch`` checks before a process)."""
     if what not in WHATS:
         raise InputError(f"--what {what}: one of {', '.join(WHATS)}")
     if seed < 0:
@@ -104,6 +107,9 @@ def plan(scene: Section, set_overrides: list[str], variations: list[Variation], 
     keys = [v.key for v in variations]
     if len(set(keys)) != len(keys):
         raise InputError(f"--vary: a key is varied twice ({', '.join(keys)})")
+    loop = what == "closed-loop"
+    if loop:
+        check_loop(scene)
     data = scene.to_dict()
     for v in variations:
         check_nominal(v, lookup(data, v.key))
@@ -111,7 +117,9 @@ def plan(scene: Section, set_overrides: list[str], variations: list[Variation], 
             trial = copy.deepcopy(data)
             set_dotted(trial, v.key, value)
             try:
-                scene_from_dict(trial)
+                varied = scene_from_dict(trial)
+                if loop:
+                    check_loop(varied)
             except InputError as exc:
                 raise InputError(f"--vary {v.key}: the value {show(value)}: {exc}") from None
     fixed = {item.partition("=")[0].strip() for item in set_overrides}
@@ -156,9 +164,7 @@ def _identify(scene: Section) -> dict[str, Any]:
     if exc.type != "white_noise" or exc.rate_hz != sensors.rate_hz:
         raise InputError("excitation: --what identify needs type white_noise with rate_hz equal "
                          "to sensors.rate_hz (a force held over each sample)")
-    every = round(1.0 / (sensors.rate_hz * scene.integrator.dt))
-    if abs(every * scene.integrator.dt * sensors.rate_hz - 1.0) > 1e-9:
-        raise InputError("integrator.dt: must divide the sample period 1/sensors.rate_hz")
+    every = sample_grid(scene)[1]
     history = simulate(scene)
     u = history.excitation[::every, None]
     y = history.floor_accelerations[::every]

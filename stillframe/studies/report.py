@@ -4,6 +4,7 @@ run, the fractions that met the targets or went unstable, and PNG plots (docs/mo
 from __future__ import annotations
 
 import csv
+import io
 import math
 import re
 from collections.abc import Callable, Sequence
@@ -12,6 +13,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from stillframe.files import open_output, save_figure
 
 QUANTILES: tuple[float, ...] = (0.05, 0.25, 0.5, 0.75, 0.95)
 HEADLINES: dict[str, tuple[tuple[str, ...], str]] = {
@@ -26,7 +29,8 @@ def write_table(rows: Sequence[dict[str, Any]], path: Path) -> Path:
     """One CSV row per run; columns in first-seen order; floats as their shortest exact text."""
     columns = list(dict.fromkeys(k for r in rows for k in r))
     path.parent.mkdir(parents=True, exist_ok=True)
-    with path.open("w", newline="") as handle:
+    with io.TextIOWrapper(open_output(path, what="run table"), encoding="utf-8",
+                          newline="") as handle:
         writer = csv.DictWriter(handle, fieldnames=columns)
         writer.writeheader()
         writer.writerows([{k: repr(v) if isinstance(v, float) else v for k, v in r.items()}
@@ -137,7 +141,7 @@ def plot(rows: Sequence[dict[str, Any]], varied: Sequence[str], directory: Path,
         fig.suptitle(context.title(len(ok)), fontsize=10)
         fig.tight_layout()
         paths.append(directory / name)
-        fig.savefig(paths[-1], dpi=100)
+        save_figure(fig, paths[-1], dpi=100)
         plt.close(fig)
 
     fig, axes = plt.subplots(*grid, figsize=(4 * cols, 3 * grid[0]), squeeze=False)

@@ -4,18 +4,22 @@ numbers worked out by hand and numpy's percentiles, the scene overrides it runs,
 from __future__ import annotations
 
 import math
+import os
+import time
 
 import numpy as np
 import pytest
 
-from stillframe.app.commands.bench_loop import (
+from stillframe.app.bench.busy import busy_loops
+from stillframe.app.bench.latency import LatencyLog
+from stillframe.app.bench.loop import (
     goal_rows,
+    loaded_table,
     realtime_overrides,
     stamp_ns,
     watchdog_zeros,
     within_period_pct,
 )
-from stillframe.bench.latency import LatencyLog
 from stillframe.config.scene import load_scene
 from stillframe.contract import messages
 from stillframe.locations import REPO_ROOT
@@ -131,3 +135,34 @@ def test_bench_loop_rejects_a_bad_rate_and_rt_practice() -> None:
     assert done.returncode == 2 and "unknown practice(s) turbo" in done.stderr
     done = run_stillframe("bench", "loop", "--repeat", "0", "--backend", "dds")
     assert done.returncode == 2 and "--repeat must be 1..100, got 0" in done.stderr
+
+
+def test_busy_loops_run_while_the_block_runs_and_not_after() -> None:
+    """Each loop spins in its own session (its own process group) and uses CPU; none is left."""
+    with busy_loops(2) as pids:
+        assert len(pids) == 2 and all(os.getpgid(pid) == pid for pid in pids)
+        ticks = [_cpu_ticks(pid) for pid in pids]
+        time.sleep(0.5)
+        assert all(_cpu_ticks(pid) > t for pid, t in zip(pids, ticks, strict=True))
+    for pid in pids:
+        with pytest.raises(ProcessLookupError):
+            os.kill(pid, 0)
+
+
+def _cpu_ticks(pid: int) -> int:
+    with open(f"/proc/{pid}/stat") as stat:
+        fields = stat.read().rsplit(")", 1)[1].split()
+    return int(fields[11]) + int(fields[12])        # utime + stime
+
+
+def test_a_loaded_run_is_set_against_its_quiet_twin() -> None:
+    quiet = {"backend": "dds", "rate_hz": 1000.0, "rt": "all", "repeat": 0, "record": False,
+             "track": False, "busy_loops": 0, "within_period_pct": 99.95, "p50_us": 300.0,
+             "p99_us": 450.0, "max_us": 900.0, "sim_deadline_misses": 5}
+    loaded = {**quiet, "busy_loops": 2, "within_period_pct": 99.5, "p99_us": 900.0,
+              "sim_deadline_misses": 50}
+    table = loaded_table([quiet, loaded])
+    row = table.splitlines()[-1]
+    for cell in ("99.95 / 99.50", "450 / 900", "5 / 50", "2.00"):
+        assert cell in row
+    assert len(table.splitlines()) == 3          # the quiet run has no row of its own

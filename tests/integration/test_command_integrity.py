@@ -1,5 +1,5 @@
-"""Command-path integrity (issue 11, item 4): the simulator takes commands from one writer only,
-identified by its writer GID, and rejects bad commands by reason.
+"""Command-path integrity: the simulator takes commands from one writer only, identified by its
+writer GID, and rejects bad commands by reason.
 
 - :class:`CommandGate` on hand-made writers and commands: each reason counted as stated.
 - The issue's scenario: a stray real-rclpy node publishes 1000 N m on ``pendulum/torque_cmd``,
@@ -15,8 +15,9 @@ from pathlib import Path
 
 import numpy as np
 
+from stillframe.config.loop_sections import COMMAND_BOUND
 from stillframe.loop.closed_loop import run_closed_loop
-from stillframe.loop.command_gate import HARD_LIMIT, REASONS, CommandGate
+from stillframe.loop.command_gate import REASONS, CommandGate
 from stillframe.loop.writer_gate import WriterGate
 from tests.support.nodes import SHORT_LQG, run_loop_beside
 from tests.support.scenes import thesis_scene
@@ -26,7 +27,9 @@ CONTROLLER, STRAY = b"c" * 16, b"s" * 16
 
 def gate_of(graph: list[tuple[bytes, str]], limit: float | None = None, pinned: str = "",
             active: bool = True) -> CommandGate:
-    return CommandGate(limit, WriterGate(pinned, lambda: graph), active)
+    """The gate of an actuator saturating at ``limit`` (None: none, so the command bound)."""
+    bound = COMMAND_BOUND if limit is None else limit
+    return CommandGate(bound, WriterGate(pinned, lambda: graph), active)
 
 
 def test_gate_takes_one_writer_and_counts_each_reason() -> None:
@@ -55,7 +58,7 @@ def test_gate_refuses_the_inactive_actuator_and_absurd_values_without_a_limit() 
     unlimited = gate_of(graph)
     assert unlimited.admits(CONTROLLER)
     assert not unlimited.check(1e308, 10, 10, 0)
-    assert unlimited.check(-HARD_LIMIT, 10, 10, 0)
+    assert unlimited.check(-COMMAND_BOUND, 10, 10, 0)
     assert dict(unused.rejected) == {"inactive_actuator": 1}
     assert dict(unlimited.rejected) == {"beyond_limit": 1}
 

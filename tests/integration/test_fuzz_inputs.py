@@ -12,109 +12,45 @@ process (milliseconds each), a few as real subprocesses (stderr, broken pipes, n
 
 from __future__ import annotations
 
-import argparse
-import contextlib
 import copy
-import io
+import functools
 import math
 import os
 import random
 import re
 import shutil
-import signal
 import subprocess
 import sys
 from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
+import yaml
 from mcap.reader import make_reader
 
-from stillframe.app import cli
 from stillframe.bags.storage import BagWriter
 from stillframe.config.scene import load_scene, scene_from_dict
 from stillframe.config.yamlio import load_yaml
 from stillframe.contract.messages import TYPESTORE
 from stillframe.errors import InputError
 from stillframe.locations import REPO_ROOT
+from tests.support.cli_fuzz import (
+    HOSTILE,
+    assert_one_line_error,
+    bounded,
+    leaf_commands,
+    positionals,
+    run,
+)
 from tests.support.middleware import child_env
 
 SCENE = REPO_ROOT / "scenes" / "thesis_lqg.yaml"
 HAMMER = REPO_ROOT / "bags" / "hammer"
 SEED = 31
-#: seconds any one case may take (a hang fails the test instead of the suite)
-BOUND_S = 30.0
 #: short closed-loop runs: control from 1 s, peaks over 1 s
 SHORT = ["--set", "duration=2", "--set", "controller.start=1", "--set", "evaluation.window=1"]
 IDENTIFY = ["--input", "/frame/excitation/wrench:wrench.force.x",
             "--output", "/frame/floor1/imu:linear_acceleration.x"]
-#: hostile YAML values for --set (and scene text): non-finite, huge, tiny, wrong types, broken
-#: syntax, deep nesting, non-ASCII and non-UTF-8 text
-HOSTILE = [".nan", "nan", ".inf", "-.inf", "inf", "1e308", "-1e308", "1e-308", "-1", "0",
-           "1" + "0" * 30, str(2**64), "1" + "0" * 5000, "'text'", "[1, 2", "{", "[]", "null",
-           "true", "[" * 3000 + "]" * 3000, "{a: " * 500 + "1" + "}" * 500, "é", "\udcff\udcfe",
-           "0x10", "- a\n- b"]
-
-
-class Hang(BaseException):
-    """A case that ran past :data:`BOUND_S` (a BaseException: nothing under test catches it)."""
-
-
-@contextlib.contextmanager
-def bounded(seconds: float = BOUND_S) -> Iterator[None]:
-    def expire(*_: object) -> None:
-        raise Hang(f"no answer within {seconds} s")
-
-    previous = signal.signal(signal.SIGALRM, expire)
-    signal.setitimer(signal.ITIMER_REAL, seconds)
-    try:
-        yield
-    finally:
-        signal.setitimer(signal.ITIMER_REAL, 0)
-        signal.signal(signal.SIGALRM, previous)
-
-
-def run(*argv: str) -> tuple[int, str, str]:
-    """``stillframe ARGV`` in process: exit code, stdout, stderr."""
-    out, err = io.StringIO(), io.StringIO()
-    with bounded(), contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
-        try:
-            code = cli.main(list(argv))
-        except SystemExit as exc:     # argparse
-            code = exc.code if isinstance(exc.code, int) else 2
-    return code, out.getvalue(), err.getvalue()
-
-
-def assert_one_line_error(argv: list[str], code: int, err: str, codes: set[int],
-                          names: str = "") -> None:
-    """Exit code of the error's kind, a last stderr line ``stillframe CMD: error: ...`` naming
-    ``names`` (when given), no traceback."""
-    shown = " ".join(a[:60] for a in argv)
-    assert "Traceback" not in err, f"{shown}: {err[-2000:]}"
-    assert code in codes, f"{shown}: exit {code}, expected {sorted(codes)}: {err[-600:]}"
-    last = err.strip().splitlines()[-1] if err.strip() else ""
-    assert last.startswith("stillframe") and ": error: " in last, f"{shown}: {err[-600:]}"
-    assert names in last, f"{shown}: {last!r} does not name {names!r}"
-
-
-def leaf_commands() -> list[tuple[list[str], argparse.ArgumentParser]]:
-    """Every command (with its verb) of the real parser, and its parser."""
-    found = []
-
-    def walk(parser: argparse.ArgumentParser, path: list[str]) -> None:
-        subs = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
-        if not subs:
-            found.append((path, parser))
-            return
-        for name, sub in subs[0].choices.items():
-            walk(sub, [*path, name])
-
-    walk(cli.build_parser(), [])
-    return found
-
-
-def positionals(parser: argparse.ArgumentParser) -> list[str]:
-    return [a.dest for a in parser._actions if not a.option_strings]
 
 
 def scene_commands() -> list[list[str]]:
@@ -364,6 +300,61 @@ def test_reindex_of_malformed_bags_recovers_or_refuses(tmp_path: Path) -> None:
             assert_one_line_error(argv, code, err, {3}, str(bag))
 
 
+#: a value of each wrong type for a metadata field
+WRONG_VALUES = {"a string": "text", "a list": [1], "a map": {"a": 1}, "null": None,
+                "negative": -5, "huge": 2**70, "NaN": math.nan}
+
+
+def metadata_fields(node: object, path: tuple = ()) -> Iterator[tuple]:
+    """The path of every field of a metadata document (mappings and lists too), the first
+    topic's in full and the other topics' entries whole."""
+    if path:
+        yield path
+    if isinstance(node, dict):
+        for key, value in node.items():
+            yield from metadata_fields(value, (*path, key))
+    elif isinstance(node, list):
+        for i, value in enumerate(node):
+            if path[-1] == "topics_with_message_count" and i > 0:
+                yield (*path, i)
+            else:
+                yield from metadata_fields(value, (*path, i))
+
+
+def _replaced(document: object, path: tuple, value: object) -> object:
+    changed = copy.deepcopy(document)
+    node = changed
+    for key in path[:-1]:
+        node = node[key]
+    node[path[-1]] = value
+    return changed
+
+
+def test_metadata_fields_of_every_wrong_type_are_one_line(tmp_path: Path) -> None:
+    """Each field of the sample bag's metadata.yaml (every level) set to a value of each wrong
+    type, one at a time: ``bag info`` says which field in one line, exit 3. A string where a
+    string belongs and ``custom_data: null`` (what rosbag2 writes for none) are right, not
+    wrong, and left out."""
+    document = yaml.safe_load((HAMMER / "metadata.yaml").read_text())
+    bag = shutil.copytree(HAMMER, tmp_path / "bag")
+    cases = 0
+    for path in metadata_fields(document):
+        current = functools.reduce(lambda node, key: node[key], path, document)
+        for kind, value in WRONG_VALUES.items():
+            if (isinstance(current, str) and isinstance(value, str)) or (
+                    path[-1] == "custom_data" and value is None):
+                continue
+            (bag / "metadata.yaml").write_text(yaml.safe_dump(_replaced(document, path, value)))
+            argv = ["bag", "info", str(bag)]
+            code, _out, err = run(*argv)
+            where = ".".join(map(str, path))
+            assert_one_line_error([where[-60:] + f"={kind}", *argv], code, err, {3},
+                                  "metadata.yaml")
+            assert str(path[-1]) in err.strip().splitlines()[-1], (where, kind, err)
+            cases += 1
+    assert cases > 300
+
+
 def _garbage_bag(path: Path, rng: random.Random) -> int:
     """The hammer bag with a fixed-seed share of floor 1's IMU payloads replaced by CDR that
     cannot decode (empty, cut to 10 bytes, random bytes); how many were replaced."""
@@ -417,7 +408,7 @@ def test_real_stderr_of_a_binary_scene_and_non_utf8_arguments(tmp_path: Path) ->
     assert b"not valid YAML: not UTF-8 or UTF-16 text" in done.stderr
     done = _stillframe("modes", os.fsencode(tmp_path) + b"/\xff\xfe.yaml")
     assert done.returncode == 2 and b"Traceback" not in done.stderr
-    assert b"cannot read scene" in done.stderr
+    assert b"cannot read the scene file" in done.stderr
 
 
 def test_unwritable_outputs_are_one_line(tmp_path: Path) -> None:

@@ -65,21 +65,21 @@ diagnostics.publish(0, {{"watchdog": 7}})
 diagnostics.pub.wait_for_all_acked(10.0)
 """
 RESULT = {"reduction_pct": {"displacement": [71.0, 75.0, 57.0], "velocity": [73.0, 80.0, 70.0]},
-          "peak_command": 0.25, "lockstep_timeouts": 0, "steps": 1600, "wall_s": 1.0}
+          "peak_command": 0.25, "complete": True, "steps": 1600, "wall_s": 1.0}
 
 
 def write_stand_ins(root: Path, sim_seconds: float = 1.0, life: float = 3600,
                     code: int = 0, wait_for: str = "") -> None:
-    """Packages sim_node/estimator_node/controller_node with a ``node`` module each: the sim
-    writes RESULT after ``sim_seconds``; the others wait for SIGINT (exit 0) or exit with
-    ``code`` after ``life`` seconds."""
+    """Packages sim_node/estimator_node/controller_node with a ``__main__`` module each (what
+    the launcher runs): the sim writes RESULT after ``sim_seconds``; the others wait for SIGINT
+    (exit 0) or exit with ``code`` after ``life`` seconds."""
     for name in ("sim_node", "estimator_node", "controller_node"):
         (root / name).mkdir()
         (root / name / "__init__.py").write_text("")
-    (root / "sim_node" / "node.py").write_text(
+    (root / "sim_node" / "__main__.py").write_text(
         SIM.format(sim_seconds=sim_seconds, result=RESULT, wait_for=wait_for))
-    (root / "estimator_node" / "node.py").write_text(WAITER.format(life=3600, code=0))
-    (root / "controller_node" / "node.py").write_text(WAITER.format(life=life, code=code))
+    (root / "estimator_node" / "__main__.py").write_text(WAITER.format(life=3600, code=0))
+    (root / "controller_node" / "__main__.py").write_text(WAITER.format(life=life, code=code))
 
 
 def start_launch(cwd: Path, *args: str) -> subprocess.Popen:
@@ -125,7 +125,7 @@ def test_node_command_passes_overrides_through_the_ros_parameter_parser() -> Non
                  "description=a b: c"]
     argv = node_command("sim_node", Path("/s/scene.yaml"), overrides, "lockstep",
                         params={"result_file": "/tmp/r.json", "lockstep_timeout_s": 2.0})
-    assert argv[1:3] == ["-m", "sim_node.node"]
+    assert argv[1:3] == ["-m", "sim_node"]
     params = node_overrides(parse_ros_args(argv[3:]), "/sim_node")
     assert params == {"scene": "/s/scene.yaml", "mode": "lockstep", "overrides": overrides,
                       "result_file": "/tmp/r.json", "lockstep_timeout_s": 2.0}
@@ -136,12 +136,12 @@ def test_node_command_passes_overrides_through_the_ros_parameter_parser() -> Non
 
 def test_status_text_orders_nodes_and_cuts_to_width() -> None:
     statuses = {"controller_node: loop": {"saturated": "0", "compute_ms_p50": "0.1"},
-                "/frame/sim_node": {"sim_time_s": "12.5", "step": "400", "lockstep_timeouts": "0",
+                "/frame/sim_node": {"sim_time_s": "12.5", "step": "400", "deadline_misses": "0",
                                     "latency_ms_p50": "0.2"},
                 "/frame/estimator_node": {"rejected": "1"},
                 "other": {"a": "b"}}
     line = status_text(statuses)
-    assert line == ("sim_node: sim_time_s=12.5 step=400 lockstep_timeouts=0 | "
+    assert line == ("sim_node: sim_time_s=12.5 step=400 deadline_misses=0 | "
                     "estimator_node: rejected=1 | loop: saturated=0 | other: a=b")
     short = status_text(statuses, width=20)
     assert len(short) == 20 and short.endswith("…")
@@ -155,13 +155,15 @@ def test_launch_passes_sim_nodes_result_through_and_stops_the_others(
     out, err = proc.communicate(timeout=60)
     assert proc.returncode == 0, err
     assert json.loads(out) == {"scene": "thesis_lqg", **RESULT, "degraded": False,
-                               "degraded_reasons": [], "diagnostics": {}}
+                               "degraded_reasons": [], "foreign_writers": [], "diagnostics": {}}
     err = "".join(lines) + err
     sim_argv = json.loads(next(line for line in err.splitlines() if "sim argv" in line)
                           .split("sim argv ", 1)[1])
     # the resolved scene (duration 60 in it), no overrides to apply again
     assert "mode:=realtime" in sim_argv and not any("overrides:=" in a for a in sim_argv)
     assert any(a.startswith("scene:=") and a.endswith("/scene.resolved.yaml") for a in sim_argv)
+    # the run's token (docs/nodes.md, writer identity): 64 random bits
+    assert sum(bool(re.fullmatch(r"run_token:=[0-9a-f]{16}", a)) for a in sim_argv) == 1
     assert not any(alive(pid) for pid in pids.values())
 
 
@@ -173,7 +175,7 @@ def test_the_nodes_last_statuses_written_as_they_stop_are_in_the_result(
     waits for the file the controller writes then, not for a time that a loaded machine may
     not keep)."""
     write_stand_ins(tmp_path, sim_seconds=0.2, wait_for="controller_matched")
-    (tmp_path / "controller_node" / "node.py").write_text(STATUS_AT_STOP.format())
+    (tmp_path / "controller_node" / "__main__.py").write_text(STATUS_AT_STOP.format())
     proc = start_launch(tmp_path, "--json", "--mode", "realtime")
     out, err = proc.communicate(timeout=120)
     assert proc.returncode == 0, err

@@ -30,8 +30,7 @@ IN_FLIGHT = 3
 def start_loop(tmp_path: Path) -> list[Any]:
     """The three nodes, the managed two with ``autostart`` false (as ``stillframe launch``
     starts them): they wait unconfigured for a client's transitions."""
-    params = params_file(tmp_path, "thesis_lqg", OVERRIDES, lockstep_timeout_s=5.0,
-                         autostart=False)
+    params = params_file(tmp_path, "thesis_lqg", OVERRIDES, autostart=False)
     return [start_node(name, params) for name in ("estimator_node", "controller_node", "sim_node")]
 
 

@@ -77,8 +77,8 @@ def test_backend_choice(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setenv(api.BACKEND_ENV, "dds")
     assert api.backend_name() == "dds"
     monkeypatch.setenv(api.BACKEND_ENV, "fastrtps")
-    with pytest.raises(InputError, match="STILLFRAME_RMW=fastrtps: unknown backend 'fastrtps' "
-                                         r"\(expected one of dds, rclpy\)"):
+    with pytest.raises(InputError, match="STILLFRAME_RMW='fastrtps': expected one of dds, "
+                                         "rclpy"):
         api.backend_name()
     monkeypatch.delenv(api.BACKEND_ENV)
     assert api.backend_name() == ("rclpy" if api.has_rclpy() else "dds")

@@ -91,7 +91,7 @@ def test_command_line_as_ros2_run_passes_it(ros_domain: int, param_file: Path) -
 @pytest.mark.parametrize(
     ("content", "message"),
     [
-        ("a: [1, 2\n", "not valid YAML (line 2)"),
+        ("a: [1, 2\n", "not valid YAML: expected ',' or ']', but got '<stream end>' at line 2"),
         ("- just a list\n", "expected 'node_name: {ros__parameters: ...}'"),
         ("sim_node:\n  rate: 1\n", "node 'sim_node' has no 'ros__parameters' map"),
         ("/**:\n  ros__parameters:\n    mixed: [1, abc]\n", "parameter 'mixed'"),
@@ -111,7 +111,7 @@ def test_bad_parameter_files_name_the_file_and_the_problem(
 
 def test_missing_parameter_file(tmp_path: Path) -> None:
     path = tmp_path / "nope.yaml"
-    with pytest.raises(InputError, match=r"nope\.yaml: No such file"):
+    with pytest.raises(InputError, match=r"nope\.yaml: cannot read the parameter file \(No "):
         params.node_overrides(params.parse_ros_args(["--ros-args", "--params-file", str(path)]),
                               "/n")
 

@@ -24,8 +24,9 @@ import matplotlib.pyplot as plt
 import numpy as np
 import pytest
 
-from stillframe.app.commands.bench_loop import realtime_overrides
+from stillframe.app.bench.loop import realtime_overrides
 from stillframe.bags.storage import read_bag
+from stillframe.config.scene import load_scene
 from stillframe.contract import messages
 from stillframe.identification.tracker import MODES_TOPIC, TrackedModes, modes_array
 from stillframe.locations import REPO_ROOT
@@ -34,7 +35,7 @@ from stillframe.middleware.names import is_hidden
 from stillframe.middleware.taps import TappedPublisher, tap_topic
 from stillframe.monitor.dashboard import ERROR_KEYS
 from stillframe.monitor.foxglove_client import Capture, capture, churn, stall
-from tests.support.middleware import child_env, isolate_domain, scheduling
+from tests.support.middleware import child_env, isolate_domain, niced, scheduling
 
 pytestmark = pytest.mark.slow
 
@@ -439,7 +440,45 @@ def test_idle_monitor_runs_at_sched_idle(ros_domain: int) -> None:
         seen = scheduling(monitor.pid)
     finally:
         stop_monitor(monitor)
-    assert len(threads) > 1 and seen == {(os.SCHED_IDLE, 10)}    # and its default --nice 10
+    assert len(threads) > 1 and seen == {(os.SCHED_IDLE, niced(10))}    # and its default --nice 10
+
+
+def test_the_help_names_the_subprotocol_the_server_accepts(ros_domain: int) -> None:
+    """Every WebSocket subprotocol ``monitor --help`` names, offered alone, is accepted by the
+    running server; the old name ``foxglove.websocket.v1``, which it refuses, is not named."""
+    import websockets
+
+    shown = subprocess.run([sys.executable, "-m", "stillframe", "monitor", "--help"],
+                           env=child_env(), cwd=REPO_ROOT, capture_output=True, text=True,
+                           timeout=60).stdout
+    named = sorted(set(re.findall(r"foxglove\.[a-z]+\.v\d", shown)))
+    assert named == ["foxglove.sdk.v1"], shown
+
+    async def accepted(url: str, subprotocol: str) -> bool:
+        try:
+            async with websockets.connect(url, subprotocols=[subprotocol]) as ws:
+                return ws.subprotocol == subprotocol
+        except websockets.InvalidStatus:
+            return False
+
+    monitor, url, _ = start_monitor()
+    try:
+        assert all(asyncio.run(accepted(url, name)) for name in named)
+        assert not asyncio.run(accepted(url, "foxglove.websocket.v1"))   # why it is not named
+    finally:
+        stop_monitor(monitor)
+
+
+def test_the_scene_is_a_file_or_a_shipped_scenes_name(ros_domain: int) -> None:
+    """``--scene thesis_lqg`` as ``launch`` takes it: the dashboard marks its controller's start
+    (25 s; without a scene, none)."""
+    monitor, _, page = start_monitor("--dashboard", "--dashboard-port", "0", "--scene",
+                                     "thesis_lqg")
+    try:
+        shown = dashboard_data(page)
+    finally:
+        stop_monitor(monitor)
+    assert shown["controller_start"] == load_scene(SCENE).controller.start == 25.0
 
 
 @pytest.mark.parametrize(("args", "message"), [

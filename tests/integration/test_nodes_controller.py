@@ -47,7 +47,7 @@ def test_commands_and_watchdog(ros_domain: int, tmp_path: Path, time_source: str
         clock = ClockPublisher(probe)
         est = probe.create_publisher(topics.STATE_ESTIMATE.type_name, topics.STATE_ESTIMATE.name,
                                      topics.STATE_ESTIMATE.qos)
-        sim_qos = LoopParameters(scene, "lockstep", 1.0, 0.2).qos(topics.EXCITATION_WRENCH)
+        sim_qos = LoopParameters(scene, "lockstep", 0.2).qos(topics.EXCITATION_WRENCH)
         wrench = probe.create_publisher(topics.EXCITATION_WRENCH.type_name,
                                         topics.EXCITATION_WRENCH.name, sim_qos)
         commands, diagnostics = [], []

@@ -1,10 +1,11 @@
 """estimator_node as a process, fed by a probe playing simulator and controller: its estimates
 equal the in-process estimator's on the same samples and commands, including a NaN reading
-(dropped and counted), a stale message (rejected and counted) and a missing channel (partial
-update after half the lock-step timeout). The probe's "simulator" saturates the torque at
-:data:`TORQUE_LIMIT` and reports the applied torque in the encoder's ``effort``: the estimator
-uses that, not the command (no windup); where no effort is reported, the command in effect
-while the sim's last report matched the commands, else (here: saturated) that report."""
+(dropped and counted), a stale message (rejected and counted) and a missing channel (a partial
+update: in lock-step only once the next stamp arrives, never after a wall-clock wait). The
+probe's "simulator" saturates the torque at :data:`TORQUE_LIMIT` and reports the applied torque
+in the encoder's ``effort``: the estimator uses that, not the command (no windup); where no
+effort is reported, the command in effect while the sim's last report matched the commands, else
+(here: saturated) that report."""
 
 from __future__ import annotations
 
@@ -20,7 +21,7 @@ from stillframe.estimation.factory import make_estimator
 from stillframe.loop.wiring import design_model
 from stillframe.middleware.api import create_node, spin_until
 from stillframe.node_runtime.support import LoopParameters, diagnostic_values
-from stillframe.plant.frame_plant import Plant
+from stillframe.plant.frame_plant import FramePlant
 from tests.support.nodes import SHORT_LQG, params_file, start_node, stop
 from tests.support.scenes import thesis_scene
 
@@ -30,7 +31,7 @@ TORQUE_LIMIT = 0.12
 
 
 def _samples() -> list[Sample]:
-    plant = Plant(thesis_scene("thesis_lqg", SHORT_LQG))
+    plant = FramePlant(thesis_scene("thesis_lqg", SHORT_LQG))
     out = []
     for _ in range(STEPS):
         s = plant.sample()
@@ -50,12 +51,11 @@ def test_estimates_nan_stale_and_missing_channels(ros_domain: int, tmp_path: Pat
         s.applied = np.array([torque, 0.0])
     # the probe stands in for the controller, so the pin names it (the start-up waits for it)
     proc = start_node("estimator_node", params_file(tmp_path, "thesis_lqg", SHORT_LQG,
-                                                    lockstep_timeout_s=1.0,
                                                     diagnostics_period_s=0.2,
                                                     command_writer="probe"))
     probe = create_node("probe", namespace=topics.DEFAULT_NAMESPACE, argv=["test"])
     try:
-        loop = LoopParameters(scene, "lockstep", 1.0, 0.2)   # the sim's sensor QoS
+        loop = LoopParameters(scene, "lockstep", 0.2)   # the sim's sensor QoS
         sensors = [probe.create_publisher(s.type_name, s.name, loop.qos(s)) for s in
                    (*topics.FLOOR_IMU, topics.PENDULUM_JOINT_STATES, topics.EXCITATION_WRENCH)]
         cmd = probe.create_publisher(topics.TORQUE_CMD.type_name, topics.TORQUE_CMD.name,
@@ -68,14 +68,21 @@ def test_estimates_nan_stale_and_missing_channels(ros_domain: int, tmp_path: Pat
         assert spin_until(probe, lambda: all(p.get_subscription_count() for p in sensors), 60)
         spin_until(probe, lambda: False, 0.3)
         wire = SensorMessages(scene.sensors)
-        for k, s in enumerate(samples):
+        def send(s: Sample) -> None:
             ns = round(s.t * 1e9)
             for channel, (pub, msg) in enumerate(zip(sensors, wire.fill(s, ns)[:5], strict=True)):
                 if s.present[channel]:
                     pub.publish(msg)
+
+        for k, s in enumerate(samples):
+            ns = round(s.t * 1e9)
+            if k != MISSING_STEP + 1:       # sent already, right after the incomplete one
+                send(s)
             if k == NAN_STEP:   # a late floor-1 reading of the previous stamp: stale
                 stale = wire.fill(samples[k - 1], round(samples[k - 1].t * 1e9))[0]
                 sensors[0].publish(stale)
+            if k == MISSING_STEP:   # lock-step: the next stamp makes the incomplete one partial
+                send(samples[k + 1])
             assert spin_until(probe, lambda k=k: len(estimates) == k + 1, 10), k
             answer = messages.new("geometry_msgs/msg/WrenchStamped")
             answer.header.stamp = messages.time_msg(ns)

@@ -17,13 +17,14 @@ EVALUATION_KEYS = ("baseline", "reduction_pct", "peak_uncontrolled", "peak_contr
                    "peak_command")
 
 
-def _same_as_one_process(tmp_path: Path, scene: str, overrides: list[str]) -> dict:
-    result, hist = run_loop(tmp_path, scene, overrides)
+def _same_as_one_process(tmp_path: Path, scene: str, overrides: list[str],
+                         log: list[str] | None = None) -> dict:
+    result, hist = run_loop(tmp_path, scene, overrides, log=log)
     reference = run_closed_loop(thesis_scene(scene, overrides))
     for key in EVALUATION_KEYS:
         assert result[key] == reference.evaluation[key], key
     assert result["steps"] == reference.evaluation["steps"]
-    assert result["lockstep_timeouts"] == 0
+    assert result["complete"] is True
     np.testing.assert_array_equal(hist["t"], reference.t)
     np.testing.assert_array_equal(hist["truth"], reference.truth)
     np.testing.assert_array_equal(hist["command"], reference.command)
@@ -58,3 +59,25 @@ def test_euk_three_processes_equal_one_process(ros_domain: int, tmp_path: Path,
     with the EKF."""
     result = _same_as_one_process(tmp_path, scene, SHORT_LQG)
     assert result["reduction_pct"]["displacement"][2] > 50.0
+
+
+#: a shipped change scene shortened: the mass on floor 2 comes at 4.5 s (sample 144), between the
+#: controller's start and the evaluation's window
+CHANGE = ["duration=6", "controller.start=3", "evaluation.window=1",
+          "events=[{time: 4.5, floor: 2, mass_factor: 1.3}]"]
+
+
+def test_a_structure_event_three_processes_equal_one_process(ros_domain: int,
+                                                             tmp_path: Path) -> None:
+    """sim_node applies the event at the sample the one-process loop applies it (both through
+    the one step), and everything after it agrees to the last bit: the histories, the
+    evaluation (its open-loop baseline changes at the same sample) and the event's record."""
+    log: list[str] = []
+    result = _same_as_one_process(tmp_path, "change_mass_floor2", CHANGE, log)
+    reference = run_closed_loop(thesis_scene("change_mass_floor2", CHANGE))
+    (record,) = result["structure_events"]
+    assert record == {"event": 0, "time_s": 4.5, "applied_s": 4.5, "sample": 144,
+                      "changes": {"rig.floor_masses": [1.281, 0.814 * 1.3, 1.38]}}
+    assert result["structure_events"] == reference.evaluation["structure_events"]
+    assert sum("structure changed: events[0] (at 4.5 s) applied at t = 4.5 s, sample 144"
+               in line for line in log) == 1

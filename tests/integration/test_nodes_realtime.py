@@ -20,7 +20,7 @@ from stillframe.loop.closed_loop import run_closed_loop
 from stillframe.middleware.api import create_node
 from stillframe.node_runtime.declarations import SimParameterValues
 from stillframe.node_runtime.support import LoopParameters
-from stillframe.plant.frame_plant import Plant
+from stillframe.plant.frame_plant import FramePlant
 from tests.support.middleware import child_env, finish, start_python, wait_for_line
 from tests.support.nodes import params_file, run_loop, start_node, stop, wait_for_log
 from tests.support.scenes import thesis_scene
@@ -47,7 +47,7 @@ def test_realtime_sim_is_paced_by_the_wall_clock(ros_domain: int, tmp_path: Path
     # Sample k is not taken before k periods of wall time: 31 periods at least (no upper bound
     # is asserted, the machine is shared).
     assert result["wall_s"] >= 31 * period
-    plant = Plant(scene)
+    plant = FramePlant(scene)
     truth = []
     for _ in range(32):
         truth.append(plant.sample().truth)
@@ -64,7 +64,7 @@ def test_realtime_sim_counts_overruns_when_it_cannot_keep_up(ros_domain: int) ->
     period, n = 1.0 / scene.sensors.rate_hz, 10
     node = create_node("sim_node", namespace=topics.DEFAULT_NAMESPACE, argv=["test"])
     try:
-        sim = SimNode(node, LoopParameters(scene, "realtime", 1.0, 1.0),
+        sim = SimNode(node, LoopParameters(scene, "realtime", 1.0),
                       {SimParameterValues: SimParameterValues(discovery_timeout_s=5.0)})
         advance = sim.plant.advance
 
@@ -73,7 +73,7 @@ def test_realtime_sim_counts_overruns_when_it_cannot_keep_up(ros_domain: int) ->
             return advance(control)
 
         sim.plant.advance = slow_advance
-        history = sim.run()
+        history, _ = sim.run()
     finally:
         node.destroy_node()
     result = history.evaluation
@@ -116,10 +116,10 @@ def test_realtime_sim_holds_zero_while_half_the_commands_miss(ros_domain: int) -
     node = create_node("sim_node", namespace=topics.DEFAULT_NAMESPACE, argv=["test"])
     try:
         wait_for_line(commander, "ready")
-        sim = SimNode(node, LoopParameters(scene, "realtime", 1.0, 1.0),
+        sim = SimNode(node, LoopParameters(scene, "realtime", 1.0),
                       {SimParameterValues: SimParameterValues(
                           discovery_timeout_s=2.0, command_timeout_periods=1_000_000)})
-        history = sim.run()
+        history, _ = sim.run()
     finally:
         node.destroy_node()
         commander.terminate()

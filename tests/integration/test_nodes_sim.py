@@ -1,6 +1,7 @@
 """sim_node as a process against a probe in the test process that plays estimator and
 controller: the wire content of every contract topic equals the in-process plant's samples
-under the same commands, and a missing command is counted and the previous one held."""
+under the same commands; in lock-step a command that does not come ends the run (exit code 7,
+the sample named, the partial result kept), and a probe that leaves the graph ends it too."""
 
 from __future__ import annotations
 
@@ -13,7 +14,7 @@ from stillframe.contract import messages, topics
 from stillframe.middleware.api import create_node, spin_until
 from stillframe.node_runtime.declarations import ESTIMATOR
 from stillframe.node_runtime.support import diagnostic_values
-from stillframe.plant.frame_plant import Plant
+from stillframe.plant.frame_plant import FramePlant
 from tests.support.middleware import finish
 from tests.support.nodes import params_file, start_node
 from tests.support.scenes import thesis_scene
@@ -52,14 +53,16 @@ class Probe:
         self.cmd = self.node.create_publisher(topics.TORQUE_CMD.type_name, topics.TORQUE_CMD.name,
                                               topics.TORQUE_CMD.qos)
         self.answers = answers
-        self.node.create_subscription(topics.STATE_TRUTH.type_name, topics.STATE_TRUTH.name,
-                                      self.answer, topics.STATE_TRUTH.qos)
+        # a controller answers once its load cell is in (the last message the loop waits for;
+        # state_truth comes after the command, docs/nodes.md, lock-step protocol)
+        wrench = topics.EXCITATION_WRENCH      # reliable, as the loop's own readers in lock-step
+        self.node.create_subscription(wrench.type_name, wrench.name, self.answer, "default")
 
-    def answer(self, truth: object) -> None:
-        k = round(messages.stamp_ns(truth.header.stamp) * 1e-9 * RATE_HZ)
+    def answer(self, reading: object) -> None:
+        k = round(messages.stamp_ns(reading.header.stamp) * 1e-9 * RATE_HZ)
         if k < self.answers:
             msg = messages.new("geometry_msgs/msg/WrenchStamped")
-            msg.header.stamp = truth.header.stamp
+            msg.header.stamp = reading.header.stamp
             msg.wrench.torque.z = torque(k)
             self.cmd.publish(msg)
 
@@ -68,25 +71,34 @@ class Probe:
         spin_until(self.node, lambda: False, 0.3)   # the last diagnostics
 
 
-def _run_sim(tmp_path: Path, answers: int, **params: object) -> tuple[Probe, dict, dict]:
+def _run_sim(tmp_path: Path, answers: int, code: int = 0, leave: bool = False,
+             **params: object) -> tuple[Probe, dict, dict, str]:
+    """sim_node against the probe; ``leave``: the probe leaves the graph once it has answered
+    its samples. Returns the probe, the result, the histories and the sim's log."""
     result = tmp_path / "result.json"
     probe = Probe(answers)
     try:
         sim = start_node("sim_node", params_file(tmp_path, "thesis_lqg", OVERRIDES,
                                                  result_file=str(result), command_writer=NAME,
                                                  **params))
-        probe.run(sim)
+        if leave:
+            assert spin_until(probe.node, lambda: len(probe.received["/clock"]) > answers, 120)
+            probe.node.destroy_node()
+            assert sim.wait(120) is not None
+        else:
+            probe.run(sim)
         _out, err = finish(sim)
-        assert sim.returncode == 0, err[-2000:]
+        assert sim.returncode == code, err[-2000:]
     finally:
-        probe.node.destroy_node()
+        if not leave:
+            probe.node.destroy_node()
     with np.load(result.with_suffix(".npz")) as data:
-        return probe, json.loads(result.read_text()), dict(data)
+        return probe, json.loads(result.read_text()), dict(data), err
 
 
 def _reference(commands: list[float]) -> list:
     """The in-process plant's samples under the given torque commands."""
-    plant = Plant(thesis_scene("thesis_lqg", OVERRIDES))
+    plant = FramePlant(thesis_scene("thesis_lqg", OVERRIDES))
     samples = []
     for u in commands:
         samples.append(plant.sample())
@@ -95,7 +107,7 @@ def _reference(commands: list[float]) -> list:
 
 
 def test_contract_topics_carry_the_plant_samples(ros_domain: int, tmp_path: Path) -> None:
-    probe, result, hist = _run_sim(tmp_path, answers=STEPS)
+    probe, result, hist, _ = _run_sim(tmp_path, answers=STEPS)
     commands = [torque(k) for k in range(STEPS)]
     ref = _reference(commands)
     got = probe.received
@@ -121,28 +133,44 @@ def test_contract_topics_carry_the_plant_samples(ros_domain: int, tmp_path: Path
     # The sim applied exactly the commands it received, one per step, no timeouts.
     np.testing.assert_array_equal(hist["command"][:, 0], commands)
     np.testing.assert_array_equal(hist["truth"], [s.truth for s in ref])
-    assert result["lockstep_timeouts"] == 0 and result["steps"] == STEPS
+    assert result["complete"] is True and result["steps"] == STEPS
     final = diagnostic_values(got["/diagnostics"][-1])
-    assert final["step"] == str(STEPS) and final["lockstep_timeouts"] == "0"
+    assert final["step"] == str(STEPS)
     assert got["/diagnostics"][-1].status[0].name == "/frame/sim_node"
 
 
-def test_missing_command_times_out_held_then_safe_state(ros_domain: int,
-                                                        tmp_path: Path) -> None:
-    """The last command is held until it is ``command_timeout_periods`` (3) periods old, then
-    the sim applies zero (the safe state when the controller is gone)."""
-    answered, timeout = 8, 3
-    probe, result, hist = _run_sim(tmp_path, answers=answered, lockstep_timeout_s=0.15)
-    last = answered - 1
-    commands = [torque(min(k, last)) if k - last < timeout else 0.0 for k in range(STEPS)]
-    assert result["lockstep_timeouts"] == STEPS - answered
-    assert result["safe_state_samples"] == STEPS - last - timeout
+def test_a_command_that_never_comes_ends_the_lockstep_run(ros_domain: int,
+                                                          tmp_path: Path) -> None:
+    """The probe answers 8 samples, then stays on the graph without answering: the simulator
+    never advances past sample 8; after ``lockstep_timeout_s`` it ends the run with one line
+    naming the sample and the peer, exit code 7, and the 8 samples it ran, bit for bit those
+    of the in-process plant under the same commands, marked incomplete."""
+    answered = 8
+    _, result, hist, err = _run_sim(tmp_path, answers=answered, code=7, lockstep_timeout_s=1.0)
+    commands = [torque(k) for k in range(answered)]
+    assert result["complete"] is False and result["steps"] == answered
+    assert result["error"]["kind"] == "LoopError"
     np.testing.assert_array_equal(hist["command"][:, 0], commands)
     np.testing.assert_array_equal(hist["truth"], [s.truth for s in _reference(commands)])
-    status = probe.received["/diagnostics"][-1].status[0]
-    assert diagnostic_values(probe.received["/diagnostics"][-1])["lockstep_timeouts"] == str(
-        STEPS - answered)
-    assert status.level == 1  # WARN
+    line = [ln for ln in err.splitlines() if "error:" in ln]
+    assert len(line) == 1 and f"no command for sample {answered} " in line[0], err[-2000:]
+    assert f"{NAME} still on the graph" in line[0] and "Traceback" not in err
+
+
+def test_a_peer_that_leaves_the_graph_ends_the_lockstep_run(ros_domain: int,
+                                                            tmp_path: Path) -> None:
+    """The probe answers 8 samples and leaves the graph (its node destroyed): the simulator
+    waits no longer than its next look at the graph (well before ``lockstep_timeout_s``, 600 s
+    here) and ends the run naming the peer that left, exit code 7, the partial result kept."""
+    answered = 8
+    _, result, hist, err = _run_sim(tmp_path, answers=answered, code=7, leave=True,
+                                    lockstep_timeout_s=600.0)
+    assert result["complete"] is False and result["steps"] == answered
+    commands = [torque(k) for k in range(answered)]
+    np.testing.assert_array_equal(hist["truth"], [s.truth for s in _reference(commands)])
+    line = [ln for ln in err.splitlines() if "error:" in ln]
+    assert len(line) == 1 and "left the graph while sample 8 " in line[0], err[-2000:]
+    assert NAME in line[0]
 
 
 def test_sensor_topics_are_reliable_in_lockstep_only() -> None:
@@ -151,8 +179,8 @@ def test_sensor_topics_are_reliable_in_lockstep_only() -> None:
     from stillframe.node_runtime.support import LoopParameters
 
     scene = thesis_scene("thesis_lqg")
-    lockstep = LoopParameters(scene, "lockstep", 1.0, 1.0)
-    realtime = LoopParameters(scene, "realtime", 1.0, 1.0)
+    lockstep = LoopParameters(scene, "lockstep", 1.0)
+    realtime = LoopParameters(scene, "realtime", 1.0)
     for spec in (*topics.FLOOR_IMU, topics.PENDULUM_JOINT_STATES, topics.EXCITATION_WRENCH):
         qos = lockstep.qos(spec)
         assert qos.reliability == Reliability.RELIABLE

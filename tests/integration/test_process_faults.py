@@ -1,20 +1,24 @@
-"""Process faults (issue 11, item 3), lock-step LQG through the three node processes, timed in
-sample periods from a bag recorded by ``stillframe record``:
+"""Process faults, LQG through the three node processes, timed in sample periods from a bag
+recorded by ``stillframe record``. Steps 1-3 run in real time: in lock-step the simulator never
+advances without the command of the current sample, so a peer that dies ends a lock-step run
+(tests/integration/test_lockstep_faults.py); in real time the loop goes on, and these are its
+safe states:
 
 1. the estimator is killed (SIGKILL): the controller's command is zero within 3 sample periods
    of the last estimate (its watchdog), the sim keeps running, the controller's ``/diagnostics``
    is ERROR naming the watchdog;
 2. the estimator is restarted: it starts from the current measurements (its first estimate of φ
    within 1e-2 rad of the truth) and control resumes;
-3. the controller is killed: the applied torque the sim reports (the encoder's ``effort``) is the
-   last command until that is 3 periods old (``command_timeout_periods``), zero from then on.
+3. the controller is killed: the sim holds the newest command it took, then applies zero once
+   that is 3 periods old (``command_timeout_periods``; the miss-rate guard is off here, so that
+   the safe state alone acts, whatever deadlines the machine's load made the loop miss before).
 
 The loop is frozen (SIGSTOP on the sim) while the estimator restarts, so that the run cannot end
 before it is back however fast the machine is.
 
-4. the sim is killed: the estimator and controller idle and report stale input; a new sim (at
-   t = 0 again) is taken as a restart and the loop resumes at once. The estimator and controller
-   take their inputs from the writers of the nodes named (``sensor_writer:=sim_node``,
+4. the sim is killed (lock-step): the estimator and controller idle and report stale input; a new
+   sim (at t = 0 again) is taken as a restart and the loop resumes at once. The estimator and
+   controller take their inputs from the writers of the nodes named (``sensor_writer:=sim_node``,
    ``estimate_writer:=estimator_node``): the new sim's writers (new GIDs) are taken, none
    refused. (Steps 1-3 take them from the first writer seen: the controller takes the restarted
    estimator's, so control resumes.)
@@ -22,7 +26,6 @@ before it is back however fast the machine is.
 
 from __future__ import annotations
 
-import itertools
 import json
 import os
 import signal
@@ -41,7 +44,7 @@ from stillframe.locations import REPO_ROOT
 from stillframe.loop.closed_loop import run_closed_loop
 from stillframe.middleware.api import create_node, spin_until
 from tests.support.middleware import child_env, finish
-from tests.support.nodes import Statuses, params_file, start_node, stop, wait_for_log
+from tests.support.nodes import Statuses, params_file, start_node, stop
 from tests.support.scenes import thesis_scene
 
 RATE_HZ = 32.0
@@ -71,6 +74,11 @@ class Watch:
     def until(self, condition: object, timeout: float = 60) -> None:
         assert spin_until(self.node, condition, timeout)
 
+    def estimator_reads(self) -> bool:
+        """An estimator subscribes the sensor topics (the restarted one is up)."""
+        return any(ep.node_name == "estimator_node"
+                   for ep in self.node.get_subscriptions_info_by_topic("/frame/floor1/imu"))
+
 
 def _by_topic(bag: Path) -> dict[str, list]:
     out: dict[str, list] = {t: [] for t in RECORDED}
@@ -82,8 +90,9 @@ def _by_topic(bag: Path) -> dict[str, list]:
 @pytest.mark.slow
 def test_kill_and_restart_estimator_then_kill_controller(ros_domain: int, tmp_path: Path) -> None:
     bag = tmp_path / "bag"
-    params = params_file(tmp_path, "thesis_lqg", OVERRIDES, lockstep_timeout_s=0.2,
-                         diagnostics_period_s=0.05, await_recorder=RECORDED)
+    params = params_file(tmp_path, "thesis_lqg", OVERRIDES, mode="realtime",
+                         command_miss_limit=0.0, diagnostics_period_s=0.05,
+                         await_recorder=RECORDED)
     recorder = subprocess.Popen([sys.executable, "-m", "stillframe", "record", "-o", str(bag),
                                  *RECORDED], env=child_env(), cwd=REPO_ROOT,
                                 stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
@@ -98,14 +107,11 @@ def test_kill_and_restart_estimator_then_kill_controller(ros_domain: int, tmp_pa
         estimator.wait()
         gone_at = watch.clock_ns
         watch.until(lambda: 2 in watch.levels)                     # the controller says ERROR
-        # the restarted estimator is handed the sim's last 5 samples of each sensor topic
-        # (TRANSIENT_LOCAL in lock-step): let the sim run on well past them, so that the bag
-        # shows the estimator's absence as a gap whatever the machine's speed
         watch.until(lambda: watch.clock_ns >= gone_at + 10 * PERIOD_NS)
         sim.send_signal(signal.SIGSTOP)                            # freeze the loop
         estimator = start_node("estimator_node", params)           # 2. restart it
         procs.append(estimator)
-        wait_for_log(estimator, "waiting for the controller")
+        watch.until(watch.estimator_reads)
         spin_until(watch.node, lambda: False, 1.0)
         sim.send_signal(signal.SIGCONT)
         seen = len(watch.levels)
@@ -149,25 +155,17 @@ def test_kill_and_restart_estimator_then_kill_controller(ros_domain: int, tmp_pa
     print(f"restarted estimator: first φ error {first[3] - true_phi:.2e} rad (φ = {true_phi:.3f})")
     assert abs(first[3] - true_phi) < 1e-2
     assert any(v != 0.0 for ns, v in commands.items() if ns > first_after)   # control resumed
-    # 3. the controller killed: the applied torque (effort, over the previous period). The newest
-    # command the sim took is the last fresh torque it reports (a command differs from the one
-    # before it; a held one repeats it). The recorder and the sim are separate readers of the
-    # controller, and the SIGKILL may cut its last write short between them (seen once in CI:
-    # the recorder had a command the sim never got), so that command is the recorder's last or
-    # the one before or after it; where the bag has it, the sim applied it to the bit
+    # 3. the controller killed: the applied torque (effort, reported at t for [t - T, t)). The
+    # newest command the sim took is the recorder's last, or one period after it (the SIGKILL
+    # may cut its last write short between the two readers); taken late in real time, it is
+    # applied from the period after its own. Either way it is held (not zero at once), and zero
+    # is applied once it is 3 periods old: reported from 5 periods after the recorder's last
     last_command = max(commands)
     effort = {ns: applied_torque(m) for ns, m in got["/frame/pendulum/joint_states"]}
-    reported = sorted(effort)
-    fresh = max(ns for before, ns in itertools.pairwise(reported)
-                if effort[ns] != 0.0 and effort[ns] != effort[before])
-    taken = fresh - PERIOD_NS
-    print(f"controller killed: last command recorded at {last_command}, last taken at {taken}")
-    assert abs(taken - last_command) <= PERIOD_NS
-    assert taken not in commands or effort[fresh] == commands[taken]
-    # the newest command taken is held until it is 3 periods old ...
-    assert all(effort[taken + k * PERIOD_NS] == effort[fresh] for k in (1, 2, 3))
-    # ... then zero (applied over [t + 3 periods, t + 4 periods), reported at t + 4 periods)
-    after = [v for ns, v in effort.items() if ns >= taken + 4 * PERIOD_NS]
+    print(f"controller killed: last command recorded at {last_command}")
+    held = [effort[ns] for ns in effort if last_command < ns <= last_command + 3 * PERIOD_NS]
+    assert any(v != 0.0 for v in held), held
+    after = [v for ns, v in effort.items() if ns >= last_command + 5 * PERIOD_NS]
     assert len(after) >= 5 and all(v == 0.0 for v in after)
 
 
@@ -187,12 +185,12 @@ def test_sim_killed_loop_idles_reports_stale_input_and_resumes_with_a_new_sim(
     estimator started again from the scene, control resumed at the new run's sample 0."""
     (tmp_path / "a").mkdir()
     (tmp_path / "b").mkdir()
-    first = params_file(tmp_path / "a", "thesis_lqg", OVERRIDES, lockstep_timeout_s=0.2,
+    first = params_file(tmp_path / "a", "thesis_lqg", OVERRIDES,
                         diagnostics_period_s=0.05, sensor_writer="sim_node",
                         estimate_writer="estimator_node")
     short = ["duration=4", "controller.start=1", "evaluation.window=1"]
     result = tmp_path / "b" / "result.json"
-    second = params_file(tmp_path / "b", "thesis_lqg", short, lockstep_timeout_s=0.2,
+    second = params_file(tmp_path / "b", "thesis_lqg", short,
                          diagnostics_period_s=0.05, result_file=str(result))
     estimator = start_node("estimator_node", first)
     controller = start_node("controller_node", first)
@@ -232,4 +230,4 @@ def test_sim_killed_loop_idles_reports_stale_input_and_resumes_with_a_new_sim(
     reference = run_closed_loop(thesis_scene("thesis_lqg", short))
     np.testing.assert_array_equal(hist["truth"], reference.truth)
     np.testing.assert_array_equal(hist["command"], reference.command)
-    assert json.loads(result.read_text())["lockstep_timeouts"] == 0
+    assert json.loads(result.read_text())["complete"] is True

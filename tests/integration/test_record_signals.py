@@ -15,9 +15,9 @@ from pathlib import Path
 
 import pytest
 from mcap.reader import make_reader
+from rosbags.highlevel import AnyReader
 
 from stillframe.bags.full_disk import RESERVE_NAME
-from stillframe.bags.storage import read_bag
 from stillframe.contract import messages
 from stillframe.contract.messages import TYPESTORE
 from stillframe.locations import REPO_ROOT
@@ -79,10 +79,24 @@ def _run(tmp_path: Path, sig: int, n: int) -> tuple[Path, int, str]:
 
 
 def _indices(bag: Path) -> dict[str, list[int]]:
+    """Each topic's header stamps as rosbags reads them."""
     found: dict[str, list[int]] = {t: [] for t, _ in TOPICS}
-    for m in read_bag(bag, TYPESTORE, decode=True):
-        found[m.topic].append(messages.stamp_ns(m.msg.header.stamp))
+    with AnyReader([bag], default_typestore=TYPESTORE) as reader:
+        for conn, _, raw in reader.messages():
+            msg = reader.deserialize(raw, conn.msgtype)
+            found[conn.topic].append(messages.stamp_ns(msg.header.stamp))
     return found
+
+
+def _records(bag: Path) -> tuple[list[tuple[str, int, bytes]], list[tuple[str, int, bytes]]]:
+    """Every message (topic, log time, bytes) as rosbags and as the mcap library (every CRC
+    checked) read it, each in its own order sorted alike."""
+    with AnyReader([bag], default_typestore=TYPESTORE) as reader:
+        by_rosbags = [(c.topic, t, bytes(d)) for c, t, d in reader.messages()]
+    with (next(bag.glob("*.mcap"))).open("rb") as stream:
+        by_mcap = [(channel.topic, message.log_time, message.data) for _, channel, message
+                   in make_reader(stream, validate_crcs=True).iter_messages()]
+    return sorted(by_rosbags), sorted(by_mcap)
 
 
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
@@ -91,11 +105,9 @@ def test_record_stopped_by_signal_loses_nothing(ros_domain: int, tmp_path: Path,
     bag, sent, err = _run(tmp_path, sig, 1000)
     for topic, indices in _indices(bag).items():   # rosbags
         assert indices == list(range(sent)), topic
-    with (next(bag.glob("*.mcap"))).open("rb") as stream:     # the mcap library
-        counts: dict[str, int] = {}
-        for _schema, channel, _message in make_reader(stream).iter_messages():
-            counts[channel.topic] = counts.get(channel.topic, 0) + 1
-    assert counts == {t: sent for t, _ in TOPICS}, err[-2000:]
+    by_rosbags, by_mcap = _records(bag)             # the mcap library: the same bytes
+    assert by_rosbags == by_mcap, err[-2000:]
+    assert len(by_mcap) == sent * len(TOPICS)
 
 
 @pytest.mark.slow

@@ -17,7 +17,7 @@ from pathlib import Path
 import pytest
 from rosbags.highlevel import AnyReader
 
-from stillframe.bench.recorder_load import PER_STEP
+from stillframe.app.bench.recorder_load import PER_STEP
 from stillframe.locations import REPO_ROOT
 from stillframe.middleware import api
 from tests.support.middleware import child_env, run_stillframe, wait_for_line
@@ -171,7 +171,7 @@ def test_launch_record_of_a_1khz_realtime_run_goes_on_dds_and_says_so(
     lines = done.stderr.splitlines()
     said = [line for line in lines if line.startswith("backend dds for every child")]
     assert len(said) == 1 and "1024 Hz" in said[0] and "--backend rclpy keeps rclpy" in said[0]
-    practices = [line for line in lines if line.startswith("real-time practices 'all'")]
+    practices = [line for line in lines if line.startswith("real-time practice: ")]
     assert len(practices) == 1 and "--rt none runs without them" in practices[0]
     recorder = [line for line in lines if line.startswith("recorder run as")]
     assert len(recorder) == 1 and "`stillframe record --idle`" in recorder[0]

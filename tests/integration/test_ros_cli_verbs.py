@@ -282,7 +282,7 @@ def test_the_backend_banner_only_with_verbose(ros_domain: int) -> None:
     (["topic", "pub", "/x", "std_msgs/msg/Float64", "data: 1", "--rate", "0"], "--rate must be"),
     (["topic", "pub", "/x", "std_msgs/msg/Float64", "data: [", "-1"], "not valid YAML"),
     (["interface", "show", "std_msgs/msg/Nope"], "unknown message type std_msgs/msg/Nope"),
-    (["param", "load", "/x", "/nonexistent.yaml"], "parameter file /nonexistent.yaml"),
+    (["param", "load", "/x", "/nonexistent.yaml"], "/nonexistent.yaml: cannot read the parameter"),
 ])
 def test_bad_verb_arguments_are_one_line(ros_domain: int, args: list[str], message: str) -> None:
     assert message in bad(*args)

@@ -61,7 +61,7 @@ import importlib, pkgutil, sys
 name = sys.argv[1]
 package = importlib.import_module(name)
 for module in pkgutil.iter_modules(package.__path__):
-    if module.name != "setup":
+    if module.name not in ("setup", "__main__"):
         importlib.import_module(f"{name}.{module.name}")
 print(" ".join(sorted({m.split(".")[0] for m in sys.modules} & set(sys.argv[2:]))))
 """
@@ -96,3 +96,17 @@ def test_package_xml_declares_what_the_package_imports(name: str) -> None:
     pip_only = imported - set(ROSDEP_KEYS) - set(PACKAGES) - {"stillframe"}
     requirements = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
     assert pip_only <= {re.split(r"[<>=!~ ]", r)[0] for r in requirements["dependencies"]}
+
+
+def test_the_docs_list_each_package_xmls_exec_depends() -> None:
+    """docs/launch.md's table of ``exec_depend`` is each package.xml's list, in its order."""
+    page = (ROOT / "docs" / "launch.md").read_text()
+    table = page[page.index("| package | `exec_depend` |"):]
+    rows = {}
+    for line in table.splitlines()[2:]:
+        if not line.startswith("| `"):
+            break
+        package, depends = (cell.strip() for cell in line.strip("|").split("|"))
+        rows[package.strip("`")] = [d.strip() for d in depends.split(",")]
+    assert rows == {name: [d.name for d in parse_package(
+        str(ROOT / name / "package.xml")).exec_depends] for name in PACKAGES}

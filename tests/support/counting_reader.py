@@ -34,7 +34,8 @@ def main() -> None:
     print("ready", flush=True)
     while not stop:
         node.spin_once(0.05)
-    print("read", len(got), sum(api.MALFORMED.values()), flush=True)
+    print("read", len(got), sum(node.malformed.values()) + sum(api.CYCLONE_DROPPED.values()),
+          flush=True)
 
 
 if __name__ == "__main__":

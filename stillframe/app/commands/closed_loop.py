@@ -3,7 +3,10 @@
 Prints the steady-state peak reductions per floor beside the reference values the scene carries
 (the thesis's, eq. 5.233 and 5.287); ``--json`` prints
 ``{"reduction_pct": {"displacement": [...], "velocity": [...]}, "peak_command": ..., "steps": ...,
-"wall_s": ..., ...}``.
+"wall_s": ..., "degraded": false, "degraded_reasons": [], ...}``. A run whose figures are not the
+controller's (commands refused, or a law that ran away and was clipped to the command's bound:
+:mod:`stillframe.app.run_verdict`, as ``launch`` judges) ends with a warning line giving the
+reasons.
 """
 
 from __future__ import annotations
@@ -12,11 +15,12 @@ import argparse
 import sys
 from collections.abc import Sequence
 
-from stillframe.app.commands.common import (
+from stillframe.app.arguments import (
     add_scene_arguments,
     emit_json,
     scene_from_args,
 )
+from stillframe.app.run_verdict import verdict
 from stillframe.errors import InputError
 from stillframe.text_table import format_table
 
@@ -56,8 +60,10 @@ def run(args: argparse.Namespace) -> int:
     if show:
         print(file=sys.stderr)
     e = history.evaluation
+    reasons = verdict(e, {})
     if args.json:
-        emit_json({"scene": scene.name, **e})
+        emit_json({"scene": scene.name, **e, "degraded": bool(reasons),
+                   "degraded_reasons": reasons})
         return 0
     ev = scene.evaluation
     print(f"scene {scene.name}: plant {e['plant']['model']} ({e['plant']['integrator']} "
@@ -73,4 +79,7 @@ def run(args: argparse.Namespace) -> int:
           f"{c['singular']}, watchdog {c['watchdog']}; rejected samples "
           f"{e['estimator']['stale'] + e['estimator']['non_finite']}")
     print(f"{e['steps']} steps in {e['wall_s']:.2f} s wall")
+    if reasons:
+        print("stillframe closed-loop: warning: its figures are not the controller's: "
+              f"{'; '.join(reasons)}", file=sys.stderr)
     return 0

@@ -5,24 +5,38 @@ controller_node over DDS while ``stillframe record`` writes every topic into a b
 reduction table beside the thesis's values (eq. 5.233) and writes a PNG of the three floors'
 displacements with control (from sim_node's history) and without (the same scene and seeds with
 no command, :func:`stillframe.loop.closed_loop.open_loop_truth`).
+
+The demo is self-contained, so it runs isolated: on a ROS domain of its own (a random
+``ROS_DOMAIN_ID`` other than the shell's, or ``--domain-id N``) with discovery on this machine
+only (``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``), and says so in one line. Another loop or tool
+on the shell's domain or the lab network neither sees it nor is seen; ``ROS_DOMAIN_ID=N
+ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST stillframe topic list`` watches it.
 """
 
 from __future__ import annotations
 
 import argparse
+import os
+import random
 import shutil
 import sys
 from pathlib import Path
 
 import numpy as np
 
-from stillframe.app.commands.common import check_output
-from stillframe.app.commands.launch import add_launch_arguments, print_evaluation, report_death
+from stillframe import interrupts
+from stillframe.app.arguments import whole
+from stillframe.app.launch_cli import add_launch_arguments, print_evaluation, report_death
+from stillframe.config import environment
+from stillframe.config.environment import MAX_DOMAIN_ID
 from stillframe.config.scene import Scene
 from stillframe.errors import InputError
+from stillframe.files import check_output, save_figure
 from stillframe.locations import SCENES_DIR
 
 DEMO_SCENE = SCENES_DIR / "thesis_lqg.yaml"
+#: the ROS domain ids a demo may be isolated on, the first to the last
+DOMAIN_IDS = (1, MAX_DOMAIN_ID)
 #: what a demo run writes into its output directory (replaced on every run)
 OUTPUTS = ("bag", "result.json", "result.npz", "floors.png")
 
@@ -35,8 +49,27 @@ def register(sub: argparse._SubParsersAction) -> None:
                              "result.npz, floors.png")
     parser.add_argument("--set", dest="overrides", action="append", default=[],
                         metavar="KEY=VALUE", help="override a scene value (repeatable)")
+    parser.add_argument("--domain-id", type=whole(*DOMAIN_IDS), default=None, metavar="N",
+                        help="the ROS domain the demo runs isolated on (default: a random one "
+                             "other than ROS_DOMAIN_ID's)")
     add_launch_arguments(parser)
     parser.set_defaults(func=run)
+
+
+def isolate(domain_id: int | None) -> str:
+    """Put this process and the children it starts on ROS domain ``domain_id`` (None: a random
+    one other than the environment's) with discovery on this machine only; the line that says
+    so."""
+    if domain_id is None:
+        current = environment.value("ROS_DOMAIN_ID")
+        domain_id = random.SystemRandom().choice(
+            [d for d in range(DOMAIN_IDS[0], DOMAIN_IDS[1] + 1) if str(d) != current])
+    os.environ["ROS_DOMAIN_ID"] = str(domain_id)
+    os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+    return (f"demo: isolated on ROS_DOMAIN_ID={domain_id}, discovery on this machine only "
+            "(ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST): other loops and tools do not see it; "
+            f"ROS_DOMAIN_ID={domain_id} ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST stillframe topic "
+            "list does")
 
 
 def clear_previous(out: Path) -> None:
@@ -69,7 +102,7 @@ def plot_floors(path: Path, controlled: tuple[np.ndarray, np.ndarray],
     axes[0].set_title(f"{scene.name}: floor displacements, {scene.controller.type} from "
                       f"{scene.controller.start:g} s (dashed)")
     axes[-1].set_xlabel("t [s]")
-    fig.savefig(path, dpi=110)
+    save_figure(fig, path, dpi=110)
     plt.close(fig)
 
 
@@ -84,21 +117,23 @@ def run(args: argparse.Namespace) -> int:
     from stillframe.config.scene import load_scene
     from stillframe.loop.closed_loop import open_loop_truth
 
-    check_output("--out", args.out)
+    check_output("--out", args.out, folder=True)
 
     scene = load_scene(DEMO_SCENE, args.overrides)
     out: Path = args.out
     clear_previous(out)
+    print(isolate(args.domain_id), file=sys.stderr)
     print(f"demo: {scene.name} through sim_node, estimator_node and controller_node "
           f"({args.mode}), recording to {out / 'bag'}", file=sys.stderr)
     try:
-        result = run_scene(DEMO_SCENE, args.overrides, out=out, mode=args.mode, record=out / "bag",
-                           lockstep_timeout_s=args.lockstep_timeout, backends=args.backends)
+        result = run_scene(DEMO_SCENE, args.overrides, out=out, mode=args.mode,
+                           record_dir=out / "bag", lockstep_timeout_s=args.lockstep_timeout,
+                           backends=args.backends)
     except NodeDiedError as exc:
         return report_death("demo", exc)
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as exc:
         print("stillframe demo: interrupted; every node stopped", file=sys.stderr)
-        return 130
+        return interrupts.exit_code(exc)
     print_evaluation(result.evaluation, scene)
     t, floors, _ = open_loop_truth(scene)
     plot_floors(out / "floors.png", controlled_floors(result.history_file), (t, floors), scene)

@@ -13,8 +13,10 @@ import argparse
 import sys
 from pathlib import Path
 
-from stillframe.app.commands.common import add_scene_arguments, check_output, emit_json
-from stillframe.app.commands.launch import add_launch_arguments, report_death
+from stillframe import interrupts
+from stillframe.app.arguments import add_scene_arguments, emit_json
+from stillframe.app.launch_cli import add_launch_arguments, report_death
+from stillframe.files import check_output
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -41,7 +43,7 @@ def run(args: argparse.Namespace) -> int:
     from stillframe.app.experiment_report import document, plot_comparison, print_report
     from stillframe.app.launcher import NodeDiedError
 
-    check_output("--out", args.out)
+    check_output("--out", args.out, folder=True)
 
     test = IdentificationTest(args.test_force, args.test_duration, args.test_seed)
     try:
@@ -49,9 +51,9 @@ def run(args: argparse.Namespace) -> int:
                                 args.lockstep_timeout, args.backends)
     except NodeDiedError as exc:
         return report_death("experiment", exc)
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as exc:
         print("stillframe experiment: interrupted; every node stopped", file=sys.stderr)
-        return 130
+        return interrupts.exit_code(exc)
     doc = document(result)
     plot_comparison(args.out / "comparison.png", result, doc)
     doc["files"]["plot"] = str(args.out / "comparison.png")

@@ -10,11 +10,11 @@ from __future__ import annotations
 
 import argparse
 import sys
-import time
 from typing import TYPE_CHECKING, Any
 
-from stillframe.app.commands.common import add_json_argument, check_output, emit_json
+from stillframe.app.arguments import Progress, add_json_argument, emit_json
 from stillframe.errors import InputError
+from stillframe.files import check_output
 
 if TYPE_CHECKING:
     from stillframe.bags.channels import Record
@@ -96,19 +96,6 @@ def register(sub: argparse._SubParsersAction) -> None:
     parser.set_defaults(func=run)
 
 
-class Progress:
-    """Stage messages with elapsed time on stderr."""
-
-    def __init__(self, enabled: bool) -> None:
-        self.enabled = enabled
-        self.start = time.perf_counter()
-
-    def __call__(self, message: str) -> None:
-        if self.enabled:
-            print(f"[{time.perf_counter() - self.start:7.2f} s] {message}", file=sys.stderr,
-                  flush=True)
-
-
 def _dofs(text: str, what: str) -> list[int]:
     try:
         return [int(d) for d in text.split(",")]
@@ -187,7 +174,7 @@ def run(args: argparse.Namespace) -> int:
     )
 
     check_output("--save-model", args.save_model)
-    check_output("--plots", args.plots)
+    check_output("--plots", args.plots, folder=True)
 
     progress = Progress(args.progress or sys.stderr.isatty())
     inputs = [Channel.parse(s) for s in args.inputs]

@@ -7,7 +7,8 @@ from __future__ import annotations
 import argparse
 import sys
 
-from stillframe.app.commands.common import add_json_argument, check_output, emit_json
+from stillframe.app.arguments import add_json_argument, emit_json
+from stillframe.files import check_output
 from stillframe.text_table import format_table
 
 
@@ -30,13 +31,13 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from stillframe.app.commands.identify import Progress
+    from stillframe.app.arguments import Progress
     from stillframe.identification import daisy
 
-    check_output("--plots", args.plots)
+    check_output("--plots", args.plots, folder=True)
 
     progress = Progress(args.progress or sys.stderr.isatty())
-    result = daisy.report(args.data or daisy.DEFAULT_PATH, progress)
+    result = daisy.report(args.data, progress)
     methods = result["methods"]
     agreement = {m: daisy.match_dominant(methods["n4sid"]["modes"], methods[m]["modes"], 3)
                  for m in daisy.OKID_METHODS}

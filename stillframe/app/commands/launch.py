@@ -4,13 +4,19 @@ Prints the live status from ``/diagnostics`` on stderr and, at the end of the sc
 evaluation sim_node wrote: steady-state peaks per floor with and without control and the
 reductions (thesis eq. 5.233, 5.287); ``--json`` prints it as one document
 ``{"reduction_pct": {"displacement": [...], "velocity": [...]}, "peak_command": ...,
-"lockstep_timeouts": ..., "steps": ..., "wall_s": ..., "degraded": false, "degraded_reasons":
-[], ...}``. A degraded real-time run (:mod:`stillframe.app.run_verdict`) ends with a warning line
-giving the reasons, and with ``--strict`` with exit code 6. Exit code 1 names a node that died
-(how: its exit code or signal) after the others were stopped cleanly; what the run still has (the
-samples the simulator ran, the statuses, the closed bag) is printed and written under ``--out``
-as a partial result marked ``"complete": false``. 130 follows Ctrl-C (every child stopped and
-reaped).
+"complete": true, "steps": ..., "wall_s": ..., "degraded": false, "degraded_reasons": [],
+"foreign_writers": [], ...}``. A degraded run (:mod:`stillframe.app.run_verdict`) ends with a
+warning line giving the reasons, and with ``--strict`` with exit code 6; so does a run whose nodes
+refused the samples of writers not of the run (``foreign_writers``: each node, topic, the writers
+fully qualified and how many samples were refused), in either mode: exit 0 with the warning (the
+figures are the loop's own nodes'), 6 with ``--strict``. With ``--record`` the document's ``bag``
+says what the recorder found missing (``missing_samples`` per topic, ``recorder_stalls``), and a
+bag that misses samples ends the run with a warning line. A node that ended on an error of its
+own passes on its line and exit code (7: a lock-step run whose peer left the graph or stopped
+answering; 4: a plant that diverged). Exit code 1 names a node that died otherwise (how: its exit
+code or signal) after the others were stopped cleanly; what the run still has (the samples the
+simulator ran, the statuses, the closed bag) is printed and written under ``--out`` as a partial
+result marked ``"complete": false``. 130 follows Ctrl-C (every child stopped and reaped).
 """
 
 from __future__ import annotations
@@ -18,43 +24,33 @@ from __future__ import annotations
 import argparse
 import sys
 import tempfile
-from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
 
-from stillframe.app.commands.common import (
-    NICE_RANGE,
+from stillframe import interrupts
+from stillframe.app.arguments import (
     add_scene_arguments,
-    check_output,
     emit_json,
     scene_from_args,
-    seconds,
     whole,
 )
-from stillframe.app.launcher import MODES, RECORDED_ABOVE_HZ
-from stillframe.app.net_faults import FAULTS
-from stillframe.app.run_verdict import verdict
-from stillframe.config.scene import Scene
-from stillframe.errors import BagError, DegradedRunError, InputError
-from stillframe.text_table import format_table
-
-
-def add_launch_arguments(parser: argparse.ArgumentParser) -> None:
-    """``--mode`` and ``--lockstep-timeout`` (shared with ``reproduce`` and ``demo``)."""
-    parser.add_argument("--mode", choices=MODES, default="lockstep",
-                        help="lockstep: deterministic, as fast as the nodes go (default); "
-                             "realtime: paced by the wall clock")
-    parser.add_argument("--lockstep-timeout", type=seconds, default=None, metavar="S",
-                        help="sim_node's wait for a command before it holds the previous one "
-                             "(given to every loop node: the estimator waits half, the "
-                             "controller a quarter)")
-    parser.add_argument("--backend", dest="backends", action="append", default=[],
-                        metavar="[NODE=]BACKEND",
-                        help="middleware of every node (dds or rclpy; default: STILLFRAME_RMW, "
-                             "else rclpy where installed, but dds for a --record'ed real-time "
-                             f"run above {RECORDED_ABOVE_HZ:g} Hz), or of one node: "
-                             "sim_node=dds "
-                             "(repeatable; also estimator_node, controller_node, recorder)")
+from stillframe.app.launch_cli import (
+    add_compose_arguments,
+    add_fault_argument,
+    add_launch_arguments,
+    add_netns_arguments,
+    add_realtime_arguments,
+    add_recorder_arguments,
+    bag_incomplete,
+    monitor_args,
+    print_evaluation,
+    print_partial,
+    realtime_arguments,
+    recorder_args,
+    report_death,
+)
+from stillframe.app.run_verdict import foreign_warning, foreign_writers, verdict
+from stillframe.errors import DegradedRunError, InputError
+from stillframe.files import check_output
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -91,8 +87,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                         help="keep sim_node's result.json and result.npz (histories) here")
     parser.add_argument("--strict", action="store_true",
                         help="a degraded real-time run (deadline misses, watchdog zeros, refused "
-                             "commands, no command in time, mostly zero actuation) exits with "
-                             "code 6 instead of only warning")
+                             "commands, no command in time, mostly zero actuation) or a run "
+                             "beside a foreign writer (its samples refused) exits with code 6 "
+                             "instead of only warning")
     add_compose_arguments(parser)
     add_realtime_arguments(parser)
     add_netns_arguments(parser)
@@ -100,168 +97,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     parser.set_defaults(func=run)
 
 
-def add_netns_arguments(parser: argparse.ArgumentParser, switch: bool = True) -> None:
-    """``--netns`` (with ``switch``) and ``--netns-prefix`` (shared with ``bench faults``)."""
-    if switch:
-        parser.add_argument("--netns", action="store_true",
-                            help="run each node in its own network namespace, joined by a "
-                                 "bridge (three hosts on one; needs root; docs/reliability.md)")
-    parser.add_argument("--netns-prefix", default=None, metavar="P",
-                        help="name prefix of the network namespaces (default sf<pid>)")
-
-
-def add_fault_argument(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--fault", default=None, metavar="NAME",
-                        help="with --netns: a network fault on every host's incoming link: "
-                             + ", ".join(f"'{f.name}'" for f in FAULTS).replace("%", "%%"))
-
-
-def evaluation_table(evaluation: dict[str, Any], scene: Scene) -> str:
-    """Floors as rows: peaks without and with control, the reductions, the scene's reference."""
-    ev = scene.evaluation
-    red = evaluation["reduction_pct"]
-    before = evaluation.get("peak_uncontrolled", {})
-    after = evaluation.get("peak_controlled", {})
-
-    def ref(values: Sequence[float], i: int) -> str:
-        return f"{values[i]:.2f}" if len(values) == 3 else "-"
-
-    def peak(table: dict[str, list[float]], key: str, i: int) -> str:
-        return f"{table[key][i]:.4g}" if key in table else "-"
-
-    rows = [[f"floor {i + 1}",
-             peak(before, "displacement", i), peak(after, "displacement", i),
-             f"{red['displacement'][i]:.2f}", ref(ev.reference_displacement_pct, i),
-             peak(before, "velocity", i), peak(after, "velocity", i),
-             f"{red['velocity'][i]:.2f}", ref(ev.reference_velocity_pct, i)]
-            for i in range(3)]
-    return format_table(["", "x off [m]", "x on [m]", "x red. %", "thesis %",
-                         "v off [m/s]", "v on [m/s]", "v red. %", "thesis %"], rows)
-
-
-def print_evaluation(evaluation: dict[str, Any], scene: Scene) -> None:
-    ev = scene.evaluation
-    baseline = (f"the {ev.window:g} s before control starts" if ev.baseline == "before_start"
-                else f"the last {ev.window:g} s of a run without control")
-    print(f"scene {scene.name}: steady-state peaks, last {ev.window:g} s with control against "
-          f"{baseline}:")
-    print(evaluation_table(evaluation, scene))
-    counters = (("deadline_misses", "overruns") if evaluation.get("mode") == "realtime"
-                else ("lockstep_timeouts",))
-    extras = [f"{key} {evaluation[key]}" for key in counters if key in evaluation]
-    print(f"peak command {evaluation['peak_command']:.4g}; {evaluation['steps']} steps in "
-          f"{evaluation['wall_s']:.2f} s wall" + (f"; {', '.join(extras)}" if extras else ""))
-
-
-def add_compose_arguments(parser: argparse.ArgumentParser) -> None:
-    """``--compose`` and ``--compose-all`` (shared with ``bench loop``)."""
-    group = parser.add_mutually_exclusive_group()
-    group.add_argument("--compose", dest="compose", action="store_const", const="pair",
-                       default="", help="estimator and controller in one process "
-                       "(container_node): samples handed over in-process, still published")
-    group.add_argument("--compose-all", dest="compose", action="store_const", const="all",
-                       help="simulator, estimator and controller in one process: one sample is "
-                            "one chain of calls, still published on every topic")
-
-
-def add_realtime_arguments(parser: argparse.ArgumentParser, *, launch: bool = True) -> None:
-    """``--rt [PRACTICES]`` and ``--rt-cpus`` (shared with ``bench loop``, which has no default
-    practices: ``launch`` False)."""
-    default = (f"none, but all for a --record'ed real-time run above {RECORDED_ABOVE_HZ:g} Hz"
-               if launch else "none")
-    parser.add_argument("--rt", nargs="?", const="all", default=None, metavar="PRACTICES",
-                        help="real-time mode for the loop nodes: 'all' (the default with --rt), "
-                             "'none', or a comma list of mlock, gc, fifo, affinity, spin, "
-                             f"cpu_latency (docs/realtime.md; default {default})")
-    parser.add_argument("--rt-cpus", default="", metavar="CPUS",
-                        help="with --rt affinity: pin the loop nodes to these CPUs (e.g. 1)")
-
-
-def add_recorder_arguments(parser: argparse.ArgumentParser) -> None:
-    """``--recorder-nice N`` and ``--recorder-idle`` (shared with ``bench loop``)."""
-    parser.add_argument("--recorder-nice", type=whole(*NICE_RANGE), default=None, metavar="N",
-                        help="with --record: the recorder's CPU priority lowered by N, 0..19 "
-                             "(`stillframe record --nice`; default 0, or what docs/realtime.md "
-                             f"gives a real-time run above {RECORDED_ABOVE_HZ:g} Hz)")
-    parser.add_argument("--recorder-idle", action="store_true",
-                        help="with --record: the recorder at SCHED_IDLE (`stillframe record "
-                             "--idle`); either option replaces the default")
-
-
-def realtime_arguments(args: argparse.Namespace) -> tuple[str | None, list[int]]:
-    """The checked ``--rt`` practices (None: not given, the launch's default) and ``--rt-cpus``
-    CPUs."""
-    from stillframe.node_runtime.realtime import parse_cpus, parse_practices
-
-    practices = None if args.rt is None else parse_practices(args.rt)
-    try:
-        cpus = [int(c) for c in args.rt_cpus.split(",") if c.strip()]
-    except ValueError:
-        raise InputError(f"--rt-cpus {args.rt_cpus!r}: expected CPU numbers, e.g. 1 or 0,1") \
-            from None
-    if cpus and not practices:
-        raise InputError("--rt-cpus needs --rt")
-    return (None if practices is None else ",".join(sorted(practices)),
-            list(parse_cpus(cpus)) if cpus else [])
-
-
-#: how ``stillframe record`` states a bag failure (a full disk), which ``launch`` passes on
-RECORDER_ERROR = "stillframe record: error: "
-
-
-def report_death(command: str, exc: Exception) -> int:
-    """One line naming the dead node, then the last lines it printed; a recorder that ended on
-    a bag failure (a full disk: the bag closed with what fit) gives its own line and exit 3."""
-    if getattr(exc, "name", "") == "recorder" and (line := next(
-            (t for t in getattr(exc, "tail", []) if t.startswith(RECORDER_ERROR)), None)):
-        print(f"stillframe {command}: error: recorder: {line.removeprefix(RECORDER_ERROR)}",
-              file=sys.stderr)
-        return BagError.exit_code
-    print(f"stillframe {command}: error: {exc}", file=sys.stderr)
-    for line in getattr(exc, "tail", []):
-        print(f"  {line}", file=sys.stderr)
-    return 1
-
-
-def print_partial(evaluation: dict[str, Any], scene: Scene, args: argparse.Namespace) -> None:
-    """What a run whose node died still has (``"complete": false``): the JSON document with
-    ``--json``, else one line on what was kept; the file under ``--out`` in both cases."""
-    if args.json:
-        emit_json({"scene": scene.name, **evaluation})
-        return
-    steps = evaluation.get("steps")
-    planned = evaluation.get("steps_planned")
-    kept = [f"{steps} of {planned} steps" if steps is not None else "no samples"]
-    if (bag := evaluation.get("bag")) is not None:
-        kept.append(f"bag {bag['path']} ({bag['messages']} messages)" if bag["closed"]
-                    else bag["note"])
-    if args.out is not None:
-        kept.append(f"written to {args.out / 'result.json'}")
-    print(f"scene {scene.name}: partial result (complete: false): {'; '.join(kept)}")
-
-
-def recorder_args(args: argparse.Namespace) -> list[str] | None:
-    """The recorder's priority arguments from ``--recorder-nice`` and ``--recorder-idle``; None
-    when neither was given (the launch's default)."""
-    if args.recorder_nice is None and not args.recorder_idle:
-        return None
-    return ["--nice", str(args.recorder_nice or 0)] + (["--idle"] if args.recorder_idle else [])
-
-
-def monitor_args(args: argparse.Namespace) -> list[str]:
-    """``stillframe monitor``'s arguments from launch's ``--monitor-*`` options."""
-    rate = [] if args.monitor_max_rate is None else ["--max-rate", f"{args.monitor_max_rate:g}"]
-    idle = ["--idle"] if args.monitor_idle else []
-    return ["--port", str(args.monitor_port), "--dashboard-port", str(args.dashboard_port), *rate,
-            *idle]
-
-
 def run(args: argparse.Namespace) -> int:
     from stillframe.app.launcher import NodeDiedError, run_scene
     from stillframe.app.net_faults import hosts_if
 
-    check_output("--out", args.out)
-    check_output("--record", args.record)
+    check_output("--out", args.out, folder=True)
+    check_output("--record", args.record, folder=True)
 
     scene = scene_from_args(args)
     rt, rt_cpus = realtime_arguments(args)
@@ -273,7 +114,7 @@ def run(args: argparse.Namespace) -> int:
         try:
             with hosts_if(args.netns, args.netns_prefix, args.fault) as hosts:
                 result = run_scene(Path(args.scene), args.overrides, out=args.out or Path(tmp),
-                                   mode=args.mode, record=args.record,
+                                   mode=args.mode, record_dir=args.record,
                                    lockstep_timeout_s=args.lockstep_timeout, resolved=scene,
                                    record_topics=args.record_topics, backends=args.backends,
                                    monitor_args=monitor_args(args) if args.monitor else None,
@@ -284,22 +125,27 @@ def run(args: argparse.Namespace) -> int:
             if exc.partial is not None:
                 print_partial(exc.partial.evaluation, scene, args)
             return code
-        except KeyboardInterrupt:
+        except KeyboardInterrupt as exc:
             print("stillframe launch: interrupted; every node stopped", file=sys.stderr)
-            return 130
+            return interrupts.exit_code(exc)
     reasons = verdict(result.evaluation, result.diagnostics)
+    if incomplete := bag_incomplete(result.evaluation.get("bag")):
+        print(f"stillframe launch: warning: {incomplete}", file=sys.stderr)
+    foreign = foreign_writers(result.evaluation, result.diagnostics)
     if args.json:
         emit_json({"scene": scene.name, **result.evaluation, "degraded": bool(reasons),
-                   "degraded_reasons": reasons, "diagnostics": result.diagnostics,
+                   "degraded_reasons": reasons, "foreign_writers": foreign,
+                   "diagnostics": result.diagnostics,
                    **({"tracked_modes": result.tracked_modes} if args.track else {})})
     elif "reduction_pct" in result.evaluation:
         print_evaluation(result.evaluation, scene)
     else:
         print(f"scene {scene.name}: {result.evaluation.get('steps')} steps, no controller")
-    if reasons:
-        degraded = DegradedRunError("degraded real-time run, its figures are not the "
-                                    f"controller's: {'; '.join(reasons)}")
-        if args.strict:
-            raise degraded
-        print(f"stillframe launch: warning: {degraded}", file=sys.stderr)
+    warnings = ([f"degraded {args.mode} run, its figures are not the controller's: "
+                 f"{'; '.join(reasons)}"] if reasons else []) + (
+        [foreign_warning(foreign)] if foreign else [])
+    if warnings and args.strict:
+        raise DegradedRunError(" | ".join(warnings))
+    for warning in warnings:
+        print(f"stillframe launch: warning: {warning}", file=sys.stderr)
     return 0

@@ -17,8 +17,9 @@ import sys
 import time
 from typing import Any
 
-from stillframe.app.commands.common import add_json_argument, emit_json
-from stillframe.app.commands.param import node_name
+from stillframe.app.arguments import add_json_argument, emit_json
+from stillframe.app.ros_tools import node_name
+from stillframe.config.environment import value
 from stillframe.contract import messages
 from stillframe.errors import InputError
 from stillframe.middleware import api, lifecycle
@@ -58,7 +59,7 @@ class LifecycleCalls:
             if time.monotonic() >= self.deadline:
                 raise InputError(
                     f"unknown node {self.target}: not in the graph on ROS_DOMAIN_ID="
-                    f"{os.environ.get('ROS_DOMAIN_ID', '0')}")
+                    f"{value('ROS_DOMAIN_ID')}")
             self.node.spin_once(0.1)
 
     def call(self, service: str, **fields: Any) -> Any:

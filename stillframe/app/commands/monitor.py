@@ -1,9 +1,9 @@
 """``stillframe monitor [TOPIC ...]``: the ROS graph live in Foxglove/Lichtblick and a dashboard.
 
-Bridges the topics (all of them by default) to the Foxglove WebSocket protocol
-(``foxglove.websocket.v1``, ``ros2msg`` schemas, CDR messages) on ``ws://HOST:PORT``; with
-``--dashboard`` also serves the built-in live dashboard on ``http://HOST:DASHBOARD_PORT``.
-Runs until Ctrl-C. See docs/monitor.md.
+Bridges the topics (all of them by default) to the Foxglove WebSocket protocol (the WebSocket
+subprotocol ``foxglove.sdk.v1``, ``ros2msg`` schemas, CDR messages) on ``ws://HOST:PORT``, for
+Foxglove and Lichtblick; with ``--dashboard`` also serves the built-in live dashboard on
+``http://HOST:DASHBOARD_PORT``. Runs until Ctrl-C. See docs/monitor.md.
 """
 
 from __future__ import annotations
@@ -11,9 +11,12 @@ from __future__ import annotations
 import argparse
 import math
 import sys
-from pathlib import Path
 
-from stillframe.app.commands.common import add_priority_arguments, apply_priority
+from stillframe.app.arguments import (
+    add_priority_arguments,
+    apply_priority,
+    scene_path,
+)
 from stillframe.errors import InputError
 
 READY_LINE = "Monitor ready"
@@ -41,8 +44,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                         help="dashboard HTTP port (default 8080; 0: any free port)")
     parser.add_argument("--namespace", default="/frame",
                         help="the loop's namespace, for the dashboard (default /frame)")
-    parser.add_argument("--scene", type=Path, default=None,
-                        help="scene whose command limits the dashboard draws")
+    parser.add_argument("--scene", type=scene_path, default=None,
+                        help="scene whose command limits the dashboard draws: a file, or the "
+                             "name of a shipped scene (e.g. thesis_lqg), as for launch")
     parser.add_argument("--set", dest="overrides", action="append", default=[],
                         metavar="KEY=VALUE", help="with --scene: override a scene value")
     add_priority_arguments(parser, nice=10, who="monitor")

@@ -9,10 +9,11 @@ import sys
 
 import numpy as np
 
-from stillframe.app.commands.common import add_json_argument, emit_json, whole
+from stillframe.app.arguments import add_json_argument, emit_json, whole
 from stillframe.dynamics.ph import crank_slider, fourbar
 from stillframe.dynamics.ph.manufactured import l2_errors, observed_rates
 from stillframe.errors import InputError
+from stillframe.files import check_output, save_figure
 from stillframe.text_table import format_table
 
 
@@ -47,6 +48,7 @@ def _progress(text: str) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    check_output("--plot", getattr(args, "plot", None))
     return {"convergence": _convergence, "fourbar": _fourbar,
             "crank-slider": _crank_slider}[args.case](args)
 
@@ -111,7 +113,7 @@ def _fourbar_plot(path: str, elements: int) -> None:
     ax.legend(["ω₁", "ω₂", "ω₃"])
     ax.grid(True, alpha=0.3)
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
+    save_figure(fig, path, dpi=120)
 
 
 def _crank_slider(args: argparse.Namespace) -> int:
@@ -154,4 +156,4 @@ def _crank_plot(path: str, run_: crank_slider.CrankSliderRun) -> None:
         ax.set_xlabel("crank angle [rad]")
         ax.grid(True, alpha=0.3)
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
+    save_figure(fig, path, dpi=120)

@@ -52,7 +52,8 @@ def run(args: argparse.Namespace) -> int:
                                + ("" if acked else " (some not acknowledged by subscribers)"))
     finally:
         node.destroy_node()
-    if player.dropped:      # counted and said, never dropped silently
-        raise BagError(f"{args.bag}: could not play {sum(player.dropped.values())} messages: "
-                       + player.dropped_text())
+    if player.dropped or player.problems:      # counted and said, never dropped silently
+        raise BagError("; ".join(
+            ([f"{args.bag}: could not play {sum(player.dropped.values())} messages: "
+              + player.dropped_text()] if player.dropped else []) + player.problems))
     return 0

@@ -1,11 +1,16 @@
-"""``stillframe record -o DIR (--all | TOPIC...)``: record topics into a rosbag2 bag (MCAP)."""
+"""``stillframe record -o DIR (--all | TOPIC...)``: record topics into a rosbag2 bag (MCAP).
+
+Its last lines say how many messages it wrote per topic and, as a warning, what the bag misses
+(samples missing from their topics' stamp grids, stalls of the recorder:
+:mod:`stillframe.recording.recorder`); the exit code stays 0 then, as ``ros2 bag record``'s."""
 
 from __future__ import annotations
 
 import argparse
 import sys
 
-from stillframe.app.commands.common import add_priority_arguments, apply_priority, check_output
+from stillframe.app.arguments import add_priority_arguments, apply_priority
+from stillframe.files import check_output
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -34,7 +39,7 @@ def run(args: argparse.Namespace) -> int:
     from stillframe.node_runtime.support import RECORDER_NODE
     from stillframe.recording.recorder import Recorder
 
-    check_output("-o", args.output)
+    check_output("-o", args.output, folder=True)
 
     if args.all == bool(args.topics):
         raise InputError("give either --all or one or more TOPICs")
@@ -50,11 +55,15 @@ def run(args: argparse.Namespace) -> int:
                                    f"({'all topics' if args.all else ', '.join(topics)})")
             spin(node)
             recorder.drain()
+            recorder.write_losses()
         for topic in recorder.missing():
             node.get_logger().warning(f"no publisher on '{topic}' was seen: not recorded")
         per_topic = ", ".join(f"{t} {n}" for t, n in recorder.counts().items())
         node.get_logger().info(f"Recorded {recorder.total} messages"
                                + (f": {per_topic}" if per_topic else ""))
+        if incomplete := recorder.summary():
+            node.get_logger().warning(f"the bag is not complete: {incomplete} (in "
+                                      f"{args.output}/metadata.yaml, custom_data)")
     finally:
         node.destroy_node()
     return 0

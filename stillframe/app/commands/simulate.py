@@ -12,18 +12,19 @@ import argparse
 import json
 import sys
 from pathlib import Path
+from typing import BinaryIO
 
 import numpy as np
 
-from stillframe.app.commands.common import (
+from stillframe.app.arguments import (
     add_scene_arguments,
-    check_output,
     emit_json,
     scene_and_choice,
     seconds,
 )
 from stillframe.dynamics.simulation import History, simulate
 from stillframe.errors import InputError
+from stillframe.files import check_output, open_output
 from stillframe.text_table import format_table
 
 CSV_COLUMNS = ("t", "x1", "x2", "x3", "v1", "v2", "v3", "a1", "a2", "a3", "phi", "phi_rate",
@@ -42,8 +43,13 @@ def write_history(history: History, path: Path, scene_json: str) -> None:
     if path.suffix not in (".npz", ".csv"):
         raise InputError(f"--out {path}: use a .npz or .csv file name")
     path.parent.mkdir(parents=True, exist_ok=True)
-    if path.suffix == ".npz":
-        np.savez_compressed(path, t=history.t, floors=history.floors,
+    with open_output(path, what="history file") as stream:
+        _write(history, stream, path.suffix, scene_json)
+
+
+def _write(history: History, stream: BinaryIO, suffix: str, scene_json: str) -> None:
+    if suffix == ".npz":
+        np.savez_compressed(stream, t=history.t, floors=history.floors,
                             floor_velocities=history.floor_velocities,
                             floor_accelerations=history.floor_accelerations, phi=history.phi,
                             phi_rate=history.phi_rate, excitation=history.excitation,
@@ -52,7 +58,7 @@ def write_history(history: History, path: Path, scene_json: str) -> None:
     table = np.column_stack([history.t, history.floors, history.floor_velocities,
                              history.floor_accelerations, history.phi, history.phi_rate,
                              history.excitation, history.energy])
-    np.savetxt(path, table, delimiter=",", header=",".join(CSV_COLUMNS), comments="")
+    np.savetxt(stream, table, delimiter=",", header=",".join(CSV_COLUMNS), comments="")
 
 
 def _progress(fraction: float) -> None:

@@ -12,7 +12,7 @@ import time
 from collections import deque
 from typing import Any
 
-from stillframe.app.commands.common import seconds
+from stillframe.app.arguments import seconds
 from stillframe.app.ros_tools import (
     add_strategy_arguments,
     add_verbs,
@@ -124,19 +124,21 @@ def run_info(args: argparse.Namespace) -> int:
     return 0
 
 
-def check_published_or_new(full: str) -> None:
-    """A name that no publisher has (asked when none appeared at once) and that matches no topic
-    of the settled graph while close names exist is a misspelling: one line naming them (exit 2)
+def check_published_or_new(full: str) -> bool | None:
+    """Whether the daemon's settled graph shows a publisher of ``full`` (asked when this
+    process's node found none at once; None without the daemon). A name that matches no topic
+    of that graph while close names exist is a misspelling: one line naming them (exit 2)
     instead of waiting for a publisher that will never come. A name with no close one may be a
     topic still to come: the caller waits for it, as ``ros2 topic echo`` does."""
     from stillframe.app import graph_daemon
 
     graph = graph_daemon.graph()
     if graph is None:
-        return
+        return None
     known = graph.topic_names(include_hidden=True)
     if full not in known and (hint := did_you_mean(full, known)):
         raise InputError(f"topic {full} does not exist{hint}")
+    return bool(graph.get_publishers_info_by_topic(full))
 
 
 def run_echo(args: argparse.Namespace) -> int:

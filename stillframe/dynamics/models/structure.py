@@ -57,12 +57,16 @@ class Structure:
                          self.dof_names, parts.matrix(self.mass, self.stiffness), parts)
 
 
-def story_stiffness(rig: Rig) -> np.ndarray:
-    """k_i = n 12 E J / L_i^3 for n blades clamped in non-rotating floors (thesis eq. 5.41–5.43)."""
+def bending_stiffness(rig: Rig) -> np.ndarray:
+    """n E J of each story's blades (n of them), times the story's ``stiffness_factors``."""
     c = rig.columns
     inertia = c.width * c.thickness**3 / 12.0
-    lengths = np.asarray(c.lengths)
-    return c.per_story * 12.0 * c.youngs_modulus * inertia / lengths**3
+    return c.per_story * c.youngs_modulus * inertia * np.asarray(c.stiffness_factors)
+
+
+def story_stiffness(rig: Rig) -> np.ndarray:
+    """k_i = n 12 E J / L_i^3 for n blades clamped in non-rotating floors (thesis eq. 5.41–5.43)."""
+    return 12.0 * bending_stiffness(rig) / np.asarray(rig.columns.lengths) ** 3
 
 
 def lumped_structure(rig: Rig) -> Structure:
@@ -126,13 +130,14 @@ def fe_structure(rig: Rig, elements_per_column: int) -> Structure:
     """Euler–Bernoulli columns, ``elements_per_column`` elements per story (thesis §5.4).
 
     Assumptions: the ``per_story`` blades of a story bend alike and are lumped into one beam of
-    n-fold EJ and ρA; columns are inextensible; their ends are clamped in rigid floors that do
-    not rotate, so end rotations are zero and end deflections are the floor displacements.
+    n-fold EJ (times the story's ``stiffness_factors``) and ρA; columns are inextensible; their
+    ends are clamped in rigid floors that do not rotate, so end rotations are zero and end
+    deflections are the floor displacements.
     DOFs: x1, x2, x3, then each story's inner nodes (w, θ) from the ground up.
     """
     n_e = elements_per_column
     c = rig.columns
-    ei = c.per_story * c.youngs_modulus * c.width * c.thickness**3 / 12.0
+    ei = bending_stiffness(rig)
     rho_a = c.per_story * c.density * c.width * c.thickness
     n_inner = 2 * (n_e - 1)
     n = 3 + 3 * n_inner
@@ -141,7 +146,7 @@ def fe_structure(rig: Rig, elements_per_column: int) -> Structure:
     names = ["x1", "x2", "x3"]
     for story, length in enumerate(c.lengths):
         names += [f"s{story + 1}n{j}{dof}" for j in range(1, n_e) for dof in ("w", "th")]
-        m_col, k_col = column_matrices(length, n_e, ei, rho_a)
+        m_col, k_col = column_matrices(length, n_e, float(ei[story]), rho_a)
         inner = list(range(3 + story * n_inner, 3 + (story + 1) * n_inner))
         dofs = [story - 1, *inner, story]  # the ground (-1) is dropped
         _scatter_add(mass, m_col, dofs)

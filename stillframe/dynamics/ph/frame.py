@@ -17,6 +17,7 @@ from __future__ import annotations
 import numpy as np
 
 from stillframe.config.scene import Rig
+from stillframe.dynamics.models.structure import bending_stiffness
 from stillframe.dynamics.ph.body import BeamSection, floating_beam, rigid_body
 from stillframe.dynamics.ph.joints import Link, Support, fixed
 from stillframe.dynamics.ph.system import BodyDamping, PHSystem, PortInput, RotaryDamper
@@ -26,11 +27,13 @@ UP = np.pi / 2
 FLOOR_INERTIA = 1.0  # kg m²; the floors do not rotate, so this value never enters the motion
 
 
-def column_section(rig: Rig) -> BeamSection:
+def column_section(rig: Rig, story: int) -> BeamSection:
+    """The lumped blades of ``story`` (0-based): n-fold ρA and EA, and EJ times the story's
+    ``stiffness_factors``."""
     c = rig.columns
     area = c.per_story * c.width * c.thickness
     return BeamSection(c.density * area, c.youngs_modulus * area,
-                       c.per_story * c.youngs_modulus * c.width * c.thickness**3 / 12.0)
+                       float(bending_stiffness(rig)[story]))
 
 
 def floor_heights(rig: Rig) -> np.ndarray:
@@ -44,14 +47,14 @@ def frame_system(rig: Rig, elements: int, rayleigh: tuple[float, float] | None =
     if rayleigh is not None and min(rayleigh) < 0:
         raise InputError(f"model.type ph: Rayleigh damping needs alpha, beta >= 0 (R ⪰ 0), "
                          f"got {rayleigh}")
-    section = column_section(rig)
     heights = floor_heights(rig)
     p = rig.pendulum
     bodies, connections, dampers = [], [], []
     below = None
     for story, (length, height, mass) in enumerate(zip(rig.columns.lengths, heights,
                                                        rig.floor_masses, strict=True)):
-        column = floating_beam(f"column{story + 1}", length, section, elements, "cantilever")
+        column = floating_beam(f"column{story + 1}", length, column_section(rig, story),
+                               elements, "cantilever")
         floor = rigid_body(f"floor{story + 1}", mass, FLOOR_INERTIA, 0.0, {"P": 0.0})
         bodies += [column, floor]
         bottom = (column.name, "P")

@@ -59,9 +59,7 @@ def test_stillframe_rmw_keeps_the_users_backend(monkeypatch: pytest.MonkeyPatch)
     assert recorded_default([], record=True, mode="realtime", rate_hz=FAST) is None
 
 
-def test_a_recorded_fast_realtime_run_gets_the_practices_and_an_idle_recorder() -> None:
-    assert parse_practices(practices_default(None, record=True, mode="realtime",
-                                             rate_hz=FAST)) == frozenset(PRACTICES)
+def test_a_recorded_fast_realtime_run_gets_an_idle_recorder() -> None:
     assert recorder_priority(None, mode="realtime", rate_hz=FAST) == ["--idle"]
 
 
@@ -70,14 +68,18 @@ def test_a_recorded_fast_realtime_run_gets_the_practices_and_an_idle_recorder() 
     (True, "lockstep", FAST),                   # not paced by the clock
     (True, "realtime", RECORDED_ABOVE_HZ),      # slow enough
 ])
-def test_otherwise_no_practices_and_the_recorder_as_ros2_bag_runs_it(
-        record: bool, mode: str, rate_hz: float) -> None:
-    assert practices_default(None, record=record, mode=mode, rate_hz=rate_hz) == ""
+def test_otherwise_the_recorder_as_ros2_bag_runs_it(record: bool, mode: str,
+                                                    rate_hz: float) -> None:
     if record:
         assert recorder_priority(None, mode=mode, rate_hz=rate_hz) == []
 
 
+def test_every_realtime_run_gets_the_practices_and_lockstep_none() -> None:
+    assert parse_practices(practices_default(None, mode="realtime")) == frozenset(PRACTICES)
+    assert practices_default(None, mode="lockstep") == ""
+
+
 def test_the_users_choice_is_kept() -> None:
-    assert practices_default("", record=True, mode="realtime", rate_hz=FAST) == ""  # --rt none
-    assert practices_default("fifo", record=True, mode="realtime", rate_hz=FAST) == "fifo"
+    assert practices_default("", mode="realtime") == ""  # --rt none
+    assert practices_default("fifo", mode="realtime") == "fifo"
     assert recorder_priority(["--nice", "0"], mode="realtime", rate_hz=FAST) == ["--nice", "0"]

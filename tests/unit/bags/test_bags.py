@@ -413,7 +413,7 @@ def test_incomplete_qos_record_is_a_bag_error_naming_the_mcap(tmp_path: Path) ->
 
 
 def test_the_recorders_write_path_writes_what_rosbags_writer_writes(tmp_path: Path) -> None:
-    """``BagWriter.writer_of`` (one ``struct.pack`` per record into rosbags' open chunk) against
+    """``BagWriter.writer_of`` (the recorder's per-message call into the ``mcap`` writer) against
     rosbags' own ``Writer.write`` on the same messages, across several chunks: the ``mcap``
     package reads the same records, and ``metadata.yaml`` says the same counts and times."""
     rng = np.random.default_rng(3)

@@ -31,6 +31,7 @@ from mcap.stream_reader import StreamReader
 from mcap.writer import CompressionType, Writer
 from rosbags.highlevel import AnyReader
 
+from stillframe.app.cli import main
 from stillframe.bags.reindex import reindex, salvage
 from stillframe.contract.messages import TYPESTORE
 from stillframe.errors import BagError
@@ -267,3 +268,23 @@ def test_a_chunk_with_a_bad_crc_is_skipped_and_counted(tmp_path: Path) -> None:
     result = reindex(bag, TYPESTORE)
     assert result.dropped == {"bad_chunks": 1}
     assert result.total == len(salvage(next(bag.glob("*.damaged"))).messages)
+
+
+def test_never_complete_while_the_summary_counts_more(tmp_path: Path) -> None:
+    """The second chunk of an intact file overwritten with zeros (its record gone, the summary
+    intact): reindex keeps the other chunks' messages, and says damaged with the summary's count,
+    not complete; its exit code is 3."""
+    bag = _rewrite(tmp_path / "zeros", CompressionType.NONE, 8 * 1024)
+    path = _mcap(bag)
+    data = bytearray(path.read_bytes())
+    starts = sorted(chunk_starts(path))
+    data[starts[1]:starts[2]] = bytes(starts[2] - starts[1])
+    path.write_bytes(bytes(data))
+    again = shutil.copytree(bag, tmp_path / "again")
+    result = reindex(bag, TYPESTORE)
+    assert main(["bag", "reindex", str(again)]) == BagError.exit_code
+    total = sum(len(v) for v in _mcap_topics(HAMMER.parent / HAMMER.name).values())
+    assert result.indexed == total == 1024
+    assert 0 < result.total < total
+    assert not result.complete and result.state.startswith("damaged")
+    assert sum(len(v) for v in _topics(bag).values()) == result.total

@@ -90,7 +90,7 @@ def _run(*args: str) -> subprocess.CompletedProcess:
 @pytest.mark.parametrize(
     ("setup", "args", "message"),
     [
-        (None, ["modes", "missing.yaml"], "missing.yaml: cannot read scene"),
+        (None, ["modes", "missing.yaml"], "missing.yaml: cannot read the scene file"),
         ("name: [x", ["modes", "{p}"], "not valid YAML: "),
         ("- a\n- b\n", ["modes", "{p}"], "a scene is a mapping"),
         ("name: x\nrig: {floor_masses: [1, -1, 1]}\n", ["modes", "{p}"], "rig.floor_masses"),

@@ -11,6 +11,7 @@ import pytest
 
 from stillframe.contract.signals import Estimate, full_inputs
 from stillframe.control.euk import EUKLaw
+from stillframe.control.limits import CommandLimits
 from stillframe.control.supervisor import Controller
 from stillframe.dynamics.models import build_model
 from tests.support.scenes import lumped_scene
@@ -92,7 +93,7 @@ def test_variant_1_is_bounded_and_flagged_at_the_singular_configuration(model) -
 
 def _supervisor(limit=None, start=1.0):
     return Controller(lambda z, f: (float(z[0] * 1e3), False), actuator=1, period=0.01,
-                      start=start, limit=limit, watchdog_periods=3)
+                      start=start, limits=CommandLimits(limit=limit), watchdog_periods=3)
 
 
 def _estimate(t: float, value: float = 1e-3) -> Estimate:
@@ -121,6 +122,6 @@ def test_watchdog_zeroes_the_command_without_a_fresh_estimate() -> None:
 
 
 def test_non_finite_law_output_gives_zero() -> None:
-    c = Controller(lambda z, f: (float("nan"), False), 0, 0.01)
+    c = Controller(lambda z, f: (float("nan"), False), actuator=0, period=0.01)
     out = c.command(0.0, _estimate(0.0), 0.0)
     assert out.torque == 0.0 and out.singular

@@ -59,7 +59,7 @@ def test_mpc_without_active_limits_is_python_controls_lqr_for_every_horizon() ->
     scene, design, lqr = _lumped()
     Q = state_weight(design, scene.controller.state_weights)
     K, _, _ = ct.dlqr(lqr.A, lqr.B, Q, np.array([[scene.controller.input_weight]]))
-    free = CommandLimits(None, None, None)
+    free = CommandLimits()
     rng = np.random.default_rng(3)
     for horizon in (1, 5, 30):
         law = MPCLaw(lqr, scene.controller.input_weight, limits=free,
@@ -73,7 +73,7 @@ def test_mpc_without_active_limits_is_python_controls_lqr_for_every_horizon() ->
 
 def test_the_qp_solution_meets_its_kkt_conditions_and_matches_scipy() -> None:
     scene, design, lqr = _lumped()
-    limits = CommandLimits(torque=0.5, step=0.3, angle=0.2)
+    limits = CommandLimits(saturation=0.5, step=0.3, angle=0.2)
     N = 10
     law = MPCLaw(lqr, scene.controller.input_weight, limits=limits, grid=PredictionGrid(1, N),
                  angle_index=design.phi_index)

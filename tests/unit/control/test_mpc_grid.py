@@ -81,7 +81,7 @@ def test_with_active_limits_the_blocked_mpc_is_the_qp_in_the_torques() -> None:
     lqr = design_lqr(design, grid.samples / 1024, scene.controller.state_weights,
                      scene.controller.input_weight, TORQUE_INPUT, 1)
     per_sample = 0.02                                  # N m per 1 ms sample: 20 N m/s
-    limits = CommandLimits(torque=0.8, step=per_sample, angle=0.3)
+    limits = CommandLimits(saturation=0.8, step=per_sample, angle=0.3)
     law = MPCLaw(lqr, scene.controller.input_weight, limits=limits, grid=grid,
                  angle_index=design.phi_index, max_iter=4000)
     law.previous = previous = 0.1

@@ -16,7 +16,7 @@ from stillframe.design.identified import frame_for
 from stillframe.dynamics.models import build_model
 from stillframe.estimation.factory import initial_physical, make_estimator
 from stillframe.estimation.kalman import SteadyStateKalman, TimeVaryingKalman
-from stillframe.plant.frame_plant import Plant
+from stillframe.plant.frame_plant import FramePlant
 from tests.support.scenes import lumped_scene, sample, thesis_scene
 
 PERIOD = 1.0 / 32
@@ -73,7 +73,7 @@ def _textbook(kf, ys, forces, controls, masks):
 
 def _plant_data(n: int):
     scene = thesis_scene("thesis_lqg", ["duration=3", "controller.type=none"])
-    plant = Plant(scene)
+    plant = FramePlant(scene)
     rng = np.random.default_rng(5)
     ys, forces, controls, masks = [], [], [], []
     control_now = np.zeros(2)

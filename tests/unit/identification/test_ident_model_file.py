@@ -103,7 +103,7 @@ def test_not_a_model_file(tmp_path, model):
     np.save(tmp_path / "array.npy", np.eye(2))
     with pytest.raises(InputError, match="single array"):
         load_model(tmp_path / "array.npy")
-    with pytest.raises(InputError, match="not found"):
+    with pytest.raises(InputError, match="cannot read the model file"):
         load_model(tmp_path / "missing.npz")
     with pytest.raises(InputError, match="'G' has shape"):
         save_model(tmp_path / "bad.npz", replace(model, G=np.ones((2, 2))))

@@ -16,7 +16,7 @@ from stillframe.dynamics.simulation import simulate
 from stillframe.errors import InputError
 from stillframe.loop.closed_loop import run_closed_loop
 from stillframe.plant.actuators import Actuator
-from stillframe.plant.frame_plant import Plant
+from stillframe.plant.frame_plant import FramePlant
 from stillframe.plant.sensors import quantise
 from tests.support.scenes import ROOT, lumped_scene, thesis_scene
 
@@ -73,7 +73,7 @@ def test_encoder_quantisation_and_sensor_noise_statistics() -> None:
     assert quantise(0.0123, 0.0) == 0.0123
     scene = lumped_scene(["sensors.accelerometer_noise_std=0.02", "sensors.load_cell_noise_std=0.1",
                           "sensors.accelerometer_bias=[0.5, 0, 0]", "excitation.type=none"])
-    plant = Plant(scene)
+    plant = FramePlant(scene)
     readings = np.array([plant.sensors.read(np.zeros(3), 0.0, 0.0)[0] for _ in range(4000)])
     forces = np.array([plant.sensors.read(np.zeros(3), 0.0, 1.0)[1] for _ in range(4000)])
     np.testing.assert_allclose(readings[:, :3].mean(axis=0), [0.5, 0, 0], atol=4 * 0.02 / 63)
@@ -177,7 +177,7 @@ def test_identified_npz_file_loads_like_the_bundled_yaml(tmp_path) -> None:
 ])
 def test_bad_loop_sections_name_their_key(overrides: list[str], key: str) -> None:
     with pytest.raises(InputError, match=key):
-        Plant(lumped_scene(["duration=30", "controller.start=15", *overrides]))
+        FramePlant(lumped_scene(["duration=30", "controller.start=15", *overrides]))
 
 
 @pytest.mark.slow

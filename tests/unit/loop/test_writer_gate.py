@@ -7,6 +7,16 @@ from __future__ import annotations
 import unittest.mock
 from types import SimpleNamespace
 
+import pytest
+
+from stillframe.contract import messages
+from stillframe.contract.codecs import (
+    CommandMessage,
+    carries_token,
+    stamped_frame,
+    token_suffix,
+)
+from stillframe.contract.signals import Command
 from stillframe.loop.writer_gate import (
     RECHECK_NS,
     STREAM_IDLE_NS,
@@ -100,10 +110,10 @@ def test_without_writer_ids_only_a_single_writer_is_safe() -> None:
 
 
 class Parameters:
-    """The node side :class:`InputGates` needs: read-only string parameters, all empty."""
+    """The node side :class:`InputGates` needs: its namespace."""
 
-    def declare_parameter(self, name: str, value: str, read_only: bool) -> object:
-        return type("Parameter", (), {"value": value})()
+    def get_namespace(self) -> str:
+        return "/frame"
 
 
 def test_the_graph_is_kept_read_until_a_first_writer_is_taken_then_left_alone() -> None:
@@ -280,7 +290,95 @@ def test_without_writer_ids_the_pinned_node_is_reported_once_the_graph_names_it(
     graph = Graph((STRAY, "/frame/idle_teleop"))
     gate = graph.gate("sim_node")
     assert gate.admits(b"", 1) and gate.admits(b"", 2)
-    assert gate.report()["writer"] == "sim_node"
+    assert gate.report()["writer"] == "/frame/sim_node"      # the pin, resolved in /frame
     graph.writers.append((SIM, "/frame/sim_node"))
     assert gate.report()["writer"] == "/frame/sim_node"
     assert gate.report()["ignored_writers"] == ""
+
+
+TOKEN = "3f9a0c2e5b7d1a64"
+
+
+def command(token: str, value: float = 0.5, frame: str = "pendulum") -> bytes:
+    """A torque command's CDR as a loop controller with ``token`` writes it (``frame``: what a
+    foreign writer might put in its frame_id instead)."""
+    msg = messages.new("geometry_msgs/msg/WrenchStamped")
+    msg.header.frame_id = stamped_frame(frame, token)
+    msg.wrench.torque.z = value
+    return bytes(messages.serialize(msg))
+
+
+def test_the_token_is_read_from_the_bytes_as_rosbags_wrote_them() -> None:
+    """:func:`carries_token` on CDR that rosbags serialized: the frame_id's end, nothing else
+    (not a prefix, not another token, not big-endian CDR, not a cut message)."""
+    suffix = token_suffix(TOKEN)
+    assert carries_token(command(TOKEN), suffix)
+    assert bytes(CommandMessage(0, TOKEN).cdr(Command(0.0, 0.5), 0)) == command(TOKEN)
+    assert carries_token(command(TOKEN, frame="anything"), suffix)
+    for refused in (command(""), command("3f9a0c2e5b7d1a6"), command(TOKEN + "0"),
+                    command("", frame=TOKEN), command(TOKEN)[:20], b"", b"\0\1"):
+        assert not carries_token(refused, suffix), refused
+    big = messages.new("geometry_msgs/msg/WrenchStamped")
+    big.header.frame_id = stamped_frame("pendulum", TOKEN)
+    assert not carries_token(messages.TYPESTORE.serialize_cdr(
+        big, big.__msgtype__, little_endian=False), suffix)
+
+
+@pytest.mark.parametrize("with_gids", [True, False])
+def test_with_the_token_a_foreign_writer_never_commands_whatever_came_first_or_its_name(
+        with_gids: bool) -> None:
+    """The issue's three intruders, each with many samples in flight: one writing before the
+    loop's first command (first seen), one under the controller's name in the root namespace
+    (the bare-name pin matched it), one mid-run; the loop's commands are all taken, every
+    other sample is refused without asking the graph, and the intruders are named fully
+    qualified, never as the loop's own controller."""
+    gids = {"own": SIM, "rogue": STRAY, "root": STRAY2} if with_gids else dict.fromkeys(
+        ("own", "rogue", "root"), b"")
+    graph = Graph((gids["rogue"] or STRAY, "/rogue_tuner"),
+                  (gids["root"] or STRAY2, "/controller_node"),
+                  (gids["own"] or SIM, "/frame/controller_node"))
+    gates = InputGates(Parameters(), {"command_writer": "controller_node"},
+                       {"command_writer": "controller_node"}, TOKEN)
+    gate = gates.add("/frame/pendulum/torque_cmd", "command_writer")
+    gate.writers = graph
+    foreign = command("")
+    for n in range(1, 501):                    # the rogue first, 500 samples
+        assert not gate.admits(gids["rogue"], n, foreign)
+    for n in range(1, 1001):                   # then the loop, with the other two mid-run
+        assert gate.admits(gids["own"], n, command(TOKEN, 1e-3 * n))
+        assert not gate.admits(gids["root"], n, foreign)
+        assert not gate.admits(gids["rogue"], 500 + n, command("0" * 16))   # another run's
+    assert graph.asked == 0                    # refused and taken without the graph
+    assert dict(gate.rejected) == {"foreign_writer": 2500}
+    report = gate.report()
+    assert report["writer"] == "/frame/controller_node"
+    named = report["ignored_writers"]
+    assert named == ("/controller_node,/rogue_tuner" if with_gids
+                     else "/controller_node or /rogue_tuner")
+    log = Log()
+    with unittest.mock.patch("time.monotonic_ns", lambda: 0):
+        assert gates.announce(log)
+    assert log.lines == [f"/frame/pendulum/torque_cmd: refusing the samples of a foreign writer "
+                         f"(without the run's token): {named.replace(',', ', ')} (2500 so far)"]
+    assert "/frame/controller_node" not in named.split(",")
+
+
+def test_with_the_token_a_second_writer_under_the_loops_own_name_is_said_so() -> None:
+    """Without GIDs and with no other node in the graph, the foreign samples can only come from
+    a second writer named as the loop's own node: said so, never the loop's node itself."""
+    graph = Graph((SIM, "/frame/controller_node"), (STRAY, "/frame/controller_node"))
+    gate = WriterGate("controller_node", graph, token=token_suffix(TOKEN))
+    assert not gate.admits(b"", 1, command(""))
+    assert gate.report()["ignored_writers"] == "another writer named /frame/controller_node"
+
+
+def test_a_topic_without_a_header_keeps_the_rule_of_a_run_without_a_token() -> None:
+    """``/clock`` has no header, so no token to carry: its gate (the controller's, with
+    ``use_sim_time``) takes the first writer seen (or the pinned node), where a token gate would
+    refuse every sample, the simulator's too."""
+    gates = InputGates(Parameters(), {"sensor_writer": ""}, {"sensor_writer": "sim_node"}, TOKEN)
+    clock = gates.add("/clock", "sensor_writer", stamped=False)
+    stamped = gates.add("/frame/excitation/wrench", "sensor_writer")
+    tick = messages.serialize(messages.new("rosgraph_msgs/msg/Clock"))
+    assert clock.token == b"" and stamped.token == token_suffix(TOKEN)
+    assert clock.admits(SIM, 0, tick) and not stamped.admits(SIM, 0, tick)

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from stillframe.node_runtime.support import Durations
+from stillframe.durations import Durations
 
 
 def expected(values: np.ndarray) -> dict[str, float]:

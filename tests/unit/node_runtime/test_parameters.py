@@ -13,7 +13,7 @@ import pytest
 from stillframe.errors import InputError
 from stillframe.locations import REPO_ROOT
 from stillframe.middleware import api
-from stillframe.middleware.params import Parameter
+from stillframe.middleware.params import Parameter, Range
 from stillframe.node_runtime.declarations import (
     NODE_PARAMETERS,
     REFERENCE_MARKERS,
@@ -42,7 +42,8 @@ def test_the_docs_reference_is_generated_from_the_declarations() -> None:
     declared = {s.name for classes in NODE_PARAMETERS.values() for c in classes
                 for s in c.specs()}
     assert {row.split("`")[1] for row in table.splitlines()[3:]} == declared
-    assert len(declared) == 23      # the 22 names declared by hand before, and autostart
+    assert len(declared) == 30      # 22 by hand before, autostart, run_token, the two of the
+    # phase timing, design, the adaptation's 3
 
 
 @dataclasses.dataclass(frozen=True)
@@ -59,7 +60,8 @@ class Node:
     def __init__(self, **given: object) -> None:
         self.given = given
 
-    def declare_parameter(self, name: str, default: object, read_only: bool) -> Parameter:
+    def declare_parameter(self, name: str, default: object, read_only: bool = False, *,
+                          descriptor: object = None) -> Parameter:
         return Parameter(name, self.given.get(name, default))
 
 
@@ -120,9 +122,65 @@ def test_a_real_node_declares_checks_and_refuses_by_the_declarations(
                 RclpyParameter("command_limit", value=0.25),
                 RclpyParameter("estimate_writer", value="x")])
             assert [r.successful for r in results] == [False, True, False]
-            assert results[0].reason == "command_limit: must be >= 0 (got -1.0)"
+            # rclpy holds a set to the descriptor's range before any callback, in its words
+            assert results[0].reason == ("Parameter command_limit out of range Min: 0.0, "
+                                         "Max: inf, value: -1.0")
             assert "read-only" in results[2].reason
         assert node.get_parameter("command_limit").value == 0.25
+    finally:
+        node.destroy_node()
+
+
+def test_each_declaration_is_described_as_rclpy_describes_its_own() -> None:
+    """The descriptor of every field of :class:`Example`: the doc with its unit, the closed range
+    of a scalar number (step 0: any value), what a range cannot say in words (an open bound,
+    the choices, a list's items), read-only unless set at run time."""
+    described = {s.name: s.descriptor() for s in Example.specs()}
+    rate, share, mode, gains = (described[n] for n in ("rate", "share", "mode", "gains"))
+    assert (rate.description, rate.read_only, rate.range) == (
+        "a rate; unit: Hz", True, Range(0, math.inf, 0))
+    assert rate.additional_constraints == "> 0 (0 itself is refused; a range is closed); finite"
+    assert (share.read_only, share.range) == (False, Range(0.0, 1.0, 0))
+    assert share.additional_constraints.startswith("< 1 (1 itself is refused")
+    assert (mode.range, mode.additional_constraints) == (None, "one of a, b")
+    assert gains.range is None
+    assert gains.additional_constraints == "> 0 (no range: a range holds a single number); finite"
+
+
+@pytest.mark.processes
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_a_real_node_describes_and_checks_start_values_by_the_declarations(
+        backend: str, ros_domain: int) -> None:
+    """The descriptor a real node of each backend answers on ``describe_parameters`` (rclpy's own
+    ParameterService on rclpy: the independent side) carries the declaration's description,
+    range and read-only flag; a start value outside the range is refused in the declaration's
+    words on both (rclpy would refuse it in its own)."""
+    scene = type("Scene", (), {"controller": type("C", (), {"limit": None})()})()
+    node = api.create_node("controller_node", namespace="/frame", argv=["x"], backend=backend)
+    try:
+        declare(node, ControllerParameterValues, scene)
+        if backend == "dds":
+            from stillframe.contract import messages
+            from stillframe.middleware.param_messages import answer_describe
+
+            request = messages.new("rcl_interfaces/srv/DescribeParameters_Request",
+                                   names=["command_limit", "estimate_writer"])
+            limit, writer = answer_describe(node._params, request).descriptors
+        else:
+            limit, writer = node._node.describe_parameters(["command_limit", "estimate_writer"])
+        spec = next(s for s in ControllerParameterValues.specs() if s.name == "command_limit")
+        assert limit.description == spec.descriptor().description
+        assert "unit: N m or N" in limit.description and not limit.read_only
+        assert [(r.from_value, r.to_value, r.step) for r in limit.floating_point_range] == [
+            (0.0, math.inf, 0.0)]
+        assert list(limit.integer_range) == [] and writer.read_only
+    finally:
+        node.destroy_node()
+    node = api.create_node("controller_node", namespace="/frame",
+                           argv=["x", "--ros-args", "-p", "command_limit:=-1.0"], backend=backend)
+    try:
+        with pytest.raises(InputError, match=r"'command_limit': must be >= 0 \(got -1.0\)"):
+            declare(node, ControllerParameterValues, scene)
     finally:
         node.destroy_node()
 

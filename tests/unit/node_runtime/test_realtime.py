@@ -7,6 +7,7 @@ from __future__ import annotations
 import gc
 import json
 import os
+import resource
 import struct
 import subprocess
 import sys
@@ -17,7 +18,10 @@ from stillframe.errors import InputError
 from stillframe.locations import REPO_ROOT
 from stillframe.loop.pacing import wait_until
 from stillframe.node_runtime.realtime import (
+    CAP_SYS_NICE,
     CPU_LATENCY_DEVICE,
+    GC_LIMIT,
+    GC_SLACK_NS,
     GC_YOUNG,
     PRACTICES,
     Realtime,
@@ -56,7 +60,7 @@ import ctypes, json, os, threading, time
 os.environ["OPENBLAS_NUM_THREADS"] = "2"     # numpy's and scipy's BLAS: two threads each
 import numpy, scipy.linalg
 from threadpoolctl import threadpool_info
-from stillframe.node_runtime.realtime import Realtime, RealtimeOptions
+from stillframe.node_runtime.realtime import Realtime, RealtimeOptions, permissions_line
 
 def blas_threads():
     return sorted(i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas")
@@ -69,8 +73,11 @@ for name in ("recvUC", "tev"):
     threading.Thread(target=named, args=(name,), daemon=True).start()
 time.sleep(0.2)
 {before}
-rt = Realtime(RealtimeOptions(frozenset({practices}), 42, ({cpu},)))
+options = RealtimeOptions(frozenset({practices}), 42, ({cpu},))
+line = permissions_line(options)
+rt = Realtime(options)
 rt.enter()
+locked_kb = int(next(l.split()[1] for l in open("/proc/self/status") if l.startswith("VmLck:")))
 threads = {{}}
 for t in os.listdir("/proc/self/task"):
     name = open(f"/proc/self/task/{{t}}/comm").read().strip()
@@ -86,7 +93,7 @@ blas = blas_threads()
 rt.leave()
 print(json.dumps({{"applied": rt.applied, "refused": rt.refused, "threads": threads,
     "child_other": status == 0, "fifo": os.SCHED_FIFO, "other": os.SCHED_OTHER,
-    "blas": blas, "blas_after_leave": blas_threads()}}))
+    "blas": blas, "blas_after_leave": blas_threads(), "line": line, "locked_kb": locked_kb}}))
 """
 
 
@@ -95,7 +102,7 @@ def test_fifo_affinity_and_mlock_reach_every_thread_and_not_children() -> None:
     cpu = max(os.sched_getaffinity(0))
     out = run_child(ENTER.format(before="", practices='{"fifo", "affinity", "mlock"}', cpu=cpu))
     assert out["refused"] == []
-    assert "memory locked" in out["applied"]
+    assert "memory locked (CAP_IPC_LOCK)" in out["applied"]
     fifo, other = out["fifo"], out["other"]
     threads = out["threads"]
     assert threads["main"][:2] == [fifo, 42] and threads["recvUC"][:2] == [fifo, 42]
@@ -108,20 +115,91 @@ def test_fifo_affinity_and_mlock_reach_every_thread_and_not_children() -> None:
         assert "VmLck:\t       0 kB" in status.read()
 
 
+def unprivileged(rtprio: tuple[int, int], memlock: tuple[int, int], keep: int = 0) -> str:
+    """Child code run first: these soft and hard limits, then the user ``nobody``, as a user's
+    login under limits.conf would be; with capability ``keep`` (0: none) still in effect, as
+    ``setcap`` on an executable gives it."""
+    caps = "" if not keep else f"""
+class Header(ctypes.Structure):
+    _fields_ = [("version", ctypes.c_uint32), ("pid", ctypes.c_int)]
+class Data(ctypes.Structure):
+    _fields_ = [("effective", ctypes.c_uint32), ("permitted", ctypes.c_uint32),
+                ("inheritable", ctypes.c_uint32)]
+libc = ctypes.CDLL(None, use_errno=True)
+libc.prctl(8, 1, 0, 0, 0)                          # PR_SET_KEEPCAPS
+os.setuid(65534)
+bits = (Data * 2)(Data(1 << {keep}, 1 << {keep}, 0), Data(0, 0, 0))
+assert libc.capset(ctypes.byref(Header(0x20080522, 0)), bits) == 0, ctypes.get_errno()
+"""
+    return ("import resource\n"
+            f"resource.setrlimit(resource.RLIMIT_RTPRIO, {rtprio})\n"
+            f"resource.setrlimit(resource.RLIMIT_MEMLOCK, {memlock})\n"
+            + (caps if keep else "os.setuid(65534)\n"))
+
+
+#: this machine's hard limits, which the tests may lower but not raise
+HARD_RTPRIO = resource.getrlimit(resource.RLIMIT_RTPRIO)[1]
+HARD_MEMLOCK = resource.getrlimit(resource.RLIMIT_MEMLOCK)[1]
+
+
 @pytest.mark.skipif(not ROOT, reason="needs root to become an unprivileged user")
 def test_an_unprivileged_process_is_told_what_was_refused_and_why() -> None:
+    """No rtprio, 64 KiB of soft memlock below a finite hard one, not root: the soft limit is
+    raised to the hard one, nothing else is tried, each refusal says why, the one line says how
+    to allow it, and the collector is held all the same."""
     cpu = max(os.sched_getaffinity(0))
-    before = ("import resource; resource.setrlimit(resource.RLIMIT_RTPRIO, (0, 0)); "
-              "resource.setrlimit(resource.RLIMIT_MEMLOCK, (65536, 65536)); os.setuid(65534)")
-    out = run_child(ENTER.format(before=before, practices='{"fifo", "mlock", "gc", "cpu_latency"}',
-                                 cpu=cpu))
-    assert any(r.startswith("SCHED_FIFO refused: Operation not permitted") for r in out["refused"])
-    assert any(r.startswith("mlockall refused:") for r in out["refused"])
-    assert f"{CPU_LATENCY_DEVICE} refused: Permission denied (errno 13) (needs root)" in out[
-        "refused"][-1]
+    memlock = min(HARD_MEMLOCK, 8 << 20)
+    out = run_child(ENTER.format(before=unprivileged((0, 0), (65536, memlock)),
+                                 practices='{"fifo", "mlock", "gc", "cpu_latency"}', cpu=cpu))
+    refused = out["refused"]
+    assert "SCHED_FIFO not permitted: RLIMIT_RTPRIO 0 and no CAP_SYS_NICE" in refused
+    assert any(r.startswith(f"memory not locked: RLIMIT_MEMLOCK {memlock >> 20} MiB, less than "
+                            "2 times the ") for r in refused)
+    assert f"{CPU_LATENCY_DEVICE} refused: Permission denied (errno 13) (needs root)" in refused
     assert out["applied"] == ["gc frozen and off in the loop"]
+    assert out["locked_kb"] == 0
     assert out["blas"] == [2, 2]                            # no SCHED_FIFO: no need
     assert all(t[0] == out["other"] for t in out["threads"].values())
+    line = out["line"]
+    assert line.startswith(f"real-time practice: collector held; not permitted: memory locked "
+                           f"(RLIMIT_MEMLOCK {memlock >> 20} MiB, less than 2 times the ")
+    assert "SCHED_FIFO (RLIMIT_RTPRIO 0 and no CAP_SYS_NICE)" in line
+    assert "@realtime - rtprio 98" in line and "@realtime - memlock unlimited" in line
+
+
+@pytest.mark.skipif(not ROOT, reason="needs root to become an unprivileged user")
+def test_a_user_with_cap_sys_nice_gets_sched_fifo_without_root() -> None:
+    """Not root, no rtprio limit, but CAP_SYS_NICE in effect: FIFO at the priority asked, on
+    the main and receive threads."""
+    cpu = max(os.sched_getaffinity(0))
+    out = run_child(ENTER.format(before=unprivileged((0, 0), (0, 0), keep=CAP_SYS_NICE),
+                                 practices='{"fifo"}', cpu=cpu))
+    assert out["refused"] == []
+    assert out["applied"] == ["SCHED_FIFO 42 on 2 threads (CAP_SYS_NICE); BLAS on one thread"]
+    assert out["threads"]["main"][:2] == [out["fifo"], 42]
+    assert out["threads"]["recvUC"][:2] == [out["fifo"], 42]
+    assert out["threads"]["tev"][:2] == [out["other"], 0]
+    assert out["line"] == "real-time practice: SCHED_FIFO 42 (CAP_SYS_NICE)"
+
+
+@pytest.mark.skipif(not ROOT or HARD_RTPRIO < 50,
+                    reason="needs root and a hard RLIMIT_RTPRIO of 50 or more to lower from "
+                           "(root without CAP_SYS_RESOURCE cannot raise it)")
+@pytest.mark.parametrize(("rtprio", "priority"), [((50, 50), 42), ((30, 30), 30),
+                                                  ((0, 35), 35)])
+def test_a_user_with_an_rtprio_limit_gets_sched_fifo_within_it(
+        rtprio: tuple[int, int], priority: int) -> None:
+    """Not root, no capabilities, the rtprio limit limits.conf gives a `realtime` group: FIFO
+    at the priority asked (42) or the limit if lower. A hard limit above a soft 0 is raised
+    to first, as a user may."""
+    cpu = max(os.sched_getaffinity(0))
+    out = run_child(ENTER.format(before=unprivileged(rtprio, (0, 0)), practices='{"fifo"}',
+                                 cpu=cpu))
+    assert out["refused"] == []
+    assert out["applied"] == [f"SCHED_FIFO {priority} on 2 threads (RLIMIT_RTPRIO {rtprio[1]}); "
+                              "BLAS on one thread"]
+    assert out["threads"]["main"][:2] == [out["fifo"], priority]
+    assert out["line"] == f"real-time practice: SCHED_FIFO {priority} (RLIMIT_RTPRIO {rtprio[1]})"
 
 
 def cpu_latency_us() -> int:
@@ -165,6 +243,40 @@ def test_collector_is_off_in_the_loop_and_idle_collects_the_young_generation() -
         assert gc.get_count()[0] > GC_YOUNG
         rt.idle()
         assert rt.young_collections == 1 and gc.get_count()[0] < GC_YOUNG
+    finally:
+        rt.leave()
+        gc.unfreeze()
+    assert gc.isenabled()
+
+
+def young_cycles(n: int) -> None:
+    """``n`` young objects that only the collector can free (each refers to itself)."""
+    for _ in range(n):
+        cycle: list = []
+        cycle.append(cycle)
+
+
+def test_idle_collects_only_when_the_next_sample_leaves_time() -> None:
+    """The young generation past :data:`GC_YOUNG`: with less than :data:`GC_SLACK_NS` to the
+    next sample the collection is put off; with enough, or without a deadline, it runs; past
+    :data:`GC_LIMIT` it runs whatever the slack."""
+    rt = Realtime(RealtimeOptions())
+    rt.hold_collector()
+    try:
+        assert not gc.isenabled() and rt.applied == ["gc frozen and off in the loop"]
+        young_cycles(2 * GC_YOUNG)
+        rt.idle(GC_SLACK_NS - 1)
+        assert (rt.young_collections, rt.deferred_collections) == (0, 1)
+        assert gc.get_count()[0] > GC_YOUNG
+        rt.idle(GC_SLACK_NS)
+        assert rt.young_collections == 1 and gc.get_count()[0] < GC_YOUNG
+        young_cycles(2 * GC_YOUNG)
+        rt.idle(None)                                       # lock-step: no deadline
+        assert rt.young_collections == 2
+        young_cycles(GC_LIMIT + GC_YOUNG)
+        rt.idle(0)
+        assert (rt.young_collections, rt.forced_collections) == (3, 1)
+        assert gc.get_count()[0] < GC_YOUNG
     finally:
         rt.leave()
         gc.unfreeze()

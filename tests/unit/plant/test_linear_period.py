@@ -17,7 +17,7 @@ import scipy.linalg as sla
 
 from stillframe.dynamics.integrators import ImplicitMidpoint, integrate, reference_solution
 from stillframe.errors import InputError
-from stillframe.plant.frame_plant import Plant
+from stillframe.plant.frame_plant import FramePlant
 from stillframe.plant.linear_period import zoh_recurrence
 from tests.support.scenes import lumped_scene, thesis_scene
 
@@ -26,11 +26,11 @@ QUIET = ["plant.process_noise_std=[0,0,0,0,0,0,0,0]", "duration=2.0", "controlle
 TORQUE = 0.01  # N m, held over the run
 
 
-def plant(*overrides: str) -> Plant:
-    return Plant(thesis_scene("thesis_lqg", [*QUIET, *overrides]))
+def plant(*overrides: str) -> FramePlant:
+    return FramePlant(thesis_scene("thesis_lqg", [*QUIET, *overrides]))
 
 
-def run(p: Plant, periods: int) -> np.ndarray:
+def run(p: FramePlant, periods: int) -> np.ndarray:
     for _ in range(periods):
         p.advance(np.array([TORQUE, 0.0]))
     return p.x.copy()
@@ -105,4 +105,4 @@ def test_sampled_accelerations_are_the_derivative_to_round_off() -> None:
 
 def test_zoh_needs_the_linear_plant() -> None:
     with pytest.raises(InputError, match=r"plant\.discretization: zoh needs the linear plant"):
-        Plant(lumped_scene(["plant.discretization=zoh"]))
+        FramePlant(lumped_scene(["plant.discretization=zoh"]))

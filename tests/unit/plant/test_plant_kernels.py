@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from stillframe.plant.frame_plant import Plant
+from stillframe.plant.frame_plant import FramePlant
 from tests.support.scenes import lumped_scene
 
 
@@ -20,7 +20,7 @@ from tests.support.scenes import lumped_scene
 ], ids=["lumped-rk4", "fe3-midpoint"])
 def test_compiled_substeps_equal_the_integrators(overrides: list[str]) -> None:
     scene = lumped_scene(["initial.phi=0.05", *overrides])
-    compiled, stepped = Plant(scene), Plant(scene)
+    compiled, stepped = FramePlant(scene), FramePlant(scene)
     assert compiled.compiled is not None
     stepped.compiled = None                      # the numpy integrator's path
     for k in range(32):
@@ -38,7 +38,7 @@ def test_warm_up_leaves_the_trajectory_as_it_was() -> None:
     """``warm_up`` (the kernels loaded before the loop) changes nothing: the same samples and
     states, bit for bit, as a plant that was not warmed up."""
     scene = lumped_scene(["initial.phi=0.05", "sensors.accelerometer_noise_std=0.01"])
-    warmed, cold = Plant(scene), Plant(scene)
+    warmed, cold = FramePlant(scene), FramePlant(scene)
     warmed.warm_up()
     np.testing.assert_array_equal(warmed.x, cold.x)
     for k in range(16):

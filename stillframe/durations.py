@@ -1,0 +1,49 @@
+"""Durations [s] kept in a preallocated ring: a loop's per-sample timings without growth.
+
+Used by the loop nodes (latencies, compute times) and the controller (its law's time per
+sample), so that a long run at 1 kHz neither grows a list nor reallocates one in the loop.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["Durations"]
+
+
+class Durations:
+    """Wall-clock durations [s] (latencies, compute times) kept in a preallocated ring of the
+    last ``keep``: percentiles in ms over all of them (:meth:`summary`, for a run's result) or
+    over those added since the last report (:meth:`recent`, for ``/diagnostics``). A report
+    costs what its window holds, not the whole run (percentiles over 10⁵ values take
+    milliseconds, too long for the loop)."""
+
+    def __init__(self, keep: int = 100_000) -> None:
+        self.values = np.empty(keep)
+        self.count = 0              # values added, ever
+        self.reported = 0           # ``count`` at the last :meth:`recent`
+
+    def add(self, seconds: float) -> None:
+        self.values[self.count % len(self.values)] = seconds
+        self.count += 1
+
+    def summary(self) -> dict[str, float]:
+        """Over every value kept."""
+        return self._percentiles(self.values[:min(self.count, len(self.values))])
+
+    def recent(self) -> dict[str, float]:
+        """Over the values added since the last call (at most ``keep``)."""
+        n = min(self.count - self.reported, len(self.values))
+        self.reported = self.count
+        end = self.count % len(self.values)
+        window = (self.values[end - n:end] if n <= end
+                  else np.concatenate([self.values[end - n:], self.values[:end]]))
+        return self._percentiles(window)
+
+    @staticmethod
+    def _percentiles(seconds: np.ndarray) -> dict[str, float]:
+        if not len(seconds):
+            return {"p50": float("nan"), "p99": float("nan"), "max": float("nan")}
+        p50, p99 = np.percentile(seconds, (50, 99))
+        return {"p50": 1e3 * float(p50), "p99": 1e3 * float(p99),
+                "max": 1e3 * float(seconds.max())}

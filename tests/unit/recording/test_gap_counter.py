@@ -1,0 +1,64 @@
+"""The recorder's count of samples missing from a topic's stamp grid, against the count of the
+grid's stamps absent from a stream built with known holes (a set difference, not the
+counter's arithmetic)."""
+
+from __future__ import annotations
+
+import random
+
+from stillframe.recording.recorder import GapCounter, starts_with_stamp
+
+PERIOD = 31_250_000     # the thesis's 32 Hz, in ns
+
+
+def counted(stamps: list[int]) -> int | None:
+    gaps = GapCounter()
+    for stamp in stamps:
+        gaps.add(stamp)
+    return gaps.missing()
+
+
+def test_holes_in_a_grid_are_counted_exactly() -> None:
+    rng = random.Random(3)
+    for _ in range(50):
+        grid = [k * PERIOD for k in range(rng.randrange(10, 2000))]
+        kept = [t for i, t in enumerate(grid) if i in (0, len(grid) - 1) or rng.random() > 0.3]
+        holes = len(set(range(kept[0], kept[-1] + 1, PERIOD)) - set(kept))
+        assert counted(kept) == holes
+
+
+def test_a_period_of_a_fraction_of_a_nanosecond_is_a_grid() -> None:
+    """1024 Hz: stamps rounded to the nanosecond from k / 1024 s, as the simulator makes them
+    (steps of 976562 and 976563 ns); a hole of 2000 samples among them."""
+    stamps = [round(k * 1e9 / 1024) for k in range(5000) if not 1000 <= k < 3000]
+    assert counted(stamps) == 2000
+
+
+def test_repeats_and_a_restart_are_not_holes() -> None:
+    """A stamp sent twice (two writers of one sample) and a simulator that starts again at 0:
+    the steps back and the repeats count nothing; the holes after the restart do."""
+    first = [k * PERIOD for k in range(100)]
+    again = [k * PERIOD for k in range(50) if k != 20]
+    stamps = [*first[:60], first[59], *first[60:], *again]
+    assert counted(stamps) == 1
+
+
+def test_stamps_off_a_grid_are_not_counted() -> None:
+    """A clock that jitters (a timer's wall-clock stamps): no grid, no count, never a huge
+    number."""
+    rng = random.Random(4)
+    stamps, t = [], 1_700_000_000 * 10**9
+    for _ in range(500):
+        t += 1_000_000_000 + rng.randrange(-50_000, 50_000)
+        stamps.append(t)
+    assert counted(stamps) is None
+    assert counted([5]) is None
+
+
+def test_the_loop_topics_start_with_a_stamp_and_others_do_not() -> None:
+    for msgtype in ("sensor_msgs/msg/Imu", "sensor_msgs/msg/JointState",
+                    "geometry_msgs/msg/WrenchStamped", "rosgraph_msgs/msg/Clock",
+                    "diagnostic_msgs/msg/DiagnosticArray", "rcl_interfaces/msg/Log"):
+        assert starts_with_stamp(msgtype), msgtype
+    for msgtype in ("std_msgs/msg/Float64", "std_msgs/msg/String", "nonexistent/msg/Type"):
+        assert not starts_with_stamp(msgtype), msgtype
