@@ -178,7 +178,7 @@ def _stderr(message: str) -> None:
     print(f"experiment: {message}", file=sys.stderr, flush=True)
 
 
-def run_experiment(scene_path: Path, user: Sequence[str], out: Path, test: IdentificationTest,
+def run_experiment(scene_path: Path, user: Sequence[str], out: Path, test: IdentificationTest, *,
                    mode: str = "lockstep", lockstep_timeout_s: float | None = None,
                    backends: Sequence[str] = (), progress: Progress = _stderr
                    ) -> ExperimentResult:

@@ -473,7 +473,7 @@ class CompiledFrame:
                 self._subdivide(kernel, method, x, start, half, u, load, depth + 1,
                                 _CAUSE[method][status])
 
-    def run(self, method: str, x0: np.ndarray, h: float, n_steps: int,
+    def run(self, method: str, x0: np.ndarray, h: float, n_steps: int, *,
             load: FloorLoad | None = None, control: np.ndarray | None = None, t0: float = 0.0,
             stride: int = 1) -> np.ndarray:
         """States every ``stride`` steps (rows, the first is x0) after ``n_steps`` steps.
@@ -529,7 +529,7 @@ def compiled_integrate(model: FrameModel, load: FloorLoad | None, method: str, x
     done = 0
     while done < n_steps:
         steps = min(chunk, n_steps - done)
-        states = frame.run(method, x, dt, steps, load, t0=done * dt)
+        states = frame.run(method, x, dt, steps, load=load, t0=done * dt)
         if observer:
             for j in range(1, steps + 1):
                 observer(done + j, (done + j) * dt, states[j])

@@ -42,7 +42,7 @@ class HammerRecord:
     damping_ratio: Array
 
 
-def hammer_test(lin: LinearModel, seed: int = 0, dt: float = 1.0 / 32.0, samples: int = 2048,
+def hammer_test(lin: LinearModel, seed: int = 0, *, dt: float = 1.0 / 32.0, samples: int = 2048,
                 impulse: float = 0.05, blow_sample: int = 32, force_noise: float = 1e-3,
                 acceleration_noise: float = 1e-3) -> HammerRecord:
     """Simulate the hammer test on ``lin`` (input ``f1``, outputs the floor accelerations)."""

@@ -174,11 +174,11 @@ class FramePlant:
         banded step matrix is factored on the first step: 0.5 s on FE 40), their throwaway
         substep not counted."""
         if self.compiled is not None:
-            self.compiled.run(self.integrator.name, self.x.copy(), self.h, 1, self.load,
+            self.compiled.run(self.integrator.name, self.x.copy(), self.h, 1, load=self.load,
                               control=self.system.control, t0=self.t)
         for _, compiled in self.changed:
             if compiled is not None:
-                compiled.run(self.integrator.name, self.x.copy(), self.h, 1, self.load,
+                compiled.run(self.integrator.name, self.x.copy(), self.h, 1, load=self.load,
                              control=self.system.control, t0=self.t)
                 compiled.subdivisions = 0
 
@@ -211,7 +211,7 @@ class FramePlant:
         try:
             if self.compiled is not None:
                 states = self.compiled.run(self.integrator.name, self.x, self.h, self.substeps,
-                                           self.load, control=self.system.control, t0=t0)
+                                           load=self.load, control=self.system.control, t0=t0)
                 self._record_period(t0, states[1:, self.physical_index[RECORDED]])
                 self.x = states[-1].copy()
             else:

@@ -91,7 +91,7 @@ def realtime_row(lab: Lab, fault: Fault, duration: float, out: Path,
             "reduction_pct": e["reduction_pct"]["displacement"]}
 
 
-def run_bench(lab: Lab, faults: Sequence[Fault], duration: float, out: Path,
+def run_bench(lab: Lab, faults: Sequence[Fault], duration: float, out: Path, *,
               modes: Sequence[str] = ("lockstep", "realtime"), backends: Sequence[str] = (),
               progress: Callable[[str], None] | None = None,
               overrides: Sequence[str] = ()) -> list[dict[str, Any]]:

@@ -82,8 +82,8 @@ def run(args: argparse.Namespace) -> int:
     modes = [args.only] if args.only else list(MODES)
     with tempfile.TemporaryDirectory(prefix="stillframe-bench-faults-") as tmp, \
             lab(args.netns_prefix) as made, joined(made):
-        rows = run_bench(made, faults, args.duration, Path(tmp), modes, args.backends,
-                         overrides=args.overrides)
+        rows = run_bench(made, faults, args.duration, Path(tmp), modes=modes,
+                         backends=args.backends, overrides=args.overrides)
     if args.json:
         emit_json({"duration_s": args.duration, "overrides": args.overrides, "rows": rows})
     else:

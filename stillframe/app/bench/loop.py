@@ -199,7 +199,7 @@ def observer_realtime(practices: str) -> Iterator[None]:
         rt.leave()
 
 
-def realtime(rate_hz: float, duration: float, out: Path, backend: str,
+def realtime(rate_hz: float, duration: float, out: Path, backend: str, *,
              rt: tuple[str, list[int]] = ("", []),
              monitor_args: list[str] | None = None, compose: str = "",
              probe: bool = False, record: Sequence[str] | None = None,
@@ -513,7 +513,7 @@ def run(args: argparse.Namespace) -> int:
                     rows.append({"repeat": repeat, **settled.figures(), **realtime(
                         rate, args.duration,
                         Path(tmp) / f"{backend}{rate:g}-{repeat}{'-' + name if name else ''}",
-                        backend, rt, compose=args.compose, probe=args.stall_probe,
+                        backend, rt=rt, compose=args.compose, probe=args.stall_probe,
                         dds_observer=args.dds_observer, **extra)})
             if args.lockstep:
                 print(f"{backend}: lock-step, the full LQG scene", file=sys.stderr)

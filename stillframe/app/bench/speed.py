@@ -72,18 +72,18 @@ def measure(quick: bool = False) -> dict:
     h = 1e-3
     say("lumped RK4")
     _, load, frame, system, x0 = _setup([])
-    frame.run("rk4", x0, h, 2, load)
+    frame.run("rk4", x0, h, 2, load=load)
     n_fast, n_slow = (200_000, 5_000) if quick else (1_000_000, 10_000)
-    fast = n_fast / _cpu(lambda: frame.run("rk4", x0, h, n_fast, load, stride=1000))
+    fast = n_fast / _cpu(lambda: frame.run("rk4", x0, h, n_fast, load=load, stride=1000))
     slow = n_slow / _cpu(lambda: integrate(system, x0, h, n_slow, RK4()))
     rk4 = {"compiled_steps_per_s": fast, "numpy_steps_per_s": slow, "ratio": fast / slow,
            "target_steps_per_s": 1e6}
     say("FE 40 implicit midpoint")
     fe = ["model.type=fe", "damping.model=modal"]
     _, load, frame, system, x0 = _setup([*fe, "model.elements_per_column=40"])
-    frame.run("midpoint", x0, h, 2, load)
+    frame.run("midpoint", x0, h, 2, load=load)
     n_fast, n_slow = (2_000, 50) if quick else (10_000, 100)
-    fast = n_fast * h / _cpu(lambda: frame.run("midpoint", x0, h, n_fast, load, stride=100))
+    fast = n_fast * h / _cpu(lambda: frame.run("midpoint", x0, h, n_fast, load=load, stride=100))
     slow = n_slow * h / _cpu(lambda: integrate(system, x0, h, n_slow, ImplicitMidpoint()))
     fe40 = {"compiled_real_time_factor": fast, "numpy_real_time_factor": slow,
             "ratio": fast / slow, "target_real_time_factor": 10.0}
@@ -91,9 +91,9 @@ def measure(quick: bool = False) -> dict:
     for n_e in MESHES[:3] if quick else MESHES:
         say(f"implicit step cost, FE {n_e} elements per column")
         model, load, frame, _, x0 = _setup([*fe, f"model.elements_per_column={n_e}"])
-        frame.run("midpoint", x0, h, 2, load)
+        frame.run("midpoint", x0, h, 2, load=load)
         n = 2_000 if quick else 10_000
-        per_step = _cpu(lambda: frame.run("midpoint", x0, h, n, load, stride=100)) / n  # noqa: B023
+        per_step = _cpu(lambda: frame.run("midpoint", x0, h, n, load=load, stride=100)) / n  # noqa: B023
         rows.append({"elements_per_column": n_e, "dofs": model.n_dof, "us_per_step": 1e6 * per_step,
                      "bandwidth": int(frame.banded_step_matrix(h)[0])})
     dofs = np.array([r["dofs"] for r in rows], float)

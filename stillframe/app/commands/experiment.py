@@ -47,8 +47,9 @@ def run(args: argparse.Namespace) -> int:
 
     test = IdentificationTest(args.test_force, args.test_duration, args.test_seed)
     try:
-        result = run_experiment(Path(args.scene), args.overrides, args.out, test, args.mode,
-                                args.lockstep_timeout, args.backends)
+        result = run_experiment(Path(args.scene), args.overrides, args.out, test,
+                                mode=args.mode, lockstep_timeout_s=args.lockstep_timeout,
+                                backends=args.backends)
     except NodeDiedError as exc:
         return report_death("experiment", exc)
     except KeyboardInterrupt as exc:
