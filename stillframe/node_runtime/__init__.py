@@ -11,4 +11,15 @@ on.
 - :mod:`.qos_table`: the QoS each topic uses, the docs' table generated from the contract.
 """
 
-__all__ = ["base", "declarations", "parameters", "qos_table", "realtime", "support"]
+import lazy_loader as lazy
+
+__getattr__, __dir__, __all__ = lazy.attach(
+    __name__,
+    submodules=["base", "declarations", "parameters", "phase_timing", "qos_table", "realtime",
+                "support"],
+    submod_attrs={
+        "base": ["Cycle", "LoopNode", "Managed"],
+        "parameters": ["NodeParameters", "param"],
+        "declarations": ["NODE_PARAMETERS"],
+    },
+)
