@@ -31,6 +31,9 @@ from stillframe.contract.messages import TYPESTORE
 from stillframe.contract.topics import CONDITIONAL, CONTRACT
 from stillframe.errors import BagError, IdentificationError, InputError
 
+__all__ = ["DEFAULT_FIELDS", "Channel", "Record", "Series", "align", "field_reader", "preprocess",
+           "read_record", "read_series", "stamp_ns"]
+
 #: Default field per message type: that of the first contract topic of the type, and std_msgs'
 #: Float64's ``data``.
 DEFAULT_FIELDS: dict[str, str] = {"std_msgs/msg/Float64": "data"} | {

@@ -61,6 +61,10 @@ from stillframe.bags.qos import qos_from_yaml, qos_to_yaml
 from stillframe.errors import BagError, InputError
 from stillframe.files import open_input
 
+__all__ = ["BagConnection", "BagMessage", "BagReader", "BagSummary", "BagWriter", "TopicSummary",
+           "bag_summary", "disagreements", "format_summary", "learn_types", "open_bag", "read_bag",
+           "refuse_damage", "storage_files"]
+
 #: the ROS distribution a bag's metadata names, as ``ros2 bag record`` on Jazzy writes it
 ROS_DISTRO = "jazzy"
 #: the MCAP header's profile for rosbag2 bags, and the name of the metadata record

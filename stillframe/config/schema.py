@@ -27,6 +27,10 @@ from typing import Any, Literal, NamedTuple, TypeVar, get_args, get_origin, get_
 
 from stillframe.errors import InputError
 
+__all__ = ["SEED_RANGE", "Check", "Field", "Floats", "Floats2", "Floats3", "Floats4", "Floats8",
+           "Section", "in_range", "key", "magnitude", "non_negative", "positive", "section",
+           "set_dotted", "show", "up_to", "validate"]
+
 Check = Callable[[Any], str | None]
 Floats = tuple[float, ...]
 Floats2 = tuple[float, float]

@@ -46,6 +46,9 @@ from stillframe.config.schema import Check, show
 from stillframe.errors import InputError
 from stillframe.files import open_input, open_output, size_text
 
+__all__ = ["META_KEYS", "STRUCTURE", "ModelArchive", "Physical", "check_structure", "read_archive",
+           "validate", "write_archive"]
+
 FORMAT = "stillframe-identified-model"
 VERSION = 1
 MODAL_KEYS = ("mode_frequency_hz", "mode_damping_ratio", "mode_eigenvalue", "mode_shape")

@@ -34,6 +34,10 @@ from scipy.integrate import solve_ivp
 from stillframe.dynamics.systems import DescriptorSystem, LinearSystem
 from stillframe.errors import InputError, IntegrationError
 
+__all__ = ["ADAPTIVE", "NO_SUBDIVISION", "RK4", "ImplicitMidpoint", "Integrator", "Observer",
+           "StepRejected", "Subdivision", "check_finite", "floor_failure", "integrate",
+           "make_integrator", "non_finite", "not_converged", "reference_solution"]
+
 
 @dataclass(frozen=True)
 class Subdivision:

@@ -15,6 +15,8 @@ import scipy.linalg as sla
 
 from stillframe.dynamics.models.frame import FrameModel, LinearModel
 
+__all__ = ["DescriptorSystem", "DrivenInputs", "LinearSystem", "Load", "MechanicalSystem"]
+
 Load = Callable[[float], np.ndarray]
 
 

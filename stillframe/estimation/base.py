@@ -15,6 +15,8 @@ from stillframe.contract.signals import Estimate, Sample
 from stillframe.design.coordinates import design_map, physical_selector
 from stillframe.dynamics.models import FrameModel
 
+__all__ = ["Counters", "Filter"]
+
 
 @dataclass
 class Counters:

@@ -25,6 +25,8 @@ from stillframe.contract.signals import full_inputs
 from stillframe.dynamics.models import FrameModel
 from stillframe.estimation.base import Filter
 
+__all__ = ["ExtendedKalman"]
+
 
 class ExtendedKalman(Filter):
     """EKF with state z = [q, q̇] of the design :class:`FrameModel`."""

@@ -13,6 +13,8 @@ from stillframe.estimation.base import Counters, Filter
 from stillframe.estimation.ekf import ExtendedKalman
 from stillframe.estimation.kalman import SteadyStateKalman, TimeVaryingKalman
 
+__all__ = ["FILTERS", "Estimator", "TruthEstimator", "initial_physical", "make_estimator"]
+
 FILTERS = {"kf": SteadyStateKalman, "tvkf": TimeVaryingKalman, "ekf": ExtendedKalman}
 
 

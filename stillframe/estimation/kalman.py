@@ -29,6 +29,8 @@ from stillframe.design.riccati import solve_dare
 from stillframe.dynamics.models import FrameModel
 from stillframe.estimation.base import Filter
 
+__all__ = ["LinearFilter", "SteadyStateKalman", "TimeVaryingKalman"]
+
 
 class LinearFilter(Filter):
     """Shared linear model: Φ, Γ0, Γ1 per interval length, and y = C z + D u."""

@@ -39,6 +39,8 @@ from stillframe.fidelity.work_precision import MODELS, REFERENCE_MODEL, SCENE_BA
 from stillframe.files import write_text
 from stillframe.locations import DATA_DIR
 
+__all__ = ["Choice", "choose", "energy_note", "load_table", "resolve_model", "write_table"]
+
 TABLE = DATA_DIR / "fidelity_table.json"
 log = logging.getLogger("stillframe.auto")
 

@@ -14,6 +14,8 @@ from numpy.typing import NDArray
 
 from stillframe.errors import IdentificationError, InputError
 
+__all__ = ["OkidResult", "minimum_samples", "observer_gain", "okid"]
+
 Array = NDArray[np.float64]
 
 

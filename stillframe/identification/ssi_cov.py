@@ -48,6 +48,9 @@ from stillframe.identification.modal import ModalTable, mac, modal_parameters
 from stillframe.identification.quality import quality_warnings, uncertain_modes
 from stillframe.identification.stabilization import matching_modes
 
+__all__ = ["OutputOnlyIdentification", "SsiRealization", "ToeplitzFactorization", "factorize",
+           "identify_output_only", "minimum_samples"]
+
 Array = NDArray[np.float64]
 
 OUTPUT_ONLY_METHODS: tuple[str, ...] = ("ssi-cov",)

@@ -22,6 +22,11 @@ from stillframe.middleware.logger import Logger
 from stillframe.middleware.params import Parameter, ParameterDescriptor, SetCallback
 from stillframe.middleware.qos import QoSProfile
 
+__all__ = ["GIVE_UP_CHECK_S", "ManagedNode", "MessageInfo", "Node", "PolledSubscription",
+           "Publisher", "Subscription", "Timer", "deliver", "freeze_setup_objects",
+           "install_signal_handlers", "never_called", "node_created", "node_destroyed", "ok",
+           "shutdown"]
+
 #: how often a service call that may give up (``call_service(..., give_up=...)``) asks [s]
 GIVE_UP_CHECK_S = 0.1
 

@@ -50,6 +50,8 @@ from stillframe.middleware.qos import QoSProfile, Reliability
 from stillframe.middleware.taps import TAP_RATE_HZ
 from stillframe.middleware.topic_follower import RawCallback, TopicFollower
 
+__all__ = ["CHARTS", "ERROR_KEYS", "SERIES", "Dashboard", "Limits", "Series", "serve"]
+
 #: counters that are errors when non-zero (the rest of STATUS_KEYS are progress figures)
 ERROR_KEYS: tuple[str, ...] = tuple(k for k in STATUS_KEYS
                                     if k not in ("sim_time_s", "step", "realtime_factor"))

@@ -42,6 +42,8 @@ from stillframe.middleware.qos import QoSProfile, viewer_request
 from stillframe.middleware.taps import TAP_RATE_HZ
 from stillframe.middleware.topic_follower import RawCallback, TopicFollower
 
+__all__ = ["FoxgloveBridge", "ros2msg_schema"]
+
 SCHEMA_ENCODING = "ros2msg"
 MESSAGE_ENCODING = "cdr"
 #: outgoing messages buffered per client before the oldest are dropped

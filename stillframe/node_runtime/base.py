@@ -48,6 +48,8 @@ from stillframe.node_runtime.realtime import (
 )
 from stillframe.node_runtime.support import Diagnostics, LoopParameters, declare_loop_parameters
 
+__all__ = ["Cycle", "LoopNode", "Managed", "main", "realtime_options"]
+
 N = TypeVar("N", bound="LoopNode")
 P = TypeVar("P", bound=NodeParameters)
 #: how long an idle managed node (not active yet, or finalized) waits in one spin [s]

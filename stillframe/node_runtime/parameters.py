@@ -35,6 +35,10 @@ from stillframe.middleware.params import (
     SetParametersResult,
 )
 
+__all__ = ["Bounds", "FromScene", "NodeParameters", "ParamField", "ParamSpec", "at_least",
+           "between", "current", "declare", "defaults", "limited", "of_length", "param",
+           "reference", "set_check"]
+
 P = TypeVar("P", bound="NodeParameters")
 
 

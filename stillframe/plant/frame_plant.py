@@ -40,6 +40,8 @@ from stillframe.plant.ph_plant import PHPlant
 from stillframe.plant.protocol import Plant
 from stillframe.plant.sensors import Sensors
 
+__all__ = ["FramePlant", "make_plant"]
+
 #: the truth kept at every substep, in the physical state: floor displacements and velocities
 RECORDED = np.array([0, 1, 2, 4, 5, 6])
 

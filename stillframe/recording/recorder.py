@@ -56,6 +56,8 @@ from stillframe.middleware.api import MessageInfo
 from stillframe.middleware.qos import CLOCK, QoSProfile, recorder_request
 from stillframe.middleware.topic_follower import RawCallback, TopicFollower
 
+__all__ = ["MISSING_KEY", "STALLS_KEY", "GapCounter", "Recorder", "SimStamps", "starts_with_stamp"]
+
 #: how often the recorder takes what its readers hold [s]: 50 wake-ups a second whatever the
 #: load; at 1 kHz a reader holds 20 samples of its ``RECORD_DEPTH`` (1000) then
 POLL_PERIOD_S = 0.02

@@ -19,6 +19,9 @@ from stillframe.dynamics.ph.body import FloatingBody
 from stillframe.dynamics.ph.joints import Connection, Port
 from stillframe.errors import InputError
 
+__all__ = ["BodyDamping", "Damper", "DistributedInput", "Input", "PHSystem", "PortInput",
+           "RotaryDamper", "VelocityDamping"]
+
 
 @dataclass(frozen=True)
 class PortInput:
