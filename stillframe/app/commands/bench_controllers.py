@@ -52,6 +52,8 @@ QUICK_TIMING = ["duration=8", "controller.start=4", "evaluation.window=2"]
 
 
 def register(sub: argparse._SubParsersAction) -> None:
+    """Add ``stillframe bench controllers``, its arguments and :func:`run` as its action to
+    ``sub``."""
     parser = sub.add_parser("controllers", help="LQG, anti-windup LQG, MPC, passivity, EUK: "
                             "reductions, peak torque, limit violations, compute time")
     add_json_argument(parser)
@@ -79,6 +81,9 @@ def _error_row(case: str, law: str, error: Exception) -> dict:
 
 
 def measure(quick: bool) -> dict:
+    """Every law of :data:`LAWS` on every case of :data:`CASES` through the one-process loop, and
+    the MPC's solve time at each rate of :data:`RATES`, as the benchmark's document (``quick``:
+    shorter runs)."""
     short = ["duration=30", "controller.start=15", "evaluation.window=10"] if quick else []
     rows = []
     for case, case_overrides in CASES.items():
@@ -126,6 +131,8 @@ def _us(seconds: float) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
+    """Run the benchmark the module's docstring describes and print its figures (``--json``: one
+    document); exit code 0."""
     result = measure(args.quick)
     if args.json:
         emit_json(result)

@@ -42,6 +42,7 @@ LABELS = {"stillframe": "stillframe (default)", "stillframe_okid": "stillframe -
 
 
 def register(sub: argparse._SubParsersAction) -> None:
+    """Add ``stillframe bench identify``, its arguments and :func:`run` as its action to ``sub``."""
     parser = sub.add_parser("identify", help="identification sweep: stillframe vs N4SID vs "
                                              "python-control on random shear buildings")
     parser.add_argument("--quick", action="store_true",
@@ -121,6 +122,8 @@ def _subset(flag: str, chosen: list | None, cells: tuple) -> tuple:
 
 
 def run(args: argparse.Namespace) -> int:
+    """Run the benchmark the module's docstring describes and print its figures (``--json``: one
+    document); exit code 0."""
     check_output("--plots", args.plots, folder=True)
     from stillframe.identification.sweep import (
         LENGTHS,

@@ -29,6 +29,8 @@ MARKOV_COUNT = 256
 
 
 def register(sub: argparse._SubParsersAction) -> None:
+    """Add ``stillframe bench identify-hammer``, its arguments and :func:`run` as its action to
+    ``sub``."""
     parser = sub.add_parser("identify-hammer",
                             help="hammer test: OKID + ERA/DC vs python-control markov + era")
     parser.add_argument("--repeat", type=int, default=5, help="timed runs per method (best kept)")
@@ -38,6 +40,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def best_time(fn: Callable[[], np.ndarray], repeat: int) -> tuple[float, np.ndarray]:
+    """The fastest of ``repeat`` calls of ``fn`` [s] (at least one), with the last call's result."""
     times, out = [], None
     for _ in range(max(repeat, 1)):
         start = time.perf_counter()
@@ -60,6 +63,8 @@ def errors(A: np.ndarray, C: np.ndarray, dt: float, freq: np.ndarray, zeta: np.n
 
 
 def run(args: argparse.Namespace) -> int:
+    """Run the benchmark the module's docstring describes and print its figures (``--json``: one
+    document); exit code 0."""
     import control
 
     from stillframe.config.scene import load_scene

@@ -26,6 +26,7 @@ from stillframe.text_table import format_table
 
 
 def register(sub: argparse._SubParsersAction) -> None:
+    """Add ``stillframe closed-loop``, its arguments and :func:`run` as its action to ``sub``."""
     parser = sub.add_parser("closed-loop", help="run a scene's control loop in one process")
     add_scene_arguments(parser)
     parser.set_defaults(func=run)
@@ -49,6 +50,9 @@ def reduction_table(evaluation: dict, reference_d: Sequence[float],
 
 
 def run(args: argparse.Namespace) -> int:
+    """Run the scene's loop in one process and print the reductions beside the scene's reference
+    values (``--json``: the document); exit code 0. A scene without a controller is an
+    :class:`~stillframe.errors.InputError`."""
     from stillframe.loop.closed_loop import run_closed_loop
 
     scene = scene_from_args(args)

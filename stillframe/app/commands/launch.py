@@ -65,6 +65,7 @@ def add_launch_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def register(sub: argparse._SubParsersAction) -> None:
+    """Add ``stillframe launch``, its arguments and :func:`run` as its action to ``sub``."""
     parser = sub.add_parser(
         "launch", help="run a scene through sim_node, estimator_node and controller_node over DDS",
         description="Start the three nodes as separate processes on the current ROS_DOMAIN_ID, "
@@ -119,6 +120,8 @@ def add_netns_arguments(parser: argparse.ArgumentParser, switch: bool = True) ->
 
 
 def add_fault_argument(parser: argparse.ArgumentParser) -> None:
+    """Add ``--fault NAME`` to ``parser``: one of the network faults of
+    :data:`~stillframe.app.net_faults.FAULTS` on every host's incoming link (with ``--netns``)."""
     parser.add_argument("--fault", default=None, metavar="NAME",
                         help="with --netns: a network fault on every host's incoming link: "
                              + ", ".join(f"'{f.name}'" for f in FAULTS).replace("%", "%%"))
@@ -148,6 +151,9 @@ def evaluation_table(evaluation: dict[str, Any], scene: Scene) -> str:
 
 
 def print_evaluation(evaluation: dict[str, Any], scene: Scene) -> None:
+    """Print the evaluation a launch returned: the steady-state peaks and reductions per floor
+    against the scene's baseline, the peak command, the steps and the wall time (and in real time
+    the deadline misses and overruns)."""
     ev = scene.evaluation
     baseline = (f"the {ev.window:g} s before control starts" if ev.baseline == "before_start"
                 else f"the last {ev.window:g} s of a run without control")
@@ -283,6 +289,9 @@ def monitor_args(args: argparse.Namespace) -> list[str]:
 
 
 def run(args: argparse.Namespace) -> int:
+    """Launch the scene's nodes as processes, print the live status and the evaluation; exit code 0,
+    a dead node's code (:func:`report_death`), 130/143 when interrupted, or a
+    :class:`~stillframe.errors.DegradedRunError` with ``--strict`` and warnings."""
     from stillframe.app.launcher import NodeDiedError, run_scene
     from stillframe.app.net_faults import hosts_if
 

@@ -36,11 +36,15 @@ class Target:
     minimum_pct: float
 
     def describe(self) -> str:
+        """The target in words, as the report prints it (``scene: quantity reduction >= N % on
+        ...``)."""
         where = ("every floor" if len(self.floors) == 3
                  else ", ".join(f"floor {f}" for f in self.floors))
         return f"{self.scene}: {self.quantity} reduction >= {self.minimum_pct:g} % on {where}"
 
     def met(self, reduction_pct: dict[str, list[float]]) -> bool:
+        """Whether every floor of the target reached ``minimum_pct`` in ``reduction_pct`` (per
+        quantity, the reductions of floors 1-3 in %)."""
         return all(reduction_pct[self.quantity][f - 1] >= self.minimum_pct for f in self.floors)
 
 
@@ -54,6 +58,7 @@ TARGETS: tuple[Target, ...] = (
 
 
 def register(sub: argparse._SubParsersAction) -> None:
+    """Add ``stillframe reproduce``, its arguments and :func:`run` as its action to ``sub``."""
     parser = sub.add_parser(
         "reproduce", help="the thesis's closed-loop tables, each scene through the three nodes",
         description=__doc__.split("\n\n", 1)[1])
@@ -68,6 +73,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    """Run each scene through the three nodes and print its reductions against the thesis's targets;
+    exit code 0, a dead node's code, or 130/143 when interrupted."""
     from stillframe.app.launcher import NodeDiedError, run_scene
 
     paths = args.scenes or [SCENES_DIR / f"{name}.yaml"
