@@ -105,6 +105,7 @@ class Record:
 
     @property
     def samples(self) -> int:
+        """The number of samples in the record."""
         return len(self.t)
 
 
@@ -166,6 +167,7 @@ def _read_field(msg: object, *, path: list[tuple[str, list[int]]], channel: Chan
 
 
 def stamp_ns(msg: object) -> int | None:
+    """The ``header.stamp`` of ``msg`` in nanoseconds, or None for a message without a header."""
     header = getattr(msg, "header", None)
     stamp = getattr(header, "stamp", None)
     if stamp is None:

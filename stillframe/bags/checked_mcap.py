@@ -91,6 +91,7 @@ class ChunkInfo:
 
     @property
     def good(self) -> bool:
+        """Whether the chunk passed every check (no fault recorded)."""
         return not self.fault
 
 
@@ -124,6 +125,7 @@ class McapFile:
 
     @property
     def bad_chunks(self) -> list[ChunkInfo]:
+        """The chunks that failed a check, in file order."""
         return [c for c in self.chunks if not c.good]
 
     @property

@@ -120,6 +120,7 @@ class BagSummary:
 
     @property
     def end_ns(self) -> int:
+        """The time of the bag's last message [ns since the epoch]."""
         return self.start_ns + self.duration_ns
 
     def as_dict(self) -> dict[str, Any]:
@@ -414,6 +415,8 @@ class BagReader:
         return total
 
     def time_range(self) -> tuple[int, int] | None:
+        """``(first, last)`` message time over every storage file [ns], or None for a bag without
+        messages."""
         ranges = [r for f in self.files if (r := f.time_range()) is not None]
         return (min(r[0] for r in ranges), max(r[1] for r in ranges)) if ranges else None
 
@@ -432,6 +435,8 @@ class BagReader:
             yield connection, log_time, data
 
     def deserialize(self, raw: bytes, msgtype: str) -> Any:
+        """The ``rosbags`` message of type ``msgtype`` from its CDR ``raw``, with the bag's own
+        types."""
         return self._store.deserialize_cdr(raw, msgtype)
 
 

@@ -31,6 +31,7 @@ class LatencyLog:
     commands: dict[int, int] = field(default_factory=dict)
 
     def on_sample(self, stamp_ns: int, at_ns: int) -> None:
+        """Record when (``at_ns``, monotonic) the sample stamped ``stamp_ns`` was first seen."""
         self.samples.setdefault(stamp_ns, at_ns)
 
     def on_command(self, stamp_ns: int, at_ns: int) -> None:

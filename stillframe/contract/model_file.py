@@ -123,6 +123,7 @@ class ModelArchive:
 
     @property
     def has_mkr(self) -> bool:
+        """Whether the archive holds the identified M, K, R (all of :data:`MKR_KEYS`)."""
         return set(MKR_KEYS) <= set(self.arrays)
 
 

@@ -351,6 +351,7 @@ def to_band(A: np.ndarray, b: int) -> np.ndarray:
 
 
 def bandwidth(A: np.ndarray) -> int:
+    """The largest |i − j| over the nonzero entries of ``A`` (0 for a zero matrix)."""
     i, j = np.nonzero(A)
     return int(np.max(np.abs(i - j))) if i.size else 0
 
