@@ -29,7 +29,7 @@ from stillframe.node_runtime.support import wait_for_peers
 #: cell it matches) are taken at least this often
 SPIN_S = 0.001
 #: with the simulator composed, the watchdog and ``/diagnostics`` run when the sim may wait at
-#: least this long [s] (two status messages cost about 0.35 ms)
+#: least this long [s]: time for the two status messages, with room to spare
 HOUSEKEEPING_S = 0.0005
 
 

@@ -10,9 +10,9 @@ takes. A command later than one sample period after its sample missed its deadli
 sample is already due); a sample never answered is counted separately, except the samples that
 came after the last command seen (still in flight when the run ended), and the samples before
 the first command seen, counted as ``unobserved``: until a command reaches the observer, its
-reader may not be matched with the controller's writer yet (on Fast DDS that took up to 1.5 s
-after the loop started, and every sample of that time looked unanswered). sim_node's own count
-of late commands covers that time.
+reader may not be matched with the controller's writer yet (on Fast DDS the match can come
+seconds after the loop started, and every sample until then would look unanswered). sim_node's
+own count of late commands covers that time.
 """
 
 from __future__ import annotations

@@ -10,8 +10,8 @@ half:
 - order 20 and N4SID block rows 21, the toolbox demo's values;
 - the 4 outputs with the highest mean multiple coherence with the two inputs on the
   identification half (H1 estimate). With more outputs the system Markov parameters that OKID
-  recovers (eq. 3.107) grow without bound on this record (measured: 1e4 by k = 10 with all 28),
-  so OKID cannot be run on all of them; N4SID gets the same 4 for a like-for-like comparison;
+  recovers (eq. 3.107) grow without bound on this record, so OKID cannot be run on all 28 of
+  them; N4SID gets the same 4 for a like-for-like comparison;
 - OKID's observer order p: the value in ``ceil(n / m) .. 12`` whose model fits best when
   identified on the first three quarters of the identification half and simulated on its last
   quarter.

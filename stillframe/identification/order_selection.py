@@ -10,12 +10,11 @@ least BIC
 costs more parameters than it gains in fit, a weak physical mode that the gap left out gains more.
 Where AIC (penalty ``2 d``) prefers a larger candidate whose model holds a well-determined mode the
 kept one lacks (:func:`stillframe.identification.quality.dropped_by_bic`), the record does not
-decide, and
-the returned note says so. A BIC choice above the gap's order whose added modes are all uncertain
-(95 % intervals beyond the limits of :func:`stillframe.identification.quality.uncertain_modes`)
-falls back to the smaller candidate: those modes fit noise the record cannot resolve (measured on
-a 3-mode frame at 2 % noise, where BIC alone kept order 8 with a mode at 8.14 Hz, ζ 0.035 and an
-interval wider than ± 30 %).
+decide, and the returned note says so. A BIC choice above the gap's order whose added modes are
+all uncertain (95 % intervals beyond the limits of
+:func:`stillframe.identification.quality.uncertain_modes`) falls back to the smaller candidate:
+those modes fit noise the record cannot resolve (on a noisy record BIC alone can keep a spurious
+mode whose interval is wider than ± 30 %).
 """
 
 from __future__ import annotations

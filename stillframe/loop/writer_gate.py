@@ -21,8 +21,9 @@ taken; so is, when the node is not pinned, a writer that the graph cannot name y
 writer taken so far has left the graph (a restart before its name arrived).
 
 The hot path is a set lookup: a GID already taken or already refused is decided without the
-graph, and so is an unpinned gate's first writer (reading the graph costs about 9 ms in a running
-loop, which the first sample then paid in each node). The graph is asked only for a later GID not
+graph, and so is an unpinned gate's first writer (a read of the graph in a running loop costs
+milliseconds, more than a sample period at 1 kHz, which the first sample would pay in each
+node). The graph is asked only for a later GID not
 seen before, and at most every :data:`RECHECK_NS` for one it could not name yet
 (``unknown_writer``).
 

@@ -258,9 +258,9 @@ class Context:
     def _alive(self, kind: str) -> tuple[int, list[Any]]:
         """How many reads so far, and the alive samples of a builtin topic. Read only when the
         reader has data available (a new, changed or vanished entity; a read resets that
-        status), and then only the samples not read before: converting an endpoint's QoS in
-        cyclonedds' Python costs about 0.15 ms, so reading all 55 of a running loop took 5 to
-        11 ms, which a node asking the graph inside its loop paid as a late sample. A vanished
+        status), and then only the samples not read before: cyclonedds converts each
+        endpoint's QoS in Python, and reading every endpoint of a running loop on each call
+        would cost a node that asks the graph inside its loop a late sample. A vanished
         entity comes as a not-read sample of a not-alive instance, by its key."""
         if kind not in self._graph_readers:
             builtin = {

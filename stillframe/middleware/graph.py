@@ -26,10 +26,10 @@ from stillframe.middleware.qos import (
 )
 
 #: discovery has settled when the graph did not change for this long [s], and at least
-#: :data:`ANNOUNCE_S` has passed. Measured here with a running loop (three rclpy nodes, a launch,
-#: a daemon) and a new participant: its view grew in steps up to 1.1 s apart on either backend
-#: and was complete after 2.6 to 3.0 s; Fast DDS participants announce themselves every 3 s
-#: (``leaseDuration_announcementperiod``), so after that long each has done so at least once
+#: :data:`ANNOUNCE_S` has passed. A new participant's view of a running graph grows in steps
+#: about a second apart, on either backend, until every participant has announced itself; Fast
+#: DDS participants announce themselves every 3 s (``leaseDuration_announcementperiod``), so
+#: after :data:`ANNOUNCE_S` each has done so at least once
 QUIET_S = 1.0
 ANNOUNCE_S = 3.2
 #: and is given up on (the answer then says what was seen) after this long [s]

@@ -37,8 +37,8 @@ class MessageInfo(NamedTuple):
     where the backend does not expose it (rclpy Jazzy's message info carries none).
     ``publication_sequence``: the writer's sequence number of the sample (1, 2, … per writer; 0
     where the backend does not give it), what tells writers apart without GIDs
-    (:mod:`stillframe.loop.writer_gate`). A tuple: one is made per sample on the loop's path (a
-    frozen dataclass cost three times as much)."""
+    (:mod:`stillframe.loop.writer_gate`). A tuple, the cheapest record to make: one is made per
+    sample on the loop's path."""
 
     source_timestamp: int
     received_timestamp: int
@@ -293,7 +293,7 @@ def freeze_setup_objects() -> None:
 
     Called when a node starts spinning: the objects made while setting up (type store,
     modules, models) live as long as the process, and a full collection pass over them takes
-    10-40 ms, a latency spike in the middle of a control loop. Objects made later are
+    tens of milliseconds, a latency spike in the middle of a control loop. Objects made later are
     collected as usual."""
     global _gc_frozen
     if not _gc_frozen:

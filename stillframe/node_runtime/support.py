@@ -79,9 +79,9 @@ class LoopParameters:
         Lock-step promises the same numbers as the one-process loop; a best-effort sample lost
         under load would silently turn into a partial update. TRANSIENT_LOCAL closes the start:
         the simulator sees its writers matched before the estimator's reader has matched them
-        (discovery is not symmetric), and a volatile Fast DDS reader then skips the first
-        sample a Cyclone writer sent (measured: 1 lock-step timeout in 6 mixed-vendor runs); a
-        transient-local reader is handed it on matching. A reliable transient-local writer still
+        (discovery is not symmetric), and a volatile Fast DDS reader then can skip the first
+        sample a Cyclone writer sent, a lock-step timeout; a transient-local reader is handed it
+        on matching. A reliable transient-local writer still
         matches the contract's best-effort volatile readers (``ros2 topic echo``, the recorder),
         so only the loop's own readers ask for more than the contract.
         """
@@ -211,9 +211,8 @@ def reaches_peer(node: api.Node, publisher: api.Publisher, peer: str) -> bool:
 
     A matched count alone is not enough in lock-step, nor is any named node: the recorder
     subscribes every topic at once and can match before the peer does; a tool's idle publisher
-    on the command topic did the same for the simulator's reader (CI, and 3 of 30 runs beside a
-    writing peer under load). The loop then started before the peer's side had matched, and
-    the first command was lost (a lock-step timeout)."""
+    on the command topic can do the same for the simulator's reader. The loop would then start
+    before the peer's side had matched, and lose the first command (a lock-step timeout)."""
     return _matched_with_peer(node, node.get_subscriptions_info_by_topic(publisher.topic_name),
                               publisher.get_subscription_count(), peer)
 
