@@ -773,7 +773,7 @@ class DdsNode:
                 wait_ns = min(wait_ns, max(due, 0))
         keys = self._triggered
         count = wait_triggered(self._waitset, wait_ns, keys)
-        # in the order the entities were made, as before (the wait set's order is its own): a
+        # in the order the entities were made (the wait set's order is its own): a
         # callback that answers a sample must not run before the other topics of that sample
         # are taken, or the answer's reply can overwrite one of them (a depth-1 /clock reader)
         triggered = keys[:count] if count < 2 else sorted(keys[:count], key=self._made.__getitem__)

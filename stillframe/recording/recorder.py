@@ -12,8 +12,8 @@ subscriptions are *polled* (the middleware's polled subscriptions, KEEP_LAST of 
 once, takes the CDR bytes waiting in each DDS reader and appends them to the open MCAP chunk;
 the chunk goes to the file when it is full (1 MiB). The DDS readers' histories are the buffer
 between receiving and writing that rosbag2 keeps in its double-buffered message cache; nothing is
-decoded. An event-driven recorder (one wake-up per sample, as before) spent its time in the
-wait (rmw's wait set, 14 000 times a second under rclpy) and starved the loop it recorded.
+decoded. An event-driven recorder (one wake-up per sample) would spend its time in the wait
+(rmw's wait set, once per sample of every topic under rclpy) and starve the loop it records.
 
 Receive time: each sample keeps the time it arrived (rmw's reception time stamp under rclpy, the
 source time stamp under Cyclone, which keeps none), not the time it was taken. With ``sim_time``
