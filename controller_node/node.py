@@ -14,12 +14,11 @@ and ≥ 0, 0: none; starts at ``controller.limit``; every law takes it at its ne
 and the anti-windup LQG plan with it). Every other parameter is read-only.
 
 Watchdog (``/diagnostics`` level ERROR while it holds the command at zero): once armed by a
-first estimate, when the newest estimate is ``watchdog_periods``
-periods older than the newest sample time the node has seen (the load cell's stamp, which every
-sample carries, or ``/clock`` with ``use_sim_time`` if newer), the node publishes the
-supervisor's zero command stamped with that time, once per sample time, and counts it. Sample
-time rather than wall time: in lock-step the simulator then applies the zero command instead of
-timing out, and it needs no ``/clock``.
+first estimate, when the newest estimate is ``watchdog_periods`` periods older than the newest
+sample time the node has seen (the load cell's stamp, which every sample carries, or ``/clock`` with
+``use_sim_time`` if newer), the node publishes the supervisor's zero command stamped with that time,
+once per sample time, and counts it. Sample time rather than wall time: in lock-step the simulator
+then applies the zero command instead of timing out, and it needs no ``/clock``.
 
 Inputs are taken from the loop's own writer per topic
 (:class:`stillframe.loop.writer_gate.WriterGate`): with the run's token (``run_token``), the

@@ -1,20 +1,18 @@
 """estimator_node: the scene's estimator on the topic contract (docs/nodes.md).
 
 A thin shell around :func:`stillframe.estimation.factory.make_estimator`. It collects the readings
-of
-one stamp t_k from the floor IMUs, the encoder and the load cell (and ``state_truth`` for the
+of one stamp t_k from the floor IMUs, the encoder and the load cell (and ``state_truth`` for the
 ``truth`` estimator), then calls ``step(sample, command in effect)`` and publishes
 ``state_estimate`` and ``state_estimate/covariance`` stamped t_k. The actuation in effect is what
-the simulator reports it applied over the previous period (after saturation and slew limits):
-the encoder's ``effort`` (hinge torque) and ``floor3/load_cell`` (floor-3 force), so that a
-saturated actuator does not wind the estimate up. Where a sample's reading was lost on the way:
-the command in effect received on ``pendulum/torque_cmd`` and ``floor3/force_cmd`` (the one
-answering the previous stamp, ``actuators.delay_periods`` stamps before that) while the
-simulator's last report showed it applying the commands, else that report held
-(``SampleAssembly._control`` in :mod:`stillframe.loop.assembly`). In lock-step a
-stamp of a scene driving the floor-3 force waits for its ``floor3/load_cell`` reading too. The
-actuator the scene's controller does not drive is taken as zero (the sim refuses its commands),
-whatever arrives on its topics.
+the simulator reports it applied over the previous period (after saturation and slew limits): the
+encoder's ``effort`` (hinge torque) and ``floor3/load_cell`` (floor-3 force), so that a saturated
+actuator does not wind the estimate up. Where a sample's reading was lost on the way: the command in
+effect received on ``pendulum/torque_cmd`` and ``floor3/force_cmd`` (the one answering the previous
+stamp, ``actuators.delay_periods`` stamps before that) while the simulator's last report showed it
+applying the commands, else that report held (``SampleAssembly._control`` in
+:mod:`stillframe.loop.assembly`). In lock-step a stamp of a scene driving the floor-3 force waits
+for its ``floor3/load_cell`` reading too. The actuator the scene's controller does not drive is
+taken as zero (the sim refuses its commands), whatever arrives on its topics.
 
 - ``mode: lockstep``: a stamp is used once all its channels arrived and the command stamped
   t_k−1 did (the previous step's answer), as long as that takes: no wall time enters a

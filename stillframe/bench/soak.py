@@ -1,5 +1,5 @@
-"""Memory over a long run: resident set sizes sampled against sim time, and
-their growth after warm-up.
+"""Memory over a long run: resident set sizes sampled against sim time, and their growth after
+warm-up.
 
 The simulator keeps its histories for the evaluation at the end (per sample a row of 12 values,
 per integrator step a row of 7, preallocated for the scene's duration, so the pages are touched

@@ -81,8 +81,8 @@ class FloorLoad:
     """Floor forces (f1, f2, f3) at time t: the excitation's force on ``excitation.floor``.
 
     Keeps the ``excitation`` section so that compiled integrators
-    (:mod:`stillframe.dynamics.kernels`)
-    can evaluate the same force without calling back into Python.
+    (:mod:`stillframe.dynamics.kernels`) can evaluate the same force without calling back into
+    Python.
     """
 
     excitation: Excitation

@@ -17,8 +17,7 @@ as
   leaves one scalar equation in p, solved by Newton. S is banded once the DOFs are ordered by
   height (reverse Cuthill–McKee) except for the rank-r modal part of C
   (:class:`~stillframe.dynamics.models.structure.DampingParts`), handled by the Woodbury identity:
-  one step
-  costs O(n (b + r)) for half-bandwidth b — linear in the number of DOFs.
+  one step costs O(n (b + r)) for half-bandwidth b — linear in the number of DOFs.
 
 Loads: none, harmonics, hammer and chirp on one floor, plus a control input held over the run.
 """

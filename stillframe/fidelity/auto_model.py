@@ -1,8 +1,7 @@
 """``model.type: auto``: the cheapest model, integrator and step that meet a band and tolerance.
 
 The choice rests on measured work-precision data (:mod:`stillframe.fidelity.work_precision`,
-shipped as
-``stillframe/data/fidelity_table.json`` by ``stillframe bench fidelity --write-table``):
+shipped as ``stillframe/data/fidelity_table.json`` by ``stillframe bench fidelity --write-table``):
 
 1. the canonical scenes whose frequency content lies inside the requested band count;
 2. a run (model, method, dt) qualifies if its worst error on those scenes is within the

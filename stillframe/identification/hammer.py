@@ -6,8 +6,8 @@ noise on the load cell and on the accelerometers. The reference modes are the co
 eigenvalues of the model itself.
 
 ``python -m stillframe.identification.hammer [--seeds N]`` prints identified against model
-frequencies and
-damping ratios for OKID + ERA, OKID + ERA/DC and the thesis's combined ERA/DC variant.
+frequencies and damping ratios for OKID + ERA, OKID + ERA/DC and the thesis's combined ERA/DC
+variant.
 """
 
 from __future__ import annotations

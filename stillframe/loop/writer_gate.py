@@ -23,9 +23,8 @@ writer taken so far has left the graph (a restart before its name arrived).
 The hot path is a set lookup: a GID already taken or already refused is decided without the
 graph, and so is an unpinned gate's first writer (a read of the graph in a running loop costs
 milliseconds, more than a sample period at 1 kHz, which the first sample would pay in each
-node). The graph is asked only for a later GID not
-seen before, and at most every :data:`RECHECK_NS` for one it could not name yet
-(``unknown_writer``).
+node). The graph is asked only for a later GID not seen before, and at most every :data:`RECHECK_NS`
+for one it could not name yet (``unknown_writer``).
 
 Without GIDs (real rclpy Jazzy: its message info has none) the gate decides from what arrives,
 not from how many publishers the graph shows: a publisher that exists but never writes (``ros2

@@ -2,15 +2,14 @@
 
 Like ``foxglove_bridge``, on whichever backend the node runs: every discovered topic
 (:class:`stillframe.middleware.topic_follower.TopicFollower`) becomes a ``foxglove-sdk`` channel
-with schema
-encoding ``ros2msg`` (the ``.msg`` definition with its dependencies, as ``rosbags`` writes it
-into MCAP bags) and message encoding ``cdr``; the CDR bytes pass through unconverted. With sim
-time, the newest ``/clock`` is broadcast as the server time after each poll (capability
+with schema encoding ``ros2msg`` (the ``.msg`` definition with its dependencies, as ``rosbags``
+writes it into MCAP bags) and message encoding ``cdr``; the CDR bytes pass through unconverted. With
+sim time, the newest ``/clock`` is broadcast as the server time after each poll (capability
 ``time``), which drives Foxglove's and Lichtblick's time cursor, and it is the log time of the
-messages forwarded in the next poll. ``/clock`` is followed like the topics, always watched (a
-node with ``use_sim_time`` would decode every one of a 1 kHz loop's ``/clock`` samples). The SDK
-keeps a bounded queue per client and drops a slow client's oldest messages, so no client can
-hold the node back.
+messages forwarded in the next poll. ``/clock`` is followed like the topics, always watched (a node
+with ``use_sim_time`` would decode every one of a 1 kHz loop's ``/clock`` samples). The SDK keeps a
+bounded queue per client and drops a slow client's oldest messages, so no client can hold the node
+back.
 
 Every topic is advertised as soon as it is found, but subscribed to only while a client
 subscribes to its channel (the server's ``on_subscribe``/``on_unsubscribe``, counted over the
@@ -23,9 +22,8 @@ no work for the samples in between, and a 1 kHz loop is not slowed by a Python p
 a thousand times a second per topic (docs/monitor.md has the figures). Up to
 :data:`~stillframe.middleware.taps.TAP_RATE_HZ` the loop's topics are read from their monitor
 taps, thinned by the loop's own writers, so the loop does not send the monitor every sample
-either. ``max_rate_hz = 0``
-forwards every sample (polled every :data:`EVERY_SAMPLE_POLL_S`, from a deep queue); a bag
-(``stillframe record``) has every sample too, for Foxglove to open after.
+either. ``max_rate_hz = 0`` forwards every sample (polled every :data:`EVERY_SAMPLE_POLL_S`, from a
+deep queue); a bag (``stillframe record``) has every sample too, for Foxglove to open after.
 """
 
 from __future__ import annotations

@@ -81,9 +81,9 @@ class LoopParameters:
         the simulator sees its writers matched before the estimator's reader has matched them
         (discovery is not symmetric), and a volatile Fast DDS reader then can skip the first
         sample a Cyclone writer sent, a lock-step timeout; a transient-local reader is handed it
-        on matching. A reliable transient-local writer still
-        matches the contract's best-effort volatile readers (``ros2 topic echo``, the recorder),
-        so only the loop's own readers ask for more than the contract.
+        on matching. A reliable transient-local writer still matches the contract's best-effort
+        volatile readers (``ros2 topic echo``, the recorder), so only the loop's own readers ask for
+        more than the contract.
         """
         if self.lockstep and spec.qos == "sensor_data":
             return replace(PROFILES["sensor_data"], reliability=Reliability.RELIABLE,

@@ -4,9 +4,9 @@ Per period k the caller takes :meth:`Plant.sample` at t_k (readings with the com
 previous period still applied) and then :meth:`Plant.advance` with the new command, which the
 actuators limit and hold over [t_k, t_k+1) while the scene's integrator takes its steps. The
 plant is the scene's nonlinear model (``plant.model: scene``) or the thesis's LQG plant, the linear
-second-order model of an identified structure with the linearised pendulum
-(``plant.model: file``, eq. 5.199–5.207). Process noise (eq. 5.215) is added to the physical
-state once per period. Ground truth is kept at every integrator step for the evaluation.
+second-order model of an identified structure with the linearised pendulum (``plant.model: file``,
+eq. 5.199–5.207). Process noise (eq. 5.215) is added to the physical state once per period. Ground
+truth is kept at every integrator step for the evaluation.
 
 A scene's ``events`` (:mod:`stillframe.config.events`) change the structure of the lumped and FE
 plants while they run: the loop's step calls :meth:`FramePlant.change_structure` at the sample

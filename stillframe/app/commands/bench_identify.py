@@ -9,9 +9,8 @@ N4SID (``nfoursid``) and python-control (``markov`` + ``era``) on the same recor
 method: median and 90th-percentile worst-mode frequency and damping errors, wrong, warned and
 silently wrong runs, runs silently worse than N4SID by more than 1.5×, and stillframe's 95 %
 interval coverage. Terminal table, ``--json``, heat maps with ``--plots DIR``; ``--quick`` runs a
-small subset, ``--snr`` and ``--samples`` pick cells. The sweep's
-modules (python-control, nfoursid, matplotlib) are imported in ``run``: every CLI command
-registers this module at start-up.
+small subset, ``--snr`` and ``--samples`` pick cells. The sweep's modules (python-control, nfoursid,
+matplotlib) are imported in ``run``: every CLI command registers this module at start-up.
 """
 
 from __future__ import annotations

@@ -3,14 +3,13 @@
 
 Data: the thesis's hammer test (§5.5) on the lumped model of ``scenes/thesis_lumped.yaml``,
 as :func:`stillframe.identification.hammer.hammer_test` simulates it: a blow on floor 1, the three
-floor
-accelerations, 32 Hz, 2048 samples, sensor noise, one fixed seed. Both methods get the same
-arrays and the same order (6, the thesis's); python-control estimates 256 Markov parameters by
-plain least squares (its ``markov`` assumes C A^k B = 0 beyond them; 8 s, where the 2 Hz mode has
-decayed to about 2 %). Accuracy: relative frequency and damping errors against the model's
-eigenvalues for the three structural modes the thesis identifies (its pendulum mode, 1.1 Hz with
-ζ 0.12, is barely observable from floor accelerations and neither method is asked for it).
-Times are the best of ``--repeat`` runs; the ratio is python-control's time over ours.
+floor accelerations, 32 Hz, 2048 samples, sensor noise, one fixed seed. Both methods get the same
+arrays and the same order (6, the thesis's); python-control estimates 256 Markov parameters by plain
+least squares (its ``markov`` assumes C A^k B = 0 beyond them; 8 s, where the 2 Hz mode has decayed
+to about 2 %). Accuracy: relative frequency and damping errors against the model's eigenvalues for
+the three structural modes the thesis identifies (its pendulum mode, 1.1 Hz with ζ 0.12, is barely
+observable from floor accelerations and neither method is asked for it). Times are the best of
+``--repeat`` runs; the ratio is python-control's time over ours.
 """
 
 from __future__ import annotations

@@ -1,12 +1,11 @@
 """``stillframe closed-loop SCENE``: plant, estimator and controller in one process, lock-step.
 
 Prints the steady-state peak reductions per floor beside the reference values the scene carries
-(the thesis's, eq. 5.233 and 5.287); ``--json`` prints
-``{"reduction_pct": {"displacement": [...], "velocity": [...]}, "peak_command": ..., "steps": ...,
-"wall_s": ..., "degraded": false, "degraded_reasons": [], ...}``. A run whose figures are not the
-controller's (commands refused, or a law that ran away and was clipped to the command's bound:
-:mod:`stillframe.app.run_verdict`, as ``launch`` judges) ends with a warning line giving the
-reasons.
+(the thesis's, eq. 5.233 and 5.287); ``--json`` prints ``{"reduction_pct": {"displacement": [...],
+"velocity": [...]}, "peak_command": ..., "steps": ..., "wall_s": ..., "degraded": false,
+"degraded_reasons": [], ...}``. A run whose figures are not the controller's (commands refused, or a
+law that ran away and was clipped to the command's bound: :mod:`stillframe.app.run_verdict`, as
+``launch`` judges) ends with a warning line giving the reasons.
 """
 
 from __future__ import annotations

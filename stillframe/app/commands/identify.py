@@ -1,9 +1,8 @@
 """``stillframe identify BAG``: a state-space model and its modes from a rosbag2 recording.
 
 Inputs and outputs are ``TOPIC[:FIELD]`` channels (see :mod:`stillframe.bags.channels`);
-the
-model comes from :func:`stillframe.identification.pipeline.identify` (OKID + ERA or ERA/DC, thesis
-ch. 3).
+the model comes from :func:`stillframe.identification.pipeline.identify` (OKID + ERA or ERA/DC,
+thesis ch. 3).
 """
 
 from __future__ import annotations
