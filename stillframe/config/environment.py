@@ -54,7 +54,7 @@ def _accepting(check: Check, accepts: str) -> Check:
 
 
 def one_of(*choices: str) -> Check:
-    """A check accepting exactly one of ``choices``, and its text for the generated reference."""
+    """A check accepting exactly one of ``choices``; its docstring lists them for the reference."""
     def check(text: str) -> str | None:
         return None if text in choices else f"expected one of {', '.join(choices)}"
 

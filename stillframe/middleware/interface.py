@@ -214,7 +214,7 @@ class ManagedNode(Node, Protocol):
 
     def manage(self, on_transition: Callable[[str], str]) -> None:
         """Make ``on_transition`` the node's answer to each transition: it gets the transition's
-        label and returns ``"success"``, ``"failure"`` or ``"error"`` (:mod:`.lifecycle`)."""
+        label and returns :data:`.lifecycle.SUCCESS`, ``FAILURE`` or ``ERROR``."""
 
     def lifecycle_state(self) -> str:
         """The label of the current primary state (``"unconfigured"``, ``"inactive"``, ``"active"``,

@@ -64,9 +64,10 @@ class LifecycleCalls:
             self.node.spin_once(0.1)
 
     def call(self, service: str, **fields: Any) -> Any:
-        """Call the target's lifecycle ``service`` (a key of :data:`.lifecycle.SERVICES`) with the
-        request ``fields`` and return the response; an :class:`~stillframe.errors.InputError` when
-        it does not answer (the target is not a managed node)."""
+        """Call the target's lifecycle ``service`` (a key of
+        :data:`stillframe.middleware.lifecycle.SERVICES`) with the request ``fields`` and return
+        the response; an :class:`~stillframe.errors.InputError` when it does not answer (the
+        target is not a managed node)."""
         srv = lifecycle.SERVICES[service]
         request = messages.new(f"lifecycle_msgs/srv/{srv}_Request", **fields)
         # a node in the graph serves its lifecycle services at once; 2 s at least for a slow one
