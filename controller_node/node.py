@@ -11,7 +11,10 @@ Parameters settable at run time (``stillframe param set`` or ``ros2 param set``;
 reason, and the loop goes on, when the value is wrong): ``enabled`` (bool; false: zero command
 from the next sample on) and ``command_limit`` (the controller's limit ±limit [N m or N], finite
 and ≥ 0, 0: none; starts at ``controller.limit``; every law takes it at its next sample, the MPC
-and the anti-windup LQG plan with it). Every other parameter is read-only.
+and the anti-windup LQG plan with it), and ``design`` (``scene`` or a model file, optionally
+``@T``: checked when set, refused with the reason and the running design kept when it fails,
+else the law of the LQG designed on it taken from the estimate stamped at or after T:
+:class:`stillframe.loop.adaptation.DesignSwitch`). Every other parameter is read-only.
 
 Watchdog (``/diagnostics`` level ERROR while it holds the command at zero): once armed by a
 first estimate, when the newest estimate is ``watchdog_periods`` periods older than the newest
@@ -58,6 +61,7 @@ from stillframe.control.supervisor import RUNAWAY_FACTOR
 from stillframe.design.coordinates import design_map
 from stillframe.durations import Durations
 from stillframe.loop import fast_inputs
+from stillframe.loop.adaptation import DesignSwitch
 from stillframe.loop.matching import ForceMatching
 from stillframe.loop.watchdog import EstimateWatchdog
 from stillframe.loop.wiring import design_model
@@ -107,6 +111,7 @@ class ControllerNode(base.LoopNode):
         settings = self.setting(ControllerParameterValues)
         self.enabled = settings.enabled
         self.controller.set_limit(settings.command_limit)
+        self.designs = DesignSwitch(scene, lambda built: built[1])
 
     def apply(self, parameters: list[Parameter]) -> SetParametersResult:
         """``enabled`` and ``command_limit`` (checked by their declarations) in effect from the
@@ -117,6 +122,10 @@ class ControllerNode(base.LoopNode):
                 self.controller.enabled = self.enabled and self.activated
             elif p.name == "command_limit":
                 self.controller.set_limit(p.value)
+            elif p.name == "design":
+                reason = self.designs.set(p.value, self.matching.last_ns, self.node.get_logger())
+                if reason is not None:
+                    return SetParametersResult(False, reason)
         return SetParametersResult(True)
 
     def activate(self) -> None:
@@ -177,6 +186,12 @@ class ControllerNode(base.LoopNode):
             timing.mark_at(slot["estimate_in"], m.arrival_ns)
             timing.mark_at(slot["ready"], now)
             self.sample_start_ns = m.arrival_ns
+            if (due := self.designs.due(m.ns)) is not None:
+                design, taken = due
+                self.controller.take_law(taken)
+                self.to_design = design_map(design)
+                self.node.get_logger().info(f"design {self.designs.current!r} taken at "
+                                            f"t = {self.grid.seconds(m.ns):.6g} s")
             t = self.grid.seconds(m.ns)
             estimate = Estimate(t, self.to_design @ m.physical, m.physical)
             command = self.controller.command(t, estimate, m.force)
@@ -219,7 +234,8 @@ class ControllerNode(base.LoopNode):
                   "commands": c.commands, "saturated": c.saturated, "singular": c.singular,
                   "watchdog": c.watchdog, "watchdog_active": cmd.watchdog,
                   "runaway": c.runaway, "fallback": c.fallback,
-                  "enabled": cmd.enabled,
+                  "enabled": cmd.enabled, "design": self.designs.current,
+                  "designs_taken": self.designs.taken,
                   "last_command": float(cmd.vector[self.controller.actuator]),
                   **self.matching.counts,
                   "refused_writers": self.gates.refused(), **self.gates.values(),

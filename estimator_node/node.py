@@ -35,6 +35,20 @@ a crash) starts a Kalman filter's mean from that sample's measurements
 state,
 at the first sample that carries all four measurements (earlier ones are skipped and counted).
 
+The design (``design`` parameter, filters only): ``scene`` or a model file, optionally ``@T``;
+checked when set (:class:`stillframe.loop.adaptation.DesignSwitch`: refused with the reason, the
+running filter kept) and taken at the first sample stamped at or after T: the new filter goes on
+from the old one's estimate (:meth:`stillframe.estimation.base.Filter.continue_from`).
+
+With ``adaptation.enabled`` the node runs the scene's
+:class:`stillframe.loop.adaptation.Adaptation` on every sample it uses, after the filter's step,
+as the one-process loop does. Each event is published on ``adaptation/events`` and counted in
+``/diagnostics``; a design is written as a model file into ``adaptation_dir`` and handed over
+at its sample through the ``design`` parameter of controller_node (``set_parameters``, waited
+for: the controller holds it before any estimate of that sample exists) and of this node; a
+design the controller refuses (or no answer within ``design_timeout_s``) is refused here too,
+and the running one stays.
+
 Every input is taken from the loop's own writer per topic
 (:class:`stillframe.loop.writer_gate.WriterGate`): with the run's token (``run_token``), the
 samples that carry it; without one, the sensors (and ``state_truth``) from the node the
@@ -55,15 +69,19 @@ restarted at t = 0, counted in ``time_jumps``) and the estimator starts again as
 from __future__ import annotations
 
 import functools
+import json
 import sys
+import tempfile
 import time
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from stillframe.config.scene import Scene
-from stillframe.contract import topics
+from stillframe.contract import messages, topics
+from stillframe.contract.adaptation_events import event_message
 from stillframe.contract.codecs import (
     COMMAND_TOPICS,
     SENSOR_TOPICS,
@@ -76,20 +94,26 @@ from stillframe.contract.codecs import (
     wrench_reader,
 )
 from stillframe.contract.signals import actuator_of
+from stillframe.design.identified import write_mkr_file
 from stillframe.durations import Durations
 from stillframe.errors import InputError
 from stillframe.estimation.base import Filter
 from stillframe.estimation.factory import FILTERS, make_estimator
 from stillframe.estimation.kalman import LinearFilter
+from stillframe.files import write_text
 from stillframe.loop import fast_inputs
+from stillframe.loop.adaptation import Adaptation, DesignSwitch, Handover, check_adaptation
 from stillframe.loop.assembly import Ready, SampleAssembly
 from stillframe.loop.wiring import command_topic, design_model, estimator_inputs
 from stillframe.middleware import api
+from stillframe.middleware.param_messages import value_msg
 from stillframe.middleware.params import Parameter, SetParametersResult
 from stillframe.middleware.taps import TappedPublisher
 from stillframe.node_runtime import base
 from stillframe.node_runtime.declarations import (
     CONTROLLER,
+    AdaptationParameterValues,
+    DesignParameterValues,
     EstimatorParameterValues,
     NoiseParameterValues,
 )
@@ -146,13 +170,31 @@ class EstimatorNode(base.LoopNode):
             "measurement_noise_std": noise.measurement_noise_std}
         if self.noise:
             self.set_noise(self.noise)
+        self.designs = (DesignSwitch(scene, lambda built: built[0])
+                        if DesignParameterValues in self.declarations(scene) else None)
+        check_adaptation(scene, mode=params.mode)
+        self.adaptation = (Adaptation(scene, round(scene.duration / params.period))
+                           if scene.adaptation.enabled else None)
+        self.grid = SampleGrid(params.period)
+        if self.adaptation is not None:
+            settings = self.setting(AdaptationParameterValues)
+            self.design_dir = Path(settings.adaptation_dir or tempfile.mkdtemp(
+                prefix="stillframe-designs-"))
+            self.design_dir.mkdir(parents=True, exist_ok=True)
+            self.record_file = (Path(settings.adaptation_record)
+                                if settings.adaptation_record else None)
+            self.design_timeout_s = settings.design_timeout_s
+            spec = topics.ADAPTATION_EVENTS
+            self.events_pub = node.create_publisher(spec.type_name, spec.name, spec.qos)
+            self.published = 0
 
     # -- parameters ----------------------------------------------------------------------
     @classmethod
     def declarations(cls, scene: Scene) -> tuple[type[NodeParameters], ...]:
-        """The noise parameters only for the filters (not ``truth``)."""
+        """The noise and design parameters only for the filters (not ``truth``)."""
         return tuple(c for c in super().declarations(scene)
-                     if c is not NoiseParameterValues or scene.estimator.type in FILTERS)
+                     if c not in (NoiseParameterValues, DesignParameterValues)
+                     or scene.estimator.type in FILTERS)
 
     def set_noise(self, noise: dict[str, list[float]]) -> None:
         """Redesign the filter with ``noise``; InputError when it cannot be designed."""
@@ -160,9 +202,17 @@ class EstimatorNode(base.LoopNode):
             self.estimator.set_noise(noise["process_noise_std"], noise["measurement_noise_std"])
 
     def apply(self, parameters: list[Parameter]) -> SetParametersResult:
-        """The new noise settings (checked by their declarations): the filter redesigned with
-        them (all or nothing)."""
-        noise = {**self.noise, **{p.name: list(p.value) for p in parameters}}
+        """A new ``design`` (taken at its sample) or new noise settings (checked by their
+        declarations): the filter redesigned with them (all or nothing)."""
+        for p in parameters:
+            if p.name == "design" and self.designs is not None:
+                reason = self.designs.set(p.value, self.assembly.last_ns, self.node.get_logger())
+                if reason is not None:
+                    return SetParametersResult(False, reason)
+        noisy = [p for p in parameters if p.name in self.noise]
+        if not noisy:
+            return SetParametersResult(True)
+        noise = {**self.noise, **{p.name: list(p.value) for p in noisy}}
         try:
             self.set_noise(noise)
         except InputError as exc:
@@ -238,9 +288,21 @@ class EstimatorNode(base.LoopNode):
                 return
             self.estimator.initialise_from(sample, control)
             self.counts["initialised_from_measurements"] += 1
+        if self.designs is not None and (due := self.designs.due(ready.ns)) is not None:
+            new = due[1]
+            assert isinstance(self.estimator, Filter)
+            new.continue_from(self.estimator)
+            self.estimator = new
+            self.node.get_logger().info(f"design {self.designs.current!r} taken at "
+                                        f"t = {sample.t:.6g} s")
         estimate = self.estimator.step(sample, control)
         timing.mark(slot["computed"])
         self.assembly.used(ready.ns)
+        if self.adaptation is not None:
+            handover = self.adaptation.observe(self.grid.index(ready.ns), sample, control)
+            if handover is not None:
+                self.hand_over(handover)
+            self.publish_events(ready.ns)
         if estimate is None:
             return
         if not self.activated:      # inactive: the filter kept current, nothing published
@@ -259,6 +321,67 @@ class EstimatorNode(base.LoopNode):
         """A stamp has some of its messages in, the first less than a period ago."""
         first = min((p.first_ns for p in self.assembly.pending.values()), default=None)
         return first is not None and time.monotonic_ns() - first < self.params.period * 1e9
+    # -- adaptation ----------------------------------------------------------------------
+    def hand_over(self, handover: Handover) -> None:
+        """Write the design's model file and set it, due at its sample, on controller_node
+        (waiting for the answer) and then on this node; refused by either: recorded, the
+        running design kept."""
+        path = self.design_dir / f"design_{handover.record['design']}.yaml"
+        write_mkr_file(path, handover.structure, handover.structure.name)
+        value = f"{path}@{handover.t!r}"
+        reason = self.set_controller_design(value)
+        if reason is None:
+            try:
+                assert self.designs is not None
+                self.designs.request(value, self.assembly.last_ns)
+            except InputError as exc:
+                reason = f"estimator_node refused it: {exc}"
+        if reason is not None:
+            self.adaptation.events.append({"kind": "refusal", "t": handover.record["t"],
+                                           "window_s": handover.record["window_s"],
+                                           "reason": reason})
+            self.node.get_logger().error(f"adaptation: design {path} not handed over: {reason}")
+            return
+        handover.record["file"] = str(path)
+        self.node.get_logger().info(f"adaptation: design {path} handed over from "
+                                    f"t = {handover.t:.6g} s")
+
+    def set_controller_design(self, value: str) -> str | None:
+        """``design`` := ``value`` on the controller (SetParameters, waited for); None when it
+        took it, else why not."""
+        controller = self.gates.pins["command_writer"] or CONTROLLER
+        request = messages.new("rcl_interfaces/srv/SetParameters_Request", parameters=[
+            messages.new("rcl_interfaces/msg/Parameter", name="design",
+                         value=value_msg(value))])
+        response = self.node.call_service(
+            "rcl_interfaces/srv/SetParameters",
+            f"{self.node.get_namespace().rstrip('/')}/{controller}/set_parameters", request,
+            self.design_timeout_s)
+        if response is None:
+            return f"{controller} did not answer within {self.design_timeout_s:g} s"
+        result = response.results[0]
+        return None if result.successful else f"{controller} refused it: {result.reason}"
+
+    def publish_events(self, ns: int) -> None:
+        """The adaptation's new events on ``adaptation/events`` (stamped with the sample that
+        decided them), and its record written."""
+        assert self.adaptation is not None
+        events = self.adaptation.events
+        if self.published == len(events):
+            return
+        for record in events[self.published:]:
+            self.events_pub.publish(event_message(ns, self.NAME, record))
+        self.published = len(events)
+        self.write_record()
+
+    def write_record(self) -> None:
+        if self.adaptation is not None and self.record_file is not None:
+            write_text(self.record_file, json.dumps(self.adaptation.report()) + "\n",
+                       what="adaptation record")
+
+    def finish(self) -> None:
+        self.write_record()
+        super().finish()
 
     def next_wait(self) -> float:
         left = self.assembly.wait_ns_left(time.monotonic_ns())
@@ -275,13 +398,26 @@ class EstimatorNode(base.LoopNode):
                   **{f"compute_ms_{k}": v for k, v in self.compute.recent().items()}}
         idle_s = 0.0 if self.input_at is None else time.monotonic() - self.input_at
         values["input_age_s"] = idle_s
+        if self.designs is not None:
+            values.update(design=self.designs.current, designs_taken=self.designs.taken)
+        adaptation = ""
+        if self.adaptation is not None:
+            kinds = [e["kind"] for e in self.adaptation.events]
+            values.update(adaptation_updates=len(self.adaptation.updates),
+                          detections=kinds.count("detection"), designs=kinds.count("design"),
+                          refused_designs=kinds.count("refusal"))
+            if kinds:
+                last = self.adaptation.events[-1]
+                adaptation = f"adaptation: {last['kind']} at t = {last['t']:.6g} s"
         level = WARN if (values["rejected"] or values["refused_writers"]
-                         or a.counts["partial_updates"]) else OK
+                         or a.counts["partial_updates"]
+                         or values.get("refused_designs")) else OK
         stale = ""
         if idle_s > self.params.stale_input_s:
             level, stale = ERROR, (f"stale input: no sample for {idle_s:.3g} s "
                                    "(simulator stale or gone)")
-        return values, level, "; ".join(m for m in (stale, self.gates.message()) if m)
+        return values, level, "; ".join(m for m in (stale, self.gates.message(), adaptation)
+                                         if m)
 
     def status_stamp(self) -> int:
         return max(self.assembly.last_ns, 0)

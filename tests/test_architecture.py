@@ -27,21 +27,43 @@ def lint_imports(cwd: Path) -> subprocess.CompletedProcess[str]:
 def test_the_import_contracts_are_kept() -> None:
     done = lint_imports(ROOT)
     assert done.returncode == 0, done.stdout[-3000:]
-    assert "5 kept, 0 broken" in done.stdout
+    assert "7 kept, 0 broken" in done.stdout
+
+
+def _tree_with(tmp_path: Path, module: str, line: str) -> Path:
+    """A copy of the tree where ``module`` (a path under the root) has ``line`` appended."""
+    for name in (*PACKAGES, "identification", "pyproject.toml"):
+        copy = shutil.copytree if (ROOT / name).is_dir() else shutil.copy
+        copy(ROOT / name, tmp_path / name)
+    path = tmp_path / module
+    path.write_text(path.read_text() + f"\n{line}  # noqa\n")
+    return tmp_path
 
 
 def test_the_contracts_catch_a_core_module_that_imports_a_node(tmp_path: Path) -> None:
     """The check can fail: a copy of the tree where the scene loader imports sim_node breaks
     the first and the layers contract."""
-    for name in (*PACKAGES, "pyproject.toml"):
-        copy = shutil.copytree if (ROOT / name).is_dir() else shutil.copy
-        copy(ROOT / name, tmp_path / name)
-    scene = tmp_path / "stillframe" / "config" / "scene.py"
-    scene.write_text(scene.read_text() + "\nimport sim_node.node  # noqa\n")
-    done = lint_imports(tmp_path)
+    done = lint_imports(_tree_with(tmp_path, "stillframe/config/scene.py", "import sim_node.node"))
     assert done.returncode == 1
     assert "the ROS-free library never imports a node package BROKEN" in done.stdout
     assert "stillframe.config.scene -> sim_node.node" in done.stdout
+
+
+def test_the_contracts_catch_a_command_that_imports_a_command(tmp_path: Path) -> None:
+    """Commands are leaves: a copy where ``lifecycle`` imports ``param``'s module breaks it."""
+    done = lint_imports(_tree_with(tmp_path, "stillframe/app/commands/lifecycle.py",
+                                   "import stillframe.app.commands.param"))
+    assert done.returncode == 1
+    assert "commands are leaves: no command module imports another BROKEN" in done.stdout
+
+
+def test_the_contracts_catch_the_library_of_the_application_importing_a_benchmark(
+        tmp_path: Path) -> None:
+    """The launcher below the benchmarks: a copy where it imports one breaks the layers."""
+    done = lint_imports(_tree_with(tmp_path, "stillframe/app/launcher.py",
+                                   "import stillframe.app.bench.loop"))
+    assert done.returncode == 1
+    assert "over the application's library BROKEN" in done.stdout
 
 
 def strongly_connected(graph: dict[str, set[str]]) -> list[list[str]]:

@@ -45,6 +45,7 @@ COMMANDS: tuple[str, ...] = (
     "stillframe.app.commands.reproduce",
     "stillframe.app.commands.demo",
     "stillframe.app.commands.experiment",
+    "stillframe.app.commands.adapt",
     "stillframe.app.commands.ph",
     "stillframe.app.commands.montecarlo",
     "stillframe.app.commands.netns",

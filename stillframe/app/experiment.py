@@ -202,7 +202,7 @@ def run_experiment(scene_path: Path, user: Sequence[str], out: Path, test: Ident
     progress(f"[1/5] identification test: white noise {test.force_std:g} N on floor 1 held at "
              f"{scene.sensors.rate_hz:g} Hz, {test.duration:g} s, through sim_node ({mode}), "
              f"recorded to {out / 'bag'}")
-    run_scene(scene_path, ident_set, out=out / "test", mode=mode, record=out / "bag",
+    run_scene(scene_path, ident_set, out=out / "test", mode=mode, record_dir=out / "bag",
               lockstep_timeout_s=lockstep_timeout_s, record_topics=[INPUT_TOPIC, *OUTPUT_TOPICS],
               backends=backends)
     progress("[2/5] OKID + ERA/DC (order 6) + MKR on the bag")

@@ -484,6 +484,12 @@ class LaunchOptions:
     def tracked_file(self) -> Path:
         return self.result_file.with_name("tracked_modes.jsonl")
 
+    @property
+    def adaptation_file(self) -> Path:
+        """estimator_node's adaptation record (``adaptation.enabled``); its designs' model files
+        go to ``designs/`` beside it."""
+        return self.result_file.with_name("adaptation.json")
+
 
 class Launcher:
     """Runs one :class:`LaunchOptions` to its end; ``node`` (a hidden DDS node on the same
@@ -501,6 +507,10 @@ class Launcher:
             load_scene(options.scene.resolve(), options.overrides))[0]
         # what a node would refuse, refused here, before any process starts
         check_loop(self.scene, mode=options.mode)
+        if self.scene.adaptation.enabled and options.compose:
+            raise InputError("--compose: with adaptation.enabled the estimator waits for the "
+                             "controller to take each design, which one process cannot serve "
+                             "while it waits; run without --compose")
         self.status = StatusLine()
         default = recorded_default(options.backends, record=options.record_dir is not None,
                                    mode=options.mode,
@@ -574,11 +584,15 @@ class Launcher:
         sim = self.simulator()
         timing = {**({"phase_log": str(o.phase_log.resolve())} if o.phase_log else {}),
                   **({} if o.phase_timing else {"phase_timing": False})}
+        adaptation = ({"adaptation_dir": str(o.adaptation_file.with_name("designs")),
+                       "adaptation_record": str(o.adaptation_file)}
+                      if self.scene.adaptation.enabled else {})
         children += [(name, [*o.hosts.get("estimator_node" if name == CONTAINER else name, []),
                              *node_command(name, scene, [], o.mode, params={
                                  **shared, **timing,
                                  **(rt if name in (sim, *LOOP) else {}),
                                  **(sim_params if name == sim else {}),
+                                 **(adaptation if name == "estimator_node" else {}),
                                  **({"autostart": False} if name in MANAGED else {})},
                                  args=["all"] if name == sim == CONTAINER else [])])
                      for name in reversed(nodes)]
@@ -621,6 +635,7 @@ class Launcher:
         or KeyboardInterrupt after a clean stop when SIGINT/SIGTERM reached the launcher."""
 
         self.options.result_file.unlink(missing_ok=True)
+        self.options.adaptation_file.unlink(missing_ok=True)
         try:
             running_graph.refuse_if_running(self.node, self.created, (*NODES, CONTAINER))
             self.write_scene()
@@ -800,6 +815,11 @@ class Launcher:
             raise InputError(f"sim_node's result file {path}: cannot read it ({exc})") from None
         if self.options.record_dir is not None:
             evaluation["bag"] = _bag_state(self.options.record_dir)
+        if self.scene.adaptation.enabled:
+            try:
+                evaluation["adaptation"] = json.loads(self.options.adaptation_file.read_text())
+            except (OSError, ValueError) as exc:
+                evaluation["adaptation"] = {"error": f"no adaptation record ({exc})"}
         return LaunchResult(evaluation, path, path.with_suffix(".npz"), dict(self.statuses),
                             read_tracked(self.options.tracked_file) if self.options.track else [])
 
@@ -826,39 +846,15 @@ def _bag_state(bag: Path) -> dict[str, Any]:
 
 
 def run_scene(scene: Path, overrides: Sequence[str] = (), *, out: Path,
-              mode: str = "lockstep", record: Path | None = None,
-              lockstep_timeout_s: float | None = None,
-              prepare: Callable[[Any], None] | None = None,
-              record_topics: Sequence[str] = (), backends: Sequence[str] = (),
-              monitor_args: Sequence[str] | None = None, compose: str = "",
-              rt: str | None = None, rt_cpus: Sequence[int] = (),
-              hosts: dict[str, list[str]] | None = None,
-              resolved: Scene | None = None, track: bool = False,
-              recorder_args: Sequence[str] | None = None, phase_log: Path | None = None,
-              phase_timing: bool = True) -> LaunchResult:
+              prepare: Callable[[Any], None] | None = None, **options: Any) -> LaunchResult:
     """Launch ``scene`` with ``overrides`` through the three nodes to its end; sim_node's
     results go to ``out`` (``result.json``, ``result.npz``, beside the resolved scene the nodes
-    read); ``record`` records ``record_topics`` (default all) into a bag; ``backends`` are
-    ``--backend`` values (:func:`parse_backends`); ``monitor_args`` (e.g. ports) start
-    ``stillframe monitor`` beside the nodes; ``compose`` runs nodes in one process
-    (``container_node``: "pair" the estimator and controller, "all" every node); ``rt`` and
-    ``rt_cpus`` are the loop nodes' real-time practices and CPUs
-    (:mod:`stillframe.node_runtime.realtime`; ``rt`` None: :func:`practices_default`);
-    ``hosts`` runs nodes on other hosts (:attr:`LaunchOptions.hosts`); ``resolved``: the scene
-    already loaded and resolved (else it is done here, once); ``track`` adds the modal tracker;
-    ``recorder_args``: the recorder's priority (:func:`recorder_priority`); ``phase_log`` and
-    ``phase_timing``: the nodes' phase timing (:attr:`LaunchOptions.phase_log`).
-    ``prepare(node)`` may subscribe the launcher's hidden node to more topics before the
-    children start."""
+    read). ``options`` are the other fields of :class:`LaunchOptions` (the mode, the recorder,
+    the backends, …), checked there. ``prepare(node)`` may subscribe the launcher's hidden node
+    to more topics before the children start."""
     out.mkdir(parents=True, exist_ok=True)
-    launcher = Launcher(LaunchOptions(
-        scene, list(overrides), resolved, mode=mode, result_file=out / "result.json",
-        record_dir=record, lockstep_timeout_s=lockstep_timeout_s,
-        record_topics=list(record_topics), backends=list(backends),
-        monitor_args=None if monitor_args is None else list(monitor_args), compose=compose,
-        rt=rt, rt_cpus=list(rt_cpus), hosts=dict(hosts or {}), track=track,
-        recorder_args=None if recorder_args is None else list(recorder_args),
-        phase_log=phase_log, phase_timing=phase_timing))
+    launcher = Launcher(LaunchOptions(scene, list(overrides), result_file=out / "result.json",
+                                      **options))
     if prepare is not None:
         prepare(launcher.node)
     return launcher.run()

@@ -111,6 +111,10 @@ class Design(Section):
         "scene's rig, or the identified structure of design.file with the rig's pendulum "
         "(eq. 5.200–5.205)"))
     file: str = key("thesis_mkr", doc="identified model: a bundled name or a path")
+    after_events: int = key(0, in_range(0, 100), doc=(
+        "scene or lumped: design on the structure after the first this many of the scene's "
+        "events (0: the structure the run starts with); the oracle of an adaptation, which "
+        "knows the change before it happens"))
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -177,6 +181,41 @@ class Controller(Section):
         "gain at rest"))
     limit: float | None = _saturation("command saturation [N m or N]")
     watchdog_periods: int = key(3, up_to(1_000_000), doc="periods without a fresh estimate")
+
+
+@dataclass(frozen=True, kw_only=True)
+class Adaptation(Section):
+    """adaptation: the loop notices a change of the structure, identifies it again from its own
+    records and hands the controller and the estimator a new LQG design (docs/adaptation.md)."""
+
+    enabled: bool = key(False, doc=(
+        "watch the structure's frequencies, identify it again after a change and hand over a new "
+        "design (LQG with a kf or tvkf estimator on the torque)"))
+    probe_std: float = key(0.003, in_range(0.0, 10.0), doc=(
+        "std of the white probe torque added to the command from controller.start [N m]: what "
+        "makes closed-loop records identify the plant (0: none, and the identification fails)"))
+    probe_seed: int = key(2, in_range(*SEED_RANGE), doc="the probe's random seed")
+    detection_window: float = key(10.0, in_range(1.0, 1e4), doc=(
+        "the window of records each detection update identifies [s]"))
+    update_period: float = key(4.0, in_range(0.1, 1e4), doc=(
+        "sample time between detection updates [s]"))
+    reference_updates: int = key(8, in_range(2, 1000), doc=(
+        "updates that set each mode's reference frequency and spread (after controller.start "
+        "and after each hand-over)"))
+    drift: float = key(2.0, in_range(0.0, 1e3), doc=(
+        "CUSUM drift nu: the deviation an update may show without accumulating [reference "
+        "std]"))
+    threshold: float = key(40.0, in_range(1e-3, 1e6), doc=(
+        "CUSUM threshold h: a change is declared once a mode's statistic exceeds it"))
+    min_relative_std: float = key(1e-3, in_range(1e-6, 1.0), doc=(
+        "the smallest reference spread of a mode, relative to its frequency [-]"))
+    identification_window: float = key(30.0, in_range(1.0, 1e4), doc=(
+        "the records after the change's estimated onset that the structure is identified "
+        "from [s]"))
+    handover_periods: int = key(4, in_range(1, 100_000), doc=(
+        "sample periods from the end of the identification window to the hand-over: the time "
+        "the identification and the design may take while the loop runs (lock-step waits for "
+        "them)"))
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -26,6 +26,7 @@ from stillframe.config.events import (
 )
 from stillframe.config.loop_sections import (
     Actuators,
+    Adaptation,
     Controller,
     Design,
     Estimator,
@@ -208,6 +209,7 @@ class Scene(Section):
     estimator: Estimator = section(Estimator)
     controller: Controller = section(Controller)
     evaluation: Evaluation = section(Evaluation)
+    adaptation: Adaptation = section(Adaptation)
     events: tuple[Event, ...] = key((), lambda v: None if len(v) <= MAX_EVENTS else (
         f"at most {MAX_EVENTS} events"), doc=(
             "changes of the structure while the run goes on, in time order "
@@ -297,11 +299,12 @@ def _check_loop(scene: Scene) -> None:
     if period > scene.duration:
         raise InputError(f"sensors.rate_hz: one period ({period:g} s) is longer than duration")
     sample_grid(scene)
-    if c.start - window < -1e-9 or c.start + window > scene.duration + 1e-9:
+    before = scene.evaluation.baseline == "before_start"
+    if (before and c.start - window < -1e-9) or c.start + window > scene.duration + 1e-9:
+        where = "before controller.start ({c.start:g} s) and " if before else ""
         raise InputError(
-            f"evaluation.window: {window:g} s does not fit before controller.start ({c.start:g} s) "
-            f"and after it within duration {scene.duration:g} s"
-        )
+            f"evaluation.window: {window:g} s does not fit {where.format(c=c)}after "
+            f"controller.start ({c.start:g} s) within duration {scene.duration:g} s")
     if window < scene.integrator.dt * (1.0 - 1e-9):
         raise InputError(
             f"evaluation.window: {window:g} s is shorter than one integrator step "
@@ -344,6 +347,13 @@ def _check_events(scene: Scene) -> None:
             validate(Rig, rig.to_dict(), prefix="rig.")
         except InputError as exc:
             raise InputError(f"{name}: the structure after it: {exc}") from None
+    after = scene.design.after_events
+    if after > len(scene.events):
+        raise InputError(f"design.after_events: {after}, but the scene has "
+                         f"{len(scene.events)} events")
+    if after and scene.design.model == "file":
+        raise InputError("design.after_events: the design is the identified model of "
+                         "design.file, which no event changes; use design.model: scene or lumped")
     if not scene.events:
         return
     if scene.plant.model == "file":

@@ -104,13 +104,24 @@ STRUCTURE_EVENTS = TopicSpec(
     "value after it, as JSON (stillframe.contract.structure_events)",
 )
 
+ADAPTATION_EVENTS = TopicSpec(
+    "adaptation/events", "diagnostic_msgs/msg/DiagnosticArray", "default",
+    "scenes with adaptation.enabled only, from estimator_node: one message per event of the "
+    "adaptation, stamped with the sample that decided it; one status (name '<node>: "
+    "adaptation <kind>', level WARN for a detection or a refusal, OK for a design, message a "
+    "one-line summary) whose values are the event's record as JSON: kind (detection, design, "
+    "refusal), t (the deciding sample's time), and for a detection onset_s, mode, statistic, "
+    "reference_hz, frequency_hz; for a design handover_s, identified_hz, design_hz, the storeys' "
+    "mass and stiffness, the gain and the poles (stillframe.contract.adaptation_events)",
+)
+
 CONTRACT: tuple[TopicSpec, ...] = (
     CLOCK, *FLOOR_IMU, PENDULUM_JOINT_STATES, EXCITATION_WRENCH, FLOOR3_LOAD_CELL, TORQUE_CMD,
     FORCE_CMD,
     STATE_ESTIMATE, STATE_COVARIANCE, STATE_TRUTH, DIAGNOSTICS,
 )
 #: topics a loop node publishes only for some scenes (not every launch has them)
-CONDITIONAL: tuple[TopicSpec, ...] = (ENERGY_BALANCE, STRUCTURE_EVENTS)
+CONDITIONAL: tuple[TopicSpec, ...] = (ENERGY_BALANCE, STRUCTURE_EVENTS, ADAPTATION_EVENTS)
 
 
 #: the ``/diagnostics`` values the status line shows, when a node reports them

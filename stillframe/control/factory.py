@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
+import numpy as np
+
 from stillframe.config.scene import Scene
 from stillframe.contract.signals import ACTUATOR
 from stillframe.control.euk import EUKLaw
@@ -89,4 +91,15 @@ def make_controller(scene: Scene, design: FrameModel) -> Controller:
     else:
         raise InputError(f"controller.type: {c.type!r} computes no command")
     return Controller(law, actuator=ACTUATOR[c.type], period=period, limits=limits,
-                      start=c.start, watchdog_periods=c.watchdog_periods, predictor=predictor)
+                      start=c.start, watchdog_periods=c.watchdog_periods, predictor=predictor,
+                      probe=probe_of(scene))
+
+
+def probe_of(scene: Scene) -> np.ndarray | None:
+    """The probe torque of each sample of the run (``adaptation.probe_std``; None without an
+    adaptation or with a probe of 0): white, from ``adaptation.probe_seed``."""
+    a = scene.adaptation
+    if not a.enabled or a.probe_std == 0.0:
+        return None
+    samples = round(scene.duration * scene.sensors.rate_hz) + 1
+    return a.probe_std * np.random.default_rng(a.probe_seed).standard_normal(samples)

@@ -12,7 +12,11 @@ that bound is flagged ``runaway`` (counted, and ``/diagnostics`` warns): the sig
 or a design that no longer matches the plant. The controller's limit can change while it runs
 (:meth:`Controller.set_limit`): the law takes the new limits at its next sample. A law that can
 fall back to a safe command (MPC: a solve that did not finish) keeps its count in ``fallbacks``;
-``fallback`` here follows it (``/diagnostics`` warns).
+``fallback`` here follows it (``/diagnostics`` warns). A ``probe`` (``adaptation.probe_std``) is
+added to the law's command before the clip: entry k at the sample k · period, the white torque
+that lets the loop's own records identify the plant
+(:mod:`stillframe.identification.loop_structure`).
+:meth:`Controller.take_law` hands the supervisor another design's law at a sample boundary.
 """
 
 from __future__ import annotations
@@ -65,8 +69,10 @@ class Controller:
 
     def __init__(self, law: Law, *, actuator: int, period: float,
                  limits: CommandLimits = NO_LIMITS, start: float = 0.0,
-                 watchdog_periods: int = 3, predictor: DelayPredictor | None = None) -> None:
+                 watchdog_periods: int = 3, predictor: DelayPredictor | None = None,
+                 probe: np.ndarray | None = None) -> None:
         self.law = law
+        self.probe = probe
         self.predictor = predictor
         self.actuator = actuator
         self.period = period
@@ -88,6 +94,14 @@ class Controller:
         """A new controller limit (None or 0: none), for the supervisor's clip and for a law
         that plans with the limits (:class:`LimitedLaw`) from the next sample on."""
         self.limits = self.limits.with_limit(limit)
+        if isinstance(self.law, LimitedLaw):
+            self.law.set_limits(self.limits)
+
+    def take_law(self, other: Controller) -> None:
+        """From the next command on, the law (and the delay predictor) of ``other``, a controller
+        of another design for this actuator; this supervisor's limits, enable state, watchdog,
+        probe and counters stay."""
+        self.law, self.predictor = other.law, other.predictor
         if isinstance(self.law, LimitedLaw):
             self.law.set_limits(self.limits)
 
@@ -133,6 +147,9 @@ class Controller:
         z = latest.z if self.predictor is None else self.predictor.ahead(latest.t, latest.z)
         started, started_cpu = time.perf_counter(), time.thread_time()
         value, out.singular = self.law(z, force)
+        if self.probe is not None:
+            k = round(t / self.period)
+            value += float(self.probe[k]) if k < self.probe.size else 0.0
         self.law_s.add(time.perf_counter() - started)
         self.law_cpu_s.add(time.thread_time() - started_cpu)
         c.fallback = getattr(self.law, "fallbacks", 0)   # laws with a safe fallback count it

@@ -27,7 +27,7 @@ from stillframe.dynamics.models import build_model
 from stillframe.dynamics.models.frame import FrameModel
 from stillframe.dynamics.models.structure import Structure
 from stillframe.errors import InputError
-from stillframe.files import read_bytes
+from stillframe.files import read_bytes, write_text
 from stillframe.locations import DATA_DIR
 
 __all__ = ["frame_for", "identified_frame", "load_identified_structure", "resolve_model_file"]
@@ -88,16 +88,36 @@ def load_identified_structure(path: Path) -> Structure:
             raise InputError(f"{path}: {labels[key]!r} must be a 3x3 matrix (floors 1-3), got "
                              f"shape {matrix.shape}")
     check_structure(arrays, str(path), labels)
-    return Structure(f"identified({source})", arrays["M"], arrays["K"], (0, 1, 2),
-                     ("x1", "x2", "x3"), arrays["R"])
+    return storeys(arrays["M"], arrays["K"], arrays["R"], source)
 
 
 def identified_frame(name: str, rig: Rig, key: str) -> FrameModel:
     """Identified structure + the rig's nonlinear pendulum on floor 3 (eq. 5.200–5.205)."""
-    structure = load_identified_structure(resolve_model_file(name, key))
+    return storeys_frame(load_identified_structure(resolve_model_file(name, key)), rig)
+
+
+def storeys_frame(structure: Structure, rig: Rig) -> FrameModel:
+    """An identified floors-only ``structure`` with the rig's pendulum: the design model."""
     model = FrameModel(structure, rig)
     model.name = "identified"
     return model
+
+
+def storeys(mass: np.ndarray, stiffness: np.ndarray, damping: np.ndarray,
+            source: str) -> Structure:
+    """The floors-only structure of M, K, R (3×3, floors 1–3), named after its ``source``."""
+    return Structure(f"identified({source})", mass, stiffness, (0, 1, 2), ("x1", "x2", "x3"),
+                     damping)
+
+
+def write_mkr_file(path: Path, structure: Structure, source: str) -> None:
+    """``structure`` as a model file ``format: stillframe-mkr`` (what ``design.model: file`` and
+    the nodes' ``design`` parameter read; floats written to the last bit)."""
+    data = {"format": "stillframe-mkr", "source": source,
+            **{name: np.asarray(matrix, dtype=float).tolist() for name, matrix in (
+                ("mass", structure.mass), ("stiffness", structure.stiffness),
+                ("damping", structure.damping))}}
+    write_text(path, yaml.safe_dump(data, sort_keys=False), what="model file")
 
 
 def frame_for(source: str, file: str, scene: Scene, key: str) -> FrameModel:

@@ -14,6 +14,7 @@ from stillframe.config.loop_sections import Estimator
 from stillframe.contract.signals import Estimate, Sample
 from stillframe.design.coordinates import design_map, physical_selector
 from stillframe.dynamics.models import FrameModel
+from stillframe.errors import IntegrationError, StillframeError
 
 __all__ = ["Counters", "Filter"]
 
@@ -61,10 +62,20 @@ class Filter(ABC):
         nothing changed, if the filter cannot be designed with them)."""
         self.Q, self.R = self.noise_covariances(process_std, measurement_std)
 
+    def continue_from(self, previous: Filter) -> None:
+        """Go on from ``previous``, a filter of the same run on another design model (a
+        hand-over at a sample boundary): its physical estimate mapped into this design's state
+        (inner DOFs in static equilibrium), its time, its last force and its counters; the
+        covariance stays this filter's own (the stationary one, or the initial one)."""
+        self.x = self.T @ (previous.S @ previous.x)
+        self.t, self.force, self.counters = previous.t, previous.force, previous.counters
+
     def step(self, sample: Sample, control: np.ndarray) -> Estimate | None:
         """Use one sample; ``control`` = [torque, force] applied since the previous sample.
 
-        Returns None (and counts it) for a sample not newer than the last one used.
+        Returns None (and counts it) for a sample not newer than the last one used; raises
+        :class:`~stillframe.errors.IntegrationError` when the estimate leaves the finite range
+        (:meth:`diverged`).
         """
         c = self.counters
         if self.t is not None and not sample.t > self.t:
@@ -84,13 +95,29 @@ class Filter(ABC):
             else:
                 c.non_finite += 1
         control = np.asarray(control, dtype=float)
-        if self.t is not None:
-            self.predict(sample.t - self.t, self.force, force, control)
-        if present.any():
-            self.update(np.asarray(sample.measurements, dtype=float), present, force, control)
+        try:   # a diverging estimate is checked below, not warned about on the way
+            with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+                if self.t is not None:
+                    self.predict(sample.t - self.t, self.force, force, control)
+                if present.any():
+                    self.update(np.asarray(sample.measurements, dtype=float), present, force,
+                                control)
+        except (ArithmeticError, ValueError, np.linalg.LinAlgError) as exc:
+            if isinstance(exc, StillframeError):
+                raise
+            raise self.diverged(sample.t) from None
+        if not (np.isfinite(self.x).all() and np.isfinite(self.P).all()):
+            raise self.diverged(sample.t)
         self.t, self.force = sample.t, force
         c.updates += 1
         return self.estimate()
+
+    def diverged(self, t: float) -> IntegrationError:
+        """The error of an estimate that left the finite range at ``t`` (the filter's model and
+        noise settings no longer follow the plant): the run cannot go on."""
+        return IntegrationError(
+            f"estimator.type: the {type(self).__name__} estimate left the finite range at "
+            f"t = {t:.6g} s (its design model and noise settings do not follow this plant)")
 
     def estimate(self) -> Estimate:
         if self.P is not self._covariance[0]:  # a stationary filter keeps P: computed once

@@ -156,6 +156,10 @@ class TimeVaryingKalman(LinearFilter):
         super().initialise_from(sample, control)
         self.kf.x = self.x
 
+    def continue_from(self, previous: Filter) -> None:
+        super().continue_from(previous)
+        self.kf.x = self.x
+
     def predict(self, dt: float, force0: float, force1: float, control: np.ndarray) -> None:
         """filterpy's predict with Φ and the inputs [u0, u1 − u0] through [Γ0, Γ1] over ``dt``
         [s]."""

@@ -10,6 +10,11 @@ saturation and slew limits (what the simulator reports in the encoder's ``effort
 floor-3 load cell), not the command, so that a saturated actuator cannot wind the estimate up.
 The same scene and seeds therefore give the same numbers here and through the nodes.
 
+With ``adaptation.enabled`` the loop runs the scene's
+:class:`~stillframe.loop.adaptation.Adaptation` on the estimator's inputs after each estimator
+step, as estimator_node does, and applies each hand-over before the estimator step of its
+sample.
+
 The evaluation is :func:`stillframe.loop.evaluation.evaluate`.
 """
 
@@ -22,6 +27,8 @@ import numpy as np
 
 from stillframe.config.scene import Scene
 from stillframe.contract.codecs import COMMAND_TOPICS
+from stillframe.estimation.base import Filter
+from stillframe.loop.adaptation import Adaptation, Handover
 from stillframe.loop.energy_balance import EnergyLedger
 from stillframe.loop.evaluation import LoopHistory, evaluate, open_loop_truth, plant_report
 from stillframe.loop.parts import controller_of, estimator_of, simulator_of
@@ -45,13 +52,21 @@ def run_closed_loop(scene: Scene, progress: Progress | None = None) -> LoopHisto
     rows = np.full((n, 20), np.nan)
     control = np.zeros(2)
     ledger = EnergyLedger.of(plant, scene)      # pH plant: balance and passivity check
+    adaptation = Adaptation(scene, n) if scene.adaptation.enabled else None
+    handover: Handover | None = None
     every = max(1, n // 100)
     looping, looping_cpu = time.perf_counter(), time.process_time()
     for k in range(n):
         sample = step.sample()
         if ledger is not None and sample.truth is not None:   # the pH plant reports its truth
             ledger.update(float(sample.truth[3]))
+        if handover is not None and k == handover.sample:
+            assert isinstance(estimator, Filter) and controller is not None  # checked: kf, lqg
+            estimator = handover.apply(estimator, controller)
+            handover = None
         estimate = estimator.step(sample, control) if estimator else None
+        if adaptation is not None:
+            handover = adaptation.observe(k, sample, control) or handover
         if controller is not None:
             command = controller.command(sample.t, estimate, sample.force)
             step.offer(controller.actuator, float(command.vector[controller.actuator]),
@@ -85,4 +100,6 @@ def run_closed_loop(scene: Scene, progress: Progress | None = None) -> LoopHisto
     })
     if ledger is not None:
         history.evaluation["energy_balance"] = ledger.values()
+    if adaptation is not None:
+        history.evaluation["adaptation"] = adaptation.report()
     return history

@@ -16,6 +16,7 @@ from stillframe.control.factory import make_controller
 from stillframe.control.supervisor import Controller
 from stillframe.dynamics.models.frame import FrameModel
 from stillframe.estimation.factory import Estimator, make_estimator
+from stillframe.loop.adaptation import check_adaptation
 from stillframe.loop.spec import LoopSpec
 from stillframe.loop.wiring import design_model
 from stillframe.plant.frame_plant import make_plant
@@ -53,3 +54,4 @@ def check_loop(scene: Scene, *, mode: str = "lockstep") -> None:
               else design_model(scene))
     estimator_of(scene, design)
     controller_of(scene, design)
+    check_adaptation(scene, mode=mode)

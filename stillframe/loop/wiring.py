@@ -4,6 +4,7 @@ take these from here, so that they cannot disagree."""
 
 from __future__ import annotations
 
+from stillframe.config.scene import changed_scene
 from stillframe.config.schema import Section
 from stillframe.contract import topics
 from stillframe.contract.codecs import COMMAND_TOPICS, SENSOR_TOPICS
@@ -13,8 +14,11 @@ from stillframe.dynamics.models.frame import FrameModel
 
 
 def design_model(scene: Section) -> FrameModel:
-    """The model the estimator and the controller are designed on (``design.model``)."""
-    return frame_for(scene.design.model, scene.design.file, scene, "design.file")
+    """The model the estimator and the controller are designed on (``design.model``, on the
+    structure after ``design.after_events`` of the scene's events)."""
+    after = scene.design.after_events
+    return frame_for(scene.design.model, scene.design.file,
+                     changed_scene(scene, after) if after else scene, "design.file")
 
 
 def estimator_inputs(scene: Section) -> tuple[topics.TopicSpec, ...]:

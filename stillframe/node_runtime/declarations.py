@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import Any, Literal
 
 from stillframe.errors import InputError
+from stillframe.loop.adaptation import SCENE_DESIGN, design_check
 from stillframe.loop.spec import (
     COMMAND_MISS_LIMIT,
     COMMAND_TIMEOUT_PERIODS,
@@ -188,6 +189,36 @@ class NoiseParameterValues(NodeParameters):
 
 
 @dataclass(frozen=True)
+class AdaptationParameterValues(NodeParameters):
+    """estimator_node with ``adaptation.enabled``: where its designs and its record go."""
+
+    adaptation_dir: str = param("", doc=(
+        "the directory the adaptation writes each design's model file into (`design_N.yaml`); "
+        "empty: a new temporary directory"))
+    adaptation_record: str = param("", doc=(
+        "write the adaptation's updates and events as JSON here at each event and at the end; "
+        "empty: none"))
+    design_timeout_s: float = param(60.0, positive, unit="s", doc=(
+        "the longest wait for controller_node to take or refuse a design; no answer: the "
+        "design is refused, the running one stays"))
+
+
+@dataclass(frozen=True)
+class DesignParameterValues(NodeParameters):
+    """estimator_node with a filter, and controller_node: the design they run, switched at a
+    sample boundary (docs/adaptation.md)."""
+
+    design: str = param(SCENE_DESIGN, limited(design_check, "`scene` or a model file, "
+                                              "optionally `@T`"), dynamic=True, doc=(
+        "the design model: `scene` (the scene's design section) or a model file (`format: "
+        "stillframe-mkr` or an identified `.npz`: storeys with the rig's pendulum); `@T`: from "
+        "the sample stamped T [s] on (none: the next sample). Checked when set (the model "
+        "loads, the LQG designed on it has finite gains and stable poles) and refused with the "
+        "reason otherwise, the running design kept; set both nodes with the same T to switch "
+        "them at the same sample; `scene@T` rolls back"))
+
+
+@dataclass(frozen=True)
 class ControllerParameterValues(NodeParameters):
     """controller_node."""
 
@@ -220,8 +251,9 @@ WRITER_DEFAULTS = {"command_writer": CONTROLLER, "sensor_writer": SIM,
 NODE_PARAMETERS: dict[str, tuple[type[NodeParameters], ...]] = {
     SIM: (*_COMMON, SimParameterValues),
     ESTIMATOR: (*_COMMON, ManagedParameterValues, EstimatorParameterValues,
-                NoiseParameterValues),
-    CONTROLLER: (*_COMMON, ManagedParameterValues, ControllerParameterValues),
+                NoiseParameterValues, DesignParameterValues, AdaptationParameterValues),
+    CONTROLLER: (*_COMMON, ManagedParameterValues, ControllerParameterValues,
+                 DesignParameterValues),
 }
 
 #: the lines between which docs/nodes.md holds :func:`.parameters.reference`

@@ -6,7 +6,7 @@ node's phases (:data:`MARKS`, in the order a sample passes them), and the node's
 counters at the row's end (minor and major page faults, voluntary and involuntary context
 switches: ``getrusage(RUSAGE_THREAD)`` into a preallocated struct). The monotonic clock is the
 same in every process of a host, so the rows of the three nodes join by stamp into one sample's
-path (:mod:`stillframe.bench.phases`). A mark not reached in a row stays 0.
+path (:mod:`stillframe.app.bench.phases`). A mark not reached in a row stays 0.
 
 With the ``phase_log`` parameter (a directory) the node writes its ring to ``<dir>/<node>.npz``
 when it ends, with what the kernel says about its scheduling (:func:`sched_facts`).

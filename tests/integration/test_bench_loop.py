@@ -10,7 +10,9 @@ import time
 import numpy as np
 import pytest
 
-from stillframe.app.commands.bench_loop import (
+from stillframe.app.bench.busy import busy_loops
+from stillframe.app.bench.latency import LatencyLog
+from stillframe.app.bench.loop import (
     goal_rows,
     loaded_table,
     realtime_overrides,
@@ -18,8 +20,6 @@ from stillframe.app.commands.bench_loop import (
     watchdog_zeros,
     within_period_pct,
 )
-from stillframe.bench.busy import busy_loops
-from stillframe.bench.latency import LatencyLog
 from stillframe.config.scene import load_scene
 from stillframe.contract import messages
 from stillframe.locations import REPO_ROOT

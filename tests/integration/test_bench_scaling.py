@@ -7,7 +7,7 @@ import json
 
 import pytest
 
-from stillframe.app.commands.bench_scaling import PLANTS, SCENE, overrides
+from stillframe.app.bench.scaling import PLANTS, SCENE, overrides
 from stillframe.config.scene import load_scene
 from stillframe.plant.frame_plant import make_plant
 from tests.support.middleware import run_stillframe

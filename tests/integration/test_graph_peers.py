@@ -134,10 +134,7 @@ def test_an_idle_publisher_on_the_command_topic_changes_nothing(
     np.testing.assert_array_equal(hist["command"], reference().command)
     np.testing.assert_array_equal(hist["truth"], reference().truth)
     assert writer_refusals(gate) == 0 and gate["ignored_writers"] == ""
-    # the stall was hundreds of lock-step timeouts from refused commands; the start-up
-    # wait seen in CI (sample 0 repaired late, numbers bit-identical) is now part of the
-    # start-up handshake (Pacer.deadline_ns), not a timeout
-    assert result["complete"] is True, [line for line in sim_log if "timeout" in line]
+    assert result["complete"] is True, [line for line in sim_log if "error" in line]
 
 
 @pytest.mark.slow
@@ -236,7 +233,6 @@ def test_a_writing_peer_is_refused_counted_and_named(
     assert result["complete"] is False and hist["t"][-1] >= CONTROLLED_UNTIL_S
     np.testing.assert_array_equal(hist["command"], reference(tuple(LONG_LQG)).command[:steps])
     np.testing.assert_array_equal(hist["truth"], reference(tuple(LONG_LQG)).truth[:steps])
-    assert result["complete"] is True, [line for line in sim_log if "timeout" in line]
 
 
 def launch(*args: str) -> subprocess.Popen:
@@ -390,8 +386,7 @@ def test_the_loop_keeps_controlling_beside_tools(ros_domain: int, tmp_path: Path
     assert run.returncode == 130, run_log.text()[-3000:]    # Ctrl-C, every node stopped
     result = json.loads((out / "result.json").read_text())
     steps = result["steps"]
-    assert result["complete"] is False and result["complete"] is True, [
-        line for line in run_log.lines if "timeout" in line]
+    assert result["complete"] is False, [line for line in run_log.lines if "error" in line]
     with np.load(out / "result.npz") as data:
         assert data["t"][-1] >= CONTROLLED_UNTIL_S
         np.testing.assert_array_equal(data["command"], reference(tuple(LONG_LQG)).command[:steps])

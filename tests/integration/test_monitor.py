@@ -24,7 +24,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 import pytest
 
-from stillframe.app.commands.bench_loop import realtime_overrides
+from stillframe.app.bench.loop import realtime_overrides
 from stillframe.bags.storage import read_bag
 from stillframe.config.scene import load_scene
 from stillframe.contract import messages

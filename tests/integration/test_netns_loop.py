@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 
 from stillframe.app import netns_lab
-from stillframe.app.commands.bench_loop import realtime_overrides
-from stillframe.app.fault_bench import SCENE
+from stillframe.app.bench.fault_runs import SCENE
+from stillframe.app.bench.loop import realtime_overrides
 from stillframe.app.net_faults import FAULTS
 from stillframe.config.scene import load_scene
 from stillframe.loop.closed_loop import run_closed_loop

@@ -29,8 +29,8 @@ def test_composed_run_equals_one_process(ros_domain: int, tmp_path: Path, compos
                                          backend: str) -> None:
     """On rclpy (no intra-process hand-over there) the composed nodes reach each other through
     Fast DDS, and the numbers are the same."""
-    result = run_scene(SCENE, SHORT_LQG, out=tmp_path, record=tmp_path / "bag", backends=[backend],
-                       compose=compose)
+    result = run_scene(SCENE, SHORT_LQG, out=tmp_path, record_dir=tmp_path / "bag",
+                       backends=[backend], compose=compose)
     reference = run_closed_loop(thesis_scene("thesis_lqg", SHORT_LQG))
     e = result.evaluation
     for key in ("reduction_pct", "peak_uncontrolled", "peak_controlled", "peak_command"):

@@ -17,7 +17,7 @@ from pathlib import Path
 import pytest
 from rosbags.highlevel import AnyReader
 
-from stillframe.bench.recorder_load import PER_STEP
+from stillframe.app.bench.recorder_load import PER_STEP
 from stillframe.locations import REPO_ROOT
 from stillframe.middleware import api
 from tests.support.middleware import child_env, run_stillframe, wait_for_line

@@ -28,7 +28,7 @@ import pytest
 import yaml
 from rosbags.highlevel import AnyReader
 
-from stillframe.bench.recorder_load import PER_STEP
+from stillframe.app.bench.recorder_load import PER_STEP
 from stillframe.locations import REPO_ROOT
 from stillframe.middleware import api
 from stillframe.recording.recorder import MISSING_KEY, STALLS_KEY

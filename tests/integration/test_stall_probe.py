@@ -1,4 +1,4 @@
-"""The machine-stall probe (:mod:`stillframe.bench.stall_probe`): cyclictest, stopped for a
+"""The machine-stall probe (:mod:`stillframe.app.bench.stall_probe`): cyclictest, stopped for a
 known time, reports a stall at least that long on every CPU."""
 
 from __future__ import annotations
@@ -10,7 +10,7 @@ import time
 
 import pytest
 
-from stillframe.bench.stall_probe import stall_probe, summary
+from stillframe.app.bench.stall_probe import stall_probe, summary
 from stillframe.errors import InputError
 
 needs_cyclictest = pytest.mark.skipif(

@@ -10,7 +10,7 @@ import argparse
 import json
 import sys
 
-from stillframe.app.commands.common import add_json_argument, emit_json
+from stillframe.app.arguments import add_json_argument, emit_json
 from stillframe.text_table import format_table
 
 

@@ -1,6 +1,7 @@
 """``stillframe bench NAME``: benchmarks that print figures as ratios against a baseline.
 
-Each module in :data:`BENCHES` exposes ``register(subparsers)`` like a top-level command.
+Each module of :data:`stillframe.app.bench.BENCHES` exposes ``register(subparsers)`` like a
+top-level command.
 """
 
 from __future__ import annotations
@@ -8,23 +9,7 @@ from __future__ import annotations
 import argparse
 import importlib
 
-BENCHES: tuple[str, ...] = (
-    "stillframe.app.commands.bench_transport",
-    "stillframe.app.commands.bench_identify",
-    "stillframe.app.commands.bench_identify_hammer",
-    "stillframe.app.commands.bench_loop",
-    "stillframe.app.commands.bench_scaling",
-    "stillframe.app.commands.bench_hops",
-    "stillframe.app.commands.bench_monitor",
-    "stillframe.app.commands.bench_fidelity",
-    "stillframe.app.commands.bench_speed",
-    "stillframe.app.commands.bench_montecarlo",
-    "stillframe.app.commands.bench_faults",
-    "stillframe.app.commands.bench_soak",
-    "stillframe.app.commands.bench_cli",
-    "stillframe.app.commands.bench_controllers",
-    "stillframe.app.commands.bench_writers",
-)
+from stillframe.app.bench import BENCHES
 
 
 def register(sub: argparse._SubParsersAction) -> None:

@@ -14,7 +14,7 @@ import argparse
 import sys
 from collections.abc import Sequence
 
-from stillframe.app.commands.common import (
+from stillframe.app.arguments import (
     add_scene_arguments,
     emit_json,
     scene_from_args,

@@ -25,8 +25,9 @@ from pathlib import Path
 import numpy as np
 
 from stillframe import interrupts
-from stillframe.app.commands.common import whole
-from stillframe.app.commands.launch import add_launch_arguments, print_evaluation, report_death
+from stillframe.app.arguments import whole
+from stillframe.app.launch_cli import add_launch_arguments, print_evaluation, report_death
+from stillframe.config import environment
 from stillframe.config.environment import MAX_DOMAIN_ID
 from stillframe.config.scene import Scene
 from stillframe.errors import InputError
@@ -61,7 +62,7 @@ def isolate(domain_id: int | None) -> str:
     one other than the environment's) with discovery on this machine only; the line that says
     so."""
     if domain_id is None:
-        current = os.environ.get("ROS_DOMAIN_ID", "0")
+        current = environment.value("ROS_DOMAIN_ID")
         domain_id = random.SystemRandom().choice(
             [d for d in range(DOMAIN_IDS[0], DOMAIN_IDS[1] + 1) if str(d) != current])
     os.environ["ROS_DOMAIN_ID"] = str(domain_id)
@@ -129,8 +130,9 @@ def run(args: argparse.Namespace) -> int:
     print(f"demo: {scene.name} through sim_node, estimator_node and controller_node "
           f"({args.mode}), recording to {out / 'bag'}", file=sys.stderr)
     try:
-        result = run_scene(DEMO_SCENE, args.overrides, out=out, mode=args.mode, record=out / "bag",
-                           lockstep_timeout_s=args.lockstep_timeout, backends=args.backends)
+        result = run_scene(DEMO_SCENE, args.overrides, out=out, mode=args.mode,
+                           record_dir=out / "bag", lockstep_timeout_s=args.lockstep_timeout,
+                           backends=args.backends)
     except NodeDiedError as exc:
         return report_death("demo", exc)
     except KeyboardInterrupt as exc:

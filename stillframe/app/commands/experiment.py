@@ -14,8 +14,8 @@ import sys
 from pathlib import Path
 
 from stillframe import interrupts
-from stillframe.app.commands.common import add_scene_arguments, emit_json
-from stillframe.app.commands.launch import add_launch_arguments, report_death
+from stillframe.app.arguments import add_scene_arguments, emit_json
+from stillframe.app.launch_cli import add_launch_arguments, report_death
 from stillframe.files import check_output
 
 

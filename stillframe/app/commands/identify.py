@@ -9,10 +9,9 @@ from __future__ import annotations
 
 import argparse
 import sys
-import time
 from typing import TYPE_CHECKING, Any
 
-from stillframe.app.commands.common import add_json_argument, emit_json
+from stillframe.app.arguments import Progress, add_json_argument, emit_json
 from stillframe.errors import InputError
 from stillframe.files import check_output
 
@@ -90,19 +89,6 @@ def register(sub: argparse._SubParsersAction) -> None:
     parser.add_argument("--progress", action="store_true",
                         help="show progress on stderr (default: when stderr is a terminal)")
     parser.set_defaults(func=run)
-
-
-class Progress:
-    """Stage messages with elapsed time on stderr."""
-
-    def __init__(self, enabled: bool) -> None:
-        self.enabled = enabled
-        self.start = time.perf_counter()
-
-    def __call__(self, message: str) -> None:
-        if self.enabled:
-            print(f"[{time.perf_counter() - self.start:7.2f} s] {message}", file=sys.stderr,
-                  flush=True)
 
 
 def _dofs(text: str, what: str) -> list[int]:

@@ -7,7 +7,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from stillframe.app.commands.common import add_json_argument, emit_json
+from stillframe.app.arguments import add_json_argument, emit_json
 from stillframe.files import check_output
 from stillframe.text_table import format_table
 
@@ -34,7 +34,7 @@ def run(args: argparse.Namespace) -> int:
     fits; exit code 0."""
     import numpy as np
 
-    from stillframe.app.commands.identify import Progress
+    from stillframe.app.arguments import Progress
     from stillframe.identification import daisy
 
     check_output("--plots", args.plots, folder=True)

@@ -17,8 +17,8 @@ import sys
 import time
 from typing import Any
 
-from stillframe.app.commands.common import add_json_argument, emit_json
-from stillframe.app.commands.param import node_name
+from stillframe.app.arguments import add_json_argument, emit_json
+from stillframe.app.ros_tools import node_name
 from stillframe.config.environment import value
 from stillframe.contract import messages
 from stillframe.errors import InputError

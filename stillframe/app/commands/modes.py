@@ -7,7 +7,7 @@ import argparse
 
 import numpy as np
 
-from stillframe.app.commands.common import (
+from stillframe.app.arguments import (
     add_scene_arguments,
     emit_json,
     scene_from_args,

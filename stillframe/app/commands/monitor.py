@@ -12,7 +12,7 @@ import argparse
 import math
 import sys
 
-from stillframe.app.commands.common import (
+from stillframe.app.arguments import (
     add_priority_arguments,
     apply_priority,
     scene_path,

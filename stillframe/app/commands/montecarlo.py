@@ -17,21 +17,13 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from stillframe.app.commands.common import add_scene_arguments, emit_json, whole
+from stillframe.app.arguments import add_executor_arguments, add_scene_arguments, emit_json, whole
 from stillframe.errors import InputError
 from stillframe.files import check_output
 from stillframe.text_table import format_table
 
 DEFAULT_RUNS = 100
 TARGET = re.compile(r"^(displacement|velocity)>=(-?\d+(\.\d*)?)$")
-
-
-def add_executor_arguments(parser: argparse.ArgumentParser) -> None:
-    """``--workers K`` and ``--scheduler tcp://HOST:PORT`` (stillframe.studies.executor)."""
-    parser.add_argument("--workers", type=whole(1, 1024), default=None, metavar="K",
-                        help="local worker processes (default: one per core)")
-    parser.add_argument("--scheduler", default=None, metavar="tcp://HOST:PORT",
-                        help="run on this Dask scheduler's workers instead of a local cluster")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -59,7 +51,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def _targets(args: argparse.Namespace, scene_name: str) -> list[tuple[str, tuple[int, ...],
                                                                         float]]:
-    from stillframe.app.commands.reproduce import TARGETS
+    from stillframe.app.thesis_targets import TARGETS
 
     targets = [(t.quantity, t.floors, t.minimum_pct) for t in TARGETS if t.scene == scene_name]
     for text in args.target:

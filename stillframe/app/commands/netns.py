@@ -10,7 +10,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from stillframe.app.commands.common import add_json_argument, emit_json
+from stillframe.app.arguments import add_json_argument, emit_json
 
 
 def register(sub: argparse._SubParsersAction) -> None:

@@ -31,7 +31,7 @@ from typing import Any
 
 import yaml
 
-from stillframe.app.commands.common import add_json_argument, emit_json
+from stillframe.app.arguments import add_json_argument, emit_json
 from stillframe.app.ros_tools import (
     add_strategy_arguments,
     add_verbs,

@@ -9,7 +9,7 @@ import sys
 
 import numpy as np
 
-from stillframe.app.commands.common import add_json_argument, emit_json, whole
+from stillframe.app.arguments import add_json_argument, emit_json, whole
 from stillframe.dynamics.ph import crank_slider, fourbar
 from stillframe.dynamics.ph.manufactured import l2_errors, observed_rates
 from stillframe.errors import InputError

@@ -9,7 +9,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from stillframe.app.commands.common import add_priority_arguments, apply_priority
+from stillframe.app.arguments import add_priority_arguments, apply_priority
 from stillframe.files import check_output
 
 

@@ -12,49 +12,18 @@ from __future__ import annotations
 import argparse
 import sys
 import tempfile
-from dataclasses import dataclass
 from pathlib import Path
 
 from stillframe import interrupts
-from stillframe.app.commands.common import add_json_argument, emit_json, scene_path
-from stillframe.app.commands.launch import add_launch_arguments, print_evaluation, report_death
+from stillframe.app.arguments import add_json_argument, emit_json, scene_path
+from stillframe.app.launch_cli import add_launch_arguments, print_evaluation, report_death
+from stillframe.app.thesis_targets import TARGETS
 from stillframe.config.scene import load_scene
 from stillframe.errors import InputError
 from stillframe.locations import SCENES_DIR
 
 THESIS_SCENES: tuple[str, ...] = ("thesis_lqg", "thesis_euk_pendulum", "thesis_euk_floor",
                                   "thesis_euk_ekf")
-
-
-@dataclass(frozen=True)
-class Target:
-    """A reduction every listed floor must reach."""
-
-    scene: str
-    quantity: str
-    floors: tuple[int, ...]
-    minimum_pct: float
-
-    def describe(self) -> str:
-        """The target in words, as the report prints it (``scene: quantity reduction >= N % on
-        ...``)."""
-        where = ("every floor" if len(self.floors) == 3
-                 else ", ".join(f"floor {f}" for f in self.floors))
-        return f"{self.scene}: {self.quantity} reduction >= {self.minimum_pct:g} % on {where}"
-
-    def met(self, reduction_pct: dict[str, list[float]]) -> bool:
-        """Whether every floor of the target reached ``minimum_pct`` in ``reduction_pct`` (per
-        quantity, the reductions of floors 1-3 in %)."""
-        return all(reduction_pct[self.quantity][f - 1] >= self.minimum_pct for f in self.floors)
-
-
-TARGETS: tuple[Target, ...] = (
-    Target("thesis_lqg", "displacement", (1, 2, 3), 50.0),
-    Target("thesis_lqg", "velocity", (1, 2, 3), 50.0),
-    Target("thesis_euk_ekf", "displacement", (3,), 85.0),
-    Target("lqg_mismatch", "displacement", (1, 2, 3), 50.0),
-    Target("lqg_mismatch", "velocity", (1, 2, 3), 50.0),
-)
 
 
 def register(sub: argparse._SubParsersAction) -> None:

@@ -16,7 +16,7 @@ from typing import BinaryIO
 
 import numpy as np
 
-from stillframe.app.commands.common import (
+from stillframe.app.arguments import (
     add_scene_arguments,
     emit_json,
     scene_and_choice,

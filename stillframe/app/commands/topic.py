@@ -12,7 +12,7 @@ import time
 from collections import deque
 from typing import Any
 
-from stillframe.app.commands.common import seconds
+from stillframe.app.arguments import seconds
 from stillframe.app.ros_tools import (
     add_strategy_arguments,
     add_verbs,

@@ -3,7 +3,7 @@ backend, on hand-made rows."""
 
 from __future__ import annotations
 
-from stillframe.app.commands.bench_writers import summary
+from stillframe.app.bench.writers import summary
 
 
 def row(backend: str, writer: bool, misses: int) -> dict:

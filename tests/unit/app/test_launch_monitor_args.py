@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from stillframe.app.cli import build_parser
-from stillframe.app.commands.launch import monitor_args
+from stillframe.app.launch_cli import monitor_args
 
 
 @pytest.mark.parametrize(("extra", "expected"), [

@@ -119,7 +119,8 @@ def test_demo_experiment_and_ph_plots(figures: dict, tmp_path: Path) -> None:
 
 
 def test_bench_plots(figures: dict, tmp_path: Path) -> None:
-    from stillframe.app.commands import bench_fidelity, bench_identify
+    from stillframe.app.bench import fidelity as bench_fidelity
+    from stillframe.app.bench import identify as bench_identify
     from stillframe.identification.sweep import METHODS
 
     point = {"scene": "s", "model": "lumped", "method": "midpoint", "cpu_per_s": 0.1,
@@ -131,6 +132,26 @@ def test_bench_plots(figures: dict, tmp_path: Path) -> None:
              for s in (40, 15) for n in (1024, 256)]
     bench_identify.heat_maps(table, tmp_path)
     assert_units(figures, 1 + len(METHODS) * len(bench_identify.FIGURES))
+
+
+def test_adapt_timeline_plot(figures: dict, tmp_path: Path) -> None:
+    from stillframe.app.adaptation_plot import plot_timeline
+
+    t = np.linspace(0.0, 10.0, 50)
+    results = {}
+    for name in ("fixed", "adaptive", "oracle"):
+        np.savez(tmp_path / f"{name}.npz", fine_t=t, fine_floors=np.zeros((50, 3)))
+        results[name] = SimpleNamespace(history_file=tmp_path / f"{name}.npz", evaluation={})
+    results["adaptive"].evaluation = {"adaptation": {
+        "updates": [{"t": 4.0 + i, "frequency_hz": [1.1, 1.98, 5.79, 8.82 - 0.1 * i],
+                     "statistic": None if i < 2 else 3.0 * i} for i in range(5)],
+        "events": [{"kind": "detection", "t": 8.0, "reference_hz": [1.1, 1.98, 5.79, 8.82],
+                    "reference_std_hz": [0.01, 0.01, 0.01, 0.01]}]}}
+    doc = {"scene": "s", "adaptation": {"change_at_s": 6.0, "detected_at_s": 8.0,
+                                        "true_hz": [1.1, 1.91, 5.76, 8.07]},
+           "details": {"handover_s": 9.0, "threshold": 40.0}}
+    plot_timeline(tmp_path / "timeline.png", doc, results)
+    assert_units(figures, 1)
 
 
 def test_the_checker_refuses_a_bare_key_and_a_missing_unit() -> None:

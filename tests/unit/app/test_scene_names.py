@@ -9,8 +9,8 @@ from pathlib import Path
 
 import pytest
 
+from stillframe.app.arguments import scene_path
 from stillframe.app.cli import build_parser
-from stillframe.app.commands.common import scene_path
 from stillframe.locations import SCENES_DIR, find_scene, shipped_scenes
 
 

@@ -9,7 +9,7 @@ from typing import Any
 
 import pytest
 
-from stillframe.app.commands.bench_loop import recorder_table, recorder_verdict, twin
+from stillframe.app.bench.loop import recorder_table, recorder_verdict, twin
 
 
 def row(backend: str = "rclpy", *, misses: int, record: bool = False, repeat: int = 0,

@@ -8,7 +8,7 @@ from typing import Any
 
 import pytest
 
-from stillframe.app.commands.bench_loop import tracker_rows, tracker_table
+from stillframe.app.bench.loop import tracker_rows, tracker_table
 
 
 def row(backend: str, rate: float, *, misses: int, p50: float, p99: float,

@@ -1,4 +1,4 @@
-"""RSS growth after warm-up (stillframe.bench.soak), against numbers worked by hand."""
+"""RSS growth after warm-up (stillframe.app.bench.rss), against numbers worked by hand."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import os
 import numpy as np
 import pytest
 
-from stillframe.bench.soak import RssLog, history_bytes, rss_bytes
+from stillframe.app.bench.rss import RssLog, history_bytes, rss_bytes
 
 MIB = 2**20
 

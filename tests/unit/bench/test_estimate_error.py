@@ -6,7 +6,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from stillframe.bench.estimate_error import EstimateLog
+from stillframe.app.bench.estimate_error import EstimateLog
 from stillframe.contract.codecs import STATE_NAMES
 
 PERIOD_NS = 10_000_000

@@ -1,4 +1,4 @@
-"""The nodes' phase rings joined into sample paths (stillframe.bench.phases), on rings written
+"""The nodes' phase rings joined into sample paths (stillframe.app.bench.phases), on rings written
 with times worked out by hand: each step's figures, the join by stamp (rows missing, out of
 order), the worst samples explained by the step that was slow and the kernel's counters, and
 the histogram against numpy's."""
@@ -8,8 +8,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from stillframe.bench import phases
-from stillframe.bench.phases import CTL, EST, PATH, SIM, NodeRing, SamplePaths
+from stillframe.app.bench import phases
+from stillframe.app.bench.phases import CTL, EST, PATH, SIM, NodeRing, SamplePaths
 from stillframe.node_runtime.phase_timing import COUNTERS, MARKS
 
 US = 1_000

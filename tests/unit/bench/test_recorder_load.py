@@ -5,8 +5,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from stillframe.app.bench.recorder_load import PER_STEP, completeness
 from stillframe.bags.storage import BagWriter
-from stillframe.bench.recorder_load import PER_STEP, completeness
 from stillframe.contract import messages
 
 RATE_HZ = 1000.0

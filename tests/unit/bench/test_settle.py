@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from stillframe.bench.settle import (
+from stillframe.app.bench.settle import (
     CpuShare,
     CpuTimes,
     Settled,

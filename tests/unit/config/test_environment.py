@@ -25,7 +25,7 @@ NAME = re.compile(r"\b(ROS_[A-Z_]+|RMW_IMPLEMENTATION|CYCLONEDDS_URI|STILLFRAME_
 #: reads of the environment outside the declarations, and why: each sets a variable for its own
 #: children or restores one it set
 OWN_READS = {
-    "stillframe/app/commands/bench_loop.py": "sets its child processes' backend, then restores it",
+    "stillframe/app/bench/loop.py": "sets its child processes' backend, then restores it",
     "stillframe/app/netns_lab.py": "sets the observer's discovery for a block, then restores it",
     "stillframe/studies/cluster.py": "PYTHONPATH of the dask workers it starts",
 }

@@ -13,8 +13,10 @@ from stillframe.contract.signals import full_inputs
 from stillframe.dynamics.integrators import reference_solution
 from stillframe.dynamics.models import build_model
 from stillframe.dynamics.systems import MechanicalSystem
+from stillframe.errors import IntegrationError
 from stillframe.estimation.ekf import ExtendedKalman
 from stillframe.estimation.factory import initial_physical, make_estimator
+from stillframe.loop.closed_loop import run_closed_loop
 from stillframe.plant.frame_plant import FramePlant
 from tests.support.scenes import lumped_scene, thesis_scene
 
@@ -109,3 +111,17 @@ def test_ekf_recovers_from_the_thesis_one_radian_error_in_phi() -> None:
     assert abs(errors[0][3]) < 1e-2
     assert np.max(np.abs(errors[-32:, 3])) < 5e-3
     assert np.max(np.abs(errors[-32:, :3])) < 5e-5  # floors: < 2.5 % of their 2 mm amplitude
+
+
+def test_an_estimate_that_leaves_the_finite_range_ends_the_run_with_the_estimators_line() -> None:
+    """The EKF of the EUK scene on the identified linear plant driven by white noise leaves the
+    finite range (its pendulum angle runs away, and sin φ of an infinite φ has no value): the
+    one-process loop ends with an IntegrationError naming ``estimator.type`` and the time, as
+    the estimator node does (exit code 4), not a ``ValueError`` from inside the model."""
+    scene = thesis_scene("thesis_euk_ekf", [
+        "duration=2", "integrator.dt=0.0078125", "controller.start=0.9777146821174447",
+        "evaluation.window=0.9777146821174447", "excitation.type=white_noise",
+        "plant.model=file"])
+    with pytest.raises(IntegrationError, match=r"^estimator\.type: the ExtendedKalman estimate "
+                                               r"left the finite range at t = \d"):
+        run_closed_loop(scene)

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from stillframe.bench.phases import NodeRing
+from stillframe.app.bench.phases import NodeRing
 from stillframe.node_runtime.phase_timing import COUNTERS, PhaseLog
 
 MARKS = ("woke", "computed", "done")

@@ -12,7 +12,6 @@ import sys
 import numpy as np
 import pytest
 import scipy.linalg as sla
-from scipy import optimize
 
 from stillframe.config.scene import Scene, changed_scene, load_scene, scene_from_dict
 from stillframe.dynamics.models import build_model
@@ -21,6 +20,7 @@ from stillframe.loop.closed_loop import run_closed_loop
 from stillframe.loop.spec import LoopSpec
 from stillframe.loop.step import LoopStep
 from stillframe.plant.frame_plant import FramePlant
+from tests.support.scenes import characteristic_frequencies
 
 CHANGE_SCENES = ("change_mass_floor2", "change_stiffness_story1")
 #: every kind of change at once: a floor's mass, the stories' stiffness, the damping, the
@@ -122,33 +122,6 @@ def test_the_structure_changes_only_at_its_event() -> None:
     assert step.plant.model.structure.mass[0, 0] == pytest.approx(1.281 * 1.2, rel=1e-15)
     assert step.plant.model.structure.mass[2, 2] == pytest.approx(1.380 * 0.9, rel=1e-15)
     assert [r["applied_s"] for r in step.event_records()] == [17 / 32, 17 / 32, 1.0]
-
-
-def characteristic_frequencies(scene: Scene) -> np.ndarray:
-    """The lumped rig's undamped frequencies [Hz] linearised at rest, from the thesis's
-    matrices (eq. 5.41–5.43, 5.59–5.66) assembled here and the roots of d(λ) = det(K − λM), a
-    quartic in λ = ω²: located by the polynomial through five values of d, then each refined by
-    Brent's method on d itself within ±2 % of it. A second assembly and a second solver,
-    independent of the model's code and of the symmetric eigensolver ``modes`` uses."""
-    rig = scene.rig
-    c, p = rig.columns, rig.pendulum
-    k = (c.per_story * 12 * c.youngs_modulus * c.width * c.thickness**3 / 12
-         * np.array(c.stiffness_factors) / np.array(c.lengths) ** 3)
-    m1, m2, m3 = rig.floor_masses
-    coupling = p.mass * p.half_length
-    M = np.array([[m1, 0, 0, 0], [0, m2, 0, 0], [0, 0, m3 + p.mass, coupling],
-                  [0, 0, coupling, p.mass * p.half_length**2 + p.inertia]])
-    K = np.array([[k[0] + k[1], -k[1], 0, 0], [-k[1], k[1] + k[2], -k[2], 0],
-                  [0, -k[2], k[2], 0], [0, 0, 0, p.mass * rig.gravity * p.half_length]])
-
-    def d(x: float) -> float:
-        return float(np.linalg.det(K - x * M))
-
-    nodes = np.linspace(0, 4e4, 5)
-    guesses = np.sort(np.roots(np.polyfit(nodes, [d(x) for x in nodes], 4)).real)
-    roots = [optimize.brentq(d, 0.98 * g, 1.02 * g, xtol=1e-300, rtol=4 * np.finfo(float).eps)
-             for g in guesses]
-    return np.sqrt(roots) / (2 * np.pi)
 
 
 @pytest.mark.parametrize("name", CHANGE_SCENES)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -126,3 +127,24 @@ def emit_json(document: Any) -> None:
     """Print ``document`` to stdout as indented JSON, with a final newline."""
     json.dump(document, sys.stdout, indent=2)
     sys.stdout.write("\n")
+
+
+def add_executor_arguments(parser: argparse.ArgumentParser) -> None:
+    """``--workers K`` and ``--scheduler tcp://HOST:PORT`` (stillframe.studies.executor)."""
+    parser.add_argument("--workers", type=whole(1, 1024), default=None, metavar="K",
+                        help="local worker processes (default: one per core)")
+    parser.add_argument("--scheduler", default=None, metavar="tcp://HOST:PORT",
+                        help="run on this Dask scheduler's workers instead of a local cluster")
+
+
+class Progress:
+    """Stage messages with elapsed time on stderr."""
+
+    def __init__(self, enabled: bool) -> None:
+        self.enabled = enabled
+        self.start = time.perf_counter()
+
+    def __call__(self, message: str) -> None:
+        if self.enabled:
+            print(f"[{time.perf_counter() - self.start:7.2f} s] {message}", file=sys.stderr,
+                  flush=True)

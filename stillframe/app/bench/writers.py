@@ -21,7 +21,7 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
-from stillframe.app.commands.common import add_json_argument, emit_json, seconds
+from stillframe.app.arguments import add_json_argument, emit_json, seconds
 from stillframe.errors import InputError
 from stillframe.text_table import format_table
 
@@ -116,7 +116,7 @@ def summary(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
 def run(args: argparse.Namespace) -> int:
     """Run the benchmark the module's docstring describes and print its figures (``--json``: one
     document); exit code 0."""
-    from stillframe.app.commands.bench_loop import realtime_overrides
+    from stillframe.app.bench.loop import realtime_overrides
     from stillframe.middleware import api
 
     if not args.duration >= 4.0:

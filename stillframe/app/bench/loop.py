@@ -2,8 +2,8 @@
 
 1. Real-time mode at 100 Hz and 1 kHz (the LQG scene with ``sensors.rate_hz`` and a matching
    ``integrator.dt``): sensor-stamp-to-command latency p50 / p99 / max and deadline misses, timed
-   by the nodes' own phase rings (:mod:`stillframe.bench.phases`; ``--dds-observer``: by an
-   observer node in this process, :mod:`stillframe.bench.latency`), beside sim_node's overruns,
+   by the nodes' own phase rings (:mod:`stillframe.app.bench.phases`; ``--dds-observer``: by an
+   observer node in this process, :mod:`stillframe.app.bench.latency`), beside sim_node's overruns,
    with a histogram, the worst ten samples explained phase by phase, and each step of a sample.
 2. Lock-step: the full LQG scene through the three nodes, steps per second and the ratio of
    simulated to wall time, against the same scene in one process (``closed-loop``, the best of
@@ -16,12 +16,12 @@ three nodes on it, so the backends are compared in the same run. ``--compose`` /
 ``--compose-all`` run the real-time runs with those nodes in one process and add a composed
 lock-step run; ``--record`` / ``--track`` repeat each real-time run with the recorder / the
 modal tracker beside the loop, the figures without and with in one table (``--repeat N``: N such
-pairs); each real-time run starts on a settled machine (:mod:`stillframe.bench.settle`: the last
+pairs); each real-time run starts on a settled machine (:mod:`stillframe.app.bench.settle`: the last
 run's children reaped, its pages flushed, an idle check printed), and its table says how much CPU
 other jobs took during it; ``--rt`` runs the nodes with the real-time practices of
 docs/realtime.md. The figures are printed beside the loop's goals (:data:`GOALS`), with the
 machine's load average during each real-time run (the machine may be shared); ``--stall-probe``
-runs cyclictest beside each real-time run (:mod:`stillframe.bench.stall_probe`) and prints the
+runs cyclictest beside each real-time run (:mod:`stillframe.app.bench.stall_probe`) and prints the
 machine's own stalls, which no practice of the loop can remove.
 """
 
@@ -42,8 +42,19 @@ from typing import Any
 
 import numpy as np
 
-from stillframe.app.commands.common import add_json_argument, emit_json, seconds
-from stillframe.app.commands.launch import (
+from stillframe.app.arguments import add_json_argument, emit_json, seconds
+from stillframe.app.bench import phases, pingpong
+from stillframe.app.bench.busy import busy_loops
+from stillframe.app.bench.latency import LatencyLog
+from stillframe.app.bench.recorder_load import (
+    RecorderRun,
+    completeness,
+    recorder_process,
+    write_limit,
+)
+from stillframe.app.bench.settle import CpuShare, children_cpu_s, settle
+from stillframe.app.bench.stall_probe import stall_probe
+from stillframe.app.launch_cli import (
     add_compose_arguments,
     add_realtime_arguments,
     add_recorder_arguments,
@@ -52,17 +63,6 @@ from stillframe.app.commands.launch import (
 )
 from stillframe.app.launcher import run_scene
 from stillframe.app.run_verdict import watchdog_zeros
-from stillframe.bench import phases, pingpong
-from stillframe.bench.busy import busy_loops
-from stillframe.bench.latency import LatencyLog
-from stillframe.bench.recorder_load import (
-    RecorderRun,
-    completeness,
-    recorder_process,
-    write_limit,
-)
-from stillframe.bench.settle import CpuShare, children_cpu_s, settle
-from stillframe.bench.stall_probe import stall_probe
 from stillframe.config.scene import load_scene
 from stillframe.contract.topics import DEFAULT_NAMESPACE, FLOOR_IMU, FORCE_CMD, TORQUE_CMD
 from stillframe.errors import InputError
@@ -145,7 +145,7 @@ def stamp_ns(cdr: bytes) -> int:
 def observe(log: LatencyLog) -> Any:
     """A ``prepare`` hook for :func:`stillframe.app.launcher.run_scene`: the launcher's node logs
     floor-1 samples and both command topics with their source timestamps
-    (:mod:`stillframe.bench.latency`), reading only the stamps from the raw bytes (the observer
+    (:mod:`stillframe.app.bench.latency`), reading only the stamps from the raw bytes (the observer
     must keep up with 1 kHz on a loaded machine)."""
 
     def prepare(node: Any) -> None:
@@ -207,12 +207,12 @@ def realtime(rate_hz: float, duration: float, out: Path, backend: str,
              track: bool = False, dds_observer: bool = False, load: int = 0) -> dict[str, Any]:
     """The LQG scene in real time at ``rate_hz`` through the nodes on ``backend`` (composed as
     ``compose`` says): latency and deadline figures from the nodes' phase rings
-    (:func:`stillframe.bench.phases.latency_log`), or with ``dds_observer`` as an observer here
+    (:func:`stillframe.app.bench.phases.latency_log`), or with ``dds_observer`` as an observer here
     sees them; ``monitor_args`` start a monitor beside them; ``probe``: cyclictest beside them;
     ``record``: ``stillframe record --all`` beside them with these further arguments
-    (:mod:`stillframe.bench.recorder_load`; None: no recorder);
+    (:mod:`stillframe.app.bench.recorder_load`; None: no recorder);
     ``track``: the modal tracker beside them (:mod:`stillframe.app.tracking`); ``load``: that
-    many busy loops beside them (:mod:`stillframe.bench.busy`)."""
+    many busy loops beside them (:mod:`stillframe.app.bench.busy`)."""
     log = LatencyLog(round(1e9 / rate_hz))
     others = CpuShare()
     children_before = children_cpu_s()
@@ -361,7 +361,7 @@ def lockstep(out: Path, backend: str, one: dict[str, Any], compose: str,
 
 def path_figures(directory: Path) -> dict[str, Any]:
     """The phase rings the nodes wrote to ``directory`` as each step's figures along a sample's
-    path and beside it (:mod:`stillframe.bench.phases`); empty when sim_node's is missing."""
+    path and beside it (:mod:`stillframe.app.bench.phases`); empty when sim_node's is missing."""
     rings = phases.load(directory) if directory.is_dir() else {}
     if phases.SIM not in rings:
         return {}

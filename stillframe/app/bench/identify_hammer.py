@@ -20,7 +20,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from stillframe.app.commands.common import add_json_argument, emit_json
+from stillframe.app.arguments import add_json_argument, emit_json
 from stillframe.text_table import format_table
 
 ORDER = 6

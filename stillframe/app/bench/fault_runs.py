@@ -22,11 +22,11 @@ from typing import Any
 
 import numpy as np
 
-from stillframe.app.commands.bench_loop import realtime_overrides
+from stillframe.app.bench.estimate_error import EstimateLog
+from stillframe.app.bench.loop import realtime_overrides
 from stillframe.app.launcher import run_scene
 from stillframe.app.net_faults import Fault, applied
 from stillframe.app.netns_lab import Lab, host_prefixes
-from stillframe.bench.estimate_error import EstimateLog
 from stillframe.config.scene import load_scene
 from stillframe.contract.topics import DEFAULT_NAMESPACE, STATE_ESTIMATE
 from stillframe.locations import SCENES_DIR

@@ -16,7 +16,7 @@ import argparse
 import os
 import sys
 
-from stillframe.app.commands.common import add_json_argument, emit_json, scene_path
+from stillframe.app.arguments import add_json_argument, emit_json, scene_path
 from stillframe.errors import InputError
 from stillframe.locations import SCENES_DIR
 from stillframe.text_table import format_table

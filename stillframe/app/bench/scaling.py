@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from stillframe.app.commands.common import add_json_argument, emit_json, seconds
+from stillframe.app.arguments import add_json_argument, emit_json, seconds
 from stillframe.errors import InputError
 from stillframe.locations import SCENES_DIR
 from stillframe.middleware import api

@@ -4,7 +4,7 @@ processes (115,200 samples at 32 Hz), each process's resident set size sampled a
 Reported per process: RSS after warm-up, at the end (the last second of sim time left out: the
 simulator then evaluates the run and writes its results), and the growth between (must stay
 below 5 %; the simulator's net of the histories it keeps by design,
-:mod:`stillframe.bench.soak`), and the loop's counters at the end (whether it completed,
+:mod:`stillframe.app.bench.rss`), and the loop's counters at the end (whether it completed,
 safe-state samples, rejected commands, malformed samples; the nodes' last ``/diagnostics``).
 Progress (sim time, RSS) goes to stderr.
 """
@@ -19,9 +19,9 @@ import time
 from pathlib import Path
 from typing import Any
 
-from stillframe.app.commands.common import add_json_argument, emit_json, seconds
+from stillframe.app.arguments import add_json_argument, emit_json, seconds
+from stillframe.app.bench.rss import RssLog, rss_bytes
 from stillframe.app.launcher import Launcher, LaunchOptions
-from stillframe.bench.soak import RssLog, rss_bytes
 from stillframe.config.scene import load_scene, sample_grid
 from stillframe.contract import messages, topics
 from stillframe.errors import InputError

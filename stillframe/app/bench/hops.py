@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import argparse
 
-from stillframe.app.commands.common import add_json_argument, emit_json
+from stillframe.app.arguments import add_json_argument, emit_json
 from stillframe.errors import InputError
 from stillframe.locations import SCENES_DIR
 from stillframe.text_table import format_table
@@ -34,7 +34,7 @@ def run(args: argparse.Namespace) -> int:
     document); exit code 0."""
     if args.number < 1:
         raise InputError("bench hops: --number must be >= 1")
-    from stillframe.bench.hops import compute_hops, dds_hops
+    from stillframe.app.bench.hop_profile import compute_hops, dds_hops
     from stillframe.config.scene import load_scene
     from stillframe.middleware import api
 
@@ -61,7 +61,7 @@ def run(args: argparse.Namespace) -> int:
 def phase_timing_hop(number: int, repeats: int = 7) -> dict[str, object]:
     """What sim_node's phase timing (:mod:`stillframe.node_runtime.phase_timing`) costs a
     sample: a row begun, every mark made, the counters read."""
-    from stillframe.bench.hops import per_call_us
+    from stillframe.app.bench.hop_profile import per_call_us
     from stillframe.node_runtime.phase_timing import MARKS, PhaseLog
 
     timing = PhaseLog("sim_node", MARKS["sim_node"], capacity=number)

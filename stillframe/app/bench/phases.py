@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from stillframe.bench.latency import LatencyLog
+from stillframe.app.bench.latency import LatencyLog
 from stillframe.text_table import format_table
 
 SIM, EST, CTL = "sim_node", "estimator_node", "controller_node"

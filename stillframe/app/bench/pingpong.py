@@ -208,7 +208,7 @@ def drive(pinger: Any, rate: float, seconds: float) -> int:
     return sent
 
 
-# -- the echoing side (``python -m stillframe.bench.pingpong --peer VARIANT``) ---------
+# -- the echoing side (``python -m stillframe.app.bench.pingpong --peer VARIANT``) ---------
 def raw_peer() -> None:
     """Echo every ping's bytes back as they came, on Cyclone's C path, until shutdown."""
     ping, pong = topics("raw")
@@ -276,7 +276,7 @@ def measure(rate: float, duration: float,
     figures of :func:`_summary`."""
     env = dict(os.environ, PYTHONPATH=str(REPO_ROOT))
     peers = [
-        subprocess.Popen([sys.executable, "-m", "stillframe.bench.pingpong",
+        subprocess.Popen([sys.executable, "-m", "stillframe.app.bench.pingpong",
                           "--peer", variant], env=env, stderr=subprocess.DEVNULL)
         for variant in variants
     ]

@@ -12,8 +12,7 @@ import sys
 from dataclasses import asdict
 from pathlib import Path
 
-from stillframe.app.commands.common import add_json_argument, emit_json, seconds
-from stillframe.app.commands.montecarlo import add_executor_arguments
+from stillframe.app.arguments import add_executor_arguments, add_json_argument, emit_json, seconds
 from stillframe.errors import InputError
 from stillframe.files import check_output, save_figure
 from stillframe.text_table import format_table

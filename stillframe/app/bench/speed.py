@@ -23,7 +23,7 @@ import time
 
 import numpy as np
 
-from stillframe.app.commands.common import add_json_argument, emit_json
+from stillframe.app.arguments import add_json_argument, emit_json
 from stillframe.text_table import format_table
 
 MESHES = (10, 20, 40, 100, 200)

@@ -4,7 +4,7 @@ Each loop node in its own network namespace on one bridge (``launch --netns``); 
 every host's incoming link (loss 1/5/10/30 %, delay 5 ± 2 ms, reordering): lock-step wall time
 and whether the result is bit-identical to the one-process loop, and at 100 Hz in real time
 sim_node's deadline misses, the estimate's RMS error against the truth and the displacement
-reductions (:mod:`stillframe.app.fault_bench`). Needs root, iproute2 and iptables.
+reductions (:mod:`stillframe.app.bench.fault_runs`). Needs root, iproute2 and iptables.
 """
 
 from __future__ import annotations
@@ -14,8 +14,8 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
-from stillframe.app.commands.common import add_json_argument, emit_json, seconds
-from stillframe.app.commands.launch import add_netns_arguments
+from stillframe.app.arguments import add_json_argument, emit_json, seconds
+from stillframe.app.launch_cli import add_netns_arguments
 from stillframe.app.net_faults import FAULTS, check_tools, fault_named
 from stillframe.errors import InputError
 from stillframe.text_table import format_table
@@ -76,7 +76,7 @@ def table(rows: list[dict[str, Any]]) -> str:
 def run(args: argparse.Namespace) -> int:
     """Run the benchmark the module's docstring describes and print its figures (``--json``: one
     document); exit code 0."""
-    from stillframe.app.fault_bench import SCENE, run_bench
+    from stillframe.app.bench.fault_runs import SCENE, run_bench
     from stillframe.app.netns_lab import joined, lab
     from stillframe.config.scene import load_scene
 

@@ -27,8 +27,8 @@ from typing import Any
 
 import numpy as np
 
-from stillframe.app.commands.bench_loop import SCENE, observer_backend, realtime
-from stillframe.app.commands.common import add_json_argument, emit_json, seconds
+from stillframe.app.arguments import add_json_argument, emit_json, seconds
+from stillframe.app.bench.loop import SCENE, observer_backend, realtime
 from stillframe.errors import InputError
 from stillframe.middleware import api
 from stillframe.monitor.foxglove_client import Capture, capture

@@ -26,7 +26,7 @@ import math
 
 import numpy as np
 
-from stillframe.app.commands.common import add_json_argument, emit_json
+from stillframe.app.arguments import add_json_argument, emit_json
 from stillframe.config.scene import load_scene
 from stillframe.errors import StillframeError
 from stillframe.locations import SCENES_DIR

@@ -21,8 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from stillframe.app.commands.common import add_json_argument, emit_json
-from stillframe.app.commands.montecarlo import add_executor_arguments
+from stillframe.app.arguments import add_executor_arguments, add_json_argument, emit_json
 from stillframe.errors import InputError
 from stillframe.files import check_output, save_figure
 from stillframe.text_table import format_table

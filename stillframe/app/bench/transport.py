@@ -1,14 +1,14 @@
 """``stillframe bench transport``: ping-pong RTT between two processes: raw Cyclone, and the node
 API on each backend (Cyclone through ``dds``, Fast DDS through real rclpy), interleaved in one run.
 
-See :mod:`stillframe.bench.pingpong` for what is measured and how.
+See :mod:`stillframe.app.bench.pingpong` for what is measured and how.
 """
 
 from __future__ import annotations
 
 import argparse
 
-from stillframe.app.commands.common import add_json_argument, emit_json, seconds
+from stillframe.app.arguments import add_json_argument, emit_json, seconds
 from stillframe.errors import InputError
 from stillframe.text_table import format_table
 
@@ -34,7 +34,7 @@ def run(args: argparse.Namespace) -> int:
     document); exit code 0."""
     if not args.duration > 0 or not args.rate >= 0:
         raise InputError("bench transport: --duration must be > 0 and --rate >= 0")
-    from stillframe.bench.pingpong import IMU, measure
+    from stillframe.app.bench.pingpong import IMU, measure
     from stillframe.middleware import api
 
     results = measure(args.rate, args.duration)

@@ -16,7 +16,7 @@ import subprocess
 import sys
 import time
 
-from stillframe.app.commands.common import add_json_argument, emit_json
+from stillframe.app.arguments import add_json_argument, emit_json
 from stillframe.errors import InputError
 from stillframe.text_table import format_table
 
