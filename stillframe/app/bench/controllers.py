@@ -4,7 +4,7 @@ Two cases, each through the one-process closed loop (:func:`run_closed_loop`, th
 
 - ``thesis``: ``scenes/thesis_lqg.yaml`` as it is (linear identified plant, no torque limit);
 - ``torque-limited``: the same scene on the rig's nonlinear lumped plant with the lumped design
-  model and ``actuators.torque_limit=2`` (the issue's case).
+  model and ``actuators.torque_limit=2`` (commands beyond it clipped).
 
 Laws: LQG, LQG with anti-windup (``controller.anti_windup``), MPC, passivity, EUK (variant 1, on
 the pendulum), each with the scene's estimator. Columns: the steady-state peak displacement

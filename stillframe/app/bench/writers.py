@@ -25,7 +25,7 @@ from stillframe.app.arguments import add_json_argument, emit_json, seconds
 from stillframe.errors import InputError
 from stillframe.text_table import format_table
 
-#: the issue's writer: ``ros2 topic pub -r 50 /frame/pendulum/torque_cmd`` of 0.5 N m
+#: the foreign writer: ``ros2 topic pub -r 50 /frame/pendulum/torque_cmd`` of 0.5 N m
 TOPIC = "/frame/pendulum/torque_cmd"
 MESSAGE = "{header: auto, wrench: {torque: {z: 0.5}}}"
 #: how many times the twin's misses the run beside the writer may have (a foreign writer must

@@ -3,7 +3,7 @@ change scene through the nodes (lock-step, the same seeds), and what the adaptat
 
 Prints when the structure changed and when the loop noticed it, the frequencies it identified
 against the true changed model's, each run's peak reductions after the change per floor and
-the adaptive loop's share of the oracle's, with the issue's targets (detection within 15 s,
+the adaptive loop's share of the oracle's, with the adaptation's targets (detection within 15 s,
 frequencies within 1 %, at least 90 % of the oracle's displacement reductions on every floor)
 met or missed; ``--json`` prints ``{"adaptation": {"change_at_s", "detected_at_s",
 "identified_hz", "true_hz", "reduction_pct": {"fixed", "adaptive", "oracle"}}, "details":
