@@ -42,9 +42,12 @@ class Container(Cycle):
         self.controller = controller
 
     def process_ready(self) -> int:
+        """What :meth:`advance` handled: the estimates and commands made."""
         return self.advance()
 
     def next_wait(self) -> float:
+        """The longest wait of the next spin [s]: :data:`SPIN_S` (:meth:`spin` shortens it to the
+        estimator's own wait)."""
         return SPIN_S
 
     def advance(self) -> int:
@@ -64,6 +67,7 @@ class Container(Cycle):
         return any(published)
 
     def finish(self) -> None:
+        """Both nodes' last status and phase log, the estimator's first."""
         self.estimator.finish()
         self.controller.finish()
 

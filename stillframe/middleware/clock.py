@@ -29,8 +29,7 @@ class Time:
 
     @classmethod
     def from_msg(cls, msg: Any) -> Time:
-        """The time of a ``builtin_interfaces/msg/Time`` (or a header's ``stamp``), in integer
-        nanoseconds."""
+        """The time a ``builtin_interfaces/msg/Time`` holds (its ``sec`` and ``nanosec``)."""
         return cls(messages.stamp_ns(msg))
 
     def seconds_nanoseconds(self) -> tuple[int, int]:
