@@ -95,10 +95,17 @@ class FoxgloveBridge(TopicFollower):
         self.want(channel.topic, False)
 
     def request(self, offers: list[QoSProfile]) -> QoSProfile:
+        """A live viewer's QoS for the ``offers``
+        (:func:`~stillframe.middleware.qos.viewer_request`: best effort), one sample deep unless
+        every sample is asked for."""
         request = viewer_request(offers)
         return request if self.every_sample else request.with_depth(1)
 
     def on_new_topic(self, topic: str, msgtype: str, offers: list[QoSProfile]) -> RawCallback:
+        """Open a Foxglove channel for ``topic`` (its ``ros2msg`` schema, CDR encoding) and return
+        the callback that logs each sample on it unchanged, stamped with its receive time or the
+        newest sim time; with ``use_sim_time`` the ``/clock`` callback also keeps the newest clock
+        for :meth:`poll`."""
         channel = foxglove.Channel(topic, schema=ros2msg_schema(msgtype),
                                    message_encoding=MESSAGE_ENCODING, context=self.context)
         self.channels[topic] = channel

@@ -162,6 +162,7 @@ class FramePlant:
 
     @property
     def t(self) -> float:
+        """The current time t_k = k · period [s]."""
         return self.k * self.period
 
     def physical(self) -> np.ndarray:

@@ -108,6 +108,9 @@ class GapCounter:
         self.off_grid = False
 
     def add(self, stamp_ns: int) -> None:
+        """Count the step from the previous stamp to ``stamp_ns`` [ns] by its size; a repeated or
+        earlier stamp counts no step, and past :data:`MAX_STEP_SIZES` sizes the stream is off the
+        grid and nothing more is counted."""
         last, self.last = self.last, stamp_ns
         if last is None or stamp_ns <= last or self.off_grid:
             return
@@ -144,11 +147,15 @@ class SimStamps:
         self._base = 0
 
     def add(self, cdr: bytes, arrived_ns: int) -> None:
+        """Note the ``/clock`` message ``cdr`` (its serialized bytes) that arrived at ``arrived_ns``
+        on the system clock."""
         sec, nanosec = _CLOCK.unpack_from(cdr, 4)
         self._arrivals.append(arrived_ns)
         self._values.append(sec * 1_000_000_000 + nanosec)
 
     def stamp(self, arrived_ns: int) -> int:
+        """The sim time [ns] of a sample that arrived at ``arrived_ns``: the latest ``/clock`` that
+        had arrived by then (the one kept by :meth:`keep_last` before any, 0 before the first)."""
         i = bisect.bisect_right(self._arrivals, arrived_ns)
         return self._values[i - 1] if i else self._base
 
@@ -182,6 +189,10 @@ class Recorder(TopicFollower):
         super().__init__(node, topics, poll_period_s=poll_period_s)
 
     def on_new_topic(self, topic: str, msgtype: str, offers: list[QoSProfile]) -> RawCallback:
+        """Add ``topic`` to the bag with its publishers' ``offers`` and return the callback that
+        writes each sample, stamped with its receive time (sim time from ``/clock`` under
+        ``use_sim_time``); on a topic whose messages start with a header stamp it also counts the
+        gaps of those stamps (:class:`GapCounter`)."""
         self.bag.add_topic(topic, msgtype, [to_bag(q) for q in offers])
         write = self.bag.writer_of(topic)
         sim = self._sim
