@@ -180,8 +180,7 @@ class SimNode(base.LoopNode):
         return self.step.plant
 
     def on_command(self, actuator: int, cdr: bytes, info: api.MessageInfo) -> None:
-        """Offer a command to the step (its writer, then its value and stamp); count the
-        others."""
+        """Offer a command to the step (its writer, then its value and stamp); count the others."""
         step = self.step
         if not step.admits(actuator, info.publisher_gid, info.publication_sequence, cdr):
             return

@@ -302,8 +302,7 @@ def _scan_chunk(found: McapFile, chunk: ChunkInfo, records: Any) -> None:
 
 
 def _checked(chunk: ChunkInfo, raw: memoryview, size: int) -> bytes | memoryview | None:
-    """The chunk's records when its CRC holds, else None (no CRC, no decompression, another
-    CRC)."""
+    """The chunk's records when its CRC holds, else None (no CRC, no decompression, another CRC)."""
     if not chunk.crc:
         return None
     try:

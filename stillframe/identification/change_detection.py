@@ -86,8 +86,7 @@ class ChangeDetector:
         return self.mean is not None
 
     def statistic(self) -> float | None:
-        """The largest CUSUM statistic over the modes (None while the reference is being
-        set)."""
+        """The largest CUSUM statistic over the modes (None while the reference is being set)."""
         if self.upper is None or self.lower is None:
             return None
         return float(max(self.upper.max(), self.lower.max()))

@@ -388,8 +388,7 @@ class DesignSwitch(Generic[Part]):
         return None
 
     def due(self, ns: int) -> tuple[FrameModel, Part] | None:
-        """The design and part to take at the sample stamped ``ns`` (None: keep the running
-        one)."""
+        """The design and part to take at the sample stamped ``ns`` (None: keep the running one)."""
         if self.pending is None or ns < self.pending[0]:
             return None
         _, self.current, design, part = self.pending

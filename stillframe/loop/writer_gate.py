@@ -288,8 +288,7 @@ class WriterGate:
 
     def name_of(self, gid: bytes) -> str:
         """The node of writer ``gid`` in the graph, its GID in hex while the graph has none; a
-        stream's (no GID): the topic's other writers, or ``unnamed`` while the graph shows
-        none."""
+        stream's (no GID): the topic's other writers, or ``unnamed`` while the graph shows none."""
         if gid.startswith(STREAM_KEY):
             return " or ".join(self.suspects()) or "unnamed"
         return next((name for g, name in self.writers() if g == gid and name.strip("/")),

@@ -74,8 +74,7 @@ class SubscriptionWait:
         sample of each ready subscription of :data:`SUBSCRIPTIONS_WAITED_HERE` into its
         callback (subscriptions in creation order); let rclpy's executor run one callback if
         anything else is ready. ``timeout_ns`` 0 only takes what the subscriptions hold: rmw's
-        wait costs a timed futex wait in Fast DDS even then, several times what empty takes
-        cost."""
+        wait costs a timed futex wait in Fast DDS even then, several times what empty takes cost."""
         own, executed = [], []
         for node in self._nodes:
             for sub in node._subscriptions:

@@ -1,5 +1,4 @@
-"""The loop nodes' runtime: what sim_node, estimator_node, controller_node and the container run
-on.
+"""The loop nodes' runtime: what sim_node, estimator_node, controller_node and the container run on.
 
 - :mod:`.base`: the declared base: ``Cycle`` (spin → process → idle → housekeeping), ``LoopNode``
   (parameters, ``/diagnostics``, writer gates, real-time practices), ``Managed`` (lifecycle),

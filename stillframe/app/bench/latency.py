@@ -45,8 +45,7 @@ class LatencyLog:
 
     def summary(self) -> dict[str, float | int]:
         """p50 / p99 / max latency in µs over the answered samples, deadline misses (latency
-        above one period), unanswered samples, samples before the first command
-        (``unobserved``)."""
+        above one period), unanswered samples, samples before the first command (``unobserved``)."""
         answered = sorted(set(self.samples) & set(self.commands))
         latency_us = np.array([(self.commands[s] - self.samples[s]) * 1e-3 for s in answered])
         first, last = min(self.commands, default=0), max(self.commands, default=-1)

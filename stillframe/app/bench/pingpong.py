@@ -141,8 +141,7 @@ class TypedPinger:
 
 
 class ApiPinger:
-    """The node API on one backend (the variant's name), or raw bytes through it
-    (``dds_raw``)."""
+    """The node API on one backend (the variant's name), or raw bytes through it (``dds_raw``)."""
 
     def __init__(self, node: api.Node, variant: str) -> None:
         self.node = node

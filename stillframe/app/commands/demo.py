@@ -59,8 +59,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def isolate(domain_id: int | None) -> str:
     """Put this process and the children it starts on ROS domain ``domain_id`` (None: a random
-    one other than the environment's) with discovery on this machine only; the line that says
-    so."""
+    one other than the environment's) with discovery on this machine only; the line that says so."""
     if domain_id is None:
         current = environment.value("ROS_DOMAIN_ID")
         domain_id = random.SystemRandom().choice(
