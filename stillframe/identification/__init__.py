@@ -17,5 +17,7 @@ __getattr__, __dir__, __all__ = lazy.attach(
         "ssi_cov": ["identify_output_only"],
         "n4sid": ["identify_n4sid"],
         "damping": ["fit_proportional_damping"],
+        "change_detection": ["ChangeDetector"],
+        "loop_structure": ["identify_loop_structure"],
     },
 )

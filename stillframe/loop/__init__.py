@@ -14,5 +14,6 @@ __getattr__, __dir__, __all__ = lazy.attach(
         "step": ["LoopStep"],
         "closed_loop": ["run_closed_loop"],
         "evaluation": ["LoopHistory", "evaluate"],
+        "adaptation": ["Adaptation"],
     },
 )
