@@ -711,12 +711,12 @@ class Launcher:
             request = messages.new("lifecycle_msgs/srv/ChangeState_Request",
                                    transition=messages.new("lifecycle_msgs/msg/Transition",
                                                            label=transition))
-            # a node killed mid-transition ends the wait at once (it cost 2 x 20 s before)
+            # a node killed mid-transition ends the wait at once, not after the timeout
             response = caller.call_service("lifecycle_msgs/srv/ChangeState",
                                            f"{prefix}/change_state", request,
                                            TRANSITION_TIMEOUT_S, give_up=child.exited)
             if response is None and not child.exited() and self._state(caller, prefix) == goal:
-                continue    # done, but its reply was lost (seen under 10 % packet loss)
+                continue    # done, but its reply was lost (a lossy network drops replies too)
             if response is None or not response.success:
                 if child.exited():   # died meanwhile: say how
                     raise NodeDiedError.exited(child)
