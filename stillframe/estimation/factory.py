@@ -27,6 +27,9 @@ class TruthEstimator:
         self.counters = Counters()
 
     def step(self, sample: Sample, control: np.ndarray) -> Estimate | None:
+        """The simulator's true state of ``sample`` as the estimate (its design coordinates beside
+        it, no covariance); None, counted stale, for a sample without truth or not newer than the
+        last."""
         if sample.truth is None or (self.t is not None and not sample.t > self.t):
             self.counters.stale += 1
             return None

@@ -157,6 +157,8 @@ class TimeVaryingKalman(LinearFilter):
         self.kf.x = self.x
 
     def continue_from(self, previous: Filter) -> None:
+        """Go on from ``previous`` (:meth:`Filter.continue_from`), filterpy's filter taking the
+        mapped mean too."""
         super().continue_from(previous)
         self.kf.x = self.x
 

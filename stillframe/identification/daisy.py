@@ -120,6 +120,9 @@ def mean_fit(model: Model, u: np.ndarray, y: np.ndarray) -> float:
 
 
 def okid_model(u: np.ndarray, y: np.ndarray, method: str, observer_order: int) -> Model:
+    """The model of order :data:`ORDER` that ``method`` (an OKID variant of
+    :func:`~stillframe.identification.pipeline.identify`, no refinement) identifies on ``u``, ``y``
+    with observer order ``observer_order``, and the seconds it took."""
     start = time.perf_counter()
     ident = identify(u, y, DT, method, ORDER, observer_order=observer_order, refine=False)
     return Model(method, ident.A, ident.B, ident.C, ident.D, time.perf_counter() - start,
@@ -155,6 +158,8 @@ def output_error_model(start: Model, u: np.ndarray, y: np.ndarray) -> Model:
 
 
 def n4sid_model(u: np.ndarray, y: np.ndarray) -> Model:
+    """The N4SID model of order :data:`ORDER` (:data:`BLOCK_ROWS` block rows) on ``u``, ``y``, and
+    the seconds it took."""
     start = time.perf_counter()
     A, B, C, D = identify_n4sid(u, y, ORDER, BLOCK_ROWS)
     return Model("n4sid", A, B, C, D, time.perf_counter() - start)

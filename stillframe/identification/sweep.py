@@ -137,6 +137,9 @@ def _eig(K: Array, M: Array) -> tuple[Array, Array]:
 
 @dataclass(frozen=True)
 class Record:
+    """One simulated record: the force ``u`` (N, 1), the accelerations ``y`` (N, n) and the sample
+    period ``dt`` [s]."""
+
     u: Array
     y: Array
     dt: float
