@@ -238,6 +238,8 @@ class NodeParameters:
 
     @classmethod
     def dynamic(cls) -> frozenset[str]:
+        """The names of the parameters that may change while the node runs (declared
+        ``dynamic=True``); ``ros2 param set`` refuses the others."""
         return frozenset(s.name for s in cls.specs() if s.field.dynamic)
 
 
