@@ -310,12 +310,12 @@ def _check_loop(scene: Scene) -> None:
             f"evaluation.window: {window:g} s is shorter than one integrator step "
             f"(integrator.dt {scene.integrator.dt:g} s): a peak needs at least one state in it")
     acting = c.start + scene.actuators.delay_periods * period
-    if acting > scene.duration - window + 1e-9:
+    if acting > scene.duration - 1e-9:
         raise InputError(
             f"actuators.delay_periods: {scene.actuators.delay_periods} periods of {period:g} s "
             f"after controller.start ({c.start:g} s) the first command acts at {acting:g} s, "
-            f"after the evaluation window begins ({scene.duration - window:g} s: duration less "
-            "evaluation.window)")
+            f"when the run has ended (duration {scene.duration:g} s): no controlled state to "
+            "evaluate")
     if c.type == "mpc" and c.horizon_s < period * (1.0 - 1e-9):
         raise InputError(
             f"controller.horizon_s: {c.horizon_s:g} s is shorter than one sample period "

@@ -152,7 +152,8 @@ class Controller:
         out.enabled = True
         z = latest.z if self.predictor is None else self.predictor.ahead(latest.t, latest.z)
         started, started_cpu = time.perf_counter(), time.thread_time()
-        value, out.singular = self.law(z, force)
+        value, singular = self.law(z, force)
+        value, out.singular = float(value), bool(singular)
         if self.probe is not None:
             k = round(t / self.period)
             value += float(self.probe[k]) if k < self.probe.size else 0.0
@@ -162,7 +163,7 @@ class Controller:
         if not np.isfinite(value):
             value, out.singular = 0.0, True
         bound = self.limits.magnitude or COMMAND_BOUND
-        out.runaway = out.singular or abs(value) > RUNAWAY_FACTOR * bound
+        out.runaway = out.singular or bool(abs(value) > RUNAWAY_FACTOR * bound)
         if abs(value) > bound:
             value, out.saturated = float(np.clip(value, -bound, bound)), True
         c.saturated += out.saturated

@@ -68,9 +68,10 @@ def test_an_adaptation_event_crosses_its_topic_as_it_was() -> None:
 def test_the_design_parameter_refuses_a_bad_design_takes_a_file_and_rolls_back(
         ros_domain: int, tmp_path: Path) -> None:
     """controller_node alone (real time, waiting for a simulator that never comes): a model
-    file whose floor 1 stands apart on a negative stiffness is refused with the check's reason
-    (no LQR stabilises it) and the parameter keeps its value; the true changed structure's file
-    is taken; ``scene@5`` (a rollback) is taken."""
+    file whose floor 1 stands apart on a negative stiffness is refused with the model file's
+    reason (its stiffness is not positive semidefinite, so no design is tried; the design check
+    itself is held by tests/unit/loop/test_adaptation.py) and the parameter keeps its value; the
+    true changed structure's file is taken; ``scene@5`` (a rollback) is taken."""
     pfile = params_file(tmp_path, "change_mass_floor2", [], mode="realtime")
     node = start_node("controller_node", pfile)
     try:
@@ -83,7 +84,7 @@ def test_the_design_parameter_refuses_a_bad_design_takes_a_file_and_rolls_back(
                        "a bad identification")
         done = run_stillframe("param", "set", target, "design", f"{bad}@3.0")
         assert done.returncode != 0
-        assert "not stabilisable" in done.stderr + done.stdout
+        assert "not positive semidefinite" in done.stderr + done.stdout
         assert done.stderr.count("\n") <= 1
         got = run_stillframe("param", "get", target, "design", "--json")
         assert json.loads(got.stdout)["value"] == "scene"

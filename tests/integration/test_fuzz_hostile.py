@@ -421,7 +421,7 @@ def boundary_cases(rng: random.Random) -> list[tuple[list[str], str | None]]:
         cases.append(([*base, f"evaluation.window={room * rng.uniform(1.01, 3)!r}"],
                       "evaluation.window"))
         window = rng.uniform(dt, room)
-        periods = (2.0 - window - start) * 32
+        periods = (2.0 - start) * 32      # the first command must act before the run ends
         cases.append(([*base, f"evaluation.window={window!r}",
                        f"actuators.delay_periods={max(0, math.floor(periods) - 1)}"], None))
         cases.append(([*base, f"evaluation.window={window!r}",

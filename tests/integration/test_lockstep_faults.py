@@ -159,7 +159,7 @@ def test_a_killed_controller_ends_the_run_of_nodes_started_by_hand(
 
 def _child_pid(parent: int, name: str) -> int:
     """The pid of the launch's child running the node package ``name`` (``python -m name``)."""
-    out = subprocess.run(["pgrep", "-P", str(parent), "-f", f"-m {name}( |$)"],
+    out = subprocess.run(["pgrep", "-P", str(parent), "-f", "--", f"-m {name}( |$)"],
                          capture_output=True, text=True, check=True).stdout.split()
     assert len(out) == 1, out
     return int(out[0])

@@ -61,7 +61,7 @@ import importlib, pkgutil, sys
 name = sys.argv[1]
 package = importlib.import_module(name)
 for module in pkgutil.iter_modules(package.__path__):
-    if module.name != "setup":
+    if module.name not in ("setup", "__main__"):
         importlib.import_module(f"{name}.{module.name}")
 print(" ".join(sorted({m.split(".")[0] for m in sys.modules} & set(sys.argv[2:]))))
 """
