@@ -35,7 +35,7 @@ from stillframe.middleware.names import is_hidden
 from stillframe.middleware.taps import TappedPublisher, tap_topic
 from stillframe.monitor.dashboard import ERROR_KEYS
 from stillframe.monitor.foxglove_client import Capture, capture, churn, stall
-from tests.support.middleware import child_env, isolate_domain, scheduling
+from tests.support.middleware import child_env, isolate_domain, niced, scheduling
 
 pytestmark = pytest.mark.slow
 
@@ -440,7 +440,7 @@ def test_idle_monitor_runs_at_sched_idle(ros_domain: int) -> None:
         seen = scheduling(monitor.pid)
     finally:
         stop_monitor(monitor)
-    assert len(threads) > 1 and seen == {(os.SCHED_IDLE, 10)}    # and its default --nice 10
+    assert len(threads) > 1 and seen == {(os.SCHED_IDLE, niced(10))}    # and its default --nice 10
 
 
 def test_the_help_names_the_subprotocol_the_server_accepts(ros_domain: int) -> None:

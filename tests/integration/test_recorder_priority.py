@@ -14,15 +14,15 @@ from pathlib import Path
 import pytest
 
 from stillframe.locations import REPO_ROOT
-from tests.support.middleware import child_env, finish, scheduling
+from tests.support.middleware import child_env, finish, niced, scheduling
 
 
-@pytest.mark.parametrize(("args", "expected"), [
-    (["--nice", "7"], {(os.SCHED_OTHER, 7)}),
-    (["--nice", "3", "--idle"], {(os.SCHED_IDLE, 3)}),
+@pytest.mark.parametrize(("args", "policy", "increment"), [
+    (["--nice", "7"], os.SCHED_OTHER, 7),
+    (["--nice", "3", "--idle"], os.SCHED_IDLE, 3),
 ])
 def test_every_recorder_thread_runs_at_the_priority_asked(
-        tmp_path: Path, ros_domain: int, args: list[str], expected: set[tuple[int, int]]) -> None:
+        tmp_path: Path, ros_domain: int, args: list[str], policy: int, increment: int) -> None:
     bag = tmp_path / "bag"
     proc = subprocess.Popen([sys.executable, "-m", "stillframe", "record", "-o", str(bag), "--all",
                              *args], env=child_env(), cwd=REPO_ROOT, stdout=subprocess.PIPE,
@@ -39,7 +39,7 @@ def test_every_recorder_thread_runs_at_the_priority_asked(
         proc.send_signal(signal.SIGINT)
         _, err = finish(proc, timeout=60)
     assert proc.returncode == 0, err[-2000:]
-    assert threads > 1 and seen == expected, seen
+    assert threads > 1 and seen == {(policy, niced(increment))}, seen
     assert (bag / "metadata.yaml").is_file()
 
 
@@ -88,5 +88,5 @@ def test_launch_hands_its_recorder_the_priority_asked(tmp_path: Path, ros_domain
         if launch.poll() is None:
             launch.kill()
     assert launch.returncode == 0, err[-2000:]
-    assert seen == {(os.SCHED_IDLE, 5)}, seen
+    assert seen == {(os.SCHED_IDLE, niced(5))}, seen
     assert (bag / "metadata.yaml").is_file()

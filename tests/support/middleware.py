@@ -71,6 +71,13 @@ def finish(proc: subprocess.Popen, timeout: float = 30) -> tuple[str, str]:
         raise AssertionError(f"process did not finish; stderr: {err[-2000:]}") from None
 
 
+def niced(increment: int) -> int:
+    """The niceness a child ends at when it lowers itself by ``increment``: children inherit this
+    process's niceness (a suite may itself run niced, as CI runners often do) and the kernel
+    caps it at 19."""
+    return min(19, os.getpriority(os.PRIO_PROCESS, 0) + increment)
+
+
 def scheduling(pid: int) -> set[tuple[int, int]]:
     """(policy, niceness) of each thread of ``pid`` (threads that end meanwhile left out)."""
     out = set()
