@@ -17,8 +17,7 @@ as
   leaves one scalar equation in p, solved by Newton. S is banded once the DOFs are ordered by
   height (reverse Cuthill–McKee) except for the rank-r modal part of C
   (:class:`~stillframe.dynamics.models.structure.DampingParts`), handled by the Woodbury identity:
-  one step
-  costs O(n (b + r)) for half-bandwidth b — linear in the number of DOFs.
+  one step costs O(n (b + r)) for half-bandwidth b — linear in the number of DOFs.
 
 Loads: none, harmonics, hammer and chirp on one floor, plus a control input held over the run.
 """
@@ -351,6 +350,7 @@ def to_band(A: np.ndarray, b: int) -> np.ndarray:
 
 
 def bandwidth(A: np.ndarray) -> int:
+    """The largest |i − j| over the nonzero entries of ``A`` (0 for a zero matrix)."""
     i, j = np.nonzero(A)
     return int(np.max(np.abs(i - j))) if i.size else 0
 

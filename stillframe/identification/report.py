@@ -21,8 +21,7 @@ def modes_document(modes: ModalTable, consistent: Sequence[bool],
                    refinement: WithIntervals | None = None) -> list[dict[str, Any]]:
     """Modes sorted by frequency: frequency, damping ratio, shape as [magnitude, phase],
     whether the mode persists at higher orders (:mod:`stillframe.identification.quality`) and, with
-    the
-    refinement, the 95 % intervals ``frequency_ci_hz`` and ``damping_ci``."""
+    the refinement, the 95 % intervals ``frequency_ci_hz`` and ``damping_ci``."""
     docs = [{"frequency_hz": float(modes.frequency_hz[k]),
              "damping_ratio": float(modes.damping_ratio[k]),
              "shape": modes.magnitude_phase(k),

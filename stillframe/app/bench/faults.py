@@ -24,6 +24,8 @@ MODES = ("lockstep", "realtime")
 
 
 def register(benches: argparse._SubParsersAction) -> None:
+    """Add ``stillframe bench faults``, its arguments and :func:`run` as its action to
+    ``benches``."""
     parser = benches.add_parser("faults", help="the loop on three hosts (network namespaces) "
                                                "under network faults",
                                 description=__doc__.split("\n\n", 1)[1])
@@ -50,6 +52,8 @@ def _pct(values: list[float]) -> str:
 
 
 def table(rows: list[dict[str, Any]]) -> str:
+    """The text table of the fault ``rows``: lock-step wall time and bit-identity, real-time steps,
+    misses, estimate RMS errors [mm, mrad] and reductions per fault."""
     lines = []
     for r in rows:
         ls, rt = r.get("lockstep", {}), r.get("realtime", {})
@@ -70,6 +74,8 @@ def table(rows: list[dict[str, Any]]) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
+    """Run the benchmark the module's docstring describes and print its figures (``--json``: one
+    document); exit code 0."""
     from stillframe.app.bench.fault_runs import SCENE, run_bench
     from stillframe.app.netns_lab import joined, lab
     from stillframe.config.scene import load_scene
