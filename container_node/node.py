@@ -29,7 +29,7 @@ from stillframe.node_runtime.support import wait_for_peers
 #: cell it matches) are taken at least this often
 SPIN_S = 0.001
 #: with the simulator composed, the watchdog and ``/diagnostics`` run when the sim may wait at
-#: least this long [s] (two status messages cost about 0.35 ms)
+#: least this long [s]: time for the two status messages, with room to spare
 HOUSEKEEPING_S = 0.0005
 
 
@@ -42,9 +42,12 @@ class Container(Cycle):
         self.controller = controller
 
     def process_ready(self) -> int:
+        """What :meth:`advance` handled: the estimates and commands made."""
         return self.advance()
 
     def next_wait(self) -> float:
+        """The longest wait of the next spin [s]: :data:`SPIN_S` (:meth:`spin` shortens it to the
+        estimator's own wait)."""
         return SPIN_S
 
     def advance(self) -> int:
@@ -64,6 +67,7 @@ class Container(Cycle):
         return any(published)
 
     def finish(self) -> None:
+        """Both nodes' last status and phase log, the estimator's first."""
         self.estimator.finish()
         self.controller.finish()
 

@@ -17,12 +17,11 @@ else the law of the LQG designed on it taken from the estimate stamped at or aft
 :class:`stillframe.loop.adaptation.DesignSwitch`). Every other parameter is read-only.
 
 Watchdog (``/diagnostics`` level ERROR while it holds the command at zero): once armed by a
-first estimate, when the newest estimate is ``watchdog_periods``
-periods older than the newest sample time the node has seen (the load cell's stamp, which every
-sample carries, or ``/clock`` with ``use_sim_time`` if newer), the node publishes the
-supervisor's zero command stamped with that time, once per sample time, and counts it. Sample
-time rather than wall time: in lock-step the simulator then applies the zero command instead of
-timing out, and it needs no ``/clock``.
+first estimate, when the newest estimate is ``watchdog_periods`` periods older than the newest
+sample time the node has seen (the load cell's stamp, which every sample carries, or ``/clock`` with
+``use_sim_time`` if newer), the node publishes the supervisor's zero command stamped with that time,
+once per sample time, and counts it. Sample time rather than wall time: in lock-step the simulator
+then applies the zero command instead of timing out, and it needs no ``/clock``.
 
 Inputs are taken from the loop's own writer per topic
 (:class:`stillframe.loop.writer_gate.WriterGate`): with the run's token (``run_token``), the
@@ -149,6 +148,8 @@ class ControllerNode(base.LoopNode):
         self.watchdog = EstimateWatchdog(self.controller, self.grid)
 
     def subscribe_inputs(self) -> None:
+        """Subscribe the state estimates and the load cell's wrench (and ``/clock`` with
+        ``use_sim_time``, for the watchdog), each through its writer gate."""
         est, wrench, clock = topics.STATE_ESTIMATE, topics.EXCITATION_WRENCH, topics.CLOCK
         token = self.params.run_token
         fast_inputs.subscribe(self.node, est.type_name, est.name, self.params.reader_qos(est),
@@ -164,13 +165,17 @@ class ControllerNode(base.LoopNode):
                                   self.gates.add(clock.name, "sensor_writer", stamped=False))
 
     def on_force(self, ns: int, force: float) -> None:
+        """The excitation force [N] stamped ``ns`` into the matching (the input's age restarts)."""
         self.input_at = time.monotonic()
         self.matching.add_force(ns, force)
 
     def on_clock(self, ns: int) -> None:
+        """The simulator's ``/clock`` [ns], the time the watchdog follows with ``use_sim_time``."""
         self.clock_ns = ns
 
     def on_estimate(self, ns: int, physical: np.ndarray) -> None:
+        """The state estimate stamped ``ns`` (physical coordinates) into the matching, to be
+        answered when its load cell is in."""
         self.matching.add_estimate(ns, physical, time.monotonic_ns())
 
     def process_ready(self) -> int:
@@ -229,6 +234,10 @@ class ControllerNode(base.LoopNode):
         self.send(self.controller.command(t, None, self.matching.force))
 
     def status(self) -> tuple[dict[str, Any], int, str]:
+        """``/diagnostics``: the command counts (saturated, singular, watchdog, runaway, fallback),
+        the design, the last command, the matching's counts, the writer gates, the compute time
+        percentiles [ms] and the input's age [s]; ERROR while the watchdog commands zero or no load
+        cell came for ``stale_input_s``, WARN on any other problem or a refused writer."""
         c = self.controller.counters
         cmd = self.last_command
         values = {"mode": self.params.mode, "rate_hz": self.rate.read(),
@@ -261,9 +270,13 @@ class ControllerNode(base.LoopNode):
         return values, level, "; ".join(problems)
 
     def status_stamp(self) -> int:
+        """The stamp of the status [ns]: the newest estimate matched (0 before the first)."""
         return max(self.matching.last_ns, 0)
 
     def peers_ready(self) -> bool:
+        """Whether the command's publisher has matched every subscriber the graph shows, the
+        simulator's (or the pinned sensor writer's node) among them
+        (:func:`~stillframe.node_runtime.support.reaches_peer`)."""
         return reaches_peer(self.node, self.pub, self.gates.pins["sensor_writer"] or SIM)
 
     def start(self) -> None:
@@ -282,6 +295,8 @@ class ControllerNode(base.LoopNode):
                 and self.input_at is not None and time.monotonic() - self.input_at < period)
 
     def next_wait(self) -> float:
+        """The longest wait of the next spin [s]: until the oldest estimate waiting for its load
+        cell times out, at most 0.05 s."""
         left = self.matching.wait_ns_left(time.monotonic_ns())
         return 0.05 if left is None else min(left * 1e-9, 0.05)
 

@@ -1,20 +1,18 @@
 """estimator_node: the scene's estimator on the topic contract (docs/nodes.md).
 
 A thin shell around :func:`stillframe.estimation.factory.make_estimator`. It collects the readings
-of
-one stamp t_k from the floor IMUs, the encoder and the load cell (and ``state_truth`` for the
+of one stamp t_k from the floor IMUs, the encoder and the load cell (and ``state_truth`` for the
 ``truth`` estimator), then calls ``step(sample, command in effect)`` and publishes
 ``state_estimate`` and ``state_estimate/covariance`` stamped t_k. The actuation in effect is what
-the simulator reports it applied over the previous period (after saturation and slew limits):
-the encoder's ``effort`` (hinge torque) and ``floor3/load_cell`` (floor-3 force), so that a
-saturated actuator does not wind the estimate up. Where a sample's reading was lost on the way:
-the command in effect received on ``pendulum/torque_cmd`` and ``floor3/force_cmd`` (the one
-answering the previous stamp, ``actuators.delay_periods`` stamps before that) while the
-simulator's last report showed it applying the commands, else that report held
-(``SampleAssembly._control`` in :mod:`stillframe.loop.assembly`). In lock-step a
-stamp of a scene driving the floor-3 force waits for its ``floor3/load_cell`` reading too. The
-actuator the scene's controller does not drive is taken as zero (the sim refuses its commands),
-whatever arrives on its topics.
+the simulator reports it applied over the previous period (after saturation and slew limits): the
+encoder's ``effort`` (hinge torque) and ``floor3/load_cell`` (floor-3 force), so that a saturated
+actuator does not wind the estimate up. Where a sample's reading was lost on the way: the command in
+effect received on ``pendulum/torque_cmd`` and ``floor3/force_cmd`` (the one answering the previous
+stamp, ``actuators.delay_periods`` stamps before that) while the simulator's last report showed it
+applying the commands, else that report held (``SampleAssembly._control`` in
+:mod:`stillframe.loop.assembly`). In lock-step a stamp of a scene driving the floor-3 force waits
+for its ``floor3/load_cell`` reading too. The actuator the scene's controller does not drive is
+taken as zero (the sim refuses its commands), whatever arrives on its topics.
 
 - ``mode: lockstep``: a stamp is used once all its channels arrived and the command stamped
   t_k−1 did (the previous step's answer), as long as that takes: no wall time enters a
@@ -249,16 +247,22 @@ class EstimatorNode(base.LoopNode):
                                   *handlers[spec.name], self.gates.add(spec.name, "sensor_writer"))
 
     def on_sensor(self, channel: int, ns: int, value: float, torque: float) -> None:
+        """A reading of sensor ``channel`` stamped ``ns``, with the torque its message carries, into
+        the sample assembly (the input's age restarts)."""
         self.input_at = time.monotonic()
         self.assembly.reading(channel, ns, value, time.monotonic_ns(), torque)
 
     def on_applied_force(self, ns: int, force: float) -> None:
+        """The excitation force [N] stamped ``ns`` (the load cell) into the sample assembly."""
         self.assembly.applied_force(ns, force, time.monotonic_ns())
 
     def on_truth(self, ns: int, physical: np.ndarray) -> None:
+        """The simulator's true physical state stamped ``ns`` into the sample assembly."""
         self.assembly.truth(ns, physical, time.monotonic_ns())
 
     def on_command(self, actuator: int, ns: int, value: float) -> None:
+        """The command ``value`` of ``actuator`` stamped ``ns`` into the sample assembly (the input
+        the filter's prediction uses)."""
         self.assembly.command_received(actuator, ns, value)
 
     # -- stepping ------------------------------------------------------------------------
@@ -377,19 +381,29 @@ class EstimatorNode(base.LoopNode):
         self.write_record()
 
     def write_record(self) -> None:
+        """Write the adaptation's record (:meth:`~stillframe.loop.adaptation.Adaptation.report`) as
+        one JSON document to the record file; nothing without an adaptation or a file."""
         if self.adaptation is not None and self.record_file is not None:
             write_text(self.record_file, json.dumps(self.adaptation.report()) + "\n",
                        what="adaptation record")
 
     def finish(self) -> None:
+        """The adaptation's record written a last time, then the base's last status and phase
+        log."""
         self.write_record()
         super().finish()
 
     def next_wait(self) -> float:
+        """The longest wait of the next spin [s]: until the assembly's oldest partial sample times
+        out, at most 0.1 s."""
         left = self.assembly.wait_ns_left(time.monotonic_ns())
         return 0.1 if left is None else min(0.1, left * 1e-9)
 
     def status(self) -> tuple[dict[str, Any], int, str]:
+        """``/diagnostics``: the update rate, the assembly's and the filter's counts, the writer
+        gates, the compute time percentiles [ms], the input's age [s], the design and the
+        adaptation's counts; ERROR when no sample came for ``stale_input_s``, WARN on rejected
+        inputs, refused writers or designs, or partial updates."""
         c, a = self.estimator.counters, self.assembly
         values = {"mode": self.params.mode, "rate_hz": self.rate.read(), **self.counts,
                   **a.counts, "updates": c.updates, "stale": c.stale,
@@ -422,6 +436,7 @@ class EstimatorNode(base.LoopNode):
                                          if m)
 
     def status_stamp(self) -> int:
+        """The stamp of the status [ns]: the newest sample assembled (0 before the first)."""
         return max(self.assembly.last_ns, 0)
 
     def peers_ready(self) -> bool:

@@ -19,6 +19,8 @@ def command_arguments(argv: list[str]) -> list[str]:
 
 
 def main() -> int:
+    """Run ``stillframe identify`` with the process's arguments (less ``--ros-args``); its exit
+    code."""
     return stillframe_main(["identify", *command_arguments(sys.argv[1:])])
 
 

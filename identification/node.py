@@ -102,6 +102,10 @@ class TrackerParameterValues(NodeParameters):
 
 
 class ModalTrackerNode:
+    """The ``modal_tracker`` node the module's docstring describes: its parameters declared on
+    ``node``, one subscription per channel, the tracker's window fed with aligned samples and
+    identified on a worker thread."""
+
     def __init__(self, node: api.Node) -> None:
         self.node = node
         values = declare(node, TrackerParameterValues)
@@ -138,6 +142,10 @@ class ModalTrackerNode:
         self.updates = self.skipped = 0
 
     def on_sample(self, k: int, msg: object, read) -> None:
+        """The value ``read`` takes from channel ``k``'s message, filed under its header stamp; once
+        every channel of a stamp is in, the row joins the tracker's window, older incomplete rows
+        are dropped and an update is submitted when due (:meth:`maybe_update`). A message without a
+        stamp is ignored."""
         stamp = stamp_ns(msg)
         if stamp is None:
             return
@@ -184,6 +192,8 @@ class ModalTrackerNode:
             os._exit(EXIT_GIVEN_UP)
 
     def publish(self, tracked: TrackedModes) -> None:
+        """Publish one update: the JSON line to ``record_file`` (if set), the modes on
+        ``identification/modes`` and a status on ``/diagnostics``."""
         self.updates += 1
         if self.record_file is not None:
             with self.record_file.open("a") as stream:

@@ -175,11 +175,12 @@ class SimNode(base.LoopNode):
 
     @property
     def plant(self) -> Plant:
+        """The plant the step advances (lumped, FE or port-Hamiltonian, as the scene's ``plant``
+        section chose)."""
         return self.step.plant
 
     def on_command(self, actuator: int, cdr: bytes, info: api.MessageInfo) -> None:
-        """Offer a command to the step (its writer, then its value and stamp); count the
-        others."""
+        """Offer a command to the step (its writer, then its value and stamp); count the others."""
         step = self.step
         if not step.admits(actuator, info.publisher_gid, info.publication_sequence, cdr):
             return
@@ -322,10 +323,17 @@ class SimNode(base.LoopNode):
         return None if self.pacer.lockstep else self.pacer.due_ns(self.step.k) - now_ns
 
     def sleep_until(self, when_ns: int) -> None:
+        """Wait until ``when_ns`` on the monotonic clock, handling messages meanwhile
+        (:func:`~stillframe.loop.pacing.wait_until`: asleep in the spin, polling over its last
+        ``rt.spin_margin_ns``); returns early on shutdown."""
         wait_until(when_ns, time.monotonic_ns, self.spin, self.rt.spin_margin_ns,
                    api.ok)
 
     def status(self) -> tuple[dict[str, Any], int, str]:
+        """``/diagnostics``: the mode, step and simulated time, the loop rate and real-time factor,
+        the command latency percentiles [ms], the pacer's and the step's counts, each command
+        topic's writer gate, saturated commands and (with an energy ledger) the energy balance;
+        ERROR when the miss-rate guard tripped, WARN when any count is non-zero."""
         step, lat = self.step, self.latency.recent()
         elapsed = (time.monotonic_ns() - self.pacer.started_ns) * 1e-9
         period = self.spec.period
@@ -351,9 +359,12 @@ class SimNode(base.LoopNode):
         return values, ERROR if step.guard.tripped else WARN if bad else OK, message
 
     def status_stamp(self) -> int:
+        """The stamp of the status [ns]: the sample the step is at."""
         return self.step.now_ns
 
     def degraded_message(self) -> str:
+        """One line when the miss-rate guard has tripped (how many of its window's commands missed
+        and that zero actuation is applied), "" otherwise."""
         g = self.step.guard
         return (f"control path degraded: {g.misses} of the last {g.window} commands missed "
                 "their deadline; applying zero actuation") if g.tripped else ""

@@ -24,6 +24,7 @@ class Durations:
         self.reported = 0           # ``count`` at the last :meth:`recent`
 
     def add(self, seconds: float) -> None:
+        """Add one duration [s], overwriting the oldest once the ring is full."""
         self.values[self.count % len(self.values)] = seconds
         self.count += 1
 

@@ -16,6 +16,9 @@ The message names what is wrong (the key, the file, the time) and is printed wit
 by :func:`stillframe.app.cli.main` and by the node executables.
 """
 
+__all__ = ["BY_EXIT_CODE", "BagError", "DegradedRunError", "IdentificationError", "InputError",
+           "IntegrationError", "LoopError", "StillframeError"]
+
 
 class StillframeError(Exception):
     """Base of the errors the user sees as one line; ``exit_code`` is the process's exit code."""

@@ -1,5 +1,5 @@
-"""The adaptation measured against an oracle, through the nodes (issue 41, item 5;
-docs/adaptation.md): three lock-step launches of one change scene with its seeds.
+"""The adaptation measured against an oracle, through the nodes (docs/adaptation.md): three
+lock-step launches of one change scene with its seeds.
 
 - **fixed**: the scene's controller, designed before the change, kept (``adaptation.enabled``
   false);
@@ -10,7 +10,7 @@ docs/adaptation.md): three lock-step launches of one change scene with its seeds
 
 Each run's reductions are its sim_node's (``evaluation.window`` at the end of the run, against the
 same run without control: the scenes' ``baseline: open_loop``). The result's ``adaptation``
-holds exactly the issue's keys: ``change_at_s`` (the sample the first event applied at),
+holds exactly these keys: ``change_at_s`` (the sample the first event applied at),
 ``detected_at_s`` (the first detection after it; None without one), ``identified_hz`` (the
 design's identified frequencies; None without one), ``true_hz`` (the true changed model's, the
 plant's model after the events linearised, its lowest as many modes as the identification has),
@@ -34,7 +34,7 @@ from stillframe.errors import InputError
 from stillframe.loop.adaptation import check_adaptation, design_frequencies
 
 RUNS = ("fixed", "adaptive", "oracle")
-#: the issue's targets: detection delay [s], frequency error [-], adaptive / oracle
+#: the adaptation's targets: detection delay [s], frequency error [-], adaptive / oracle
 #: displacement reduction on every floor [-]
 DETECTION_S, FREQUENCY_ERROR, ORACLE_SHARE = 15.0, 0.01, 0.9
 

@@ -31,6 +31,9 @@ def moving_rms(t: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def plot_timeline(path: Path, doc: dict[str, Any], results: dict[str, LaunchResult]) -> None:
+    """Draw the timeline the module's docstring describes for the adaptation document ``doc`` and
+    the three launches' ``results`` (keyed ``fixed``, ``adaptive``, ``oracle``) and save it to
+    ``path``."""
     import matplotlib
 
     matplotlib.use("Agg")

@@ -105,6 +105,8 @@ def apply_priority(args: argparse.Namespace) -> None:
 
 
 def add_json_argument(parser: argparse.ArgumentParser) -> None:
+    """Add ``--json`` to ``parser``: the command then prints one JSON document (:func:`emit_json`)
+    instead of its tables."""
     parser.add_argument("--json", action="store_true", help="print one JSON document")
 
 
@@ -122,6 +124,7 @@ def scene_and_choice(args: argparse.Namespace) -> tuple[Scene, Choice | None]:
 
 
 def emit_json(document: Any) -> None:
+    """Print ``document`` to stdout as indented JSON, with a final newline."""
     json.dump(document, sys.stdout, indent=2)
     sys.stdout.write("\n")
 

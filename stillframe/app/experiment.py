@@ -9,8 +9,7 @@ For a scene (its plant: the nonlinear lumped or FE model, or an identified linea
    the input exactly; the excitation is flat up to the Nyquist frequency (16 Hz at 32 Hz),
    above the three structural modes.
 2. **OKID + ERA/DC + MKR** on the bag: :mod:`stillframe.identification.structure_model`,
-   written as an
-   identified-model file.
+   written as an identified-model file.
 3. **LQG design** on it (``design.model: file``) in estimator_node and controller_node.
 4. **Closed loop** on the plant through the three nodes.
 5. The same loop **designed on the true model** (``design.model: scene``, or the plant's file).
@@ -178,7 +177,7 @@ def _stderr(message: str) -> None:
     print(f"experiment: {message}", file=sys.stderr, flush=True)
 
 
-def run_experiment(scene_path: Path, user: Sequence[str], out: Path, test: IdentificationTest,
+def run_experiment(scene_path: Path, user: Sequence[str], out: Path, test: IdentificationTest, *,
                    mode: str = "lockstep", lockstep_timeout_s: float | None = None,
                    backends: Sequence[str] = (), progress: Progress = _stderr
                    ) -> ExperimentResult:

@@ -77,6 +77,8 @@ def request(op: str, path: Path | None = None, timeout_s: float = 10.0) -> dict[
 
 
 def is_running() -> bool:
+    """Whether a graph daemon answers at :func:`socket_path` now (this user, environment, backend
+    and installation)."""
     return request("status") is not None
 
 

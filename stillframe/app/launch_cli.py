@@ -51,6 +51,8 @@ def add_netns_arguments(parser: argparse.ArgumentParser, switch: bool = True) ->
 
 
 def add_fault_argument(parser: argparse.ArgumentParser) -> None:
+    """Add ``--fault NAME`` to ``parser``: one of the network faults of
+    :data:`~stillframe.app.net_faults.FAULTS` on every host's incoming link (with ``--netns``)."""
     parser.add_argument("--fault", default=None, metavar="NAME",
                         help="with --netns: a network fault on every host's incoming link: "
                              + ", ".join(f"'{f.name}'" for f in FAULTS).replace("%", "%%"))
@@ -80,6 +82,9 @@ def evaluation_table(evaluation: dict[str, Any], scene: Scene) -> str:
 
 
 def print_evaluation(evaluation: dict[str, Any], scene: Scene) -> None:
+    """Print the evaluation a launch returned: the steady-state peaks and reductions per floor
+    against the scene's baseline, the peak command, the steps and the wall time (and in real time
+    the deadline misses and overruns)."""
     ev = scene.evaluation
     baseline = (f"the {ev.window:g} s before control starts" if ev.baseline == "before_start"
                 else f"the last {ev.window:g} s of a run without control")

@@ -84,8 +84,8 @@ STOP_GRACE_S = 10.0
 #: children that get longer to exit after SIGINT: the tracker finishes the windows due
 STOP_GRACES_S: dict[str, float] = {TRACKER: TRACKER_STOP_S}
 #: seconds a child that is still running gets to log its ready line: a guard against a hung
-#: child, not a start-up time (a recorder took more than 20 s to import and open its bag on a
-#: loaded 2-core machine, and the launch then called it dead)
+#: child, not a start-up time: on a loaded machine a recorder can take tens of seconds to
+#: import and open its bag, and a shorter limit would call it dead
 READY_TIMEOUT_S = 120.0
 #: the log line by which a helper child says it is ready (the nodes start after it)
 READY_LINES: dict[str, str] = {"recorder": "Recording to", "monitor": "Monitor ready",
@@ -711,12 +711,12 @@ class Launcher:
             request = messages.new("lifecycle_msgs/srv/ChangeState_Request",
                                    transition=messages.new("lifecycle_msgs/msg/Transition",
                                                            label=transition))
-            # a node killed mid-transition ends the wait at once (it cost 2 x 20 s before)
+            # a node killed mid-transition ends the wait at once, not after the timeout
             response = caller.call_service("lifecycle_msgs/srv/ChangeState",
                                            f"{prefix}/change_state", request,
                                            TRANSITION_TIMEOUT_S, give_up=child.exited)
             if response is None and not child.exited() and self._state(caller, prefix) == goal:
-                continue    # done, but its reply was lost (seen under 10 % packet loss)
+                continue    # done, but its reply was lost (a lossy network drops replies too)
             if response is None or not response.success:
                 if child.exited():   # died meanwhile: say how
                     raise NodeDiedError.exited(child)
@@ -749,8 +749,7 @@ class Launcher:
         recorder is recording and the monitor serving (:data:`READY_LINES`); with mixed vendors,
         a node starts once the previous one has its participant ('middleware backend'), because
         a Cyclone and a Fast DDS participant created in the same instant can take the same
-        participant index and then never discover each other (measured: 3 of 4 simultaneous
-        starts)."""
+        participant index and then never discover each other."""
 
         deadline = time.monotonic() + timeout_s
         while not any(text in line for line in child.tail):

@@ -61,6 +61,8 @@ FAULTS: tuple[Fault, ...] = (
 
 
 def fault_named(name: str) -> Fault:
+    """The fault of :data:`FAULTS` called ``name`` (spaces ignored); an
+    :class:`~stillframe.errors.InputError` listing the names otherwise."""
     for fault in FAULTS:
         if fault.name.replace(" ", "") == name.replace(" ", ""):
             return fault

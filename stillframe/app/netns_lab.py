@@ -46,6 +46,7 @@ class Lab:
     subnet: ipaddress.IPv4Network
 
     def namespace(self, host: str) -> str:
+        """The network namespace of ``host`` in this lab (``P-sim`` for prefix ``P``)."""
         return f"{self.prefix}-{host}"
 
     @property
@@ -54,6 +55,7 @@ class Lab:
         return f"{self.prefix}h"
 
     def address(self, host: str) -> ipaddress.IPv4Address:
+        """The IPv4 address of ``host`` (or of the observer, ``obs``) on the lab's bridge subnet."""
         index = [*HOSTS.values(), "obs"].index(host)
         return self.subnet[index + 1 if host != "obs" else OBSERVER_ADDRESS]
 
@@ -72,6 +74,8 @@ class Lab:
 
 
 def check_prefix(prefix: str) -> str:
+    """``prefix`` if it makes valid namespace and interface names (a lower-case letter and up to 9
+    letters or digits), else an :class:`~stillframe.errors.InputError`."""
     if not _PREFIX.fullmatch(prefix):
         raise InputError(f"--prefix {prefix!r}: expected a lower-case letter and up to 9 more "
                          "letters or digits (interface names have at most 15 characters)")

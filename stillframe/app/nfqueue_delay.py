@@ -55,6 +55,9 @@ class DelayModel:
     reorder: float = 0.0
 
     def draw(self, rng: random.Random) -> float:
+        """One packet's delay [s] drawn from ``rng``: zero with probability ``reorder`` (sent at
+        once, ahead of the held ones), else ``delay_s`` plus a uniform jitter within ± ``jitter_s``,
+        never negative."""
         if self.reorder and rng.random() < self.reorder:
             return 0.0
         return max(0.0, self.delay_s + (rng.uniform(-self.jitter_s, self.jitter_s)
@@ -118,10 +121,12 @@ class Queue:
         return ids
 
     def accept(self, packet_id: int) -> None:
+        """Send the kernel the verdict NF_ACCEPT for ``packet_id``: the packet goes on."""
         self.sock.send(_message(NFQNL_MSG_VERDICT, self.number,
                                 _attr(NFQA_VERDICT_HDR, struct.pack("!II", NF_ACCEPT, packet_id))))
 
     def close(self) -> None:
+        """Unbind the queue and close the netlink socket."""
         try:
             self._config(_attr(NFQA_CFG_CMD, struct.pack("!BxH", NFQNL_CFG_CMD_UNBIND, 0)))
         finally:
@@ -159,6 +164,9 @@ def serve(queue: Queue, model: DelayModel, rng: random.Random) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Bind the netfilter queue ``--queue``, print ``ready``, hold each packet for its drawn delay
+    until SIGTERM or SIGINT (:func:`serve`), then release the held ones and print ``queued N``
+    (the packets seen); exit code 0."""
     parser = argparse.ArgumentParser(prog="python -m stillframe.app.nfqueue_delay",
                                      description=__doc__.split("\n\n")[0])
     parser.add_argument("--queue", type=int, default=0)

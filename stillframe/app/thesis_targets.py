@@ -15,11 +15,15 @@ class Target:
     minimum_pct: float
 
     def describe(self) -> str:
+        """The target in words, as the report prints it (``scene: quantity reduction >= N % on
+        ...``)."""
         where = ("every floor" if len(self.floors) == 3
                  else ", ".join(f"floor {f}" for f in self.floors))
         return f"{self.scene}: {self.quantity} reduction >= {self.minimum_pct:g} % on {where}"
 
     def met(self, reduction_pct: dict[str, list[float]]) -> bool:
+        """Whether every floor of the target reached ``minimum_pct`` in ``reduction_pct`` (per
+        quantity, the reductions of floors 1-3 in %)."""
         return all(reduction_pct[self.quantity][f - 1] >= self.minimum_pct for f in self.floors)
 
 

@@ -31,6 +31,9 @@ from stillframe.contract.messages import TYPESTORE
 from stillframe.contract.topics import CONDITIONAL, CONTRACT
 from stillframe.errors import BagError, IdentificationError, InputError
 
+__all__ = ["DEFAULT_FIELDS", "Channel", "Record", "Series", "align", "field_reader", "preprocess",
+           "read_record", "read_series", "stamp_ns"]
+
 #: Default field per message type: that of the first contract topic of the type, and std_msgs'
 #: Float64's ``data``.
 DEFAULT_FIELDS: dict[str, str] = {"std_msgs/msg/Float64": "data"} | {
@@ -102,6 +105,7 @@ class Record:
 
     @property
     def samples(self) -> int:
+        """The number of samples in the record."""
         return len(self.t)
 
 
@@ -163,6 +167,7 @@ def _read_field(msg: object, *, path: list[tuple[str, list[int]]], channel: Chan
 
 
 def stamp_ns(msg: object) -> int | None:
+    """The ``header.stamp`` of ``msg`` in nanoseconds, or None for a message without a header."""
     header = getattr(msg, "header", None)
     stamp = getattr(header, "stamp", None)
     if stamp is None:

@@ -91,6 +91,7 @@ class ChunkInfo:
 
     @property
     def good(self) -> bool:
+        """Whether the chunk passed every check (no fault recorded)."""
         return not self.fault
 
 
@@ -124,6 +125,7 @@ class McapFile:
 
     @property
     def bad_chunks(self) -> list[ChunkInfo]:
+        """The chunks that failed a check, in file order."""
         return [c for c in self.chunks if not c.good]
 
     @property
@@ -300,8 +302,7 @@ def _scan_chunk(found: McapFile, chunk: ChunkInfo, records: Any) -> None:
 
 
 def _checked(chunk: ChunkInfo, raw: memoryview, size: int) -> bytes | memoryview | None:
-    """The chunk's records when its CRC holds, else None (no CRC, no decompression, another
-    CRC)."""
+    """The chunk's records when its CRC holds, else None (no CRC, no decompression, another CRC)."""
     if not chunk.crc:
         return None
     try:

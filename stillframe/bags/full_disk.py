@@ -113,6 +113,8 @@ class DiskLedger:
                            f"{RESERVE_BYTES // 1024} KiB free for its index)") from None
 
     def write(self, data: bytes | memoryview) -> int:
+        """Write all of ``data`` and count it; after a failed write, refuse every later one with a
+        :class:`~stillframe.errors.BagError` (the first failure is raised as its ``OSError``)."""
         if self.failure is not None:
             raise BagError(f"{self.path}: not written after a failed write")
         try:
@@ -125,6 +127,7 @@ class DiskLedger:
         return len(data)
 
     def tell(self) -> int:
+        """The bytes written so far, the file position the MCAP writer records."""
         return self.position
 
     def flush(self) -> None:
@@ -136,9 +139,12 @@ class DiskLedger:
         self.wrote = False
 
     def release_reserve(self) -> None:
+        """Delete the reserve file, freeing its space for the bag's closing records."""
         self.reserve.unlink(missing_ok=True)
 
     def close(self) -> None:
+        """Close the file; an error on close is ignored, since every write went to the file
+        unbuffered and nothing is left to flush."""
         with contextlib.suppress(OSError):
             self.file.close()
 

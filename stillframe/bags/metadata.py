@@ -1,11 +1,11 @@
 """A bag's ``metadata.yaml``: read with every field checked, and written as ROS 2 Jazzy writes it.
 
-The format is rosbag2's (``rosbag2_storage/yaml.hpp``): one mapping
-``rosbag2_bagfile_information`` whose fields depend on its ``version`` (1 to 9): compression
-fields from 3, ``offered_qos_profiles`` as a YAML string from 4 and as a list of mappings from 9,
-``files`` from 5, ``custom_data`` (a map of strings, which ``ros2 bag info`` does not show) from
-6, ``type_description_hash`` from 7, ``ros_distro`` from 8. rosbag2 reads counts and times as
-unsigned 64-bit integers and the rest as strings, lists and maps, and refuses any other type.
+The format is rosbag2's (``rosbag2_storage/yaml.hpp``): one mapping ``rosbag2_bagfile_information``
+whose fields depend on its ``version`` (1 to 9): compression fields from 3, ``offered_qos_profiles``
+as a YAML string from 4 and as a list of mappings from 9, ``files`` from 5, ``custom_data`` (a map
+of strings, which ``ros2 bag info`` does not show) from 6, ``type_description_hash`` from 7,
+``ros_distro`` from 8. rosbag2 reads counts and times as unsigned 64-bit integers and the rest as
+strings, lists and maps, and refuses any other type.
 
 :func:`load_metadata` checks each field against that: a field of the wrong type (a string, list,
 map or null where a number belongs, a negative, huge or non-finite number, ...) is a

@@ -94,6 +94,7 @@ class Recovered:
 
     @property
     def total(self) -> int:
+        """The messages recovered over every topic."""
         return sum(self.counts.values())
 
     @property

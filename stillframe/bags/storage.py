@@ -61,6 +61,10 @@ from stillframe.bags.qos import qos_from_yaml, qos_to_yaml
 from stillframe.errors import BagError, InputError
 from stillframe.files import open_input
 
+__all__ = ["BagConnection", "BagMessage", "BagReader", "BagSummary", "BagWriter", "TopicSummary",
+           "bag_summary", "disagreements", "format_summary", "learn_types", "open_bag", "read_bag",
+           "refuse_damage", "storage_files"]
+
 #: the ROS distribution a bag's metadata names, as ``ros2 bag record`` on Jazzy writes it
 ROS_DISTRO = "jazzy"
 #: the MCAP header's profile for rosbag2 bags, and the name of the metadata record
@@ -116,6 +120,7 @@ class BagSummary:
 
     @property
     def end_ns(self) -> int:
+        """The time of the bag's last message [ns since the epoch]."""
         return self.start_ns + self.duration_ns
 
     def as_dict(self) -> dict[str, Any]:
@@ -410,6 +415,8 @@ class BagReader:
         return total
 
     def time_range(self) -> tuple[int, int] | None:
+        """``(first, last)`` message time over every storage file [ns], or None for a bag without
+        messages."""
         ranges = [r for f in self.files if (r := f.time_range()) is not None]
         return (min(r[0] for r in ranges), max(r[1] for r in ranges)) if ranges else None
 
@@ -428,6 +435,8 @@ class BagReader:
             yield connection, log_time, data
 
     def deserialize(self, raw: bytes, msgtype: str) -> Any:
+        """The ``rosbags`` message of type ``msgtype`` from its CDR ``raw``, with the bag's own
+        types."""
         return self._store.deserialize_cdr(raw, msgtype)
 
 

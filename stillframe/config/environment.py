@@ -54,6 +54,7 @@ def _accepting(check: Check, accepts: str) -> Check:
 
 
 def one_of(*choices: str) -> Check:
+    """A check accepting exactly one of ``choices``; its docstring lists them for the reference."""
     def check(text: str) -> str | None:
         return None if text in choices else f"expected one of {', '.join(choices)}"
 
@@ -61,6 +62,7 @@ def one_of(*choices: str) -> Check:
 
 
 def whole_number(low: int, high: int) -> Check:
+    """A check accepting a decimal integer in ``low..high`` (digits only, no sign)."""
     def check(text: str) -> str | None:
         ok = text.isascii() and text.isdigit() and low <= int(text) <= high
         return None if ok else f"expected an integer {low}..{high}"
@@ -69,6 +71,7 @@ def whole_number(low: int, high: int) -> Check:
 
 
 def seconds(high: float) -> Check:
+    """A check accepting a number of seconds in (0, ``high``]."""
     def check(text: str) -> str | None:
         try:
             value = float(text)

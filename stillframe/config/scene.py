@@ -53,6 +53,11 @@ from stillframe.config.yamlio import MAX_YAML_BYTES, load_yaml, problem
 from stillframe.errors import InputError
 from stillframe.files import read_bytes
 
+__all__ = ["DAMPING_COEFFICIENT", "FLOOR_MASS", "FREQUENCY_HZ", "Columns", "Damping", "Excitation",
+           "Initial", "Integrator", "Model", "Pendulum", "Rig", "Scene", "apply_overrides",
+           "changed_scene", "event_changes", "load_scene", "sample_grid", "scene_from_dict",
+           "steps_in"]
+
 #: the finite-element mesh and the modal model's modes at most (matrices of 3 * 2 * n + 1)
 MAX_ELEMENTS = 200
 #: integrator steps of one run at most (duration / integrator.dt): the simulator keeps a row

@@ -27,6 +27,10 @@ from typing import Any, Literal, NamedTuple, TypeVar, get_args, get_origin, get_
 
 from stillframe.errors import InputError
 
+__all__ = ["SEED_RANGE", "Check", "Field", "Floats", "Floats2", "Floats3", "Floats4", "Floats8",
+           "Section", "in_range", "key", "magnitude", "non_negative", "positive", "section",
+           "set_dotted", "show", "up_to", "validate"]
+
 Check = Callable[[Any], str | None]
 Floats = tuple[float, ...]
 Floats2 = tuple[float, float]
@@ -74,10 +78,12 @@ def _values(value: Any) -> tuple:
 
 
 def positive(value: Any) -> str | None:
+    """The check of a key whose value (or each of its values) must be > 0; the problem, or None."""
     return None if all(v > 0 for v in _values(value)) else "must be > 0"
 
 
 def non_negative(value: Any) -> str | None:
+    """The check of a key whose value (or each of its values) must be >= 0; the problem, or None."""
     return None if all(v >= 0 for v in _values(value)) else "must be >= 0"
 
 
@@ -100,6 +106,7 @@ SEED_RANGE = (0, 2**63 - 1)
 
 
 def in_range(low: float, high: float) -> Check:
+    """A check holding a value (or each of its values) to [``low``, ``high``]."""
     def check(value: Any) -> str | None:
         ok = all(low <= v <= high for v in _values(value))
         return None if ok else f"must lie in [{low:g}, {high:g}]"

@@ -79,6 +79,7 @@ class SampleGrid:
 
     @staticmethod
     def ns(t: float) -> int:
+        """``t`` [s] as integer nanoseconds, rounded (the stamp of a sample time)."""
         return round(t * 1e9)
 
     def index(self, ns: int) -> int:
@@ -86,6 +87,8 @@ class SampleGrid:
         return round(ns * 1e-9 / self.period)
 
     def seconds(self, ns: int) -> float:
+        """The sample time [s] of the stamp ``ns``: k × period when ``ns`` lies within 1 µs of the
+        grid (so a stamp gives back the exact float the simulator used), else ``ns`` × 1e-9."""
         t = self.index(ns) * self.period
         return t if abs(round(t * 1e9) - ns) <= 1000 else ns * 1e-9
 
@@ -155,6 +158,8 @@ class SensorMessages:
         return [*self.imus, self.encoder, self.load_cell, self.actuator_load_cell]
 
     def fill_truth(self, sample: Sample, ns: int) -> Any:
+        """The ``state_truth`` message filled in place with the sample's true state, stamped
+        ``ns``."""
         fill_joint_state(self.truth, ns, sample.truth)
         return self.truth
 
@@ -228,6 +233,8 @@ class EstimateMessages:
         self._cov_cdr = FixedWriter(self.covariance, ("data",))
 
     def fill(self, estimate: Estimate, ns: int) -> tuple[Any, Any]:
+        """The ``state_estimate`` and its covariance message filled in place (zeros for an estimator
+        without a covariance), stamped ``ns``."""
         fill_joint_state(self.state, ns, estimate.physical)
         cov = np.zeros((8, 8)) if estimate.covariance is None else estimate.covariance
         self.covariance.data = np.ascontiguousarray(cov, dtype=np.float64).ravel()
@@ -277,6 +284,8 @@ class CommandMessage:
         self._cdr = FixedWriter(self.msg, (*STAMP, self.field))
 
     def fill(self, command: Command, ns: int) -> Any:
+        """The command message filled in place: ``torque.z`` for the pendulum, ``force.x`` for the
+        floor-3 actuator, stamped ``ns``."""
         set_stamp(self.msg, ns)
         if self.actuator == 0:
             self.msg.wrench.torque.z = command.torque
@@ -309,6 +318,8 @@ class TopicReader:
         self._from_msg = from_msg
 
     def read(self, data: bytes | memoryview) -> tuple[Any, ...] | None:
+        """The values of one sample's CDR ``data``: by the fixed layout when it matches, else
+        decoded with ``rosbags``; None for a malformed sample."""
         values = self._fixed.unpack(data)
         if values is not None:
             return self._from_values(values)

@@ -129,6 +129,8 @@ class FixedWriter:
         self.count = first
 
     def pack(self, *values: Any) -> bytearray:
+        """Write ``values`` (in the layout's field order) into the preallocated buffer and return
+        it; the buffer is reused, so publish it before the next pack."""
         buffer = self.buffer
         for pack_into, offset, first, last in self._runs:
             pack_into(buffer, offset, *values[first:last])
@@ -157,6 +159,8 @@ class FixedReader:
         self._start = start
 
     def unpack(self, data: bytes | bytearray | memoryview) -> tuple[Any, ...] | None:
+        """The field values of ``data``, or None when it is not this layout (size, encapsulation or
+        a fixed part such as the frame id differ), so that the caller decodes it in full."""
         # little-endian CDR (the options bytes after it may carry the padding, as Fast DDS sets)
         if not self.size <= len(data) <= self.size + 3 or data[:2] != b"\0\x01":
             return None

@@ -46,6 +46,9 @@ from stillframe.config.schema import Check, show
 from stillframe.errors import InputError
 from stillframe.files import open_input, open_output, size_text
 
+__all__ = ["META_KEYS", "STRUCTURE", "ModelArchive", "Physical", "check_structure", "read_archive",
+           "validate", "write_archive"]
+
 FORMAT = "stillframe-identified-model"
 VERSION = 1
 MODAL_KEYS = ("mode_frequency_hz", "mode_damping_ratio", "mode_eigenvalue", "mode_shape")
@@ -120,6 +123,7 @@ class ModelArchive:
 
     @property
     def has_mkr(self) -> bool:
+        """Whether the archive holds the identified M, K, R (all of :data:`MKR_KEYS`)."""
         return set(MKR_KEYS) <= set(self.arrays)
 
 

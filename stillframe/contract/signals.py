@@ -13,6 +13,8 @@ import numpy as np
 
 from stillframe.config.scene import Scene
 
+__all__ = ["ACTUATOR", "Command", "Estimate", "Sample", "actuator_of", "full_inputs"]
+
 
 @dataclass
 class Sample:

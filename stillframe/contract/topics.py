@@ -8,6 +8,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+__all__ = ["CLOCK", "CONDITIONAL", "CONTRACT", "DEFAULT_NAMESPACE", "DIAGNOSTICS", "ENERGY_BALANCE",
+           "ENERGY_FIELDS", "EXCITATION_WRENCH", "FLOOR3_LOAD_CELL", "FLOOR_IMU", "FORCE_CMD",
+           "PENDULUM_JOINT_STATES", "STATE_COVARIANCE", "STATE_ESTIMATE", "STATE_TRUTH",
+           "STATUS_KEYS", "STRUCTURE_EVENTS", "TORQUE_CMD", "TopicSpec"]
+
 DEFAULT_NAMESPACE = "/frame"
 
 

@@ -12,12 +12,12 @@ the floor back when the sampled control lets it drift).
 
 Singularity of variant 1: on the lumped model g = −m4 L4 cos φ / ((m3 + m4) J − (m4 L4 cos φ)²),
 zero when the pendulum is horizontal (sin θ → 0 in the thesis's angle), where eq. 5.246 divides
-by zero. Here the command is the
-singularity-robust (damped least-squares) inverse u = g e / (g² + λ²), e = a_des − a_free,3,
-λ = ``singular_margin`` · |g at rest|: equal to the exact law up to the factor g²/(g² + λ²)
-(0.9996 at rest for the default margin 0.02), bounded by |e| / (2λ) everywhere, and zero at the
-singular configuration itself; the command is flagged ``singular`` while |g| < λ. Variant 2 has
-g = 1/(m3 + m4 − (m4 L4 cos φ)²/J) > 0 for every φ and uses the exact inverse.
+by zero. Here the command is the singularity-robust (damped least-squares) inverse
+u = g e / (g² + λ²), e = a_des − a_free,3, λ = ``singular_margin`` · |g at rest|: equal to the
+exact law up to the factor g²/(g² + λ²) (0.9996 at rest for the default margin 0.02), bounded by
+|e| / (2λ) everywhere, and zero at the singular configuration itself; the command is flagged
+``singular`` while |g| < λ. Variant 2 has g = 1/(m3 + m4 − (m4 L4 cos φ)²/J) > 0 for every φ and
+uses the exact inverse.
 """
 
 from __future__ import annotations

@@ -22,6 +22,8 @@ import numpy as np
 from stillframe.config.scene import Scene
 from stillframe.contract.signals import FORCE, actuator_of
 
+__all__ = ["CommandLimits", "condition"]
+
 
 @dataclass(frozen=True, kw_only=True)
 class CommandLimits:

@@ -34,6 +34,8 @@ from stillframe.design.discrete import first_order_hold
 from stillframe.design.riccati import solve_dare
 from stillframe.dynamics.models import FrameModel
 
+__all__ = ["ConditionedLQGLaw", "LQGLaw", "LQRDesign", "design_lqr", "state_weight"]
+
 
 @dataclass(frozen=True)
 class LQRDesign:

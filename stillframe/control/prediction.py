@@ -25,9 +25,12 @@ class CommandLog:
         self._by_index: dict[int, float] = {}
 
     def record(self, k: int, value: float) -> None:
+        """Remember ``value`` as the command issued at sample ``k``."""
         self._by_index[k] = value
 
     def in_effect(self, j: int) -> float:
+        """The command in effect at sample ``j``: the newest recorded at or before it (0 before
+        any)."""
         older = [i for i in self._by_index if i <= j]
         return self._by_index[max(older)] if older else 0.0
 
@@ -49,6 +52,7 @@ class DelayPredictor:
         self._sent = CommandLog()
 
     def index(self, t: float) -> int:
+        """The sample index of time ``t`` [s] on the period's grid."""
         return round(t / self.period)
 
     def sent(self, t: float, value: float) -> None:

@@ -51,11 +51,17 @@ class LimitedLaw(Protocol):
 
     def __call__(self, z: np.ndarray, force: float) -> tuple[float, bool]: ...
 
-    def set_limits(self, limits: CommandLimits) -> None: ...
+    def set_limits(self, limits: CommandLimits) -> None:
+        """Take ``limits`` at the next call (the controller's limit changed)."""
 
 
 @dataclass
 class ControllerCounters:
+    """The controller's counts for ``/diagnostics``: commands, commands clipped to the limit,
+    singular ones (the law said so, or its output was not finite), watchdog zeros, runaway outputs
+    (singular, or beyond :data:`RUNAWAY_FACTOR` times the limit) and the law's fallbacks (the MPC's
+    anti-windup LQG)."""
+
     commands: int = 0
     saturated: int = 0
     singular: int = 0

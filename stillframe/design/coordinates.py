@@ -7,6 +7,8 @@ import numpy as np
 
 from stillframe.dynamics.models import FrameModel
 
+__all__ = ["design_map", "physical_selector", "to_design"]
+
 
 def physical_selector(model: FrameModel) -> np.ndarray:
     """S (8 × 2n) with physical = S z."""

@@ -12,6 +12,8 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.linalg as sla
 
+__all__ = ["Discrete", "first_order_hold"]
+
 
 @dataclass(frozen=True)
 class Discrete:

@@ -30,6 +30,8 @@ from stillframe.errors import InputError
 from stillframe.files import read_bytes, write_text
 from stillframe.locations import DATA_DIR
 
+__all__ = ["frame_for", "identified_frame", "load_identified_structure", "resolve_model_file"]
+
 
 def resolve_model_file(name: str, key: str) -> Path:
     """A bundled model name (``thesis_mkr``) or a path to a ``.yaml``/``.npz`` file."""

@@ -22,6 +22,8 @@ import scipy.linalg as sla
 
 from stillframe.errors import InputError
 
+__all__ = ["RiccatiWarning", "pbh_margins", "solve_dare"]
+
 SINGULAR = 1e-10
 NEAR = 1e-6
 UNIT_CIRCLE = 1e-9

@@ -22,12 +22,15 @@ Force = Callable[[float], float]
 
 def harmonics(amplitudes: Sequence[float], frequencies_hz: Sequence[float],
               phases: Sequence[float]) -> Force:
+    """F(t) = Σ Aᵢ sin(2π fᵢ t + ψᵢ) [N] (phases 0 when none are given)."""
     terms = list(zip(amplitudes, [2.0 * math.pi * f for f in frequencies_hz],
                      phases or [0.0] * len(amplitudes), strict=True))
     return lambda t: sum(a * math.sin(w * t + psi) for a, w, psi in terms)
 
 
 def hammer(impulse: float, time: float, width: float) -> Force:
+    """A half-sine pulse F(t) [N] from ``time`` over ``width`` [s] whose integral is ``impulse`` [N
+    s], 0 elsewhere."""
     peak = np.pi * impulse / (2.0 * width)  # ∫ peak sin(π s / width) ds over [0, width] = impulse
 
     def force(t: float) -> float:
@@ -46,6 +49,8 @@ def white_noise(std: float, rate_hz: float, seed: int, duration: float) -> Force
 
 
 def chirp(amplitude: float, f0_hz: float, f1_hz: float, sweep_s: float) -> Force:
+    """A linear sweep ``amplitude`` sin(2π (f0 t + ½ (f1 − f0)/T t²)) [N] over [0, ``sweep_s``], 0
+    after."""
     rate = (f1_hz - f0_hz) / sweep_s
 
     def force(t: float) -> float:
@@ -76,8 +81,8 @@ class FloorLoad:
     """Floor forces (f1, f2, f3) at time t: the excitation's force on ``excitation.floor``.
 
     Keeps the ``excitation`` section so that compiled integrators
-    (:mod:`stillframe.dynamics.kernels`)
-    can evaluate the same force without calling back into Python.
+    (:mod:`stillframe.dynamics.kernels`) can evaluate the same force without calling back into
+    Python.
     """
 
     excitation: Excitation

@@ -34,6 +34,10 @@ from scipy.integrate import solve_ivp
 from stillframe.dynamics.systems import DescriptorSystem, LinearSystem
 from stillframe.errors import InputError, IntegrationError
 
+__all__ = ["ADAPTIVE", "NO_SUBDIVISION", "RK4", "ImplicitMidpoint", "Integrator", "Observer",
+           "StepRejected", "Subdivision", "check_finite", "floor_failure", "integrate",
+           "make_integrator", "non_finite", "not_converged", "reference_solution"]
+
 
 @dataclass(frozen=True)
 class Subdivision:
@@ -129,6 +133,9 @@ class Integrator(ABC):
     subdivisions: int = 0
 
     def step(self, system: DescriptorSystem, t: float, x: np.ndarray, h: float) -> np.ndarray:
+        """x(t + h) of ``system`` from ``x`` at ``t`` [s] over ``h`` [s], as a new array: the
+        contract of the class docstring (``h`` checked, ``x`` finite at the start, a failed attempt
+        subdivided, the result finite or an :class:`~stillframe.errors.IntegrationError`)."""
         if not (np.isfinite(h) and h > 0):
             raise InputError(f"integrator.dt: the step must be > 0 and finite, got {h!r}")
         check_finite(x, t, h, self.name)
@@ -284,6 +291,8 @@ def make_integrator(method: str, subdivision: Subdivision | None = None) -> Inte
 
 
 def check_finite(x: np.ndarray, t: float, h: float, method: str) -> None:
+    """Raise :func:`non_finite`'s :class:`~stillframe.errors.IntegrationError` (naming ``t``, ``h``
+    and ``method``) unless every entry of ``x`` is finite."""
     if not np.all(np.isfinite(x)):
         raise non_finite(t, h, method)
 

@@ -17,8 +17,7 @@ as
   leaves one scalar equation in p, solved by Newton. S is banded once the DOFs are ordered by
   height (reverse Cuthill–McKee) except for the rank-r modal part of C
   (:class:`~stillframe.dynamics.models.structure.DampingParts`), handled by the Woodbury identity:
-  one step
-  costs O(n (b + r)) for half-bandwidth b — linear in the number of DOFs.
+  one step costs O(n (b + r)) for half-bandwidth b — linear in the number of DOFs.
 
 Loads: none, harmonics, hammer and chirp on one floor, plus a control input held over the run.
 """
@@ -351,6 +350,7 @@ def to_band(A: np.ndarray, b: int) -> np.ndarray:
 
 
 def bandwidth(A: np.ndarray) -> int:
+    """The largest |i − j| over the nonzero entries of ``A`` (0 for a zero matrix)."""
     i, j = np.nonzero(A)
     return int(np.max(np.abs(i - j))) if i.size else 0
 
@@ -473,7 +473,7 @@ class CompiledFrame:
                 self._subdivide(kernel, method, x, start, half, u, load, depth + 1,
                                 _CAUSE[method][status])
 
-    def run(self, method: str, x0: np.ndarray, h: float, n_steps: int,
+    def run(self, method: str, x0: np.ndarray, h: float, n_steps: int, *,
             load: FloorLoad | None = None, control: np.ndarray | None = None, t0: float = 0.0,
             stride: int = 1) -> np.ndarray:
         """States every ``stride`` steps (rows, the first is x0) after ``n_steps`` steps.
@@ -529,7 +529,7 @@ def compiled_integrate(model: FrameModel, load: FloorLoad | None, method: str, x
     done = 0
     while done < n_steps:
         steps = min(chunk, n_steps - done)
-        states = frame.run(method, x, dt, steps, load, t0=done * dt)
+        states = frame.run(method, x, dt, steps, load=load, t0=done * dt)
         if observer:
             for j in range(1, steps + 1):
                 observer(done + j, (done + j) * dt, states[j])

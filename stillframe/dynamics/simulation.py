@@ -25,6 +25,8 @@ from stillframe.dynamics.stability import check_rk4_step, drift_warning
 from stillframe.dynamics.systems import MechanicalSystem
 from stillframe.errors import InputError
 
+__all__ = ["History", "Progress", "initial_state", "simulate"]
+
 log = logging.getLogger("stillframe.dynamics.simulation")
 
 Progress = Callable[[float], None]

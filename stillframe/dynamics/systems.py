@@ -15,6 +15,8 @@ import scipy.linalg as sla
 
 from stillframe.dynamics.models.frame import FrameModel, LinearModel
 
+__all__ = ["DescriptorSystem", "DrivenInputs", "LinearSystem", "Load", "MechanicalSystem"]
+
 Load = Callable[[float], np.ndarray]
 
 
@@ -51,6 +53,8 @@ class DrivenInputs:
         self.control = np.zeros(4)
 
     def inputs(self, t: float) -> np.ndarray:
+        """u(t) = [f1, f2, f3, torque]: the held :attr:`control` plus the floor loads ``load(t)``
+        [N] on floors 1-3."""
         u = self.control.copy()
         if self.load is not None:
             u[:3] += self.load(t)
@@ -67,9 +71,12 @@ class MechanicalSystem(DrivenInputs):
         self.n = 2 * model.n_dof
 
     def split(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(q, q̇)``: the positions and the velocities of the state x = [q, q̇] (views, not
+        copies)."""
         return x[: self.n_dof], x[self.n_dof :]
 
     def mass(self, x: np.ndarray) -> np.ndarray:
+        """E(x) = blockdiag(I, M(q)), the descriptor matrix of the state x = [q, q̇]."""
         n = self.n_dof
         E = np.zeros((self.n, self.n))
         E[:n, :n] = np.eye(n)
@@ -77,10 +84,14 @@ class MechanicalSystem(DrivenInputs):
         return E
 
     def rhs(self, t: float, x: np.ndarray) -> np.ndarray:
+        """f(t, x) = [q̇, Q(q, q̇, u(t))]: the generalized forces of the model at the inputs of
+        ``t``."""
         q, v = self.split(x)
         return np.concatenate([v, self.model.forces(q, v, self.inputs(t))])
 
     def jacobian(self, t: float, x: np.ndarray, xdot: np.ndarray) -> np.ndarray:
+        """∂/∂x [f(t, x) − E(x) ẋ] at fixed ẋ: the force Jacobians, less ∂(M(q) q̈)/∂q at the
+        accelerations in ``xdot`` (the Newton matrix of the implicit integrators)."""
         n = self.n_dof
         q, v = self.split(x)
         dq, dv = self.model.force_jacobians(q, v)
@@ -91,10 +102,12 @@ class MechanicalSystem(DrivenInputs):
         return J
 
     def derivative(self, t: float, x: np.ndarray) -> np.ndarray:
+        """ẋ = [q̇, M(q)⁻¹ Q(q, q̇, u(t))], for the explicit integrators."""
         q, v = self.split(x)
         return np.concatenate([v, self.model.accelerations(q, v, self.inputs(t))])
 
     def energy(self, x: np.ndarray) -> float:
+        """The model's kinetic plus potential energy at x [J], for drift checks."""
         q, v = self.split(x)
         return self.model.energy(q, v)
 
@@ -118,18 +131,23 @@ class LinearSystem(DrivenInputs):
         self._e_factor = sla.lu_factor(self.E)
 
     def mass(self, x: np.ndarray) -> np.ndarray:
+        """The constant E = blockdiag(I, M)."""
         return self.E
 
     def rhs(self, t: float, x: np.ndarray) -> np.ndarray:
+        """A x + B u(t)."""
         return self.A @ x + self.B @ self.inputs(t)
 
     def jacobian(self, t: float, x: np.ndarray, xdot: np.ndarray) -> np.ndarray:
+        """The constant A: f is linear and E does not depend on x."""
         return self.A
 
     def derivative(self, t: float, x: np.ndarray) -> np.ndarray:
+        """ẋ = E⁻¹ (A x + B u(t)), with E factored once at construction."""
         return sla.lu_solve(self._e_factor, self.rhs(t, x))
 
     def energy(self, x: np.ndarray) -> float:
+        """½ q̇ᵀ M q̇ + ½ qᵀ K q [J], for drift checks."""
         n = self.n_dof
         q, v = x[:n], x[n:]
         return float(0.5 * v @ self._mass @ v + 0.5 * q @ self._stiffness @ q)

@@ -16,6 +16,8 @@ from stillframe.design.coordinates import design_map, physical_selector
 from stillframe.dynamics.models import FrameModel
 from stillframe.errors import IntegrationError, StillframeError
 
+__all__ = ["Counters", "Filter"]
+
 
 @dataclass
 class Counters:
@@ -28,6 +30,7 @@ class Counters:
 
     @property
     def rejected(self) -> int:
+        """Samples refused: stale ones and those with non-finite readings."""
         return self.stale + self.non_finite
 
 
@@ -118,6 +121,9 @@ class Filter(ABC):
             f"t = {t:.6g} s (its design model and noise settings do not follow this plant)")
 
     def estimate(self) -> Estimate:
+        """The current :class:`~stillframe.contract.signals.Estimate`: the time, the design state z,
+        the physical state S z and its covariance S P Sᵀ (formed again only when P changed,
+        read-only)."""
         if self.P is not self._covariance[0]:  # a stationary filter keeps P: computed once
             covariance = self.S @ self.P @ self.S.T
             covariance.flags.writeable = False

@@ -25,6 +25,8 @@ from stillframe.contract.signals import full_inputs
 from stillframe.dynamics.models import FrameModel
 from stillframe.estimation.base import Filter
 
+__all__ = ["ExtendedKalman"]
+
 
 class ExtendedKalman(Filter):
     """EKF with state z = [q, q̇] of the design :class:`FrameModel`."""
@@ -85,11 +87,16 @@ class ExtendedKalman(Filter):
         return np.append(f[rows], z[self.model.phi_index]), H
 
     def predict(self, dt: float, force0: float, force1: float, control: np.ndarray) -> None:
+        """Time update over ``dt`` [s]: the mean through the RK4 map (:meth:`flow`), P ← Φ P Φᵀ + Q
+        with its Jacobian Φ."""
         self.x, Phi = self.flow(self.x, dt, force0, force1, control)
         self.P = Phi @ self.P @ Phi.T + self.Q
 
     def update(self, y: np.ndarray, present: np.ndarray, force: float,
                control: np.ndarray) -> None:
+        """Measurement update with the rows ``present`` of y = [a1, a2, a3, φ], linearised at the
+        predicted mean (:meth:`measurement`); the covariance in Joseph form, (I − K H) P (I − K H)ᵀ
+        + K R Kᵀ."""
         h, H = self.measurement(self.x, force, control)
         H, R = H[present], self.R[np.ix_(present, present)]
         residual = (y - h)[present]

@@ -13,6 +13,8 @@ from stillframe.estimation.base import Counters, Filter
 from stillframe.estimation.ekf import ExtendedKalman
 from stillframe.estimation.kalman import SteadyStateKalman, TimeVaryingKalman
 
+__all__ = ["FILTERS", "Estimator", "TruthEstimator", "initial_physical", "make_estimator"]
+
 FILTERS = {"kf": SteadyStateKalman, "tvkf": TimeVaryingKalman, "ekf": ExtendedKalman}
 
 
@@ -25,6 +27,9 @@ class TruthEstimator:
         self.counters = Counters()
 
     def step(self, sample: Sample, control: np.ndarray) -> Estimate | None:
+        """The simulator's true state of ``sample`` as the estimate (its design coordinates beside
+        it, no covariance); None, counted stale, for a sample without truth or not newer than the
+        last."""
         if sample.truth is None or (self.t is not None and not sample.t > self.t):
             self.counters.stale += 1
             return None

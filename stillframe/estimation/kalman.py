@@ -29,6 +29,8 @@ from stillframe.design.riccati import solve_dare
 from stillframe.dynamics.models import FrameModel
 from stillframe.estimation.base import Filter
 
+__all__ = ["LinearFilter", "SteadyStateKalman", "TimeVaryingKalman"]
+
 
 class LinearFilter(Filter):
     """Shared linear model: Φ, Γ0, Γ1 per interval length, and y = C z + D u."""
@@ -45,6 +47,8 @@ class LinearFilter(Filter):
         self._discrete: dict[float, Discrete] = {}
 
     def discrete(self, dt: float) -> Discrete:
+        """Φ, Γ0 and Γ1 of :func:`~stillframe.design.discrete.first_order_hold` over an interval of
+        ``dt`` [s], computed once per interval length."""
         key = round(dt, 12)
         if key not in self._discrete:
             self._discrete[key] = first_order_hold(self.A, self.B, dt)
@@ -52,6 +56,8 @@ class LinearFilter(Filter):
 
     def propagate_mean(self, dt: float, force0: float, force1: float,
                        control: np.ndarray) -> Discrete:
+        """Advance the mean over ``dt`` [s]: the excitation linear from ``force0`` to ``force1`` [N]
+        and ``control`` held; returns the discretization used, for the covariance."""
         d = self.discrete(dt)
         u0 = full_inputs(control, force0, self.excited_floor)
         u1 = full_inputs(control, force1, self.excited_floor)
@@ -102,18 +108,24 @@ class SteadyStateKalman(LinearFilter):
         self.posterior = self.prior - self.gain @ self.C @ self.prior  # all channels present
 
     def set_noise(self, process_std: list[float], measurement_std: list[float]) -> None:
+        """Design P∞ and the gains again for the new standard deviations (:meth:`design`)."""
         self.design(*self.noise_covariances(process_std, measurement_std))
 
     def gain_for(self, present: np.ndarray) -> np.ndarray:
+        """The gain P∞ Cₛᵀ (Cₛ P∞ Cₛᵀ + Rₛ)⁻¹ for the rows ``present`` of y."""
         C, R = self.C[present], self.R[np.ix_(present, present)]
         return sla.solve(C @ self.prior @ C.T + R, C @ self.prior, assume_a="pos").T
 
     def predict(self, dt: float, force0: float, force1: float, control: np.ndarray) -> None:
+        """Propagate the mean over ``dt`` [s]; the covariance stays the stationary prior P∞."""
         self.propagate_mean(dt, force0, force1, control)
         self.P = self.prior
 
     def update(self, y: np.ndarray, present: np.ndarray, force: float,
                control: np.ndarray) -> None:
+        """Correct the mean with the measurement rows ``present``: the stationary gain when all are
+        present, else the gain for those rows (:meth:`gain_for`) and the posterior covariance it
+        gives."""
         z, C, _ = self.innovation(y, present, force, control)
         if present.all():
             self.x = self.x + self.gain @ (z - C @ self.x)
@@ -134,18 +146,25 @@ class TimeVaryingKalman(LinearFilter):
         self.kf.x, self.kf.P, self.kf.Q, self.kf.R = self.x, self.P, self.Q, self.R
 
     def set_noise(self, process_std: list[float], measurement_std: list[float]) -> None:
+        """New Q and R for the filter and for filterpy's ``KalmanFilter`` inside it."""
         super().set_noise(process_std, measurement_std)
         self.kf.Q, self.kf.R = self.Q, self.R
 
     def initialise_from(self, sample: Sample, control: np.ndarray) -> None:
+        """Restart the mean from one sample (:meth:`LinearFilter.initialise_from`) in filterpy's
+        filter too."""
         super().initialise_from(sample, control)
         self.kf.x = self.x
 
     def continue_from(self, previous: Filter) -> None:
+        """Go on from ``previous`` (:meth:`Filter.continue_from`), filterpy's filter taking the
+        mapped mean too."""
         super().continue_from(previous)
         self.kf.x = self.x
 
     def predict(self, dt: float, force0: float, force1: float, control: np.ndarray) -> None:
+        """filterpy's predict with Φ and the inputs [u0, u1 − u0] through [Γ0, Γ1] over ``dt``
+        [s]."""
         d = self.discrete(dt)
         u0 = full_inputs(control, force0, self.excited_floor)
         u1 = full_inputs(control, force1, self.excited_floor)
@@ -155,6 +174,7 @@ class TimeVaryingKalman(LinearFilter):
 
     def update(self, y: np.ndarray, present: np.ndarray, force: float,
                control: np.ndarray) -> None:
+        """filterpy's update with the rows ``present`` of y, their C and R."""
         z, C, R = self.innovation(y, present, force, control)
         self.kf.update(z, R=R, H=C)
         self.x, self.P = self.kf.x, self.kf.P

@@ -1,8 +1,7 @@
 """``model.type: auto``: the cheapest model, integrator and step that meet a band and tolerance.
 
 The choice rests on measured work-precision data (:mod:`stillframe.fidelity.work_precision`,
-shipped as
-``stillframe/data/fidelity_table.json`` by ``stillframe bench fidelity --write-table``):
+shipped as ``stillframe/data/fidelity_table.json`` by ``stillframe bench fidelity --write-table``):
 
 1. the canonical scenes whose frequency content lies inside the requested band count;
 2. a run (model, method, dt) qualifies if its worst error on those scenes is within the
@@ -38,6 +37,8 @@ from stillframe.errors import InputError
 from stillframe.fidelity.work_precision import MODELS, REFERENCE_MODEL, SCENE_BANDS_HZ
 from stillframe.files import write_text
 from stillframe.locations import DATA_DIR
+
+__all__ = ["Choice", "choose", "energy_note", "load_table", "resolve_model", "write_table"]
 
 TABLE = DATA_DIR / "fidelity_table.json"
 log = logging.getLogger("stillframe.auto")

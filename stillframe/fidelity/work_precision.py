@@ -102,10 +102,10 @@ def run_outputs(frame: CompiledFrame, scene: Scene, method: str, dt: float,
     x0 = initial_state(model, scene.initial)
     stride = round(GRID_DT / dt)
     n = round(scene.duration / dt)
-    frame.run(method, x0, dt, 1, load)  # compile and factor outside the clock
+    frame.run(method, x0, dt, 1, load=load)  # compile and factor outside the clock
     runs, start = 0, time.process_time()
     while True:
-        states = frame.run(method, x0, dt, n, load, stride=stride)
+        states = frame.run(method, x0, dt, n, load=load, stride=stride)
         runs += 1
         spent = time.process_time() - start
         if spent >= repeat_until:
@@ -206,7 +206,7 @@ def model_points(job: tuple[str, str, float, tuple[float, ...], np.ndarray]) -> 
 Mapper = Callable[[Callable, list], list]
 
 
-def sweep(quick: bool = False, duration: float | None = None,
+def sweep(*, quick: bool = False, duration: float | None = None,
           progress: Progress | None = None, mapper: Mapper | None = None) -> dict:
     """The whole work-precision sweep: references, points, Pareto fronts, model frequencies.
 

@@ -42,6 +42,8 @@ class CusumSettings:
     min_relative_std: float = 2e-4
 
     def check(self) -> None:
+        """Raise :class:`~stillframe.errors.InputError` unless ``reference_updates`` is at least 2,
+        ``drift`` non-negative and ``threshold`` and ``min_relative_std`` positive."""
         if self.reference_updates < 2:
             raise InputError("reference_updates: at least 2 (a spread needs two updates)")
         if not (self.drift >= 0 and self.threshold > 0 and self.min_relative_std > 0):
@@ -84,8 +86,7 @@ class ChangeDetector:
         return self.mean is not None
 
     def statistic(self) -> float | None:
-        """The largest CUSUM statistic over the modes (None while the reference is being
-        set)."""
+        """The largest CUSUM statistic over the modes (None while the reference is being set)."""
         if self.upper is None or self.lower is None:
             return None
         return float(max(self.upper.max(), self.lower.max()))

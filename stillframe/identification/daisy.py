@@ -10,8 +10,8 @@ half:
 - order 20 and N4SID block rows 21, the toolbox demo's values;
 - the 4 outputs with the highest mean multiple coherence with the two inputs on the
   identification half (H1 estimate). With more outputs the system Markov parameters that OKID
-  recovers (eq. 3.107) grow without bound on this record (measured: 1e4 by k = 10 with all 28),
-  so OKID cannot be run on all of them; N4SID gets the same 4 for a like-for-like comparison;
+  recovers (eq. 3.107) grow without bound on this record, so OKID cannot be run on all 28 of
+  them; N4SID gets the same 4 for a like-for-like comparison;
 - OKID's observer order p: the value in ``ceil(n / m) .. 12`` whose model fits best when
   identified on the first three quarters of the identification half and simulated on its last
   quarter.
@@ -120,6 +120,9 @@ def mean_fit(model: Model, u: np.ndarray, y: np.ndarray) -> float:
 
 
 def okid_model(u: np.ndarray, y: np.ndarray, method: str, observer_order: int) -> Model:
+    """The model of order :data:`ORDER` that ``method`` (an OKID variant of
+    :func:`~stillframe.identification.pipeline.identify`, no refinement) identifies on ``u``, ``y``
+    with observer order ``observer_order``, and the seconds it took."""
     start = time.perf_counter()
     ident = identify(u, y, DT, method, ORDER, observer_order=observer_order, refine=False)
     return Model(method, ident.A, ident.B, ident.C, ident.D, time.perf_counter() - start,
@@ -155,6 +158,8 @@ def output_error_model(start: Model, u: np.ndarray, y: np.ndarray) -> Model:
 
 
 def n4sid_model(u: np.ndarray, y: np.ndarray) -> Model:
+    """The N4SID model of order :data:`ORDER` (:data:`BLOCK_ROWS` block rows) on ``u``, ``y``, and
+    the seconds it took."""
     start = time.perf_counter()
     A, B, C, D = identify_n4sid(u, y, ORDER, BLOCK_ROWS)
     return Model("n4sid", A, B, C, D, time.perf_counter() - start)

@@ -8,6 +8,8 @@ from numpy.typing import NDArray
 
 from stillframe.errors import InputError
 
+__all__ = ["fit_proportional_damping", "proportional_damping_matrix"]
+
 Array = NDArray[np.float64]
 
 

@@ -72,6 +72,8 @@ class HankelFactorization:
 
     @property
     def numerical_rank(self) -> int:
+        """The highest order :meth:`realize` accepts: the singular values above
+        :data:`RANK_TOLERANCE` of the largest (:func:`numerical_rank`)."""
         return numerical_rank(self.singular_values)
 
     def realize(self, order: int) -> Realization:

@@ -6,8 +6,8 @@ noise on the load cell and on the accelerometers. The reference modes are the co
 eigenvalues of the model itself.
 
 ``python -m stillframe.identification.hammer [--seeds N]`` prints identified against model
-frequencies and
-damping ratios for OKID + ERA, OKID + ERA/DC and the thesis's combined ERA/DC variant.
+frequencies and damping ratios for OKID + ERA, OKID + ERA/DC and the thesis's combined ERA/DC
+variant.
 """
 
 from __future__ import annotations
@@ -42,7 +42,7 @@ class HammerRecord:
     damping_ratio: Array
 
 
-def hammer_test(lin: LinearModel, seed: int = 0, dt: float = 1.0 / 32.0, samples: int = 2048,
+def hammer_test(lin: LinearModel, seed: int = 0, *, dt: float = 1.0 / 32.0, samples: int = 2048,
                 impulse: float = 0.05, blow_sample: int = 32, force_noise: float = 1e-3,
                 acceleration_noise: float = 1e-3) -> HammerRecord:
     """Simulate the hammer test on ``lin`` (input ``f1``, outputs the floor accelerations)."""
@@ -68,6 +68,10 @@ def hammer_test(lin: LinearModel, seed: int = 0, dt: float = 1.0 / 32.0, samples
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Identify :func:`hammer_test` records of the scene's linearised model (``--seeds`` noise
+    realisations) at ``--order`` with OKID/ERA, OKID/ERA-DC, and OKID/ERA-DC on the combined
+    parameters, and print each identified mode's frequency and damping beside the model's
+    nearest; exit code 0."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, default=3, help="noise realisations")
     parser.add_argument("--order", type=int, default=6)

@@ -1,5 +1,5 @@
 """The structure identified from a closed loop's own records: the excitation force, the hinge
-torque the loop applied and the sensors (issue 41; docs/adaptation.md).
+torque the loop applied and the sensors (docs/adaptation.md).
 
 Records at each sample t_k (what the estimator has): the load cell (the excitation held over
 [t_k, t_k+1)), the torque the actuator applied over [t_k−1, t_k) (the encoder's ``effort``), the

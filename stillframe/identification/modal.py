@@ -17,6 +17,8 @@ from numpy.typing import NDArray
 
 from stillframe.errors import InputError
 
+__all__ = ["ModalTable", "continuous_eigenvalues", "mac", "modal_parameters"]
+
 Array = NDArray[np.float64]
 ComplexArray = NDArray[np.complex128]
 

@@ -9,6 +9,8 @@ from nfoursid.nfoursid import NFourSID
 
 from stillframe.errors import InputError
 
+__all__ = ["identify_n4sid"]
+
 
 def identify_n4sid(u: np.ndarray, y: np.ndarray, order: int, block_rows: int
                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:

@@ -14,6 +14,8 @@ from numpy.typing import NDArray
 
 from stillframe.errors import IdentificationError, InputError
 
+__all__ = ["OkidResult", "minimum_samples", "observer_gain", "okid"]
+
 Array = NDArray[np.float64]
 
 
@@ -35,6 +37,8 @@ class OkidResult:
 
     @property
     def n_inputs(self) -> int:
+        """r, the number of inputs: the observer Markov parameters' columns are r inputs, then m
+        outputs."""
         return self.observer_markov.shape[2] - self.observer_markov.shape[1]
 
     def system_markov(self, count: int) -> Array:

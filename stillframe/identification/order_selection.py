@@ -2,20 +2,17 @@
 refined models' fit decides, and a disagreement between criteria is reported.
 
 The Hankel gap (largest σ_n / σ_{n+1}, :func:`stillframe.identification.era.auto_order`) gives n.
-The ERA
-realizations of orders n - 2, n and n + 2 (those within the Hankel matrix's numerical rank) are
-each refined (:func:`stillframe.identification.pem.refine_prediction_error`),
-and among those whose refinement converged (all, if none did) the order of least BIC
-(Ljung §16.4, eq. 16.33 with penalty ``d ln N``) is kept: a spurious mode that the gap let in
-costs more parameters than it gains in fit, a weak physical mode that the gap left out gains more.
-Where AIC (penalty ``2 d``) prefers a larger candidate whose model holds a well-determined mode the
-kept one lacks (:func:`stillframe.identification.quality.dropped_by_bic`), the record does not
-decide, and
-the returned note says so. A BIC choice above the gap's order whose added modes are all uncertain
-(95 % intervals beyond the limits of :func:`stillframe.identification.quality.uncertain_modes`)
-falls back to the smaller candidate: those modes fit noise the record cannot resolve (measured on
-a 3-mode frame at 2 % noise, where BIC alone kept order 8 with a mode at 8.14 Hz, ζ 0.035 and an
-interval wider than ± 30 %).
+The ERA realizations of orders n - 2, n and n + 2 (those within the Hankel matrix's numerical rank)
+are each refined (:func:`stillframe.identification.pem.refine_prediction_error`), and among those
+whose refinement converged (all, if none did) the order of least BIC (Ljung §16.4, eq. 16.33 with
+penalty ``d ln N``) is kept: a spurious mode that the gap let in costs more parameters than it
+gains in fit, a weak physical mode that the gap left out gains more. Where AIC (penalty ``2 d``)
+prefers a larger candidate whose model holds a well-determined mode the kept one lacks
+(:func:`stillframe.identification.quality.dropped_by_bic`), the record does not decide, and the
+returned note says so. A BIC choice above the gap's order whose added modes are all uncertain (95 %
+intervals beyond the limits of :func:`stillframe.identification.quality.uncertain_modes`) falls
+back to the smaller candidate: those modes fit noise the record cannot resolve (on a noisy record
+BIC alone can keep a spurious mode whose interval is wider than ± 30 %).
 """
 
 from __future__ import annotations

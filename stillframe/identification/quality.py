@@ -17,15 +17,13 @@ from the one Hankel factorization (thesis §3.6):
   through :data:`STABLE_RUN` successive higher orders up to twice the chosen order, but has no
   counterpart within 1 % in the chosen model, is a physical candidate the order dropped;
 - **uncertain modes** (with the prediction-error refinement, :mod:`stillframe.identification.pem`):
-a mode
-  whose 95 % interval is wider than ± 1 % in frequency or ± 30 % in damping ratio is not known to
-  that accuracy from this record;
+  a mode whose 95 % interval is wider than ± 1 % in frequency or ± 30 % in damping ratio is not
+  known to that accuracy from this record;
 - **a mode dropped by BIC** (with the refinement and ``--order auto``,
   :mod:`stillframe.identification.order_selection`): BIC keeps order n, but AIC (a smaller penalty
-  per
-  parameter, Ljung §16.4) prefers a larger candidate, whose model adds a mode that
-  is stable and whose 95 % intervals are within the limits above. The record then does not
-  decide whether that mode is physical.
+  per parameter, Ljung §16.4) prefers a larger candidate, whose model adds a mode that is stable and
+  whose 95 % intervals are within the limits above. The record then does not decide whether that
+  mode is physical.
 """
 
 from __future__ import annotations

@@ -21,9 +21,9 @@ def modes_document(modes: ModalTable, consistent: Sequence[bool],
                    refinement: WithIntervals | None = None,
                    reference: int | None = None) -> list[dict[str, Any]]:
     """Modes sorted by frequency: frequency, damping ratio, shape as [magnitude, phase],
-    whether the mode persists at higher orders (:mod:`stillframe.identification.quality`) and,
-    with intervals, ``frequency_ci_hz`` and ``damping_ci`` (None where there is none), and with
-    the refinement each shape component's 95 % phase interval ``shape_phase_ci`` [rad]."""
+    whether the mode persists at higher orders (:mod:`stillframe.identification.quality`) and, with
+    intervals, ``frequency_ci_hz`` and ``damping_ci`` (None where there is none), and with the
+    refinement each shape component's 95 % phase interval ``shape_phase_ci`` [rad]."""
     docs = [{"frequency_hz": float(modes.frequency_hz[k]),
              "damping_ratio": float(modes.damping_ratio[k]),
              "shape": modes.magnitude_phase(k),

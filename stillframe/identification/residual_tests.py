@@ -47,6 +47,8 @@ class Whiteness:
 
     @property
     def white(self) -> bool:
+        """Whether the errors pass as white: the corrected p-value at least
+        :data:`WHITENESS_LEVEL`."""
         return self.p_value >= WHITENESS_LEVEL
 
 

@@ -48,6 +48,9 @@ from stillframe.identification.modal import ModalTable, mac, modal_parameters
 from stillframe.identification.quality import quality_warnings, uncertain_modes
 from stillframe.identification.stabilization import matching_modes
 
+__all__ = ["OutputOnlyIdentification", "SsiRealization", "ToeplitzFactorization", "factorize",
+           "identify_output_only", "minimum_samples"]
+
 Array = NDArray[np.float64]
 
 OUTPUT_ONLY_METHODS: tuple[str, ...] = ("ssi-cov",)
@@ -77,9 +80,14 @@ class ToeplitzFactorization:
 
     @property
     def numerical_rank(self) -> int:
+        """The highest order :meth:`realize` accepts: the singular values above the tolerance of
+        :func:`~stillframe.identification.era.numerical_rank`."""
         return numerical_rank(self.singular_values)
 
     def realize(self, order: int) -> SsiRealization:
+        """The (A, C) of order ``order``: the observability matrix from the leading singular vectors
+        scaled by the square roots of their values, C its first block row, A by least squares from
+        its shift; :class:`~stillframe.errors.InputError` outside 1 … :attr:`numerical_rank`."""
         if order < 1 or order > self.numerical_rank:
             raise InputError(f"model order {order} is outside 1..{self.numerical_rank} (the "
                              "numerical rank of the output covariances' Toeplitz matrix)")
@@ -141,6 +149,8 @@ def _toeplitz(cov: Array, p: int) -> Array:
 
 
 def factorize(cov: Array, p: int) -> ToeplitzFactorization:
+    """The SVD of the block Toeplitz matrix ``[R_{p+a−b}]`` (a, b = 0 … p − 1) of the output
+    covariances ``cov`` (``cov[i]`` = R_i, i up to 2p − 1 used)."""
     left, s, _ = np.linalg.svd(_toeplitz(cov, p))
     return ToeplitzFactorization(left=left, singular_values=s, n_outputs=cov.shape[1])
 

@@ -8,11 +8,11 @@ floor-3 mass includes the pendulum's apparent mass; the design model adds the pe
 structure again (eqs. 5.200–5.205), so that mass is taken off floor 3 first:
 :func:`pendulum_apparent_mass`.
 
-The scale of M, K, R is that of the input: the discrete model (and MKR's
-``B_c = (A − I)⁻¹ A_c B``, eq. 3.43) assumes a force held over each sample period. The load cell
-then reads exactly the force applied over the next period. A blow shorter than a period is not
-measured by its samples (a half-sine one period wide, sampled at its peak, reads π/2 times its
-impulse per period and lies half a period early): :func:`unresolved_pulse` detects such inputs.
+The scale of M, K, R is that of the input: the discrete model (and MKR's ``B_c = (A − I)⁻¹ A_c B``,
+eq. 3.43) assumes a force held over each sample period. The load cell then reads exactly the force
+applied over the next period. A blow shorter than a period is not measured by its samples (a
+half-sine one period wide, sampled at its peak, reads π/2 times its impulse per period and lies half
+a period early): :func:`unresolved_pulse` detects such inputs.
 """
 
 from __future__ import annotations

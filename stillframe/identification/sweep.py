@@ -4,12 +4,11 @@ A *case* is one random building, one record length, one signal-to-noise ratio an
 :func:`run_case` simulates it and identifies it with stillframe's default path
 (``identify(u, y, dt)``: OKID + ERA/DC, order ``auto``, then the prediction-error refinement,
 which also gives 95 % intervals), the fast path without the refinement (``stillframe_okid``,
-``refine=False``), N4SID (``nfoursid``, PO-MOESP) and python-control
-(``markov`` + ``eigensys_realization``); the last two are given the true order, stillframe
-chooses its own. Output-only (the force unmeasured): stillframe's SSI-COV (order auto, jackknife
-intervals) and pyOMA2's SSI-COV given the true order. :func:`run_cases` maps it over a
-list of cases (serially, with progress); the function is top-level and picklable so a parallel
-executor can map it instead.
+``refine=False``), N4SID (``nfoursid``, PO-MOESP) and python-control (``markov`` +
+``eigensys_realization``); the last two are given the true order, stillframe chooses its own.
+Output-only (the force unmeasured): stillframe's SSI-COV (order auto, jackknife intervals) and
+pyOMA2's SSI-COV given the true order. :func:`run_cases` maps it over a list of cases (serially,
+with progress); the function is top-level and picklable so a parallel executor can map it instead.
 
 Buildings: a shear building of ``n`` storeys (2–5 modes) with random storey masses and
 stiffnesses (±25 %) and modal damping ratios 1–5 %; in one case of two the top storey is replaced
@@ -138,6 +137,9 @@ def _eig(K: Array, M: Array) -> tuple[Array, Array]:
 
 @dataclass(frozen=True)
 class Record:
+    """One simulated record: the force ``u`` (N, 1), the accelerations ``y`` (N, n) and the sample
+    period ``dt`` [s]."""
+
     u: Array
     y: Array
     dt: float

@@ -1,7 +1,6 @@
-"""The loop that notices a change of its structure and re-tunes itself (issue 41;
-docs/adaptation.md): :class:`Adaptation`, one object that the one-process loop and
-estimator_node both run on the same records, so that both hand over the same design at the same
-sample.
+"""The loop that notices a change of its structure and re-tunes itself (docs/adaptation.md):
+:class:`Adaptation`, one object that the one-process loop and estimator_node both run on the same
+records, so that both hand over the same design at the same sample.
 
 Per sample k (after the estimator's step) :meth:`Adaptation.observe` takes the load cell, the
 torque applied over the period before and the four measurements. Then, by sample count (never by
@@ -389,8 +388,7 @@ class DesignSwitch(Generic[Part]):
         return None
 
     def due(self, ns: int) -> tuple[FrameModel, Part] | None:
-        """The design and part to take at the sample stamped ``ns`` (None: keep the running
-        one)."""
+        """The design and part to take at the sample stamped ``ns`` (None: keep the running one)."""
         if self.pending is None or ns < self.pending[0]:
             return None
         _, self.current, design, part = self.pending

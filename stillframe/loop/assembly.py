@@ -198,10 +198,9 @@ class SampleAssembly:
         """The actuation in effect over the period before ``p``: what the simulator reports it
         applied. Where that report was lost: the command in effect (:meth:`in_effect`) while
         the simulator's last report of a non-zero command showed it applying the commands, else
-        that report held
-        (it saturates, holds or zeroes them: a command is then no evidence, and taking it would
-        let the estimator and the controller feed each other). Zero for the actuator not
-        driven."""
+        that report held (it saturates, holds or zeroes them: a command is then no evidence, and
+        taking it would let the estimator and the controller feed each other). Zero for the actuator
+        not driven."""
         index = self.grid.index(p.ns) - self.answer_lag
         control = np.zeros(2)
         for i, log in enumerate(self.commands):

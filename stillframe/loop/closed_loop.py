@@ -12,8 +12,7 @@ The same scene and seeds therefore give the same numbers here and through the no
 
 With ``adaptation.enabled`` the loop runs the scene's
 :class:`~stillframe.loop.adaptation.Adaptation` on the estimator's inputs after each estimator
-step, as estimator_node does, and applies each hand-over before the estimator step of its
-sample.
+step, as estimator_node does, and applies each hand-over before the estimator step of its sample.
 
 The evaluation is :func:`stillframe.loop.evaluation.evaluate`.
 """

@@ -51,8 +51,7 @@ class CommandGate:
 
     def check(self, value: float, stamp_ns: int, now_ns: int, held_ns: int) -> bool:
         """Whether the command ``value`` stamped ``stamp_ns`` (from an admitted writer) is taken
-        at sample ``now_ns`` with the command stamped ``held_ns`` held; counts the reason if
-        not."""
+        at sample ``now_ns`` with the command stamped ``held_ns`` held; counts the reason if not."""
         if not math.isfinite(value):
             reason = "non_finite"
         elif abs(value) > self.bound:

@@ -90,6 +90,9 @@ class Decimator:
         self.count = 0
 
     def push(self, values: Any, stamp: int) -> tuple[np.ndarray, int] | None:
+        """Take one sample of every channel, stamped ``stamp``; when the filter's centre (the sample
+        :attr:`delay` back) is a ``factor``-th sample, the filtered values there and its stamp, else
+        None. Before the first sample the filter sees zeros."""
         i = self.count % self.length
         self._ring[i] = self._ring[i + self.length] = values
         self._stamps[i] = stamp
@@ -118,6 +121,8 @@ class DecimatedTaps:
     @classmethod
     def of(cls, node: Any, messages: SensorMessages, rate_hz: float,
            qos: Callable[[TopicSpec], Any]) -> DecimatedTaps | None:
+        """The taps of a simulator publishing at ``rate_hz``, decimated by
+        :func:`decimation_factor`; None when that is 1 (the rate needs no tap)."""
         factor = decimation_factor(rate_hz)
         return cls(node, messages, factor, qos) if factor > 1 else None
 

@@ -70,12 +70,17 @@ class PassivityCheck:
                 self.first_violation_t = t
 
     def values(self) -> dict[str, Any]:
+        """The check's figures for ``/diagnostics`` once it is active: the energy the controller
+        supplied and the energy its storage allowed [J], the largest excess [J] and the violations;
+        empty otherwise."""
         if not self.active:
             return {}
         return {"controller_energy_J": self.supplied, "controller_energy_allowed_J": self.allowed,
                 "passivity_excess_J": self.excess_max, "passivity_violations": self.violations}
 
     def message(self) -> str:
+        """One line on the violations (the largest excess, how many samples, the first time), ""
+        without any."""
         if not self.violations:
             return ""
         return (f"passivity: the controller supplied up to {self.excess_max:.3g} J more than its "
@@ -104,6 +109,8 @@ class EnergyLedger:
         self.check.update(self.t, self.last, phi)
 
     def values(self) -> dict[str, Any]:
+        """The energy stored above rest at the last sample [J] and the passivity check's figures
+        (:meth:`PassivityCheck.values`)."""
         return {"energy_stored_J": float(self.last[0]), **self.check.values()}
 
 
@@ -129,4 +136,5 @@ class EnergyTopic:
         self.publisher.publish(self.message.cdr(self.ledger.t, self.ledger.last))
 
     def values(self) -> dict[str, Any]:
+        """Its ledger's figures (:meth:`EnergyLedger.values`)."""
         return self.ledger.values()

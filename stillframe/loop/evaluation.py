@@ -53,6 +53,8 @@ def steady_state_peaks(t: np.ndarray, values: np.ndarray, start: float, end: flo
 
 
 def reduction_pct(uncontrolled: np.ndarray, controlled: np.ndarray) -> list[float]:
+    """The reduction of each peak in percent, 100 (1 − controlled / uncontrolled), element by
+    element."""
     return (100.0 * (1.0 - controlled / uncontrolled)).tolist()
 
 

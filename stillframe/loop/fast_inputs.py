@@ -2,12 +2,11 @@
 
 The hot path of the estimator and the controller: a raw subscription checks the sample's writer
 against the topic's :class:`stillframe.loop.writer_gate.WriterGate` (the run's token in its
-bytes, or a set lookup of its writer), hands the
-bytes to a :class:`stillframe.contract.codecs.TopicReader` (a few fields unpacked in place when
-the layout is the stack's own, ``rosbags`` otherwise), and the handler gets the values; bytes
-that are no valid message are counted in the node's ``malformed``
-(:attr:`stillframe.middleware.interface.Node.malformed`), as the decoding subscriptions count
-them.
+bytes, or a set lookup of its writer), hands the bytes to a
+:class:`stillframe.contract.codecs.TopicReader` (a few fields unpacked in place when the layout is
+the stack's own, ``rosbags`` otherwise), and the handler gets the values; bytes that are no valid
+message are counted in the node's ``malformed``
+(:attr:`stillframe.middleware.interface.Node.malformed`), as the decoding subscriptions count them.
 """
 
 from __future__ import annotations

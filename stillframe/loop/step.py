@@ -107,8 +107,7 @@ class LoopStep:
                data: bytes | memoryview = b"") -> bool:
         """Whether writer ``gid`` (or, without one, the writer that numbered the sample
         ``sequence``; with the run's token, the sample's CDR ``data`` carrying it) may command
-        ``actuator``; counted as a refused command if not. Asked before the command is
-        decoded."""
+        ``actuator``; counted as a refused command if not. Asked before the command is decoded."""
         if self.gates[actuator].admits(gid, sequence, data):
             return True
         self.counts["rejected_commands"] += 1

@@ -21,10 +21,10 @@ taken; so is, when the node is not pinned, a writer that the graph cannot name y
 writer taken so far has left the graph (a restart before its name arrived).
 
 The hot path is a set lookup: a GID already taken or already refused is decided without the
-graph, and so is an unpinned gate's first writer (reading the graph costs about 9 ms in a running
-loop, which the first sample then paid in each node). The graph is asked only for a later GID not
-seen before, and at most every :data:`RECHECK_NS` for one it could not name yet
-(``unknown_writer``).
+graph, and so is an unpinned gate's first writer (a read of the graph in a running loop costs
+milliseconds, more than a sample period at 1 kHz, which the first sample would pay in each
+node). The graph is asked only for a later GID not seen before, and at most every :data:`RECHECK_NS`
+for one it could not name yet (``unknown_writer``).
 
 Without GIDs (real rclpy Jazzy: its message info has none) the gate decides from what arrives,
 not from how many publishers the graph shows: a publisher that exists but never writes (``ros2
@@ -288,8 +288,7 @@ class WriterGate:
 
     def name_of(self, gid: bytes) -> str:
         """The node of writer ``gid`` in the graph, its GID in hex while the graph has none; a
-        stream's (no GID): the topic's other writers, or ``unnamed`` while the graph shows
-        none."""
+        stream's (no GID): the topic's other writers, or ``unnamed`` while the graph shows none."""
         if gid.startswith(STREAM_KEY):
             return " or ".join(self.suspects()) or "unnamed"
         return next((name for g, name in self.writers() if g == gid and name.strip("/")),

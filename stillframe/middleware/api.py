@@ -12,8 +12,7 @@ node.destroy_node()
 ```
 
 Messages are ``rosbags`` message instances (see :mod:`stillframe.contract.messages`); ``publish``
-also
-takes CDR bytes, and ``create_subscription(..., raw=True)`` hands the callback
+also takes CDR bytes, and ``create_subscription(..., raw=True)`` hands the callback
 ``(cdr_bytes, MessageInfo)``. The backend is ``rclpy`` when ``import rclpy`` works and ``dds``
 otherwise; the environment variable ``STILLFRAME_RMW=dds|rclpy`` overrides the choice.
 """

@@ -29,13 +29,17 @@ class Time:
 
     @classmethod
     def from_msg(cls, msg: Any) -> Time:
+        """The time a ``builtin_interfaces/msg/Time`` holds (its ``sec`` and ``nanosec``)."""
         return cls(messages.stamp_ns(msg))
 
     def seconds_nanoseconds(self) -> tuple[int, int]:
+        """Whole seconds and the nanoseconds left over, as ``rclpy.time.Time.seconds_nanoseconds``
+        returns them."""
         return divmod(self.nanoseconds, 1_000_000_000)
 
     @property
     def seconds(self) -> float:
+        """The time in seconds, a float (:attr:`nanoseconds` holds it exactly)."""
         return self.nanoseconds * 1e-9
 
 
@@ -47,6 +51,8 @@ class Clock:
         self._sim_ns = 0
 
     def now(self) -> Time:
+        """The current time: the latest ``/clock`` with ``sim`` (zero before the first), else the
+        system time since the Unix epoch."""
         return Time(self.now_ns())
 
     def now_ns(self) -> int:

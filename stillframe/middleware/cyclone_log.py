@@ -4,7 +4,7 @@ A sample whose CDR Cyclone's receive path refuses (truncated, garbage under a va
 as an rclpy peer can publish) never reaches a ``dds``-backend reader: Cyclone drops it and logs
 ``deserialization rt/TOPIC/TYPE failed`` on stderr. The wheel's ``libddsc`` exports no log sink
 (``dds_set_log_sink`` is not in its symbol table) and its reader statistics
-(``dds_create_statistics``: ``discarded_bytes``) stay 0 for these samples, measured. So
+(``dds_create_statistics``: ``discarded_bytes``) stay 0 for these samples. So
 :func:`count_deserialization_failures` taps the process's stderr (file descriptor 2): a thread
 passes every byte on to the real stderr unchanged and counts each such line in :data:`DROPPED`
 under its ROS topic. Cyclone drops these before any node of the process sees them, so they are

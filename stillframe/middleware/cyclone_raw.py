@@ -52,8 +52,7 @@ def take_raw(reader: DataReader, limit: int) -> list[tuple[bytes, Any]]:
 def writer_guid(reader: DataReader, handle: int) -> bytes | None:
     """The GUID of the writer matched with ``reader`` under instance handle ``handle`` (None if
     not matched). ``get_matched_publication_data`` converts the writer's whole QoS and type
-    information in Python, about 0.1 ms, which each topic's first sample paid; only the key is
-    taken here."""
+    information in Python, which each topic's first sample would pay; only the key is taken here."""
     return ddspy_get_matched_publication_data(reader._ref, handle, _key_only, _no_qos)
 
 

@@ -167,6 +167,7 @@ class Context:
 
     @classmethod
     def get(cls) -> Context:
+        """The participant of the domain that ``ROS_DOMAIN_ID`` names, made on first use."""
         domain = discovery.domain_id()
         if domain not in cls._instances:
             cls._instances[domain] = cls(domain)
@@ -243,6 +244,8 @@ class Context:
         write_raw(self._discovery_writer, messages.serialize(info))
 
     def remove_node(self, node: DdsNode) -> None:
+        """Drop ``node`` from the published node list; with the last node gone, delete the
+        participant."""
         self.nodes.remove(node)
         if self.nodes:
             self.publish_graph()
@@ -255,9 +258,9 @@ class Context:
     def _alive(self, kind: str) -> tuple[int, list[Any]]:
         """How many reads so far, and the alive samples of a builtin topic. Read only when the
         reader has data available (a new, changed or vanished entity; a read resets that
-        status), and then only the samples not read before: converting an endpoint's QoS in
-        cyclonedds' Python costs about 0.15 ms, so reading all 55 of a running loop took 5 to
-        11 ms, which a node asking the graph inside its loop paid as a late sample. A vanished
+        status), and then only the samples not read before: cyclonedds converts each
+        endpoint's QoS in Python, and reading every endpoint of a running loop on each call
+        would cost a node that asks the graph inside its loop a late sample. A vanished
         entity comes as a not-read sample of a not-alive instance, by its key."""
         if kind not in self._graph_readers:
             builtin = {
@@ -511,13 +514,18 @@ class DdsTimer:
         self.reset()
 
     def reset(self) -> None:
+        """Start the period from now on the timer's clock (not before the first ``/clock`` with sim
+        time)."""
         self.canceled = False
         self.next_ns = self.clock.now().nanoseconds + self.period_ns if self.clock.started else None
 
     def cancel(self) -> None:
+        """Stop calling back until :meth:`reset`."""
         self.canceled = True
 
     def time_until_call_ns(self) -> int | None:
+        """Nanoseconds until the next call (≤ 0: due now), or None when canceled or before sim time
+        starts."""
         if self.canceled or not self.clock.started:
             return None
         if self.next_ns is None:
@@ -525,6 +533,8 @@ class DdsTimer:
         return self.next_ns - self.clock.now().nanoseconds
 
     def call_if_due(self) -> bool:
+        """Call back if the period elapsed and move to the next period not in the past (skipped
+        periods are not made up); True if it called."""
         wait = self.time_until_call_ns()
         if wait is None or wait > 0:
             return False
@@ -577,18 +587,23 @@ class DdsNode:
 
     # -- identity, logging, time, parameters -----------------------------------------------
     def get_name(self) -> str:
+        """The node's name after ``__node`` remapping."""
         return self._name
 
     def get_namespace(self) -> str:
+        """The node's namespace after ``__ns`` remapping."""
         return self._namespace
 
     def get_fully_qualified_name(self) -> str:
+        """Namespace and name as one absolute name (``/frame/sim_node``)."""
         return self._namespace.rstrip("/") + "/" + self._name
 
     def get_logger(self) -> Logger:
+        """The node's logger (its level from ``--ros-args --log-level``)."""
         return self._logger
 
     def get_clock(self) -> Clock:
+        """The node's clock: system time, or sim time from ``/clock`` with ``use_sim_time``."""
         return self._clock
 
     def _on_clock(self, msg: Any) -> None:
@@ -598,23 +613,32 @@ class DdsNode:
         self, name: str, default: Any = None, read_only: bool = False, *,
         descriptor: params.ParameterDescriptor | None = None,
     ) -> params.Parameter:
+        """Declare ``name`` in the node's parameter store (overrides from ``--ros-args`` applied)
+        and return it with its value."""
         descriptor = params.described(descriptor, read_only=read_only)
         return params.Parameter(name, self._params.declare(name, default, descriptor))
 
     def get_parameter(self, name: str) -> params.Parameter:
+        """The declared parameter ``name`` with its current value."""
         return params.Parameter(name, self._params.get(name))
 
     def add_on_set_parameters_callback(self, callback: params.SetCallback) -> None:
+        """Ask ``callback`` before each set of the node's parameters (the parameter services
+        included)."""
         self._params.callbacks.append(callback)
 
     # -- endpoints ---------------------------------------------------------------------------
     def resolve_topic_name(self, topic: str) -> str:
+        """``topic`` as an absolute name in the node's namespace, then remapped by ``-r
+        from:=to``."""
         full = names.resolve_topic(topic, self._namespace, self._name)
         return self._remaps.get(full, full)
 
     def create_publisher(
         self, msg_type: str | type, topic: str, qos: QoSProfile | str | int
     ) -> DdsPublisher:
+        """A :class:`DdsPublisher` on the resolved ``topic``; the node list is published again with
+        its writer."""
         topic = self.resolve_topic_name(topic)
         pub = DdsPublisher(self, messages.type_name(msg_type), topic, as_profile(qos))
         self._publishers.append(pub)
@@ -625,6 +649,9 @@ class DdsNode:
         self, msg_type: str | type, topic: str, callback: Callable[..., None],
         qos: QoSProfile | str | int, raw: bool = False,
     ) -> DdsSubscription:
+        """A :class:`DdsSubscription` on the resolved ``topic``, its reader attached to the node's
+        wait set; a raw one takes the process's own samples in-process when :mod:`.intra_process` is
+        on."""
         topic = self.resolve_topic_name(topic)
         sub = DdsSubscription(
             self, messages.type_name(msg_type), topic, callback, as_profile(qos), raw,
@@ -636,6 +663,7 @@ class DdsNode:
         return sub
 
     def destroy_publisher(self, pub: DdsPublisher) -> None:
+        """Delete ``pub``'s writer and publish the node list without it."""
         self._publishers.remove(pub)
         pub.release()
         self.context.publish_graph()
@@ -652,6 +680,7 @@ class DdsNode:
         return sub
 
     def destroy_subscription(self, sub: DdsSubscription) -> None:
+        """Detach and delete ``sub``'s reader and publish the node list without it."""
         if sub in self._polled:
             self._polled.remove(sub)
         else:
@@ -663,14 +692,17 @@ class DdsNode:
     def create_timer(
         self, period_s: float, callback: Callable[[], None], clock: Clock | None = None
     ) -> DdsTimer:
+        """A :class:`DdsTimer` on ``clock`` (default the node's), run by :meth:`spin_once`."""
         timer = DdsTimer(period_s, callback, clock or self._clock)
         self._timers.append(timer)
         return timer
 
     def reader_gids(self) -> list[bytes]:
+        """The GUIDs of the node's readers, as the node list publishes them."""
         return [sub.gid for sub in (*self._subscriptions, *self._polled)]
 
     def writer_gids(self) -> list[bytes]:
+        """The GUIDs of the node's writers, as the node list publishes them."""
         return [pub.gid for pub in self._publishers]
 
     # -- graph -------------------------------------------------------------------------------
@@ -683,17 +715,21 @@ class DdsNode:
         return [(topic, sorted(types)) for topic, types in sorted(found.items())]
 
     def get_publishers_info_by_topic(self, topic: str) -> list[interface.TopicEndpointInfo]:
+        """Every alive publisher of ``topic`` (resolved in the node's namespace) in the graph."""
         full = names.resolve_topic(topic, self._namespace, self._name)
         return [ep for ep in self.context.endpoints("publication") if ep.topic_name == full]
 
     def count_publishers(self, topic: str) -> int:
+        """How many alive publishers of ``topic`` the graph holds."""
         return len(self.get_publishers_info_by_topic(topic))
 
     def get_subscriptions_info_by_topic(self, topic: str) -> list[interface.TopicEndpointInfo]:
+        """Every alive subscription of ``topic`` (resolved in the node's namespace) in the graph."""
         full = names.resolve_topic(topic, self._namespace, self._name)
         return [ep for ep in self.context.endpoints("subscription") if ep.topic_name == full]
 
     def get_node_names_and_namespaces(self) -> list[tuple[str, str]]:
+        """``(name, namespace)`` of every node that alive participants publish, sorted."""
         return sorted(
             (name, namespace)
             for nodes in self.context.node_names().values()
@@ -720,6 +756,7 @@ class DdsNode:
         self._triggered = key_slots(len(self._handlers))
 
     def detach(self, condition: Any) -> None:
+        """Stop running the handler of ``condition`` and take it out of the wait set."""
         key = attach_key(self._waitset, condition)
         del self._handlers[key], self._made[key]
         self._waitset.detach(condition)
@@ -736,7 +773,7 @@ class DdsNode:
                 wait_ns = min(wait_ns, max(due, 0))
         keys = self._triggered
         count = wait_triggered(self._waitset, wait_ns, keys)
-        # in the order the entities were made, as before (the wait set's order is its own): a
+        # in the order the entities were made (the wait set's order is its own): a
         # callback that answers a sample must not run before the other topics of that sample
         # are taken, or the answer's reply can overwrite one of them (a depth-1 /clock reader)
         triggered = keys[:count] if count < 2 else sorted(keys[:count], key=self._made.__getitem__)

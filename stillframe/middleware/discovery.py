@@ -26,8 +26,8 @@ PEERS_ENV = "ROS_STATIC_PEERS"
 MAX_AUTO_PARTICIPANT_INDEX = 32
 #: LOCALHOST without static peers also binds Cyclone to the loopback interface. rmw_cyclonedds_cpp
 #: leaves the interface to Cyclone (the host's first multicast-capable one), but then Cyclone does
-#: not talk to Fast DDS nodes under LOCALHOST, which restrict themselves to loopback (measured:
-#: no Fast DDS → Cyclone sample in 3 of 4 start orders; every order works with this).
+#: not talk to Fast DDS nodes under LOCALHOST, which restrict themselves to loopback: their
+#: samples then reach Cyclone in some start orders only. Bound to loopback, every order works.
 LOOPBACK_INTERFACE = ('<Interfaces><NetworkInterface address="127.0.0.1"/>'
                       '<NetworkInterface autodetermine="true" multicast="false"/></Interfaces>')
 

@@ -26,10 +26,10 @@ from stillframe.middleware.qos import (
 )
 
 #: discovery has settled when the graph did not change for this long [s], and at least
-#: :data:`ANNOUNCE_S` has passed. Measured here with a running loop (three rclpy nodes, a launch,
-#: a daemon) and a new participant: its view grew in steps up to 1.1 s apart on either backend
-#: and was complete after 2.6 to 3.0 s; Fast DDS participants announce themselves every 3 s
-#: (``leaseDuration_announcementperiod``), so after that long each has done so at least once
+#: :data:`ANNOUNCE_S` has passed. A new participant's view of a running graph grows in steps
+#: about a second apart, on either backend, until every participant has announced itself; Fast
+#: DDS participants announce themselves every 3 s (``leaseDuration_announcementperiod``), so
+#: after :data:`ANNOUNCE_S` each has done so at least once
 QUIET_S = 1.0
 ANNOUNCE_S = 3.2
 #: and is given up on (the answer then says what was seen) after this long [s]
@@ -66,6 +66,7 @@ class Endpoint(TopicEndpointInfo):
 
     @property
     def vendor(self) -> str:
+        """The DDS vendor of the endpoint, from the first two bytes of its GID ('' if unknown)."""
         return VENDORS.get(bytes(self.endpoint_gid[:2]), "")
 
     def describe(self) -> str:
@@ -97,6 +98,8 @@ def duration_text(ns: int) -> str:
 
 
 def fqn(namespace: str, name: str) -> str:
+    """The fully qualified name of ``name`` in ``namespace`` (``/frame`` and ``sim_node``:
+    ``/frame/sim_node``)."""
     return namespace.rstrip("/") + "/" + name
 
 
@@ -123,15 +126,19 @@ class Graph:
     settled: bool = True
 
     def get_node_names_and_namespaces(self) -> list[tuple[str, str]]:
+        """``(name, namespace)`` of every node seen."""
         return list(self.nodes)
 
     def get_topic_names_and_types(self) -> list[tuple[str, list[str]]]:
+        """Every topic seen with its type names."""
         return list(self.topics)
 
     def get_publishers_info_by_topic(self, topic: str) -> list[Endpoint]:
+        """The publishers of ``topic`` (a fully qualified name)."""
         return [e for e in self.endpoints if e.topic_name == topic and e.kind == "PUBLISHER"]
 
     def get_subscriptions_info_by_topic(self, topic: str) -> list[Endpoint]:
+        """The subscriptions of ``topic`` (a fully qualified name)."""
         return [e for e in self.endpoints if e.topic_name == topic and e.kind == "SUBSCRIPTION"]
 
     def node_names(self, include_hidden: bool = False) -> list[str]:
@@ -141,9 +148,12 @@ class Graph:
                       if include_hidden or not name.startswith("_"))
 
     def topic_names(self, include_hidden: bool = False) -> list[str]:
+        """The topic names, hidden ones (:func:`.names.is_hidden`) left out unless asked for."""
         return [t for t, _ in self.topics if include_hidden or not names.is_hidden(t)]
 
     def to_json(self) -> dict[str, Any]:
+        """The graph as plain JSON values (GIDs in hex, QoS by name), what the graph daemon
+        sends."""
         return {
             "nodes": self.nodes, "topics": self.topics,
             "endpoints": [dict(asdict(e), endpoint_gid=e.endpoint_gid.hex(),
@@ -154,6 +164,7 @@ class Graph:
 
     @classmethod
     def from_json(cls, data: dict[str, Any]) -> Graph:
+        """The graph from :meth:`to_json`'s document."""
         return cls(
             nodes=[tuple(n) for n in data["nodes"]],
             topics=[(t, list(types)) for t, types in data["topics"]],

@@ -32,22 +32,31 @@ def enable() -> None:
 
 
 def enabled() -> bool:
+    """Whether :func:`enable` was called in this process (nodes then hand samples over
+    in-process)."""
     return _enabled
 
 
 def subscribe(topic: str, deliver: Delivery) -> None:
+    """Add ``deliver`` to the in-process subscriptions of ``topic``: every later write of a
+    publisher of this process on ``topic`` calls it."""
     _subscriptions[topic].append(deliver)
 
 
 def unsubscribe(topic: str, deliver: Delivery) -> None:
+    """Remove ``deliver`` from the in-process subscriptions of ``topic`` (``ValueError`` if it was
+    not there)."""
     _subscriptions[topic].remove(deliver)
 
 
 def add_publisher(topic: str) -> None:
+    """Count one more publisher of ``topic`` in this process (what :func:`publisher_count`
+    returns)."""
     _publishers[topic] += 1
 
 
 def remove_publisher(topic: str) -> None:
+    """Count one publisher of ``topic`` fewer, as a destroyed publisher does."""
     _publishers[topic] -= 1
 
 
@@ -58,8 +67,11 @@ def subscriptions(topic: str) -> list[Delivery]:
 
 
 def subscription_count(topic: str) -> int:
+    """How many in-process subscriptions ``topic`` has, added to a publisher's DDS matches."""
     return len(_subscriptions.get(topic, ()))
 
 
 def publisher_count(topic: str) -> int:
+    """How many publishers of this process write ``topic``, added to a subscription's DDS
+    matches."""
     return _publishers.get(topic, 0)

@@ -93,9 +93,13 @@ class StateMachine:
 
     @property
     def label(self) -> str:
+        """The current state's label as ``ros2 lifecycle get`` prints it (``unconfigured``,
+        ``inactive``, ``active``, ``finalized`` or a transition state)."""
         return STATE_LABELS[self.state]
 
     def available(self) -> list[Transition]:
+        """The transitions that start in the current state (what ``~/get_available_transitions``
+        answers)."""
         return [t for t in GRAPH if t.start == self.state]
 
     def find(self, transition_id: int = 0, label: str = "") -> Transition:
@@ -132,14 +136,18 @@ class StateMachine:
 
 
 def state_msg(state: int) -> Any:
+    """The ``lifecycle_msgs/msg/State`` of state id ``state``, with its label."""
     return messages.new("lifecycle_msgs/msg/State", id=state, label=STATE_LABELS[state])
 
 
 def transition_msg(t: Transition) -> Any:
+    """The ``lifecycle_msgs/msg/Transition`` of ``t``: its id and label."""
     return messages.new("lifecycle_msgs/msg/Transition", id=t.id, label=t.label)
 
 
 def description_msg(t: Transition) -> Any:
+    """The ``lifecycle_msgs/msg/TransitionDescription`` of ``t``: the transition with its start and
+    goal states."""
     return messages.new("lifecycle_msgs/msg/TransitionDescription", transition=transition_msg(t),
                         start_state=state_msg(t.start), goal_state=state_msg(t.goal))
 

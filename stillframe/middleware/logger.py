@@ -31,18 +31,24 @@ class Logger:
         return True
 
     def debug(self, message: str, once: bool = False) -> bool:
+        """Print ``message`` at DEBUG level (see :meth:`log`); True when it was printed."""
         return self.log("debug", message, once)
 
     def info(self, message: str, once: bool = False) -> bool:
+        """Print ``message`` at INFO level (see :meth:`log`); True when it was printed."""
         return self.log("info", message, once)
 
     def warning(self, message: str, once: bool = False) -> bool:
+        """Print ``message`` at WARN level (see :meth:`log`); True when it was printed. ``warn`` is
+        the same method."""
         return self.log("warn", message, once)
 
     warn = warning
 
     def error(self, message: str, once: bool = False) -> bool:
+        """Print ``message`` at ERROR level (see :meth:`log`); True when it was printed."""
         return self.log("error", message, once)
 
     def fatal(self, message: str, once: bool = False) -> bool:
+        """Print ``message`` at FATAL level (see :meth:`log`); True when it was printed."""
         return self.log("fatal", message, once)

@@ -70,6 +70,8 @@ def value_of(msg: Any) -> Any:
 
 
 def result_msg(result: SetParametersResult) -> Any:
+    """``result`` as an ``rcl_interfaces/msg/SetParametersResult`` (successful, and the reason when
+    not)."""
     return messages.new("rcl_interfaces/msg/SetParametersResult",
                         successful=result.successful, reason=result.reason)
 
@@ -84,6 +86,8 @@ def _listed(name: str, prefixes: list[str], depth: int) -> bool:
 
 
 def answer_list(params: Parameters, request: Any) -> Any:
+    """The ``~/list_parameters`` response: the names within ``request.depth`` of
+    ``request.prefixes`` (rclpy's rule) and the first components of the dotted ones among them."""
     names = [n for n in params.values if _listed(n, list(request.prefixes), request.depth)]
     prefixes = list(dict.fromkeys(n.split(".", 1)[0] for n in names if "." in n))
     result = messages.new("rcl_interfaces/msg/ListParametersResult", names=names,
@@ -92,11 +96,16 @@ def answer_list(params: Parameters, request: Any) -> Any:
 
 
 def answer_get(params: Parameters, request: Any) -> Any:
+    """The ``~/get_parameters`` response: one ``ParameterValue`` per requested name, NOT_SET for a
+    name the node does not have."""
     return messages.new("rcl_interfaces/srv/GetParameters_Response",
                         values=[value_msg(params.values.get(n)) for n in request.names])
 
 
 def answer_set(params: Parameters, request: Any) -> Any:
+    """The ``~/set_parameters`` response: each parameter set in turn, each with its own result; a
+    refused value (an :class:`~stillframe.errors.InputError`) gives an unsuccessful result with its
+    reason and does not stop the others."""
     results = []
     for p in request.parameters:
         try:

@@ -13,6 +13,8 @@ INFINITE_NS = 9_223_372_036_854_775_807
 
 
 class History(enum.IntEnum):
+    """``rmw_qos_history_policy_e``: keep the last ``depth`` samples or all of them."""
+
     SYSTEM_DEFAULT = 0
     KEEP_LAST = 1
     KEEP_ALL = 2
@@ -20,6 +22,8 @@ class History(enum.IntEnum):
 
 
 class Reliability(enum.IntEnum):
+    """``rmw_qos_reliability_policy_e``: resend lost samples (reliable) or not (best effort)."""
+
     SYSTEM_DEFAULT = 0
     RELIABLE = 1
     BEST_EFFORT = 2
@@ -27,6 +31,9 @@ class Reliability(enum.IntEnum):
 
 
 class Durability(enum.IntEnum):
+    """``rmw_qos_durability_policy_e``: whether a late-joining reader gets the samples already
+    written (transient local) or only new ones (volatile)."""
+
     SYSTEM_DEFAULT = 0
     TRANSIENT_LOCAL = 1
     VOLATILE = 2
@@ -34,6 +41,9 @@ class Durability(enum.IntEnum):
 
 
 class Liveliness(enum.IntEnum):
+    """``rmw_qos_liveliness_policy_e``: how a writer shows it is alive, by the middleware
+    (automatic) or by publishing on its topic (manual by topic)."""
+
     SYSTEM_DEFAULT = 0
     AUTOMATIC = 1
     MANUAL_BY_TOPIC = 3

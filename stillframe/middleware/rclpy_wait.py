@@ -2,8 +2,8 @@
 handed to the callbacks directly, as the ``dds`` backend's ``spin_once`` does.
 
 rclpy's ``SingleThreadedExecutor`` builds a new wait set in Python on every ``spin_once`` and runs
-each message as a ``Task``, one message per call: 258 µs to wait for and take 7 messages in one
-process where this wait takes 49 – 53 µs (`stillframe bench hops`, docs/realtime.md). Its C++
+each message as a ``Task``, one message per call, several times the cost of this wait
+(``stillframe bench hops`` times both; docs/realtime.md, "rclpy's executor"). Its C++
 ``EventsExecutor`` is not usable in Jazzy (rclpy 7.1.6): it fails with "SystemError: null argument
 to internal routine" on every subscription whose callback takes a ``MessageInfo``, and it ignores
 callback groups (ros2/rclpy#1478), so it would take the polled subscriptions' samples.
@@ -74,7 +74,7 @@ class SubscriptionWait:
         sample of each ready subscription of :data:`SUBSCRIPTIONS_WAITED_HERE` into its
         callback (subscriptions in creation order); let rclpy's executor run one callback if
         anything else is ready. ``timeout_ns`` 0 only takes what the subscriptions hold: rmw's
-        wait costs 25 – 85 µs even then (a timed futex wait in Fast DDS), seven empty takes 5."""
+        wait costs a timed futex wait in Fast DDS even then, several times what empty takes cost."""
         own, executed = [], []
         for node in self._nodes:
             for sub in node._subscriptions:

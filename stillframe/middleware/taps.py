@@ -4,7 +4,7 @@ A live view (``stillframe monitor``, its dashboard) shows a few dozen samples a 
 publishes a thousand. Every reader of a topic costs its writer one send per sample, whatever the
 reader keeps: DDS's TIME_BASED_FILTER is applied at the reader in Cyclone, so a monitor reading
 the loop's topics, even one that wakes only 50 times a second, makes each of the loop's writes
-dearer (docs/monitor.md measured this: about a tenth of the lock-step rate).
+dearer (docs/monitor.md has the figures and the command that prints them).
 
 So the loop's per-sample publishers are :class:`TappedPublisher`\\ s: every sample goes to the
 topic, and the first sample after each ``1 / TAP_RATE_HZ`` s of wall time goes to a twin topic,

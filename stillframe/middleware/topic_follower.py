@@ -77,6 +77,9 @@ class TopicFollower:
             self.node.create_timer(poll_period_s, self.poll, clock=SYSTEM_CLOCK)
 
     def on_new_topic(self, topic: str, msgtype: str, offers: list[QoSProfile]) -> RawCallback:
+        """The raw callback of a newly found ``topic`` of type ``msgtype`` whose publishers offer
+        ``offers``: what each subclass does with its samples (write them to a bag, forward them,
+        keep the newest)."""
         raise NotImplementedError
 
     def request(self, offers: list[QoSProfile]) -> QoSProfile:

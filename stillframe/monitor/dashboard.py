@@ -50,6 +50,8 @@ from stillframe.middleware.qos import QoSProfile, Reliability
 from stillframe.middleware.taps import TAP_RATE_HZ
 from stillframe.middleware.topic_follower import RawCallback, TopicFollower
 
+__all__ = ["CHARTS", "ERROR_KEYS", "SERIES", "Dashboard", "Limits", "Series", "serve"]
+
 #: counters that are errors when non-zero (the rest of STATUS_KEYS are progress figures)
 ERROR_KEYS: tuple[str, ...] = tuple(k for k in STATUS_KEYS
                                     if k not in ("sim_time_s", "step", "realtime_factor"))
@@ -100,6 +102,7 @@ class Series:
         self.kept = 0
 
     def keep(self, sample: tuple[float, list[float]]) -> None:
+        """Append ``(stamp [s], values)``, the oldest dropped past ``points``, and count it."""
         self.samples.append(sample)
         self.kept += 1
 
@@ -148,9 +151,12 @@ class Dashboard(TopicFollower):
                                  self._on_modes, WATCH_QOS)
 
     def request(self, offers: list[QoSProfile]) -> QoSProfile:
+        """:data:`WATCH_QOS` whatever the publishers offer: best effort, the newest sample only."""
         return WATCH_QOS
 
     def on_new_topic(self, topic: str, msgtype: str, offers: list[QoSProfile]) -> RawCallback:
+        """The callback that decodes each sample of ``topic`` and keeps its stamp and values in the
+        topic's :class:`Series`."""
         name, values = self._by_topic[topic]
         stamp = STAMPS.get(name, _header_stamp)
 

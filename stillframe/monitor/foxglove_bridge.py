@@ -2,15 +2,14 @@
 
 Like ``foxglove_bridge``, on whichever backend the node runs: every discovered topic
 (:class:`stillframe.middleware.topic_follower.TopicFollower`) becomes a ``foxglove-sdk`` channel
-with schema
-encoding ``ros2msg`` (the ``.msg`` definition with its dependencies, as ``rosbags`` writes it
-into MCAP bags) and message encoding ``cdr``; the CDR bytes pass through unconverted. With sim
-time, the newest ``/clock`` is broadcast as the server time after each poll (capability
+with schema encoding ``ros2msg`` (the ``.msg`` definition with its dependencies, as ``rosbags``
+writes it into MCAP bags) and message encoding ``cdr``; the CDR bytes pass through unconverted. With
+sim time, the newest ``/clock`` is broadcast as the server time after each poll (capability
 ``time``), which drives Foxglove's and Lichtblick's time cursor, and it is the log time of the
-messages forwarded in the next poll. ``/clock`` is followed like the topics, always watched (a
-node with ``use_sim_time`` would decode every one of a 1 kHz loop's ``/clock`` samples). The SDK
-keeps a bounded queue per client and drops a slow client's oldest messages, so no client can
-hold the node back.
+messages forwarded in the next poll. ``/clock`` is followed like the topics, always watched (a node
+with ``use_sim_time`` would decode every one of a 1 kHz loop's ``/clock`` samples). The SDK keeps a
+bounded queue per client and drops a slow client's oldest messages, so no client can hold the node
+back.
 
 Every topic is advertised as soon as it is found, but subscribed to only while a client
 subscribes to its channel (the server's ``on_subscribe``/``on_unsubscribe``, counted over the
@@ -23,9 +22,8 @@ no work for the samples in between, and a 1 kHz loop is not slowed by a Python p
 a thousand times a second per topic (docs/monitor.md has the figures). Up to
 :data:`~stillframe.middleware.taps.TAP_RATE_HZ` the loop's topics are read from their monitor
 taps, thinned by the loop's own writers, so the loop does not send the monitor every sample
-either. ``max_rate_hz = 0``
-forwards every sample (polled every :data:`EVERY_SAMPLE_POLL_S`, from a deep queue); a bag
-(``stillframe record``) has every sample too, for Foxglove to open after.
+either. ``max_rate_hz = 0`` forwards every sample (polled every :data:`EVERY_SAMPLE_POLL_S`, from a
+deep queue); a bag (``stillframe record``) has every sample too, for Foxglove to open after.
 """
 
 from __future__ import annotations
@@ -41,6 +39,8 @@ from stillframe.middleware.clock import ClockPublisher
 from stillframe.middleware.qos import QoSProfile, viewer_request
 from stillframe.middleware.taps import TAP_RATE_HZ
 from stillframe.middleware.topic_follower import RawCallback, TopicFollower
+
+__all__ = ["FoxgloveBridge", "ros2msg_schema"]
 
 SCHEMA_ENCODING = "ros2msg"
 MESSAGE_ENCODING = "cdr"
@@ -95,10 +95,17 @@ class FoxgloveBridge(TopicFollower):
         self.want(channel.topic, False)
 
     def request(self, offers: list[QoSProfile]) -> QoSProfile:
+        """A live viewer's QoS for the ``offers``
+        (:func:`~stillframe.middleware.qos.viewer_request`: best effort), one sample deep unless
+        every sample is asked for."""
         request = viewer_request(offers)
         return request if self.every_sample else request.with_depth(1)
 
     def on_new_topic(self, topic: str, msgtype: str, offers: list[QoSProfile]) -> RawCallback:
+        """Open a Foxglove channel for ``topic`` (its ``ros2msg`` schema, CDR encoding) and return
+        the callback that logs each sample on it unchanged, stamped with its receive time or the
+        newest sim time; with ``use_sim_time`` the ``/clock`` callback also keeps the newest clock
+        for :meth:`poll`."""
         channel = foxglove.Channel(topic, schema=ros2msg_schema(msgtype),
                                    message_encoding=MESSAGE_ENCODING, context=self.context)
         self.channels[topic] = channel

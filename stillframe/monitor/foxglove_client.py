@@ -64,8 +64,7 @@ def refused_channel(message: dict[str, Any]) -> int | None:
 async def capture(url: str, topics: list[str] | None, until: asyncio.Event,
                   out: Capture, decode: bool = True) -> None:
     """Subscribe to ``topics`` (None: every topic) as they are advertised and decode what
-    arrives (or, without ``decode``, keep its size) until ``until`` is set or the server
-    closes."""
+    arrives (or, without ``decode``, keep its size) until ``until`` is set or the server closes."""
     subscribed: dict[int, tuple[str, Any]] = {}
     subscription_of: dict[int, int] = {}  # channel id -> subscription id
 

@@ -1,5 +1,4 @@
-"""The loop nodes' runtime: what sim_node, estimator_node, controller_node and the container run
-on.
+"""The loop nodes' runtime: what sim_node, estimator_node, controller_node and the container run on.
 
 - :mod:`.base`: the declared base: ``Cycle`` (spin → process → idle → housekeeping), ``LoopNode``
   (parameters, ``/diagnostics``, writer gates, real-time practices), ``Managed`` (lifecycle),
@@ -11,4 +10,15 @@ on.
 - :mod:`.qos_table`: the QoS each topic uses, the docs' table generated from the contract.
 """
 
-__all__ = ["base", "declarations", "parameters", "qos_table", "realtime", "support"]
+import lazy_loader as lazy
+
+__getattr__, __dir__, __all__ = lazy.attach(
+    __name__,
+    submodules=["base", "declarations", "parameters", "phase_timing", "qos_table", "realtime",
+                "support"],
+    submod_attrs={
+        "base": ["Cycle", "LoopNode", "Managed"],
+        "parameters": ["NodeParameters", "param"],
+        "declarations": ["NODE_PARAMETERS"],
+    },
+)

@@ -48,6 +48,8 @@ from stillframe.node_runtime.realtime import (
 )
 from stillframe.node_runtime.support import Diagnostics, LoopParameters, declare_loop_parameters
 
+__all__ = ["Cycle", "LoopNode", "Managed", "main", "realtime_options"]
+
 N = TypeVar("N", bound="LoopNode")
 P = TypeVar("P", bound=NodeParameters)
 #: how long an idle managed node (not active yet, or finalized) waits in one spin [s]
@@ -61,6 +63,7 @@ class Cycle:
         """Before the first cycle (the peers of lock-step, the subscriptions)."""
 
     def spin(self, timeout_s: float) -> None:
+        """Wait at most ``timeout_s`` [s] for the middleware and run what arrived."""
         raise NotImplementedError
 
     def next_wait(self) -> float:
@@ -88,12 +91,16 @@ class Cycle:
         return False
 
     def cycle(self) -> None:
+        """One turn: spin, handle what is ready, then the idle work and the housekeeping unless a
+        sample is only partly in."""
         self.spin(self.next_wait())
         if self.process_ready() or not self.mid_sample():
             self.idle()
             self.housekeeping()
 
     def run(self) -> None:
+        """:meth:`start`, cycles until shutdown (SIGINT, SIGTERM, or
+        :func:`~stillframe.middleware.api.shutdown`), then :meth:`finish`."""
         self.start()
         while api.ok():
             self.cycle()
@@ -184,9 +191,11 @@ class LoopNode(Cycle):
 
     # -- lifecycle -----------------------------------------------------------------------
     def activate(self) -> None:
+        """``activate``: the node acts on its samples again."""
         self.activated = True
 
     def deactivate(self) -> None:
+        """``deactivate``: the node keeps spinning and reporting but does not act on samples."""
         self.activated = False
 
     def reset(self) -> None:
@@ -194,6 +203,7 @@ class LoopNode(Cycle):
 
     # -- the cycle -----------------------------------------------------------------------
     def spin(self, timeout_s: float) -> None:
+        """One ``spin_once`` of the node, at most ``timeout_s`` [s]."""
         self.node.spin_once(timeout_s)
 
     def idle(self) -> None:
@@ -234,15 +244,20 @@ class LoopNode(Cycle):
         return 0
 
     def publish_status(self) -> None:
+        """Publish the node's ``/diagnostics`` (:meth:`status`, plus the lifecycle state of a
+        managed node), stamped with :meth:`status_stamp`."""
         values, level, message = self.status()
         if self.node_is_managed():
             values = {**values, "lifecycle": "active" if self.activated else "inactive"}
         self.diagnostics.publish(self.status_stamp(), values, level, message)
 
     def node_is_managed(self) -> bool:
+        """Whether the node runs under the lifecycle: its class is :attr:`MANAGED` and the
+        middleware node is a managed one."""
         return self.MANAGED and hasattr(self.node, "lifecycle_state")
 
     def finish(self) -> None:
+        """A last status, and the phase log written (:meth:`write_phases`)."""
         self.publish_status()
         self.write_phases()
 
@@ -321,9 +336,12 @@ class Managed(Cycle):
         return self.loop
 
     def spin(self, timeout_s: float) -> None:
+        """One ``spin_once`` of the node, at most ``timeout_s`` [s]."""
         self.node.spin_once(timeout_s)
 
     def cycle(self) -> None:
+        """While unconfigured or not yet active, serve the services only; from the first activation
+        on, the node's own cycle (started once)."""
         if self.loop is None or not (self.started or self.loop.activated):
             self.spin(IDLE_SPIN_S)      # unconfigured, or not active yet: the services only
             return
@@ -333,6 +351,7 @@ class Managed(Cycle):
         self.loop.cycle()
 
     def finish(self) -> None:
+        """The node's :meth:`LoopNode.finish` if it ever started."""
         if self.started and self.loop is not None:
             self.loop.finish()
 

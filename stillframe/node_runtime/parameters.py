@@ -35,6 +35,10 @@ from stillframe.middleware.params import (
     SetParametersResult,
 )
 
+__all__ = ["Bounds", "FromScene", "NodeParameters", "ParamField", "ParamSpec", "at_least",
+           "between", "current", "declare", "defaults", "limited", "of_length", "param",
+           "reference", "set_check"]
+
 P = TypeVar("P", bound="NodeParameters")
 
 
@@ -234,6 +238,8 @@ class NodeParameters:
 
     @classmethod
     def dynamic(cls) -> frozenset[str]:
+        """The names of the parameters that may change while the node runs (declared
+        ``dynamic=True``); ``ros2 param set`` refuses the others."""
         return frozenset(s.name for s in cls.specs() if s.field.dynamic)
 
 

@@ -12,7 +12,7 @@ The node parameter ``rt`` names the practices to apply (``all``, or a comma list
   libraries (numpy's and scipy's OpenBLAS, through ``threadpoolctl``) on the calling thread
   only: their worker threads stay ``SCHED_OTHER``, and a ``SCHED_FIFO`` thread that waits for
   one waits until the FIFO threads leave it a CPU (the estimator's first discretisation at a new
-  time step took 57 – 195 ms that way on rclpy);
+  time step would then wait for whole periods);
 - ``affinity``: every thread pinned to the CPUs of ``rt_cpus`` (e.g. ``[1]``);
 - ``spin``: sim_node sleeps until ``spin_margin_us`` before a due time and polls from there
   (:func:`stillframe.loop.pacing.wait_until`);
@@ -59,8 +59,8 @@ GC_YOUNG = 700
 #: generation-0 collections before :meth:`Realtime.idle` collects generation 1
 GC_OLDER = 10
 #: the least time [ns] before the next sample in which :meth:`Realtime.idle` collects: about ten
-#: times a generation-0 collection of :data:`GC_YOUNG` objects (17 – 34 µs measured on the
-#: loaded 2-core machine)
+#: times what a generation-0 collection of :data:`GC_YOUNG` objects takes, so that it ends well
+#: before the sample even on a loaded machine
 GC_SLACK_NS = 300_000
 #: young objects past which :meth:`Realtime.idle` collects even without slack (bounded memory)
 GC_LIMIT = 20 * GC_YOUNG

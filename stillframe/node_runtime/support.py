@@ -60,10 +60,12 @@ class LoopParameters:
 
     @property
     def period(self) -> float:
+        """The sample period [s]: one over the scene's ``sensors.rate_hz``."""
         return 1.0 / self.scene.sensors.rate_hz
 
     @property
     def lockstep(self) -> bool:
+        """Whether the node runs in lock-step (``mode: lockstep``) rather than in real time."""
         return self.mode == "lockstep"
 
     @property
@@ -79,11 +81,11 @@ class LoopParameters:
         Lock-step promises the same numbers as the one-process loop; a best-effort sample lost
         under load would silently turn into a partial update. TRANSIENT_LOCAL closes the start:
         the simulator sees its writers matched before the estimator's reader has matched them
-        (discovery is not symmetric), and a volatile Fast DDS reader then skips the first
-        sample a Cyclone writer sent (measured: 1 lock-step timeout in 6 mixed-vendor runs); a
-        transient-local reader is handed it on matching. A reliable transient-local writer still
-        matches the contract's best-effort volatile readers (``ros2 topic echo``, the recorder),
-        so only the loop's own readers ask for more than the contract.
+        (discovery is not symmetric), and a volatile Fast DDS reader then can skip the first
+        sample a Cyclone writer sent, a lock-step timeout; a transient-local reader is handed it
+        on matching. A reliable transient-local writer still matches the contract's best-effort
+        volatile readers (``ros2 topic echo``, the recorder), so only the loop's own readers ask for
+        more than the contract.
         """
         if self.lockstep and spec.qos == "sensor_data":
             return replace(PROFILES["sensor_data"], reliability=Reliability.RELIABLE,
@@ -124,8 +126,9 @@ def malformed_samples(node: api.Node) -> int:
 
 
 class Diagnostics:
-    """One ``diagnostic_msgs/DiagnosticStatus`` per node on ``/diagnostics``, published at most
-    every ``period_s`` of wall time (and on :meth:`publish` with ``force``)."""
+    """One ``diagnostic_msgs/DiagnosticStatus`` per node on ``/diagnostics``: the node publishes
+    one when :meth:`due` says ``period_s`` of wall time have passed, when it has news of its own
+    (a writer gate's) and a last one when it finishes."""
 
     def __init__(self, node: api.Node, period_s: float) -> None:
         self.pub = node.create_publisher(topics.DIAGNOSTICS.type_name, topics.DIAGNOSTICS.name,
@@ -136,10 +139,15 @@ class Diagnostics:
         self.next = time.monotonic() + period_s
 
     def due(self) -> bool:
+        """Whether ``period_s`` of wall time has passed since the last status (or since the
+        start)."""
         return time.monotonic() >= self.next
 
     def publish(self, stamp_ns: int, values: dict[str, Any], level: int = OK,
                 message: str = "") -> None:
+        """Publish one status stamped ``stamp_ns`` with ``values`` (each float as ``%.6g`` text) and
+        the samples that did not decode, at ``level`` with ``message`` ("OK" or "degraded" when
+        empty); the next is due ``period_s`` later."""
         kv = messages.msg_class("diagnostic_msgs/msg/KeyValue")
         values = {**values, "malformed_samples": malformed_samples(self.node)}
         status = messages.new(
@@ -170,9 +178,11 @@ class RateMeter:
         self.since = time.monotonic()
 
     def tick(self) -> None:
+        """Count one event."""
         self.count += 1
 
     def read(self) -> float:
+        """Events per second since the last reading (or the start), and start counting again."""
         now = time.monotonic()
         rate = self.count / max(now - self.since, 1e-9)
         self.count, self.since = 0, now
@@ -211,9 +221,8 @@ def reaches_peer(node: api.Node, publisher: api.Publisher, peer: str) -> bool:
 
     A matched count alone is not enough in lock-step, nor is any named node: the recorder
     subscribes every topic at once and can match before the peer does; a tool's idle publisher
-    on the command topic did the same for the simulator's reader (CI, and 3 of 30 runs beside a
-    writing peer under load). The loop then started before the peer's side had matched, and
-    the first command was lost (a lock-step timeout)."""
+    on the command topic can do the same for the simulator's reader. The loop would then start
+    before the peer's side had matched, and lose the first command (a lock-step timeout)."""
     return _matched_with_peer(node, node.get_subscriptions_info_by_topic(publisher.topic_name),
                               publisher.get_subscription_count(), peer)
 

@@ -25,6 +25,9 @@ class Actuator:
     limited: int = 0  # commands changed by saturation or slew limit
 
     def apply(self, command: float) -> float:
+        """The value applied for ``command``: moved at most ``rate_limit * period`` from the last
+        applied value, then clipped to ± ``limit`` (either limit None: not applied); a command
+        either limit changed is counted in ``limited``."""
         target = command
         if self.rate_limit is not None:
             step = self.rate_limit * self.period
@@ -51,4 +54,6 @@ class Actuators:
 
     @property
     def limited(self) -> int:
+        """How many commands saturation or the slew limit changed so far, torque and force
+        together."""
         return self.torque.limited + self.force.limited

@@ -4,9 +4,9 @@ Per period k the caller takes :meth:`Plant.sample` at t_k (readings with the com
 previous period still applied) and then :meth:`Plant.advance` with the new command, which the
 actuators limit and hold over [t_k, t_k+1) while the scene's integrator takes its steps. The
 plant is the scene's nonlinear model (``plant.model: scene``) or the thesis's LQG plant, the linear
-second-order model of an identified structure with the linearised pendulum
-(``plant.model: file``, eq. 5.199–5.207). Process noise (eq. 5.215) is added to the physical
-state once per period. Ground truth is kept at every integrator step for the evaluation.
+second-order model of an identified structure with the linearised pendulum (``plant.model: file``,
+eq. 5.199–5.207). Process noise (eq. 5.215) is added to the physical state once per period. Ground
+truth is kept at every integrator step for the evaluation.
 
 A scene's ``events`` (:mod:`stillframe.config.events`) change the structure of the lumped and FE
 plants while they run: the loop's step calls :meth:`FramePlant.change_structure` at the sample
@@ -39,6 +39,8 @@ from stillframe.plant.linear_period import LinearPeriod, make_linear_period
 from stillframe.plant.ph_plant import PHPlant
 from stillframe.plant.protocol import Plant
 from stillframe.plant.sensors import Sensors
+
+__all__ = ["FramePlant", "make_plant"]
 
 #: the truth kept at every substep, in the physical state: floor displacements and velocities
 RECORDED = np.array([0, 1, 2, 4, 5, 6])
@@ -160,6 +162,7 @@ class FramePlant:
 
     @property
     def t(self) -> float:
+        """The current time t_k = k · period [s]."""
         return self.k * self.period
 
     def physical(self) -> np.ndarray:
@@ -174,11 +177,11 @@ class FramePlant:
         banded step matrix is factored on the first step: 0.5 s on FE 40), their throwaway
         substep not counted."""
         if self.compiled is not None:
-            self.compiled.run(self.integrator.name, self.x.copy(), self.h, 1, self.load,
+            self.compiled.run(self.integrator.name, self.x.copy(), self.h, 1, load=self.load,
                               control=self.system.control, t0=self.t)
         for _, compiled in self.changed:
             if compiled is not None:
-                compiled.run(self.integrator.name, self.x.copy(), self.h, 1, self.load,
+                compiled.run(self.integrator.name, self.x.copy(), self.h, 1, load=self.load,
                              control=self.system.control, t0=self.t)
                 compiled.subdivisions = 0
 
@@ -211,7 +214,7 @@ class FramePlant:
         try:
             if self.compiled is not None:
                 states = self.compiled.run(self.integrator.name, self.x, self.h, self.substeps,
-                                           self.load, control=self.system.control, t0=t0)
+                                           load=self.load, control=self.system.control, t0=t0)
                 self._record_period(t0, states[1:, self.physical_index[RECORDED]])
                 self.x = states[-1].copy()
             else:

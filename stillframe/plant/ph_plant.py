@@ -84,6 +84,7 @@ class PHPlant:
 
     @property
     def t(self) -> float:
+        """The current time t_k = k · period [s]."""
         return self.k * self.period
 
     def _floor_state(self) -> np.ndarray:
@@ -97,6 +98,7 @@ class PHPlant:
                          r["phi_rate"][0]])
 
     def force(self, t: float) -> float:
+        """The excitation force [N] on the excited floor at time ``t``; zero without a load."""
         return float(self.load(t)[self.excited_floor - 1]) if self.load else 0.0
 
     def _loads(self, t0: float) -> np.ndarray:
@@ -106,6 +108,8 @@ class PHPlant:
         return loads
 
     def sample(self) -> Sample:
+        """Sensor readings and ground truth at the current time t_k (the accelerations from the
+        pHDAE's state, the applied control, the process noise and the load)."""
         t = self.t
         u = self.control + self.noise
         if self.load is not None:
@@ -116,6 +120,10 @@ class PHPlant:
         return Sample(t, readings, force, truth=self.physical(), applied=applied)
 
     def advance(self, command: np.ndarray) -> np.ndarray:
+        """Apply [torque, floor-3 force] via the actuators for one period on the compiled pHDAE
+        stepper (with process noise: held over the period, plus a doublet that changes sign at its
+        middle); the applied values. The energy balance of the period is kept for
+        :meth:`energy_sample`."""
         applied = self.actuators.apply(command)
         self.control = np.array([0.0, 0.0, applied[1], applied[0]])
         t0 = self.t
@@ -157,5 +165,7 @@ class PHPlant:
                          "runs; use model.type: lumped or fe")
 
     def truth_history(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Times, floor displacements (N×3) and velocities (N×3) at every integrator step, the
+        initial state first."""
         r = np.asarray(self._fine)
         return r[:, 0], r[:, 1:4], r[:, 4:7]

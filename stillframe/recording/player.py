@@ -24,6 +24,8 @@ from stillframe.middleware.api import ok
 from stillframe.middleware.clock import ClockPublisher
 from stillframe.middleware.names import resolve_topic
 
+__all__ = ["Player"]
+
 #: How long the player waits at the end for subscribers to acknowledge (reliable topics).
 ACK_TIMEOUT_S = 5.0
 

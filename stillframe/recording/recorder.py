@@ -12,8 +12,8 @@ subscriptions are *polled* (the middleware's polled subscriptions, KEEP_LAST of 
 once, takes the CDR bytes waiting in each DDS reader and appends them to the open MCAP chunk;
 the chunk goes to the file when it is full (1 MiB). The DDS readers' histories are the buffer
 between receiving and writing that rosbag2 keeps in its double-buffered message cache; nothing is
-decoded. An event-driven recorder (one wake-up per sample, as before) spent its time in the
-wait (rmw's wait set, 14 000 times a second under rclpy) and starved the loop it recorded.
+decoded. An event-driven recorder (one wake-up per sample) would spend its time in the wait
+(rmw's wait set, once per sample of every topic under rclpy) and starve the loop it records.
 
 Receive time: each sample keeps the time it arrived (rmw's reception time stamp under rclpy, the
 source time stamp under Cyclone, which keeps none), not the time it was taken. With ``sim_time``
@@ -55,6 +55,8 @@ from stillframe.contract import messages
 from stillframe.middleware.api import MessageInfo
 from stillframe.middleware.qos import CLOCK, QoSProfile, recorder_request
 from stillframe.middleware.topic_follower import RawCallback, TopicFollower
+
+__all__ = ["MISSING_KEY", "STALLS_KEY", "GapCounter", "Recorder", "SimStamps", "starts_with_stamp"]
 
 #: how often the recorder takes what its readers hold [s]: 50 wake-ups a second whatever the
 #: load; at 1 kHz a reader holds 20 samples of its ``RECORD_DEPTH`` (1000) then
@@ -106,6 +108,9 @@ class GapCounter:
         self.off_grid = False
 
     def add(self, stamp_ns: int) -> None:
+        """Count the step from the previous stamp to ``stamp_ns`` [ns] by its size; a repeated or
+        earlier stamp counts no step, and past :data:`MAX_STEP_SIZES` sizes the stream is off the
+        grid and nothing more is counted."""
         last, self.last = self.last, stamp_ns
         if last is None or stamp_ns <= last or self.off_grid:
             return
@@ -142,11 +147,15 @@ class SimStamps:
         self._base = 0
 
     def add(self, cdr: bytes, arrived_ns: int) -> None:
+        """Note the ``/clock`` message ``cdr`` (its serialized bytes) that arrived at ``arrived_ns``
+        on the system clock."""
         sec, nanosec = _CLOCK.unpack_from(cdr, 4)
         self._arrivals.append(arrived_ns)
         self._values.append(sec * 1_000_000_000 + nanosec)
 
     def stamp(self, arrived_ns: int) -> int:
+        """The sim time [ns] of a sample that arrived at ``arrived_ns``: the latest ``/clock`` that
+        had arrived by then (the one kept by :meth:`keep_last` before any, 0 before the first)."""
         i = bisect.bisect_right(self._arrivals, arrived_ns)
         return self._values[i - 1] if i else self._base
 
@@ -180,6 +189,10 @@ class Recorder(TopicFollower):
         super().__init__(node, topics, poll_period_s=poll_period_s)
 
     def on_new_topic(self, topic: str, msgtype: str, offers: list[QoSProfile]) -> RawCallback:
+        """Add ``topic`` to the bag with its publishers' ``offers`` and return the callback that
+        writes each sample, stamped with its receive time (sim time from ``/clock`` under
+        ``use_sim_time``); on a topic whose messages start with a header stamp it also counts the
+        gaps of those stamps (:class:`GapCounter`)."""
         self.bag.add_topic(topic, msgtype, [to_bag(q) for q in offers])
         write = self.bag.writer_of(topic)
         sim = self._sim

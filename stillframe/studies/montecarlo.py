@@ -43,6 +43,8 @@ from stillframe.studies.vary import (
     lookup,
 )
 
+__all__ = ["RunSpec", "Study", "flatten", "is_timing", "plan", "row", "run_one"]
+
 WHATS: tuple[str, ...] = ("closed-loop", "simulate", "identify")
 NOISE_SEEDS: tuple[str, ...] = ("plant.seed", "sensors.seed", "excitation.seed")
 TIMING: tuple[str, ...] = ("wall_s", "loop_s", "loop_cpu_s", "steps_per_s", "cpu_s",

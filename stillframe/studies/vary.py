@@ -28,6 +28,9 @@ import yaml
 from stillframe.config.yamlio import load_yaml
 from stillframe.errors import InputError
 
+__all__ = ["Variation", "as_overrides", "check_nominal", "combinations", "draw", "lookup",
+           "parse_vary", "perturb"]
+
 RELATIVE = ("uniform", "normal")
 
 

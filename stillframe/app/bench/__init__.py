@@ -7,9 +7,24 @@ a settled machine). Each prints its figures as ratios against a baseline measure
 run.
 """
 
-__all__ = ["BENCHES"]
+import lazy_loader as lazy
 
 #: the benchmarks ``stillframe bench`` lists, in the order it lists them
 BENCHES: tuple[str, ...] = tuple(f"stillframe.app.bench.{name}" for name in (
     "transport", "identify", "identify_hammer", "loop", "scaling", "hops", "monitor",
     "fidelity", "speed", "montecarlo", "faults", "soak", "cli", "controllers", "writers"))
+
+__getattr__, _dir_of_modules, _modules = lazy.attach(
+    __name__,
+    submodules=["busy", "cli", "controllers", "estimate_error", "fault_runs", "faults",
+                "fidelity", "hop_profile", "hops", "identify", "identify_hammer", "latency",
+                "loop", "monitor", "montecarlo", "phases", "pingpong", "recorder_load", "rss",
+                "scaling", "settle", "soak", "speed", "stall_probe", "transport", "writers"],
+)
+__all__ = sorted(["BENCHES", *_modules])
+
+
+def __dir__() -> list[str]:
+    """The names of :data:`__all__`: :data:`BENCHES`, defined here, and the modules, imported on
+    first use."""
+    return list(__all__)

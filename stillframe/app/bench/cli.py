@@ -32,6 +32,7 @@ node.destroy_node()
 
 
 def register(benches: argparse._SubParsersAction) -> None:
+    """Add ``stillframe bench cli``, its arguments and :func:`run` as its action to ``benches``."""
     parser = benches.add_parser("cli", help="topic list with and without the graph daemon",
                                 description=__doc__.split("\n\n", 1)[1])
     parser.add_argument("--calls", type=int, default=10, metavar="N",
@@ -53,6 +54,8 @@ def timed(*args: str) -> tuple[float, list[str]]:
 
 
 def run(args: argparse.Namespace) -> int:
+    """Run the benchmark the module's docstring describes and print its figures (``--json``: one
+    document); exit code 0."""
     if args.calls < 1:
         raise InputError(f"bench cli: --calls must be >= 1, got {args.calls}")
     from stillframe.app import graph_daemon

@@ -4,7 +4,7 @@ Two cases, each through the one-process closed loop (:func:`run_closed_loop`, th
 
 - ``thesis``: ``scenes/thesis_lqg.yaml`` as it is (linear identified plant, no torque limit);
 - ``torque-limited``: the same scene on the rig's nonlinear lumped plant with the lumped design
-  model and ``actuators.torque_limit=2`` (the issue's case).
+  model and ``actuators.torque_limit=2`` (commands beyond it clipped).
 
 Laws: LQG, LQG with anti-windup (``controller.anti_windup``), MPC, passivity, EUK (variant 1, on
 the pendulum), each with the scene's estimator. Columns: the steady-state peak displacement
@@ -52,6 +52,8 @@ QUICK_TIMING = ["duration=8", "controller.start=4", "evaluation.window=2"]
 
 
 def register(sub: argparse._SubParsersAction) -> None:
+    """Add ``stillframe bench controllers``, its arguments and :func:`run` as its action to
+    ``sub``."""
     parser = sub.add_parser("controllers", help="LQG, anti-windup LQG, MPC, passivity, EUK: "
                             "reductions, peak torque, limit violations, compute time")
     add_json_argument(parser)
@@ -79,6 +81,9 @@ def _error_row(case: str, law: str, error: Exception) -> dict:
 
 
 def measure(quick: bool) -> dict:
+    """Every law of :data:`LAWS` on every case of :data:`CASES` through the one-process loop, and
+    the MPC's solve time at each rate of :data:`RATES`, as the benchmark's document (``quick``:
+    shorter runs)."""
     short = ["duration=30", "controller.start=15", "evaluation.window=10"] if quick else []
     rows = []
     for case, case_overrides in CASES.items():
@@ -126,6 +131,8 @@ def _us(seconds: float) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
+    """Run the benchmark the module's docstring describes and print its figures (``--json``: one
+    document); exit code 0."""
     result = measure(args.quick)
     if args.json:
         emit_json(result)

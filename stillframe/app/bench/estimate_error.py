@@ -23,6 +23,7 @@ class EstimateLog:
     estimates: dict[int, np.ndarray] = field(default_factory=dict)
 
     def on_estimate(self, msg: Any) -> None:
+        """Keep the first estimate of each sample, indexed by its stamp on the period's grid."""
         stamp = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
         self.estimates.setdefault(round(stamp / self.period_ns), physical_state(msg))
 

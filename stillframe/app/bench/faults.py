@@ -24,6 +24,8 @@ MODES = ("lockstep", "realtime")
 
 
 def register(benches: argparse._SubParsersAction) -> None:
+    """Add ``stillframe bench faults``, its arguments and :func:`run` as its action to
+    ``benches``."""
     parser = benches.add_parser("faults", help="the loop on three hosts (network namespaces) "
                                                "under network faults",
                                 description=__doc__.split("\n\n", 1)[1])
@@ -50,6 +52,8 @@ def _pct(values: list[float]) -> str:
 
 
 def table(rows: list[dict[str, Any]]) -> str:
+    """The text table of the fault ``rows``: lock-step wall time and bit-identity, real-time steps,
+    misses, estimate RMS errors [mm, mrad] and reductions per fault."""
     lines = []
     for r in rows:
         ls, rt = r.get("lockstep", {}), r.get("realtime", {})
@@ -70,6 +74,8 @@ def table(rows: list[dict[str, Any]]) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
+    """Run the benchmark the module's docstring describes and print its figures (``--json``: one
+    document); exit code 0."""
     from stillframe.app.bench.fault_runs import SCENE, run_bench
     from stillframe.app.netns_lab import joined, lab
     from stillframe.config.scene import load_scene
@@ -82,8 +88,8 @@ def run(args: argparse.Namespace) -> int:
     modes = [args.only] if args.only else list(MODES)
     with tempfile.TemporaryDirectory(prefix="stillframe-bench-faults-") as tmp, \
             lab(args.netns_prefix) as made, joined(made):
-        rows = run_bench(made, faults, args.duration, Path(tmp), modes, args.backends,
-                         overrides=args.overrides)
+        rows = run_bench(made, faults, args.duration, Path(tmp), modes=modes,
+                         backends=args.backends, overrides=args.overrides)
     if args.json:
         emit_json({"duration_s": args.duration, "overrides": args.overrides, "rows": rows})
     else:

@@ -19,6 +19,7 @@ from stillframe.text_table import format_table
 
 
 def register(sub: argparse._SubParsersAction) -> None:
+    """Add ``stillframe bench fidelity``, its arguments and :func:`run` as its action to ``sub``."""
     parser = sub.add_parser("fidelity", help="work-precision of models, integrators and steps")
     add_json_argument(parser)
     parser.add_argument("--plots", type=Path, metavar="DIR", help="write PNG diagrams here")
@@ -75,6 +76,8 @@ def plot(result: dict, directory: Path) -> list[Path]:
 
 
 def run(args: argparse.Namespace) -> int:
+    """Run the benchmark the module's docstring describes and print its figures (``--json``: one
+    document); exit code 0."""
     from stillframe.dynamics.ph.energy_drift import FREE_VIBRATION, energy_drift_rows
     from stillframe.fidelity.auto_model import write_table
     from stillframe.fidelity.work_precision import GRID_DT, sweep

@@ -17,6 +17,7 @@ SCENE = SCENES_DIR / "thesis_lqg.yaml"
 
 
 def register(benches: argparse._SubParsersAction) -> None:
+    """Add ``stillframe bench hops``, its arguments and :func:`run` as its action to ``benches``."""
     parser = benches.add_parser("hops", help="cost of each hop of one real-time sample",
                                 description=__doc__.split("\n", 1)[1])
     parser.add_argument("--number", type=int, default=200, metavar="N",
@@ -29,6 +30,8 @@ def register(benches: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    """Run the benchmark the module's docstring describes and print its figures (``--json``: one
+    document); exit code 0."""
     if args.number < 1:
         raise InputError("bench hops: --number must be >= 1")
     from stillframe.app.bench.hop_profile import compute_hops, dds_hops

@@ -9,9 +9,8 @@ N4SID (``nfoursid``) and python-control (``markov`` + ``era``) on the same recor
 method: median and 90th-percentile worst-mode frequency and damping errors, wrong, warned and
 silently wrong runs, runs silently worse than N4SID by more than 1.5×, and stillframe's 95 %
 interval coverage. Terminal table, ``--json``, heat maps with ``--plots DIR``; ``--quick`` runs a
-small subset, ``--snr`` and ``--samples`` pick cells. The sweep's
-modules (python-control, nfoursid, matplotlib) are imported in ``run``: every CLI command
-registers this module at start-up.
+small subset, ``--snr`` and ``--samples`` pick cells. The sweep's modules (python-control, nfoursid,
+matplotlib) are imported in ``run``: every CLI command registers this module at start-up.
 """
 
 from __future__ import annotations
@@ -41,6 +40,7 @@ LABELS = {"stillframe": "stillframe (default)", "stillframe_okid": "stillframe -
 
 
 def register(sub: argparse._SubParsersAction) -> None:
+    """Add ``stillframe bench identify``, its arguments and :func:`run` as its action to ``sub``."""
     parser = sub.add_parser("identify", help="identification sweep: stillframe vs N4SID vs "
                                              "python-control on random shear buildings")
     parser.add_argument("--quick", action="store_true",
@@ -120,6 +120,8 @@ def _subset(flag: str, chosen: list | None, cells: tuple) -> tuple:
 
 
 def run(args: argparse.Namespace) -> int:
+    """Run the benchmark the module's docstring describes and print its figures (``--json``: one
+    document); exit code 0."""
     check_output("--plots", args.plots, folder=True)
     from stillframe.identification.sweep import (
         LENGTHS,

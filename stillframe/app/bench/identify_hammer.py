@@ -3,14 +3,13 @@
 
 Data: the thesis's hammer test (§5.5) on the lumped model of ``scenes/thesis_lumped.yaml``,
 as :func:`stillframe.identification.hammer.hammer_test` simulates it: a blow on floor 1, the three
-floor
-accelerations, 32 Hz, 2048 samples, sensor noise, one fixed seed. Both methods get the same
-arrays and the same order (6, the thesis's); python-control estimates 256 Markov parameters by
-plain least squares (its ``markov`` assumes C A^k B = 0 beyond them; 8 s, where the 2 Hz mode has
-decayed to about 2 %). Accuracy: relative frequency and damping errors against the model's
-eigenvalues for the three structural modes the thesis identifies (its pendulum mode, 1.1 Hz with
-ζ 0.12, is barely observable from floor accelerations and neither method is asked for it).
-Times are the best of ``--repeat`` runs; the ratio is python-control's time over ours.
+floor accelerations, 32 Hz, 2048 samples, sensor noise, one fixed seed. Both methods get the same
+arrays and the same order (6, the thesis's); python-control estimates 256 Markov parameters by plain
+least squares (its ``markov`` assumes C A^k B = 0 beyond them; 8 s, where the 2 Hz mode has decayed
+to about 2 %). Accuracy: relative frequency and damping errors against the model's eigenvalues for
+the three structural modes the thesis identifies (its pendulum mode, 1.1 Hz with ζ 0.12, is barely
+observable from floor accelerations and neither method is asked for it). Times are the best of
+``--repeat`` runs; the ratio is python-control's time over ours.
 """
 
 from __future__ import annotations
@@ -29,6 +28,8 @@ MARKOV_COUNT = 256
 
 
 def register(sub: argparse._SubParsersAction) -> None:
+    """Add ``stillframe bench identify-hammer``, its arguments and :func:`run` as its action to
+    ``sub``."""
     parser = sub.add_parser("identify-hammer",
                             help="hammer test: OKID + ERA/DC vs python-control markov + era")
     parser.add_argument("--repeat", type=int, default=5, help="timed runs per method (best kept)")
@@ -38,6 +39,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def best_time(fn: Callable[[], np.ndarray], repeat: int) -> tuple[float, np.ndarray]:
+    """The fastest of ``repeat`` calls of ``fn`` [s] (at least one), with the last call's result."""
     times, out = [], None
     for _ in range(max(repeat, 1)):
         start = time.perf_counter()
@@ -60,6 +62,8 @@ def errors(A: np.ndarray, C: np.ndarray, dt: float, freq: np.ndarray, zeta: np.n
 
 
 def run(args: argparse.Namespace) -> int:
+    """Run the benchmark the module's docstring describes and print its figures (``--json``: one
+    document); exit code 0."""
     import control
 
     from stillframe.config.scene import load_scene

@@ -10,9 +10,9 @@ takes. A command later than one sample period after its sample missed its deadli
 sample is already due); a sample never answered is counted separately, except the samples that
 came after the last command seen (still in flight when the run ended), and the samples before
 the first command seen, counted as ``unobserved``: until a command reaches the observer, its
-reader may not be matched with the controller's writer yet (on Fast DDS that took up to 1.5 s
-after the loop started, and every sample of that time looked unanswered). sim_node's own count
-of late commands covers that time.
+reader may not be matched with the controller's writer yet (on Fast DDS the match can come
+seconds after the loop started, and every sample until then would look unanswered). sim_node's
+own count of late commands covers that time.
 """
 
 from __future__ import annotations
@@ -31,6 +31,7 @@ class LatencyLog:
     commands: dict[int, int] = field(default_factory=dict)
 
     def on_sample(self, stamp_ns: int, at_ns: int) -> None:
+        """Record when (``at_ns``, monotonic) the sample stamped ``stamp_ns`` was first seen."""
         self.samples.setdefault(stamp_ns, at_ns)
 
     def on_command(self, stamp_ns: int, at_ns: int) -> None:
@@ -44,8 +45,7 @@ class LatencyLog:
 
     def summary(self) -> dict[str, float | int]:
         """p50 / p99 / max latency in µs over the answered samples, deadline misses (latency
-        above one period), unanswered samples, samples before the first command
-        (``unobserved``)."""
+        above one period), unanswered samples, samples before the first command (``unobserved``)."""
         answered = sorted(set(self.samples) & set(self.commands))
         latency_us = np.array([(self.commands[s] - self.samples[s]) * 1e-3 for s in answered])
         first, last = min(self.commands, default=0), max(self.commands, default=-1)

@@ -81,6 +81,7 @@ FLOOR_S = 3.0
 
 
 def register(benches: argparse._SubParsersAction) -> None:
+    """Add ``stillframe bench loop``, its arguments and :func:`run` as its action to ``benches``."""
     parser = benches.add_parser("loop", help="closed-loop latency (real time) and lock-step speed",
                                 description=__doc__.split("\n\n", 1)[1])
     parser.add_argument("--duration", type=seconds, default=10.0, metavar="S",
@@ -199,7 +200,7 @@ def observer_realtime(practices: str) -> Iterator[None]:
         rt.leave()
 
 
-def realtime(rate_hz: float, duration: float, out: Path, backend: str,
+def realtime(rate_hz: float, duration: float, out: Path, backend: str, *,
              rt: tuple[str, list[int]] = ("", []),
              monitor_args: list[str] | None = None, compose: str = "",
              probe: bool = False, record: Sequence[str] | None = None,
@@ -477,6 +478,8 @@ def tracker_table(pairs: list[dict[str, Any]]) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
+    """Run the benchmark the module's docstring describes and print its figures (``--json``: one
+    document); exit code 0."""
     if not args.duration >= 1.0:
         raise InputError("bench loop: --duration must be >= 1 s")
     backends = args.backends or [b for b in api.BACKENDS if b == "dds" or api.has_rclpy()]
@@ -513,7 +516,7 @@ def run(args: argparse.Namespace) -> int:
                     rows.append({"repeat": repeat, **settled.figures(), **realtime(
                         rate, args.duration,
                         Path(tmp) / f"{backend}{rate:g}-{repeat}{'-' + name if name else ''}",
-                        backend, rt, compose=args.compose, probe=args.stall_probe,
+                        backend, rt=rt, compose=args.compose, probe=args.stall_probe,
                         dds_observer=args.dds_observer, **extra)})
             if args.lockstep:
                 print(f"{backend}: lock-step, the full LQG scene", file=sys.stderr)

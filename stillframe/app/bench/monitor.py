@@ -38,6 +38,8 @@ POLL_PERIOD_S = 0.5
 
 
 def register(benches: argparse._SubParsersAction) -> None:
+    """Add ``stillframe bench monitor``, its arguments and :func:`run` as its action to
+    ``benches``."""
     parser = benches.add_parser("monitor",
                                 help="the loop's figures with and without a monitor attached",
                                 description=__doc__.split("\n\n", 1)[1])
@@ -192,6 +194,8 @@ def delivered(runs: list[dict[str, Any]], duration: float) -> dict[str, float]:
 
 
 def run(args: argparse.Namespace) -> int:
+    """Run the benchmark the module's docstring describes and print its figures (``--json``: one
+    document); exit code 0."""
     if args.repeats < 1:
         raise InputError(f"bench monitor: --repeats must be >= 1, got {args.repeats}")
     if not args.rate > 0:

@@ -26,6 +26,8 @@ SHORT = ["duration=10", "controller.start=5", "evaluation.window=5"]
 
 
 def register(benches: argparse._SubParsersAction) -> None:
+    """Add ``stillframe bench montecarlo``, its arguments and :func:`run` as its action to
+    ``benches``."""
     parser = benches.add_parser("montecarlo", help="Monte Carlo scaling: 1, 2, all local "
                                                    "workers and an external 2-worker cluster")
     parser.add_argument("--scene", default=DEFAULT_SCENE, type=scene_path, help="scene (default "
@@ -47,6 +49,8 @@ def _timing_free(rows: list[dict]) -> list[dict]:
 
 
 def run(args: argparse.Namespace) -> int:
+    """Run the benchmark the module's docstring describes and print its figures (``--json``: one
+    document); exit code 0."""
     from stillframe.config.scene import load_scene
     from stillframe.studies.cluster import local_processes
     from stillframe.studies.executor import run_tasks

@@ -60,10 +60,12 @@ LOST_NS = 10_000_000
 
 
 def topics(variant: str) -> tuple[str, str]:
+    """The ping and pong topics of ``variant``."""
     return f"/stillframe_bench/{variant}/ping", f"/stillframe_bench/{variant}/pong"
 
 
 def now_stamp() -> tuple[int, int]:
+    """``(sec, nanosec)`` of the monotonic clock, as a ``header.stamp`` carries it."""
     return divmod(time.monotonic_ns(), 1_000_000_000)
 
 
@@ -85,12 +87,15 @@ class CycloneEnd:
         self.waitset.attach(ReadCondition(self.reader, ANY_SAMPLES))
 
     def ready(self) -> bool:
+        """Whether both ends are matched: the writer with a reader and the reader with a writer."""
         return bool(self.writer.get_matched_subscriptions()) and bool(
             self.reader.get_matched_publications())
 
 
 # -- the pinging side ---------------------------------------------------------------------------
 class RawPinger:
+    """Pings through Cyclone's C path: pre-serialized bytes with the stamp patched in."""
+
     def __init__(self) -> None:
         self.end = CycloneEnd(*topics("raw"), own_domain=False)
         self.ping = bytearray(pad4(messages.serialize(messages.new(IMU))))
@@ -98,10 +103,12 @@ class RawPinger:
         self.ready = self.end.ready
 
     def send(self) -> None:
+        """Write one ping stamped now."""
         STAMP.pack_into(self.ping, 4, *now_stamp())
         write_raw(self.end.writer, bytes(self.ping))
 
     def receive(self, timeout_ns: int) -> None:
+        """Wait at most ``timeout_ns`` and record the round-trip time of every pong taken [ns]."""
         self.end.waitset.wait(timeout_ns)
         now = time.monotonic_ns()
         for data, _info in take_raw(self.end.reader, 64):
@@ -110,6 +117,9 @@ class RawPinger:
 
 
 class TypedPinger:
+    """Pings through ``cyclonedds``' own Python API: a typed writer and reader of the generated
+    struct."""
+
     def __init__(self) -> None:
         self.end = CycloneEnd(*topics("typed"), own_domain=False)
         self.ping = self.end.struct.deserialize(messages.serialize(messages.new(IMU)))
@@ -117,10 +127,12 @@ class TypedPinger:
         self.ready = self.end.ready
 
     def send(self) -> None:
+        """Write one ping stamped now."""
         self.ping.header.stamp.sec, self.ping.header.stamp.nanosec = now_stamp()
         self.end.writer.write(self.ping)
 
     def receive(self, timeout_ns: int) -> None:
+        """Wait at most ``timeout_ns`` and record the round-trip time of every pong taken [ns]."""
         self.end.waitset.wait(timeout_ns)
         now = time.monotonic_ns()
         for pong in self.end.reader.take(N=64):
@@ -129,8 +141,7 @@ class TypedPinger:
 
 
 class ApiPinger:
-    """The node API on one backend (the variant's name), or raw bytes through it
-    (``dds_raw``)."""
+    """The node API on one backend (the variant's name), or raw bytes through it (``dds_raw``)."""
 
     def __init__(self, node: api.Node, variant: str) -> None:
         self.node = node
@@ -144,16 +155,20 @@ class ApiPinger:
         self.cdr = bytearray(pad4(messages.serialize(self.ping)))
 
     def ready(self) -> bool:
+        """Whether the ping publisher and the pong subscription are both matched."""
         return self.pub.get_subscription_count() > 0 and self.sub.get_publisher_count() > 0
 
     def on_pong(self, msg: Any) -> None:
+        """Record the round-trip time of a decoded pong [ns]."""
         self.rtts.append(time.monotonic_ns() - messages.stamp_ns(msg.header.stamp))
 
     def on_raw(self, cdr: bytes, _info: Any) -> None:
+        """Record the round-trip time of a raw pong, its stamp read from the CDR bytes [ns]."""
         sec, nanosec = STAMP.unpack_from(cdr, 4)
         self.rtts.append(time.monotonic_ns() - (sec * 1_000_000_000 + nanosec))
 
     def send(self) -> None:
+        """Publish one ping stamped now: the patched CDR buffer (``dds_raw``) or the message."""
         if self.raw:
             STAMP.pack_into(self.cdr, 4, *now_stamp())
             self.pub.publish(self.cdr)
@@ -162,6 +177,7 @@ class ApiPinger:
             self.pub.publish(self.ping)
 
     def receive(self, timeout_ns: int) -> None:
+        """Spin the node at most ``timeout_ns``; the pong callbacks record the round trips."""
         self.node.spin_once(timeout_ns * 1e-9)
 
 
@@ -193,6 +209,7 @@ def drive(pinger: Any, rate: float, seconds: float) -> int:
 
 # -- the echoing side (``python -m stillframe.app.bench.pingpong --peer VARIANT``) ---------
 def raw_peer() -> None:
+    """Echo every ping's bytes back as they came, on Cyclone's C path, until shutdown."""
     ping, pong = topics("raw")
     end = CycloneEnd(pong, ping, own_domain=True)
     while api.ok():
@@ -202,6 +219,7 @@ def raw_peer() -> None:
 
 
 def typed_peer() -> None:
+    """Echo every ping back through ``cyclonedds``' typed reader and writer, until shutdown."""
     ping, pong = topics("typed")
     end = CycloneEnd(pong, ping, own_domain=True)
     while api.ok():

@@ -1,5 +1,5 @@
-"""Memory over a long run: resident set sizes sampled against sim time, and
-their growth after warm-up.
+"""Memory over a long run: resident set sizes sampled against sim time, and their growth after
+warm-up.
 
 The simulator keeps its histories for the evaluation at the end (per sample a row of 12 values,
 per integrator step a row of 7, preallocated for the scene's duration, so the pages are touched
@@ -43,6 +43,7 @@ class RssLog:
     samples: dict[str, list[tuple[float, int]]] = field(default_factory=dict)
 
     def add(self, name: str, sim_s: float, rss: int) -> None:
+        """Record process ``name``'s resident set size ``rss`` [bytes] at sim time ``sim_s`` [s]."""
         self.samples.setdefault(name, []).append((sim_s, rss))
 
     def growth(self, name: str, warmup_s: float, by_design: tuple[float, int] | None = None,

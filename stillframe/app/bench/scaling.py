@@ -48,6 +48,8 @@ PLANTS: tuple[tuple[str, list[str]], ...] = (
 
 
 def register(benches: argparse._SubParsersAction) -> None:
+    """Add ``stillframe bench scaling``, its arguments and :func:`run` as its action to
+    ``benches``."""
     parser = benches.add_parser("scaling", help="cost per lock-step sample against plant size",
                                 description=__doc__.split("\n\n", 1)[1])
     parser.add_argument("--duration", type=seconds, default=4.0, metavar="S",
@@ -104,6 +106,8 @@ def through_nodes(sets: list[str], out: Path, backend: str) -> dict[str, Any]:
 
 
 def run(args: argparse.Namespace) -> int:
+    """Run the benchmark the module's docstring describes and print its figures (``--json``: one
+    document); exit code 0."""
     if not args.duration >= 1.0:
         raise InputError("bench scaling: --duration must be >= 1 s")
     if not args.no_nodes:

@@ -43,6 +43,8 @@ class CpuTimes:
 
     @classmethod
     def parse(cls, line: str) -> CpuTimes:
+        """The machine's CPU times [s] from the ``cpu`` line of ``/proc/stat`` (clock ticks over
+        ``SC_CLK_TCK``): busy, niced and total."""
         user, nice, system, idle, iowait, irq, softirq, steal = (
             int(v) / os.sysconf("SC_CLK_TCK") for v in line.split()[1:9])
         busy = user + nice + system + irq + softirq + steal
@@ -50,6 +52,7 @@ class CpuTimes:
 
 
 def cpu_times(stat: Path = Path("/proc/stat")) -> CpuTimes:
+    """The machine's CPU times now, from ``stat`` (``/proc/stat``)."""
     with open(stat) as f:
         return CpuTimes.parse(f.readline())
 
@@ -86,6 +89,9 @@ class CpuShare:
         self._start = (times(), own(), clock())
 
     def stop(self) -> dict[str, float]:
+        """How many CPUs other processes kept busy since the start (``others_cpus``), and how many
+        of them at a lower priority (``others_niced_cpus``): the machine's busy time less this
+        process's, over the wall time."""
         t0, own0, wall0 = self._start
         t1, own1, wall1 = self._times(), self._own(), self._clock()
         wall = max(wall1 - wall0, 1e-9)
@@ -124,6 +130,8 @@ class Settled:
     children: list[tuple[int, str]]
 
     def text(self) -> str:
+        """One line for the report: settled or not, the CPUs busy at normal priority and niced, the
+        load average, and the children still running."""
         left = (f"; children still running: {', '.join(f'{n} ({p})' for p, n in self.children)}"
                 if self.children else "")
         state = "settled" if self.settled else f"NOT settled after {self.waited_s:.0f} s"
@@ -131,6 +139,8 @@ class Settled:
                 f"{self.niced_cpus:.2f} niced, load {self.load_1min:.2f}{left}")
 
     def figures(self) -> dict[str, Any]:
+        """The same as JSON fields of the benchmark's document (``before_*``, ``settled``,
+        ``settle_wait_s``)."""
         return {"before_busy_cpus": self.busy_cpus, "before_niced_cpus": self.niced_cpus,
                 "before_load_1min": self.load_1min, "settled": self.settled,
                 "settle_wait_s": self.waited_s}

@@ -34,6 +34,7 @@ COUNTERS = ("complete", "safe_state_samples", "rejected_commands", "malformed_sa
 
 
 def register(benches: argparse._SubParsersAction) -> None:
+    """Add ``stillframe bench soak``, its arguments and :func:`run` as its action to ``benches``."""
     parser = benches.add_parser("soak", help="one hour of lock-step LQG: memory and counters",
                                 description=__doc__.split("\n\n", 1)[1])
     parser.add_argument("--duration", type=seconds, default=3600.0, metavar="S",
@@ -101,6 +102,8 @@ def within_limit(report: dict[str, Any]) -> bool:
 
 
 def run(args: argparse.Namespace) -> int:
+    """Run the benchmark the module's docstring describes and print its figures (``--json``: one
+    document); exit code 0."""
     if not args.duration >= 20.0:
         raise InputError("bench soak: --duration must be >= 20 s")
     if not 0.0 <= args.warmup < 1.0:

@@ -30,6 +30,7 @@ MESHES = (10, 20, 40, 100, 200)
 
 
 def register(sub: argparse._SubParsersAction) -> None:
+    """Add ``stillframe bench speed``, its arguments and :func:`run` as its action to ``sub``."""
     parser = sub.add_parser("speed", help="compiled kernels vs numpy integrators (ratios)")
     add_json_argument(parser)
     parser.add_argument("--quick", action="store_true", help="fewer steps and meshes")
@@ -66,24 +67,27 @@ def _setup(overrides: list[str]):
 
 
 def measure(quick: bool = False) -> dict:
+    """The compiled kernels against the numpy integrators, each measured in CPU time in this run:
+    lumped RK4 steps per second and FE-40 implicit-midpoint real-time factors, with their ratios and
+    targets (``quick``: fewer steps)."""
     from stillframe.dynamics.integrators import RK4, ImplicitMidpoint, integrate
 
     say = lambda text: print(f"bench speed: {text}", file=sys.stderr, flush=True)  # noqa: E731
     h = 1e-3
     say("lumped RK4")
     _, load, frame, system, x0 = _setup([])
-    frame.run("rk4", x0, h, 2, load)
+    frame.run("rk4", x0, h, 2, load=load)
     n_fast, n_slow = (200_000, 5_000) if quick else (1_000_000, 10_000)
-    fast = n_fast / _cpu(lambda: frame.run("rk4", x0, h, n_fast, load, stride=1000))
+    fast = n_fast / _cpu(lambda: frame.run("rk4", x0, h, n_fast, load=load, stride=1000))
     slow = n_slow / _cpu(lambda: integrate(system, x0, h, n_slow, RK4()))
     rk4 = {"compiled_steps_per_s": fast, "numpy_steps_per_s": slow, "ratio": fast / slow,
            "target_steps_per_s": 1e6}
     say("FE 40 implicit midpoint")
     fe = ["model.type=fe", "damping.model=modal"]
     _, load, frame, system, x0 = _setup([*fe, "model.elements_per_column=40"])
-    frame.run("midpoint", x0, h, 2, load)
+    frame.run("midpoint", x0, h, 2, load=load)
     n_fast, n_slow = (2_000, 50) if quick else (10_000, 100)
-    fast = n_fast * h / _cpu(lambda: frame.run("midpoint", x0, h, n_fast, load, stride=100))
+    fast = n_fast * h / _cpu(lambda: frame.run("midpoint", x0, h, n_fast, load=load, stride=100))
     slow = n_slow * h / _cpu(lambda: integrate(system, x0, h, n_slow, ImplicitMidpoint()))
     fe40 = {"compiled_real_time_factor": fast, "numpy_real_time_factor": slow,
             "ratio": fast / slow, "target_real_time_factor": 10.0}
@@ -91,9 +95,9 @@ def measure(quick: bool = False) -> dict:
     for n_e in MESHES[:3] if quick else MESHES:
         say(f"implicit step cost, FE {n_e} elements per column")
         model, load, frame, _, x0 = _setup([*fe, f"model.elements_per_column={n_e}"])
-        frame.run("midpoint", x0, h, 2, load)
+        frame.run("midpoint", x0, h, 2, load=load)
         n = 2_000 if quick else 10_000
-        per_step = _cpu(lambda: frame.run("midpoint", x0, h, n, load, stride=100)) / n  # noqa: B023
+        per_step = _cpu(lambda: frame.run("midpoint", x0, h, n, load=load, stride=100)) / n  # noqa: B023
         rows.append({"elements_per_column": n_e, "dofs": model.n_dof, "us_per_step": 1e6 * per_step,
                      "bandwidth": int(frame.banded_step_matrix(h)[0])})
     dofs = np.array([r["dofs"] for r in rows], float)
@@ -147,6 +151,7 @@ def plant_costs(quick: bool = False) -> dict:
 
 
 def run(args: argparse.Namespace) -> int:
+    """Print :func:`measure`'s figures (``--json``: its document); exit code 0."""
     result = measure(args.quick)
     if args.json:
         emit_json(result)

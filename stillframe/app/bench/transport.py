@@ -14,6 +14,8 @@ from stillframe.text_table import format_table
 
 
 def register(benches: argparse._SubParsersAction) -> None:
+    """Add ``stillframe bench transport``, its arguments and :func:`run` as its action to
+    ``benches``."""
     parser = benches.add_parser(
         "transport", help="ping-pong RTT between two processes: raw Cyclone DDS and the node API "
                           "on each backend"
@@ -28,6 +30,8 @@ def register(benches: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    """Run the benchmark the module's docstring describes and print its figures (``--json``: one
+    document); exit code 0."""
     if not args.duration > 0 or not args.rate >= 0:
         raise InputError("bench transport: --duration must be > 0 and --rate >= 0")
     from stillframe.app.bench.pingpong import IMU, measure

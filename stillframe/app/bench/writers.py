@@ -25,7 +25,7 @@ from stillframe.app.arguments import add_json_argument, emit_json, seconds
 from stillframe.errors import InputError
 from stillframe.text_table import format_table
 
-#: the issue's writer: ``ros2 topic pub -r 50 /frame/pendulum/torque_cmd`` of 0.5 N m
+#: the foreign writer: ``ros2 topic pub -r 50 /frame/pendulum/torque_cmd`` of 0.5 N m
 TOPIC = "/frame/pendulum/torque_cmd"
 MESSAGE = "{header: auto, wrench: {torque: {z: 0.5}}}"
 #: how many times the twin's misses the run beside the writer may have (a foreign writer must
@@ -34,6 +34,8 @@ GOAL_RATIO = 2.0
 
 
 def register(benches: argparse._SubParsersAction) -> None:
+    """Add ``stillframe bench writers``, its arguments and :func:`run` as its action to
+    ``benches``."""
     parser = benches.add_parser("writers", help="a real-time loop beside a foreign writer on its "
                                                 "command topic, against its twin without it",
                                 description=__doc__.split("\n\n", 1)[1])
@@ -62,6 +64,7 @@ def start_writer(backend: str, rate: float) -> subprocess.Popen:
 
 
 def stop(proc: subprocess.Popen) -> None:
+    """Stop ``proc`` as Ctrl-C would; kill it if it has not ended 10 s later."""
     proc.send_signal(signal.SIGINT)
     try:
         proc.wait(10)
@@ -111,6 +114,8 @@ def summary(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
 
 
 def run(args: argparse.Namespace) -> int:
+    """Run the benchmark the module's docstring describes and print its figures (``--json``: one
+    document); exit code 0."""
     from stillframe.app.bench.loop import realtime_overrides
     from stillframe.middleware import api
 

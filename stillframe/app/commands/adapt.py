@@ -3,7 +3,7 @@ change scene through the nodes (lock-step, the same seeds), and what the adaptat
 
 Prints when the structure changed and when the loop noticed it, the frequencies it identified
 against the true changed model's, each run's peak reductions after the change per floor and
-the adaptive loop's share of the oracle's, with the issue's targets (detection within 15 s,
+the adaptive loop's share of the oracle's, with the adaptation's targets (detection within 15 s,
 frequencies within 1 %, at least 90 % of the oracle's displacement reductions on every floor)
 met or missed; ``--json`` prints ``{"adaptation": {"change_at_s", "detected_at_s",
 "identified_hz", "true_hz", "reduction_pct": {"fixed", "adaptive", "oracle"}}, "details":
@@ -24,6 +24,7 @@ from stillframe.text_table import format_table
 
 
 def register(sub: argparse._SubParsersAction) -> None:
+    """Add ``stillframe adapt``, its arguments and :func:`run` as its action to ``sub``."""
     parser = sub.add_parser("adapt", help="fixed, adaptive and oracle LQG across a change of "
                                           "the structure, through the nodes",
                             description=__doc__.split("\n\n", 1)[1])
@@ -39,6 +40,9 @@ def _progress(text: str) -> None:
 
 
 def print_report(doc: dict) -> None:
+    """Print the adaptation document ``doc`` as tables: the change and its detection, the identified
+    against the design model's and the true frequencies, each run's reductions per floor and the
+    adaptive loop's share of the oracle's, each target met or missed, and every refused design."""
     a, d = doc["adaptation"], doc["details"]
     t = d["targets"]
 
@@ -77,6 +81,9 @@ def print_report(doc: dict) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    """Run the fixed, adaptive and oracle launches, write ``adapt.json`` and ``timeline.png`` under
+    ``--out`` and print the report (``--json``: the document); exit code 0, a dead node's code
+    (:func:`~stillframe.app.launch_cli.report_death`), or 130 when interrupted."""
     from stillframe.app.adaptation_experiment import run_adaptation_experiment
     from stillframe.app.adaptation_plot import plot_timeline
     from stillframe.app.launch_cli import report_death

@@ -15,6 +15,8 @@ from stillframe.text_table import format_table
 
 
 def register(sub: argparse._SubParsersAction) -> None:
+    """Add ``stillframe bag`` and its verbs (``info``, ``reindex``) to ``sub``, each verb with its
+    ``run_VERB`` as its action."""
     parser = sub.add_parser("bag", help="inspect rosbag2 bags")
     verbs = parser.add_subparsers(dest="verb", metavar="VERB")
     verbs.required = True
@@ -30,6 +32,9 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run_info(args: argparse.Namespace) -> int:
+    """``bag info DIR``: the bag's summary (``--json``: as a document), a warning for samples the
+    recorder counted missing; a :class:`~stillframe.errors.BagError` after the summary for what is
+    damaged or disagrees."""
     from stillframe.bags.storage import bag_summary, format_summary
     from stillframe.contract.messages import TYPESTORE
     from stillframe.errors import BagError

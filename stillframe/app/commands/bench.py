@@ -13,6 +13,8 @@ from stillframe.app.bench import BENCHES
 
 
 def register(sub: argparse._SubParsersAction) -> None:
+    """Add ``stillframe bench`` to ``sub`` and, below it, each benchmark of :data:`BENCHES` by its
+    own ``register``."""
     parser = sub.add_parser("bench", help="benchmarks (ratios against a baseline in the same run)")
     benches = parser.add_subparsers(dest="bench", metavar="NAME")
     benches.required = True

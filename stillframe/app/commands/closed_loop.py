@@ -1,12 +1,11 @@
 """``stillframe closed-loop SCENE``: plant, estimator and controller in one process, lock-step.
 
 Prints the steady-state peak reductions per floor beside the reference values the scene carries
-(the thesis's, eq. 5.233 and 5.287); ``--json`` prints
-``{"reduction_pct": {"displacement": [...], "velocity": [...]}, "peak_command": ..., "steps": ...,
-"wall_s": ..., "degraded": false, "degraded_reasons": [], ...}``. A run whose figures are not the
-controller's (commands refused, or a law that ran away and was clipped to the command's bound:
-:mod:`stillframe.app.run_verdict`, as ``launch`` judges) ends with a warning line giving the
-reasons.
+(the thesis's, eq. 5.233 and 5.287); ``--json`` prints ``{"reduction_pct": {"displacement": [...],
+"velocity": [...]}, "peak_command": ..., "steps": ..., "wall_s": ..., "degraded": false,
+"degraded_reasons": [], ...}``. A run whose figures are not the controller's (commands refused, or a
+law that ran away and was clipped to the command's bound: :mod:`stillframe.app.run_verdict`, as
+``launch`` judges) ends with a warning line giving the reasons.
 """
 
 from __future__ import annotations
@@ -26,6 +25,7 @@ from stillframe.text_table import format_table
 
 
 def register(sub: argparse._SubParsersAction) -> None:
+    """Add ``stillframe closed-loop``, its arguments and :func:`run` as its action to ``sub``."""
     parser = sub.add_parser("closed-loop", help="run a scene's control loop in one process")
     add_scene_arguments(parser)
     parser.set_defaults(func=run)
@@ -49,6 +49,9 @@ def reduction_table(evaluation: dict, reference_d: Sequence[float],
 
 
 def run(args: argparse.Namespace) -> int:
+    """Run the scene's loop in one process and print the reductions beside the scene's reference
+    values (``--json``: the document); exit code 0. A scene without a controller is an
+    :class:`~stillframe.errors.InputError`."""
     from stillframe.loop.closed_loop import run_closed_loop
 
     scene = scene_from_args(args)

@@ -11,6 +11,7 @@ from stillframe.app.ros_tools import add_verbs
 
 
 def register(sub: argparse._SubParsersAction) -> None:
+    """Add ``stillframe daemon``, its arguments and :func:`run` as its action to ``sub``."""
     verbs = add_verbs(sub, "daemon", "the graph cache the topic and node verbs ask (like ros2 "
                                      "daemon)")
     for verb, text in (("start", "start the daemon if it is not running"),
@@ -20,6 +21,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    """Start, stop or ask after the graph daemon and say what it did; exit code 1 when ``start``
+    could not start it (its log named on stderr), else 0."""
     from stillframe.app import graph_daemon
 
     running = graph_daemon.is_running()

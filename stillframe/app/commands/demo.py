@@ -42,6 +42,7 @@ OUTPUTS = ("bag", "result.json", "result.npz", "floors.png")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
+    """Add ``stillframe demo``, its arguments and :func:`run` as its action to ``sub``."""
     parser = sub.add_parser("demo", help="LQG through the three nodes: bag, table and plot",
                             description=__doc__.split("\n\n", 1)[1])
     parser.add_argument("--out", type=Path, default=Path("out/demo"), metavar="DIR",
@@ -58,8 +59,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def isolate(domain_id: int | None) -> str:
     """Put this process and the children it starts on ROS domain ``domain_id`` (None: a random
-    one other than the environment's) with discovery on this machine only; the line that says
-    so."""
+    one other than the environment's) with discovery on this machine only; the line that says so."""
     if domain_id is None:
         current = environment.value("ROS_DOMAIN_ID")
         domain_id = random.SystemRandom().choice(
@@ -113,6 +113,9 @@ def controlled_floors(history_file: Path) -> tuple[np.ndarray, np.ndarray]:
 
 
 def run(args: argparse.Namespace) -> int:
+    """Run the demo scene through the three nodes with the recorder, print the table and write the
+    bag and ``floors.png`` under ``--out``; exit code 0, a dead node's code
+    (:func:`~stillframe.app.commands.launch.report_death`), or 130/143 when interrupted."""
     from stillframe.app.launcher import NodeDiedError, run_scene
     from stillframe.config.scene import load_scene
     from stillframe.loop.closed_loop import open_loop_truth

@@ -20,6 +20,7 @@ from stillframe.files import check_output
 
 
 def register(sub: argparse._SubParsersAction) -> None:
+    """Add ``stillframe experiment``, its arguments and :func:`run` as its action to ``sub``."""
     parser = sub.add_parser(
         "experiment", help="identify through the nodes, design LQG on it, compare with the "
                            "design on the true model", description=__doc__.split("\n\n", 1)[1])
@@ -39,6 +40,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    """Identify, design and control as :mod:`stillframe.app.experiment` does and print the
+    comparison; exit code 0, a dead node's code, or 130/143 when interrupted."""
     from stillframe.app.experiment import IdentificationTest, run_experiment, write_summary
     from stillframe.app.experiment_report import document, plot_comparison, print_report
     from stillframe.app.launcher import NodeDiedError
@@ -47,8 +50,9 @@ def run(args: argparse.Namespace) -> int:
 
     test = IdentificationTest(args.test_force, args.test_duration, args.test_seed)
     try:
-        result = run_experiment(Path(args.scene), args.overrides, args.out, test, args.mode,
-                                args.lockstep_timeout, args.backends)
+        result = run_experiment(Path(args.scene), args.overrides, args.out, test,
+                                mode=args.mode, lockstep_timeout_s=args.lockstep_timeout,
+                                backends=args.backends)
     except NodeDiedError as exc:
         return report_death("experiment", exc)
     except KeyboardInterrupt as exc:

@@ -1,9 +1,8 @@
 """``stillframe identify BAG``: a state-space model and its modes from a rosbag2 recording.
 
 Inputs and outputs are ``TOPIC[:FIELD]`` channels (see :mod:`stillframe.bags.channels`);
-the
-model comes from :func:`stillframe.identification.pipeline.identify` (OKID + ERA or ERA/DC, thesis
-ch. 3).
+the model comes from :func:`stillframe.identification.pipeline.identify` (OKID + ERA or ERA/DC,
+thesis ch. 3).
 """
 
 from __future__ import annotations
@@ -37,6 +36,7 @@ def _order(text: str) -> int | str:
 
 
 def register(sub: argparse._SubParsersAction) -> None:
+    """Add ``stillframe identify``, its arguments and :func:`run` as its action to ``sub``."""
     from stillframe.identification.pipeline import METHODS, NOISE_MODELS
     from stillframe.identification.ssi_cov import OUTPUT_ONLY_METHODS
 
@@ -164,6 +164,9 @@ def run_output_only(args: argparse.Namespace, record: Record, progress: Progress
 
 
 def run(args: argparse.Namespace) -> int:
+    """Read the channels from the bag, identify the model and print its modes (``--save-model``,
+    ``--plots`` and ``--json`` as asked); exit code 0. Output-only methods (``ssi-cov``) take their
+    own path."""
     from stillframe.bags.channels import DEFAULT_JITTER, Channel, read_record
     from stillframe.identification.pipeline import identify
     from stillframe.identification.report import (

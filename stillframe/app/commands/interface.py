@@ -23,6 +23,8 @@ FIELD_TYPE = re.compile(r"^(\S+?)(\[[^\]]*\])?\s")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
+    """Add ``stillframe interface`` and its verbs (``show``) to ``sub``, each verb with its
+    ``run_VERB`` as its action."""
     verbs = add_verbs(sub, "interface", "show message and service definitions (like ros2 "
                                         "interface)")
     show = verbs.add_parser("show", help="the definition of a message or service type")
@@ -76,5 +78,6 @@ def definition(type_name: str) -> str:
 
 
 def run_show(args: argparse.Namespace) -> int:
+    """``interface show TYPE``: print the definition of the message or service type; exit code 0."""
     print(definition(args.type))
     return 0

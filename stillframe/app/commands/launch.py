@@ -2,21 +2,21 @@
 
 Prints the live status from ``/diagnostics`` on stderr and, at the end of the scene, the
 evaluation sim_node wrote: steady-state peaks per floor with and without control and the
-reductions (thesis eq. 5.233, 5.287); ``--json`` prints it as one document
-``{"reduction_pct": {"displacement": [...], "velocity": [...]}, "peak_command": ...,
-"complete": true, "steps": ..., "wall_s": ..., "degraded": false, "degraded_reasons": [],
-"foreign_writers": [], ...}``. A degraded run (:mod:`stillframe.app.run_verdict`) ends with a
-warning line giving the reasons, and with ``--strict`` with exit code 6; so does a run whose nodes
-refused the samples of writers not of the run (``foreign_writers``: each node, topic, the writers
-fully qualified and how many samples were refused), in either mode: exit 0 with the warning (the
-figures are the loop's own nodes'), 6 with ``--strict``. With ``--record`` the document's ``bag``
-says what the recorder found missing (``missing_samples`` per topic, ``recorder_stalls``), and a
-bag that misses samples ends the run with a warning line. A node that ended on an error of its
-own passes on its line and exit code (7: a lock-step run whose peer left the graph or stopped
-answering; 4: a plant that diverged). Exit code 1 names a node that died otherwise (how: its exit
-code or signal) after the others were stopped cleanly; what the run still has (the samples the
-simulator ran, the statuses, the closed bag) is printed and written under ``--out`` as a partial
-result marked ``"complete": false``. 130 follows Ctrl-C (every child stopped and reaped).
+reductions (thesis eq. 5.233, 5.287); ``--json`` prints it as one document ``{"reduction_pct":
+{"displacement": [...], "velocity": [...]}, "peak_command": ..., "complete": true, "steps": ...,
+"wall_s": ..., "degraded": false, "degraded_reasons": [], "foreign_writers": [], ...}``. A degraded
+run (:mod:`stillframe.app.run_verdict`) ends with a warning line giving the reasons, and with
+``--strict`` with exit code 6; so does a run whose nodes refused the samples of writers not of the
+run (``foreign_writers``: each node, topic, the writers fully qualified and how many samples were
+refused), in either mode: exit 0 with the warning (the figures are the loop's own nodes'), 6 with
+``--strict``. With ``--record`` the document's ``bag`` says what the recorder found missing
+(``missing_samples`` per topic, ``recorder_stalls``), and a bag that misses samples ends the run
+with a warning line. A node that ended on an error of its own passes on its line and exit code (7: a
+lock-step run whose peer left the graph or stopped answering; 4: a plant that diverged). Exit code 1
+names a node that died otherwise (how: its exit code or signal) after the others were stopped
+cleanly; what the run still has (the samples the simulator ran, the statuses, the closed bag) is
+printed and written under ``--out`` as a partial result marked ``"complete": false``. 130 follows
+Ctrl-C (every child stopped and reaped).
 """
 
 from __future__ import annotations
@@ -54,6 +54,7 @@ from stillframe.files import check_output
 
 
 def register(sub: argparse._SubParsersAction) -> None:
+    """Add ``stillframe launch``, its arguments and :func:`run` as its action to ``sub``."""
     parser = sub.add_parser(
         "launch", help="run a scene through sim_node, estimator_node and controller_node over DDS",
         description="Start the three nodes as separate processes on the current ROS_DOMAIN_ID, "
@@ -98,6 +99,9 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    """Launch the scene's nodes as processes, print the live status and the evaluation; exit code 0,
+    a dead node's code (:func:`report_death`), 130/143 when interrupted, or a
+    :class:`~stillframe.errors.DegradedRunError` with ``--strict`` and warnings."""
     from stillframe.app.launcher import NodeDiedError, run_scene
     from stillframe.app.net_faults import hosts_if
 

@@ -26,6 +26,7 @@ from stillframe.middleware import api, lifecycle
 
 
 def register(sub: argparse._SubParsersAction) -> None:
+    """Add ``stillframe lifecycle``, its arguments and :func:`run` as its action to ``sub``."""
     parser = sub.add_parser("lifecycle", help="a managed node's state and transitions "
                             "(like ros2 lifecycle)")
     verbs = parser.add_subparsers(dest="verb", metavar="VERB")
@@ -63,6 +64,10 @@ class LifecycleCalls:
             self.node.spin_once(0.1)
 
     def call(self, service: str, **fields: Any) -> Any:
+        """Call the target's lifecycle ``service`` (a key of
+        :data:`stillframe.middleware.lifecycle.SERVICES`) with the request ``fields`` and return
+        the response; an :class:`~stillframe.errors.InputError` when it does not answer (the
+        target is not a managed node)."""
         srv = lifecycle.SERVICES[service]
         request = messages.new(f"lifecycle_msgs/srv/{srv}_Request", **fields)
         # a node in the graph serves its lifecycle services at once; 2 s at least for a slow one
@@ -75,14 +80,18 @@ class LifecycleCalls:
         return response
 
     def state(self) -> str:
+        """The label of the target's current state (``get_state``)."""
         return str(self.call("get_state").current_state.label)
 
     def available(self) -> list[str]:
+        """The labels of the transitions available from the target's current state."""
         return [t.transition.label
                 for t in self.call("get_available_transitions").available_transitions]
 
 
 def run(args: argparse.Namespace) -> int:
+    """Ask or change the managed node's state through its lifecycle services; exit code 1 when the
+    node refused the transition (the reason on stderr), else 0."""
     target = node_name(args.node)
     if args.verb == "set" and args.transition not in lifecycle.PUBLIC:
         raise InputError(f"unknown transition {args.transition!r} (expected one of "
@@ -121,6 +130,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def show(args: argparse.Namespace, document: dict[str, Any], text: str) -> int:
+    """Print ``document`` as JSON with ``--json``, else ``text``; exit code 0."""
     if args.json:
         emit_json(document)
     else:

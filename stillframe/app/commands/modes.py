@@ -18,6 +18,7 @@ from stillframe.text_table import format_table
 
 
 def register(sub: argparse._SubParsersAction) -> None:
+    """Add ``stillframe modes``, its arguments and :func:`run` as its action to ``sub``."""
     parser = sub.add_parser("modes", help="modes of the scene's model, linearised at rest")
     add_scene_arguments(parser)
     parser.set_defaults(func=run)
@@ -53,6 +54,8 @@ def scene_modes(scene: Scene) -> dict:
 
 
 def run(args: argparse.Namespace) -> int:
+    """Print the scene's modal table (:func:`print_table`), and each event's after it; exit code
+    0."""
     from stillframe.config.scene import changed_scene, event_changes
 
     scene = scene_from_args(args)
@@ -76,6 +79,8 @@ def run(args: argparse.Namespace) -> int:
 
 
 def print_table(table: dict) -> None:
+    """Print the modal table: per mode its frequency [Hz], damping ratio and mode shape over the
+    three floors and the pendulum angle."""
     rows = [[i + 1, f, z, *shape] for i, (f, z, shape) in enumerate(
         zip(table["frequencies_hz"], table["damping_ratios"], table["mode_shapes"], strict=True))]
     print(format_table(["mode", "f [Hz]", "zeta", "x1", "x2", "x3", "phi"], rows))

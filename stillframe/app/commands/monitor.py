@@ -26,6 +26,7 @@ MAX_RATE_HZ = 50.0
 
 
 def register(sub: argparse._SubParsersAction) -> None:
+    """Add ``stillframe monitor``, its arguments and :func:`run` as its action to ``sub``."""
     parser = sub.add_parser(
         "monitor", help="bridge topics to Foxglove (WebSocket) and serve a live dashboard",
         description=__doc__.split("\n\n", 1)[1])
@@ -61,6 +62,8 @@ def _check_port(name: str, port: int) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    """Serve the Foxglove bridge (and the dashboard with ``--dashboard``) until Ctrl-C; exit code 0.
+    A port that cannot be served is an :class:`~stillframe.errors.InputError`."""
     from stillframe.config.scene import load_scene
     from stillframe.middleware.api import create_node, spin
     from stillframe.middleware.names import resolve_topic

@@ -27,6 +27,7 @@ TARGET = re.compile(r"^(displacement|velocity)>=(-?\d+(\.\d*)?)$")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
+    """Add ``stillframe montecarlo``, its arguments and :func:`run` as its action to ``sub``."""
     from stillframe.studies.montecarlo import WHATS
 
     parser = sub.add_parser("montecarlo", help="Monte Carlo study of a scene on Dask")
@@ -77,6 +78,8 @@ def _runs(args: argparse.Namespace, combinations: int, discrete_only: bool) -> i
 
 
 def run(args: argparse.Namespace) -> int:
+    """Run the study on Dask, write ``runs.csv``, the plots and the summary under ``--out``; exit
+    code 0, 130 when interrupted (the finished runs kept), 1 when every run failed."""
     from stillframe.config.scene import load_scene
     from stillframe.studies import report
     from stillframe.studies.executor import run_tasks

@@ -14,6 +14,7 @@ from stillframe.app.arguments import add_json_argument, emit_json
 
 
 def register(sub: argparse._SubParsersAction) -> None:
+    """Add ``stillframe netns``, its arguments and :func:`run` as its action to ``sub``."""
     parser = sub.add_parser("netns", help="make or remove the three-host lab (network "
                                           "namespaces on a bridge; root)",
                             description=__doc__.split("\n\n", 1)[1])
@@ -25,6 +26,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    """Bring the three-host lab up or down, or list the labs present; exit code 0 (``up`` and
+    ``down`` need root)."""
     from stillframe.app import netns_lab
     from stillframe.errors import InputError
 

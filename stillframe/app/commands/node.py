@@ -16,6 +16,8 @@ from stillframe.middleware.graph import Graph
 
 
 def register(sub: argparse._SubParsersAction) -> None:
+    """Add ``stillframe node`` and its verbs (``info``, ``list``) to ``sub``, each verb with its
+    ``run_VERB`` as its action."""
     verbs = add_verbs(sub, "node", "list nodes and show a node's topics and services (like ros2 "
                                    "node)")
     listing = verbs.add_parser("list", help="the nodes in the graph")
@@ -34,6 +36,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run_list(args: argparse.Namespace) -> int:
+    """``node list``: the node names, one a line (``--count-nodes``: how many); exit code 0."""
     nodes = graph_of(args).node_names(include_hidden=args.all)
     if args.count_nodes:
         print(len(nodes))
@@ -52,11 +55,14 @@ def topics_of(graph: Graph, node: str, kind: str) -> list[tuple[str, list[str]]]
 
 
 def services_of(graph: Graph, node: str, server: bool) -> list[tuple[str, list[str]]]:
+    """The services ``node`` serves (``server``) or calls in ``graph``, sorted, with their types."""
     return sorted((s.name, list(s.types)) for s in graph.services
                   if s.node == node and s.server == server)
 
 
 def run_info(args: argparse.Namespace) -> int:
+    """``node info NODE``: what ``ros2 node info`` prints: the node's subscribers, publishers,
+    service servers and clients with their types; exit code 0."""
     graph = graph_of(args)
     node = existing_node(graph, args.node)
     if (count := graph.node_names(include_hidden=True).count(node)) > 1:

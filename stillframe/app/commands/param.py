@@ -67,6 +67,7 @@ SERVICE_TYPES = {"list": "ListParameters", "get": "GetParameters", "set": "SetPa
 
 
 def register(sub: argparse._SubParsersAction) -> None:
+    """Add ``stillframe param``, its arguments and :func:`run` as its action to ``sub``."""
     verbs = add_verbs(sub, "param", "list, get and set a running node's parameters (like ros2 "
                                     "param)")
     for verb, text in (("list", "every parameter with its type, value and read-only flag "
@@ -108,6 +109,10 @@ class ParameterCalls:
         self.timeout_sec = timeout_sec
 
     def call(self, verb: str, **fields: Any) -> Any:
+        """Call the target's parameter service of ``verb`` (``list``, ``get``, ``set``,
+        ``describe``) with the request ``fields`` and return the response; an
+        :class:`~stillframe.errors.InputError` saying why when no answer comes within the
+        timeout."""
         srv = SERVICE_TYPES[verb]
         request = messages.new(f"rcl_interfaces/srv/{srv}_Request", **fields)
         service = f"{self.target}/{verb}_parameters"
@@ -186,6 +191,8 @@ def value_for(current: Any, value: Any) -> Any:
 
 
 def run(args: argparse.Namespace) -> int:
+    """Run the ``param`` verb on the remote node (``dump`` and ``load`` are :func:`run_dump` and
+    :func:`run_load`); exit code 1 when the node refused a set (its reason on stderr), else 0."""
     if args.verb == "list" and args.node is None:
         return list_all(args)
     target = node_name(args.node)
@@ -218,6 +225,8 @@ def run(args: argparse.Namespace) -> int:
 
 
 def show(args: argparse.Namespace, rows: list[dict[str, Any]]) -> int:
+    """Print parameter ``rows``: as JSON with ``--json``, the bare value for ``get``, else a table
+    of name, type, value and read-only; exit code 0."""
     if args.json:
         emit_json(rows if args.verb == "list" else rows[0])
     elif args.verb == "get":
@@ -328,6 +337,8 @@ def nest(flat: dict[str, Any]) -> dict[str, Any]:
 
 
 def run_dump(args: argparse.Namespace) -> int:
+    """``param dump NODE``: every parameter of the node as a params file (YAML, ``NODE:
+    ros__parameters:``) on stdout; exit code 0."""
     target = node_name(args.node)
     node = tool_node("param")
     try:
@@ -359,6 +370,8 @@ def loaded(path: Path, target: str, *, wildcard: bool) -> dict[str, Any]:
 
 
 def run_load(args: argparse.Namespace) -> int:
+    """``param load NODE FILE``: set the node's parameters from a params file, one line per
+    parameter saying whether it was set; exit code 1 if any was refused, else 0."""
     target = node_name(args.node)
     wanted = loaded(args.file, target, wildcard=not args.no_use_wildcard)
     node = tool_node("param")

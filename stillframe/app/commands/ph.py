@@ -18,6 +18,7 @@ from stillframe.text_table import format_table
 
 
 def register(sub: argparse._SubParsersAction) -> None:
+    """Add ``stillframe ph``, its arguments and :func:`run` as its action to ``sub``."""
     parser = sub.add_parser("ph", help="port-Hamiltonian multibody validation cases (seed 000)")
     cases = parser.add_subparsers(dest="case", metavar="CASE")
     cases.required = True
@@ -48,6 +49,7 @@ def _progress(text: str) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    """Run the chosen validation case and print its table (``--plot`` as asked); exit code 0."""
     check_output("--plot", getattr(args, "plot", None))
     return {"convergence": _convergence, "fourbar": _fourbar,
             "crank-slider": _crank_slider}[args.case](args)

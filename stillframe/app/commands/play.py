@@ -8,6 +8,7 @@ import sys
 
 
 def register(sub: argparse._SubParsersAction) -> None:
+    """Add ``stillframe play``, its arguments and :func:`run` as its action to ``sub``."""
     parser = sub.add_parser(
         "play", help="republish a rosbag2 bag with its original timing and QoS, like ros2 bag play")
     parser.add_argument("bag", metavar="DIR", help="rosbag2 directory")
@@ -28,6 +29,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    """Play the bag until its end (or Ctrl-C); exit code 0, or a
+    :class:`~stillframe.errors.BagError` naming samples that could not be played."""
     from stillframe.errors import BagError, InputError
     from stillframe.middleware.api import create_node, ok
     from stillframe.recording.player import Player

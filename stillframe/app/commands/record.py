@@ -14,6 +14,7 @@ from stillframe.files import check_output
 
 
 def register(sub: argparse._SubParsersAction) -> None:
+    """Add ``stillframe record``, its arguments and :func:`run` as its action to ``sub``."""
     parser = sub.add_parser(
         "record", help="record topics into a rosbag2 bag (metadata v9, MCAP), like ros2 bag record",
         description="Record until Ctrl-C (SIGINT) or SIGTERM; the bag is closed cleanly then.")
@@ -31,6 +32,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    """Record until Ctrl-C and print the messages written per topic and what the bag misses; exit
+    code 0."""
     from stillframe.bags.storage import BagWriter
     from stillframe.contract import messages
     from stillframe.errors import InputError

@@ -27,6 +27,7 @@ THESIS_SCENES: tuple[str, ...] = ("thesis_lqg", "thesis_euk_pendulum", "thesis_e
 
 
 def register(sub: argparse._SubParsersAction) -> None:
+    """Add ``stillframe reproduce``, its arguments and :func:`run` as its action to ``sub``."""
     parser = sub.add_parser(
         "reproduce", help="the thesis's closed-loop tables, each scene through the three nodes",
         description=__doc__.split("\n\n", 1)[1])
@@ -41,6 +42,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    """Run each scene through the three nodes and print its reductions against the thesis's targets;
+    exit code 0, a dead node's code, or 130/143 when interrupted."""
     from stillframe.app.launcher import NodeDiedError, run_scene
 
     paths = args.scenes or [SCENES_DIR / f"{name}.yaml"

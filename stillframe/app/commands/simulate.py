@@ -32,6 +32,7 @@ CSV_COLUMNS = ("t", "x1", "x2", "x3", "v1", "v2", "v3", "a1", "a2", "a3", "phi",
 
 
 def register(sub: argparse._SubParsersAction) -> None:
+    """Add ``stillframe simulate``, its arguments and :func:`run` as its action to ``sub``."""
     parser = sub.add_parser("simulate", help="integrate a scene open loop and summarise it")
     add_scene_arguments(parser)
     parser.add_argument("--duration", type=seconds, help="override the scene's duration [s]")
@@ -40,6 +41,9 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def write_history(history: History, path: Path, scene_json: str) -> None:
+    """Write ``history`` to ``path`` as ``.npz`` arrays or ``.csv`` columns (the module's docstring
+    lists them), with the resolved scene as JSON; any other suffix is an
+    :class:`~stillframe.errors.InputError`."""
     if path.suffix not in (".npz", ".csv"):
         raise InputError(f"--out {path}: use a .npz or .csv file name")
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -66,6 +70,8 @@ def _progress(fraction: float) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    """Integrate the scene open-loop, print the summary and write ``--out`` when given; exit code
+    0."""
     check_output("--out", args.out)
     if args.duration is not None:   # the scene's checks (steps at most) apply to it
         args.overrides = [*args.overrides, f"duration={args.duration!r}"]

@@ -27,6 +27,8 @@ QOS_PROFILES = ("default", "sensor_data", "clock", "parameters")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
+    """Add ``stillframe topic`` and its verbs (``echo``, ``hz``, ``info``, ``list``, ``pub``) to
+    ``sub``, each verb with its ``run_VERB`` as its action."""
     verbs = add_verbs(sub, "topic", "list, inspect, echo, measure and publish ROS 2 topics (like "
                                     "ros2 topic)")
 
@@ -93,11 +95,15 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def add_wait_argument(parser: argparse.ArgumentParser) -> None:
+    """Add ``--timeout S`` to ``parser``: give up when no publisher of the topic appears within S
+    seconds (default: wait for one)."""
     parser.add_argument("--timeout", type=float, metavar="S",
                         help="give up if no publisher appears within S seconds (default: wait)")
 
 
 def run_list(args: argparse.Namespace) -> int:
+    """``topic list``: the topics of the graph, one a line (``--show-types``: with their types;
+    ``--count-topics``: how many); exit code 0."""
     graph = graph_of(args)
     topics = [(t, types) for t, types in graph.get_topic_names_and_types()
               if t in set(graph.topic_names(args.include_hidden_topics))]
@@ -110,6 +116,8 @@ def run_list(args: argparse.Namespace) -> int:
 
 
 def run_info(args: argparse.Namespace) -> int:
+    """``topic info TOPIC``: its type and the counts of publishers and subscriptions (``--verbose``:
+    each endpoint with its node, GID and QoS); exit code 0."""
     graph = graph_of(args)
     topic = existing_topic(graph, args.topic)
     types = dict(graph.get_topic_names_and_types())[topic]
@@ -142,6 +150,8 @@ def check_published_or_new(full: str) -> bool | None:
 
 
 def run_echo(args: argparse.Namespace) -> int:
+    """``topic echo TOPIC``: each message as YAML followed by ``---`` once a publisher appears
+    (``--field``: one field; ``--once``: the first only); exit code 0."""
     from stillframe.middleware import api, names
     from stillframe.middleware.monitor import select_field, to_yaml, wait_for_publisher
 
@@ -178,6 +188,8 @@ def hz_line(stamps: deque[int], reported: int) -> str:
 
 
 def run_hz(args: argparse.Namespace) -> int:
+    """``topic hz TOPIC``: the rate of arrival over the last ``--window`` samples, printed about
+    once a second as ``ros2 topic hz`` prints it; exit code 0."""
     if args.window < 1:
         raise InputError(f"--window must be >= 1, got {args.window}")
     from stillframe.middleware import api, names
@@ -223,6 +235,8 @@ def message_repr(msg: Any) -> str:
 
 
 def pub_qos(args: argparse.Namespace) -> Any:
+    """The QoS of ``topic pub``: the profile ``--qos-profile`` with ``--qos-reliability`` and
+    ``--qos-durability`` applied."""
     from dataclasses import replace
 
     from stillframe.middleware.qos import PROFILES, Durability, Reliability
@@ -236,6 +250,8 @@ def pub_qos(args: argparse.Namespace) -> Any:
 
 
 def run_pub(args: argparse.Namespace) -> int:
+    """``topic pub TOPIC TYPE VALUES``: publish the message given as YAML at ``--rate`` Hz,
+    ``--times`` times (0: until Ctrl-C) or ``--once``; exit code 0."""
     import yaml
 
     from stillframe.config.yamlio import load_yaml

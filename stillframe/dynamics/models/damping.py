@@ -41,6 +41,8 @@ def undamped_modes(structure: Structure) -> tuple[np.ndarray, np.ndarray]:
 
 
 def rayleigh_ratio(omega: np.ndarray, alpha: float, beta: float) -> np.ndarray:
+    """The damping ratio ζ(ω) = α/(2ω) + βω/2 that Rayleigh damping C = αM + βK gives at each ω
+    [rad/s]."""
     return alpha / (2.0 * omega) + beta * omega / 2.0
 
 

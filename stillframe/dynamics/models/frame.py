@@ -8,8 +8,7 @@ M(q) q̈ = Q(q, q̇, u), thesis eq. 5.57 (lumped) and 5.154 (FE), written in the
 
 with e3 the floor-3 DOF. Viscous terms as in eq. 5.237 (hinge damping σ4 = r4; structural
 damping from :mod:`stillframe.dynamics.models.damping`). Inputs u = [f1, f2, f3, C]: horizontal
-forces on
-floors 1–3 (excitation, floor-3 actuator) and the hinge torque (eq. 5.56).
+forces on floors 1–3 (excitation, floor-3 actuator) and the hinge torque (eq. 5.56).
 """
 
 from __future__ import annotations

@@ -31,6 +31,7 @@ class DampingParts:
     gains: np.ndarray  # g, r
 
     def matrix(self, mass: np.ndarray, stiffness: np.ndarray) -> np.ndarray:
+        """The dense C = a M + b K + U diag(g) Uᵀ for the given mass and stiffness matrices."""
         low_rank = (self.shapes * self.gains) @ self.shapes.T
         return self.mass_coefficient * mass + self.stiffness_coefficient * stiffness + low_rank
 
@@ -49,6 +50,7 @@ class Structure:
 
     @property
     def n_dof(self) -> int:
+        """The number of degrees of freedom (the size of M)."""
         return self.mass.shape[0]
 
     def with_damping(self, parts: DampingParts) -> Structure:

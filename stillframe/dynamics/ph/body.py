@@ -36,6 +36,7 @@ from stillframe.errors import InputError
 
 
 def rotation(theta: float) -> np.ndarray:
+    """The 2 × 2 rotation matrix of angle ``theta`` [rad]."""
     c, s = np.cos(theta), np.sin(theta)
     return np.array([[c, -s], [s, c]])
 
@@ -81,10 +82,13 @@ class FloatingBody:
     # sizes -----------------------------------------------------------------------------
     @property
     def n_q(self) -> int:
+        """Generalized coordinates of the body: x, y, θ of its floating frame, then its flexible
+        ones."""
         return 3 + self.n_flex
 
     @property
     def n_stress(self) -> int:
+        """Stress variables of the body: three per element of its mesh (none for a rigid body)."""
         return 0 if self.mesh is None else 3 * self.mesh.elements
 
     # constant operators --------------------------------------------------------------------
@@ -191,6 +195,8 @@ class FloatingBody:
                                + np.cos(q[2]) * sy)
 
     def potential_gradient(self, q: np.ndarray) -> np.ndarray:
+        """∂V/∂q of gravity on the body (zero without gravity), its flexible coordinates
+        included."""
         grad = np.zeros(self.n_q)
         if self.gravity == 0.0:
             return grad

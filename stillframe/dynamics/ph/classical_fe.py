@@ -2,9 +2,8 @@
 
 Each element is a bar (linear axial shape) plus a Hermite bending element
 (:func:`stillframe.dynamics.models.structure.beam_element`) on nodal DOFs (u_x, u_y, θ) in the
-inertial
-frame, rotated to the element's direction. Revolute joints share the translations of two nodes,
-supports remove DOFs, lumped masses add to translations. Nothing here uses the pH code.
+inertial frame, rotated to the element's direction. Revolute joints share the translations of two
+nodes, supports remove DOFs, lumped masses add to translations. Nothing here uses the pH code.
 """
 
 from __future__ import annotations

@@ -34,6 +34,7 @@ class BeamMesh:
 
     @property
     def h(self) -> float:
+        """The element length [m]."""
         return self.length / self.elements
 
     def axial_dofs(self) -> np.ndarray:

@@ -27,6 +27,8 @@ import scipy.linalg as sla
 from stillframe.dynamics.ph.system import PHSystem
 from stillframe.errors import InputError, IntegrationError
 
+__all__ = ["AVF_POINTS", "InputSignal", "MidpointDAE", "StepRecord", "balance_error"]
+
 AVF_POINTS = 4
 NEWTON_TOL = 1e-13
 MAX_ITER = 30

@@ -19,6 +19,9 @@ from stillframe.dynamics.ph.body import FloatingBody
 from stillframe.dynamics.ph.joints import Connection, Port
 from stillframe.errors import InputError
 
+__all__ = ["BodyDamping", "Damper", "DistributedInput", "Input", "PHSystem", "PortInput",
+           "RotaryDamper", "VelocityDamping"]
+
 
 @dataclass(frozen=True)
 class PortInput:
@@ -103,10 +106,13 @@ class PHSystem:
 
     # state layout ----------------------------------------------------------------------------
     def split(self, e: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(q, ν, σ)`` of the state e: positions, velocities and stresses of all bodies, stacked
+        by kind."""
         nq = self.n_q
         return e[:nq], e[nq:2 * nq], e[2 * nq:]
 
     def body_state(self, e: np.ndarray, name: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(q, ν, σ)`` of body ``name`` within the state e."""
         q, nu, s = self.split(e)
         sl = self.q_slices[name]
         return q[sl], nu[sl], s[self.s_slices[name]]
@@ -125,21 +131,28 @@ class PHSystem:
     # operators -------------------------------------------------------------------------------
     @property
     def descriptor(self) -> np.ndarray:
+        """E = blockdiag(I, M, C), the descriptor matrix of seed 000 eq. 38–42."""
         return self._E
 
     @property
     def mass(self) -> np.ndarray:
+        """M: the bodies' mass matrices, block diagonal."""
         return self._mass
 
     @property
     def compliance(self) -> np.ndarray:
+        """C: the bodies' compliance matrices of the stresses, block diagonal (0 × 0 without
+        stresses)."""
         return self._compliance
 
     @property
     def stress_coupling(self) -> np.ndarray:
+        """D: the coupling of the stresses to the velocities (n_stress × n_q) in the
+        interconnection."""
         return self._coupling
 
     def kinematics(self, q: np.ndarray) -> np.ndarray:
+        """A(q): the bodies' kinematic matrices q̇ = A(q) ν, block diagonal."""
         A = np.zeros((self.n_q, self.n_q))
         for name, b in self.bodies.items():
             sl = self.q_slices[name]
@@ -165,6 +178,7 @@ class PHSystem:
         return out
 
     def potential_gradient(self, q: np.ndarray) -> np.ndarray:
+        """∂V/∂q of all bodies, stacked."""
         return np.concatenate([b.potential_gradient(q[self.q_slices[n]])
                                for n, b in self.bodies.items()])
 
@@ -174,6 +188,7 @@ class PHSystem:
         return np.concatenate([self.potential_gradient(q), nu, s])
 
     def hamiltonian(self, e: np.ndarray) -> float:
+        """H = ½νᵀMν + ½σᵀCσ + V(q) at the state e [J]."""
         q, nu, s = self.split(e)
         V = sum(b.potential(q[self.q_slices[n]]) for n, b in self.bodies.items())
         return 0.5 * nu @ self._mass @ nu + 0.5 * s @ self._compliance @ s + V
@@ -238,6 +253,8 @@ class PHSystem:
 
     def state(self, q: np.ndarray, nu: np.ndarray | None = None,
               stress: np.ndarray | None = None) -> np.ndarray:
+        """The state e = [q, ν, σ] from positions and, when given, velocities and stresses (zero
+        otherwise)."""
         nu = np.zeros(self.n_q) if nu is None else nu
         stress = np.zeros(self.n_stress) if stress is None else stress
         return np.concatenate([q, nu, stress])

@@ -96,7 +96,7 @@ def test_fine_meshes_up_to_200_elements_stiffen_as_n_squared_and_stay_accurate()
         scene, _, frame, x0 = _setup([
             "model.type=fe", f"model.elements_per_column={n}", "damping.model=modal",
             "excitation.type=harmonics"])
-        states = frame.run("midpoint", x0, 1e-3, 2000, floor_load(scene.excitation, 2.0),
+        states = frame.run("midpoint", x0, 1e-3, 2000, load=floor_load(scene.excitation, 2.0),
                            stride=10)
         runs[n] = states[:, :3]
     error = np.max(np.abs(runs[200] - runs[40])) / np.max(np.abs(runs[40]))

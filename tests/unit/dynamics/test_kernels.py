@@ -48,7 +48,7 @@ def test_compiled_kernels_agree_with_the_numpy_integrators(case: str, method: st
                                                            integrator) -> None:
     h = 1e-4 if method == "rk4" and "lumped" in case else 2e-6 if method == "rk4" else 1e-3
     model, load, x0, control, expected = _reference(CASES[case], integrator(), h, 300)
-    states = CompiledFrame(model).run(method, x0, h, 300, load, control)
+    states = CompiledFrame(model).run(method, x0, h, 300, load=load, control=control)
     scale = np.max(np.abs(expected), axis=0) + 1e-300
     error = np.max(np.abs(states - expected) / scale)
     # RK4: the same operations, so round-off only; midpoint: both Newton solves stop at 1e-12
@@ -62,7 +62,7 @@ def test_generic_midpoint_on_the_40_element_mesh_stops_at_round_off_and_agrees()
     overrides = ["model.type=fe", "model.elements_per_column=40", "damping.model=modal",
                  "excitation.type=harmonics", "initial.phi=0.3"]
     model, load, x0, control, expected = _reference(overrides, ImplicitMidpoint(), 1e-3, 300)
-    states = CompiledFrame(model).run("midpoint", x0, 1e-3, 300, load, control)
+    states = CompiledFrame(model).run("midpoint", x0, 1e-3, 300, load=load, control=control)
     scale = np.max(np.abs(expected), axis=0) + 1e-300
     error = np.max(np.abs(states - expected) / scale)
     print(f"FE 40, generic vs compiled midpoint: {error:.2g}")
@@ -87,10 +87,10 @@ def test_stride_and_chunks_give_the_same_states() -> None:
     model, load, x0, control, expected = _reference(CASES["fe3-hammer"], ImplicitMidpoint(),
                                                     1e-3, 40)
     frame = CompiledFrame(model)
-    every_tenth = frame.run("midpoint", x0, 1e-3, 40, load, control, stride=10)
+    every_tenth = frame.run("midpoint", x0, 1e-3, 40, load=load, control=control, stride=10)
     np.testing.assert_allclose(every_tenth, expected[::10], rtol=0, atol=1e-12)
-    first = frame.run("midpoint", x0, 1e-3, 25, load, control)
-    rest = frame.run("midpoint", first[-1], 1e-3, 15, load, control, t0=25e-3)
+    first = frame.run("midpoint", x0, 1e-3, 25, load=load, control=control)
+    rest = frame.run("midpoint", first[-1], 1e-3, 15, load=load, control=control, t0=25e-3)
     np.testing.assert_allclose(rest[-1], expected[-1], rtol=0, atol=1e-12)
 
 
