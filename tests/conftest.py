@@ -10,6 +10,7 @@ Every DDS participant a test starts (in this process or a child) discovers only 
 other ranges set their own, inside network namespaces of their own.
 """
 
+import contextlib
 import os
 from pathlib import Path
 
@@ -39,3 +40,20 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
     for item in items:
         if INTEGRATION in Path(str(item.fspath)).parents:
             item.add_marker(pytest.mark.processes)
+
+
+@pytest.fixture(autouse=True)
+def _the_suite_keeps_its_priority() -> object:
+    """A test that lowers the suite's own CPU priority (a command's ``--nice``/``--idle`` run
+    in-process) would slow every later test beside a busy machine: each test must leave the
+    process's (niceness, policy) as it found them. The error names the test; the priority is
+    put back so that the tests after it run as before."""
+    before = os.getpriority(os.PRIO_PROCESS, 0), os.sched_getscheduler(0)
+    yield
+    after = os.getpriority(os.PRIO_PROCESS, 0), os.sched_getscheduler(0)
+    if after != before:
+        for task in os.listdir("/proc/self/task"):
+            with contextlib.suppress(OSError):
+                os.sched_setscheduler(int(task), before[1], os.sched_param(0))
+                os.setpriority(os.PRIO_PROCESS, int(task), before[0])
+    assert after == before, f"the test changed the suite's (niceness, policy) {before} to {after}"

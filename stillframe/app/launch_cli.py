@@ -190,17 +190,16 @@ def print_partial(evaluation: dict[str, Any], scene: Scene, args: argparse.Names
 
 
 def bag_incomplete(bag: dict[str, Any] | None) -> str:
-    """One line on what the launch's bag misses (the recorder's counts), "" when nothing."""
+    """One line on what the launch's bag lacks (the recorder's counts, as
+    :func:`stillframe.recording.recorder.completeness` says it), "" when nothing."""
+    from stillframe.recording.recorder import completeness
+
     if not bag or not bag.get("closed"):
         return ""
-    missing = {t: n for t, n in bag.get("missing_samples", {}).items() if n}
-    stalls = bag.get("recorder_stalls", {}).get("count", 0)
-    if not missing and not stalls:
-        return ""
-    return (f"the bag {bag['path']} is not complete: it misses {sum(missing.values())} samples "
-            f"({', '.join(f'{t} {n}' for t, n in missing.items()) or 'none on a stamp grid'})"
-            + (f"; the recorder stalled {stalls} times, the longest "
-               f"{bag['recorder_stalls'].get('longest_s', 0):g} s" if stalls else ""))
+    stalls = bag.get("recorder_stalls", {})
+    line = completeness(bag.get("missing_samples", {}), stalls.get("count", 0),
+                        stalls.get("longest_s", 0.0))
+    return f"the bag {bag['path']} {line}" if line else ""
 
 
 def recorder_args(args: argparse.Namespace) -> list[str] | None:

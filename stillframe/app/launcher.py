@@ -50,7 +50,12 @@ from stillframe.loop.spec import MODES
 from stillframe.middleware import api, discovery, names
 from stillframe.middleware.graph import UNNAMED_NODES, fqn
 from stillframe.node_runtime.declarations import NODE_PARAMETERS, ManagedParameterValues
-from stillframe.node_runtime.realtime import RealtimeOptions, parse_practices, permissions_line
+from stillframe.node_runtime.realtime import (
+    RealtimeOptions,
+    parse_practices,
+    permissions_line,
+    restore_scheduling,
+)
 from stillframe.recording.recorder import MISSING_KEY, STALLS_KEY
 
 NODES: tuple[str, ...] = tuple(NODE_PARAMETERS)
@@ -83,9 +88,8 @@ STOPPED_CODES = (0, -signal.SIGINT, -signal.SIGTERM, 128 + signal.SIGINT, 128 + 
 STOP_GRACE_S = 10.0
 #: children that get longer to exit after SIGINT: the tracker finishes the windows due
 STOP_GRACES_S: dict[str, float] = {TRACKER: TRACKER_STOP_S}
-#: seconds a child that is still running gets to log its ready line: a guard against a hung
-#: child, not a start-up time: on a loaded machine a recorder can take tens of seconds to
-#: import and open its bag, and a shorter limit would call it dead
+#: seconds of the machine's time (:meth:`Child.time_given_s`) a child that is still running
+#: gets to log its ready line: a guard against a hung child, not a start-up time
 READY_TIMEOUT_S = 120.0
 #: the log line by which a helper child says it is ready (the nodes start after it)
 READY_LINES: dict[str, str] = {"recorder": "Recording to", "monitor": "Monitor ready",
@@ -275,6 +279,9 @@ class Child:
     started_ns: int = field(default_factory=time.monotonic_ns)
     #: seconds it gets to exit after SIGINT
     grace_s: float = STOP_GRACE_S
+    #: put back at the launcher's scheduling before it is asked to stop (a recorder that ran
+    #: below the loop needs the CPU to close its bag on a busy machine)
+    restore_on_stop: bool = False
 
     @property
     def pid(self) -> int:
@@ -307,8 +314,8 @@ class ProcessSet:
         self.children: list[Child] = []
         self.echo = echo
 
-    def start(self, name: str, argv: list[str], env_extra: dict[str, str] | None = None,
-              grace_s: float = STOP_GRACE_S) -> Child:
+    def start(self, name: str, argv: list[str], env_extra: dict[str, str] | None = None, *,
+              grace_s: float = STOP_GRACE_S, restore_on_stop: bool = False) -> Child:
         env = dict(os.environ, PYTHONUNBUFFERED="1", **(env_extra or {}))
         env["PYTHONPATH"] = os.pathsep.join(
             p for p in (env.get("PYTHONPATH", ""), str(REPO_ROOT)) if p)
@@ -316,7 +323,7 @@ class ProcessSet:
             argv, env=env, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
             stderr=subprocess.STDOUT, text=True, errors="replace", process_group=0,
             preexec_fn=_prepare_child)
-        child = Child(name, proc, grace_s=grace_s)
+        child = Child(name, proc, grace_s=grace_s, restore_on_stop=restore_on_stop)
         self.children.append(child)
         self.echo(f"started {name} (pid {proc.pid})")
         threading.Thread(target=self._pump, args=(child,), daemon=True).start()
@@ -344,6 +351,10 @@ class ProcessSet:
         :func:`_prepare_child`), wait (the child's grace); SIGTERM, wait; SIGKILL. Always reaps
         the process."""
         child.stop_requested = True
+        if child.restore_on_stop and not child.exited() and not restore_scheduling(child.pid):
+            self.echo(f"{child.name} (pid {child.pid}) stays below the loop's priority while it "
+                      "stops (raising it back needs CAP_SYS_NICE): on a busy machine it may not "
+                      f"finish within {child.grace_s + 2 * STOP_GRACE_S:g} s")
         first = signal.SIGINT if catches_sigint(child.pid) else signal.SIGTERM
         for sig, grace in ((first, child.grace_s), (signal.SIGTERM, STOP_GRACE_S),
                            (signal.SIGKILL, STOP_GRACE_S)):
@@ -645,7 +656,8 @@ class Launcher:
             mixed = len({self.backend(name) for name, _ in commands}) > 1
             for name, argv in commands:
                 child = self.processes.start(name, argv, {"STILLFRAME_RMW": self.backend(name)},
-                                             STOP_GRACES_S.get(name, STOP_GRACE_S))
+                                             grace_s=STOP_GRACES_S.get(name, STOP_GRACE_S),
+                                             restore_on_stop=name == "recorder")
                 if name in READY_LINES:
                     self._wait_for_line(child, READY_LINES[name])
                 elif mixed:
@@ -749,16 +761,17 @@ class Launcher:
         recorder is recording and the monitor serving (:data:`READY_LINES`); with mixed vendors,
         a node starts once the previous one has its participant ('middleware backend'), because
         a Cyclone and a Fast DDS participant created in the same instant can take the same
-        participant index and then never discover each other."""
-
-        deadline = time.monotonic() + timeout_s
+        participant index and then never discover each other. The limit counts the time the
+        machine gave the child (:meth:`Child.time_given_s`): a recorder below the loop on a busy
+        machine may wait long for its first CPU, a hung one runs the limit out."""
         while not any(text in line for line in child.tail):
             if child.exited():
                 raise NodeDiedError.exited(child)
             if not api.ok():
                 raise KeyboardInterrupt
-            if time.monotonic() > deadline:
-                raise NodeDiedError(child.name, f"no {text!r} after {timeout_s:g} s", child.tail)
+            if child.time_given_s() > timeout_s:
+                raise NodeDiedError(child.name, f"no {text!r} after {timeout_s:g} s of the "
+                                    "machine's time", child.tail)
             time.sleep(0.05)
 
     def _partial(self, died: NodeDiedError) -> LaunchResult:

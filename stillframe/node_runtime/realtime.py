@@ -247,6 +247,31 @@ def run_nicer(increment: int) -> None:
                            min(19, os.getpriority(os.PRIO_PROCESS, tid) + increment))
 
 
+def restore_scheduling(pid: int) -> bool:
+    """Put every thread of process ``pid`` back at SCHED_OTHER and at this process's niceness,
+    undoing :func:`run_idle` and :func:`run_nicer` there (a recorder that stepped back from the
+    loop needs the CPU to close its bag once the loop has stopped). False where the kernel
+    refuses: leaving SCHED_IDLE or raising a niceness needs CAP_SYS_NICE, or an RLIMIT_NICE
+    that allows it."""
+    nice = os.getpriority(os.PRIO_PROCESS, 0)
+    try:
+        tids = [int(t) for t in os.listdir(f"/proc/{pid}/task")]
+    except OSError:           # ended meanwhile
+        return True
+    restored = True
+    for tid in tids:
+        try:
+            if os.sched_getscheduler(tid) == os.SCHED_IDLE:
+                os.sched_setscheduler(tid, os.SCHED_OTHER, os.sched_param(0))
+            if os.getpriority(os.PRIO_PROCESS, tid) > nice:
+                os.setpriority(os.PRIO_PROCESS, tid, nice)
+        except ProcessLookupError:      # ended meanwhile
+            continue
+        except PermissionError:
+            restored = False
+    return restored
+
+
 def _loop_threads() -> list[int]:
     """The main thread and the DDS threads a sample passes through (:data:`RECEIVE_THREADS`).
     Cyclone's housekeeping threads (``gc``, ``tev``) stay SCHED_OTHER: with every thread at

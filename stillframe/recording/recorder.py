@@ -46,7 +46,7 @@ import bisect
 import json
 import struct
 import time
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 from stillframe.bags.qos import to_bag
@@ -56,7 +56,8 @@ from stillframe.middleware.api import MessageInfo
 from stillframe.middleware.qos import CLOCK, QoSProfile, recorder_request
 from stillframe.middleware.topic_follower import RawCallback, TopicFollower
 
-__all__ = ["MISSING_KEY", "STALLS_KEY", "GapCounter", "Recorder", "SimStamps", "starts_with_stamp"]
+__all__ = ["MISSING_KEY", "STALLS_KEY", "GapCounter", "Recorder", "SimStamps", "completeness",
+           "starts_with_stamp"]
 
 #: how often the recorder takes what its readers hold [s]: 50 wake-ups a second whatever the
 #: load; at 1 kHz a reader holds 20 samples of its ``RECORD_DEPTH`` (1000) then
@@ -264,18 +265,30 @@ class Recorder(TopicFollower):
                 if (missing := gaps.missing()) is not None}
 
     def summary(self) -> str:
-        """What is missing and how the recorder stalled, one phrase ("" when nothing)."""
-        missing = {t: n for t, n in self.missing_samples().items() if n}
-        parts = []
-        if missing:
-            parts.append(f"missing {sum(missing.values())} samples from the stamp grids: "
-                         + ", ".join(f"{t} {n}" for t, n in missing.items()))
-        if self.stalls:
-            parts.append(f"stalled {self.stalls} times, the longest {self.longest_stall_s:.2f} s")
-        return "; ".join(parts)
+        """What the bag lacks, as :func:`completeness` says it ("" when nothing)."""
+        return completeness(self.missing_samples(), self.stalls, self.longest_stall_s)
 
     def write_losses(self) -> None:
         """What is missing, and the stalls, into the bag's metadata (before it closes)."""
         self.bag.custom_data[MISSING_KEY] = json.dumps(self.missing_samples())
         self.bag.custom_data[STALLS_KEY] = json.dumps(
             {"count": self.stalls, "longest_s": round(self.longest_stall_s, 3)})
+
+
+def completeness(missing: Mapping[str, int], stalls: int, longest_s: float) -> str:
+    """What a bag lacks, one phrase to follow "the bag": ``is not complete: it misses N
+    samples (...)`` when the stamp grids show missing samples; ``may not be complete: ...`` when
+    the recorder only stalled (the topics on a stamp grid miss nothing, but those without one,
+    such as ``/rosout`` and ``/diagnostics``, may have lost what was sent meanwhile); "" when
+    neither."""
+    missing = {t: n for t, n in missing.items() if n}
+    stalled = (f"the recorder stalled {stalls} times, the longest {longest_s:.2f} s"
+               if stalls else "")
+    if missing:
+        return (f"is not complete: it misses {sum(missing.values())} samples ("
+                + ", ".join(f"{t} {n}" for t, n in missing.items()) + ")"
+                + (f"; {stalled}" if stalled else ""))
+    if stalled:
+        return (f"may not be complete: {stalled}; no sample is missing from the topics on a "
+                "stamp grid, topics without one may have lost what was sent meanwhile")
+    return ""

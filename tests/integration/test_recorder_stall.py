@@ -140,7 +140,7 @@ def test_a_stopped_recorder_counts_what_the_bag_misses(tmp_path: Path, ros_domai
     assert doc["recorder_stalls"]["longest_s"] >= 1.0
     total = sum(n for n in counted.values())
     assert re.search(r"\[recorder\] .*recorder stalled: no poll for", text), text[-3000:]
-    assert re.search(rf"\[recorder\] .*the bag is not complete: missing {total} samples", text)
+    assert re.search(rf"\[recorder\] .*the bag is not complete: it misses {total} samples", text)
     assert re.search(rf"stillframe launch: warning: the bag {re.escape(str(bag))} is not "
                      rf"complete: it misses {total} samples", text)
     info = subprocess.run([sys.executable, "-m", "stillframe", "bag", "info", str(bag)],

@@ -65,7 +65,7 @@ def run(args: argparse.Namespace) -> int:
         node.get_logger().info(f"Recorded {recorder.total} messages"
                                + (f": {per_topic}" if per_topic else ""))
         if incomplete := recorder.summary():
-            node.get_logger().warning(f"the bag is not complete: {incomplete} (in "
+            node.get_logger().warning(f"the bag {incomplete} (in "
                                       f"{args.output}/metadata.yaml, custom_data)")
     finally:
         node.destroy_node()

@@ -1,12 +1,12 @@
 """The recorder's count of samples missing from a topic's stamp grid, against the count of the
 grid's stamps absent from a stream built with known holes (a set difference, not the
-counter's arithmetic)."""
+counter's arithmetic); and the one phrase a launch and a recorder say of what a bag lacks."""
 
 from __future__ import annotations
 
 import random
 
-from stillframe.recording.recorder import GapCounter, starts_with_stamp
+from stillframe.recording.recorder import GapCounter, completeness, starts_with_stamp
 
 PERIOD = 31_250_000     # the thesis's 32 Hz, in ns
 
@@ -62,3 +62,15 @@ def test_the_loop_topics_start_with_a_stamp_and_others_do_not() -> None:
         assert starts_with_stamp(msgtype), msgtype
     for msgtype in ("std_msgs/msg/Float64", "std_msgs/msg/String", "nonexistent/msg/Type"):
         assert not starts_with_stamp(msgtype), msgtype
+
+
+def test_completeness_says_missing_samples_apart_from_stalls_alone() -> None:
+    """Missing samples make a bag "not complete"; a stall with nothing missing on the stamp grids
+    makes it "may not be complete" (topics without a grid cannot be checked); neither: ""."""
+    assert completeness({"/a": 0, "/b": 3, "/c": 2}, 1, 5.004) == (
+        "is not complete: it misses 5 samples (/b 3, /c 2); the recorder stalled 1 times, the "
+        "longest 5.00 s")
+    assert completeness({"/a": 0}, 2, 0.571).startswith(
+        "may not be complete: the recorder stalled 2 times, the longest 0.57 s; no sample is "
+        "missing from the topics on a stamp grid")
+    assert completeness({"/a": 0}, 0, 0.0) == ""

@@ -1,0 +1,65 @@
+"""A recorder that ran below the loop (SCHED_IDLE, niced) is put back at the launcher's
+scheduling before it is asked to stop, so a busy machine cannot starve it past its grace and kill
+it with its bag open. The condition is forced: one busy loop per CPU beside a child at SCHED_IDLE
+and nice 5 whose SIGINT handler needs 0.5 s of CPU (as closing a bag does). At SCHED_IDLE its
+share would be about 0.3 % of a CPU (weight 3 against the busy loops' 1024 each), some minutes
+for the handler, so the launcher's graces (10 + 10 + 10 s) would end in SIGKILL; put back, it
+ends on its own handler with exit code 0."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import threading
+
+import pytest
+
+from stillframe.app.launcher import ProcessSet
+from stillframe.node_runtime.realtime import CAP_SYS_NICE, capable
+
+pytestmark = pytest.mark.skipif(not capable(CAP_SYS_NICE),
+                                reason="leaving SCHED_IDLE needs CAP_SYS_NICE")
+
+#: the child: below the loop, with a handler that needs CPU time to finish
+CHILD = """
+import os, signal, sys, time
+for task in os.listdir("/proc/self/task"):
+    os.sched_setscheduler(int(task), os.SCHED_IDLE, os.sched_param(0))
+    os.setpriority(os.PRIO_PROCESS, int(task), os.getpriority(os.PRIO_PROCESS, 0) + 5)
+def close(*_):
+    end = time.thread_time() + 0.5
+    while time.thread_time() < end:
+        pass
+    sys.exit(0)
+signal.signal(signal.SIGINT, close)
+print("ready", flush=True)
+while True:
+    time.sleep(0.05)
+"""
+
+
+def test_a_recorder_below_the_loop_closes_on_its_own_handler_on_a_busy_machine() -> None:
+    ready = threading.Event()
+    lines: list[str] = []
+
+    def echo(line: str) -> None:
+        lines.append(line)
+        if line.endswith("] ready"):
+            ready.set()
+
+    processes = ProcessSet(echo)
+    child = processes.start("recorder", [sys.executable, "-c", CHILD], restore_on_stop=True)
+    busy = []
+    try:
+        assert ready.wait(120), lines
+        busy = [subprocess.Popen(["sh", "-c", "while :; do :; done"])
+                for _ in os.sched_getaffinity(0)]
+        processes.stop(child)
+    finally:
+        for loop in busy:
+            loop.kill()
+            loop.wait()
+        if child.proc.poll() is None:
+            child.proc.kill()
+    assert child.proc.returncode == 0, lines
