@@ -95,6 +95,7 @@ def test_low_snr_is_accurate_or_flagged(lin, noise: float, least_accurate: int,
     assert len(flagged) >= least_flagged, outcomes
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("order", [10, 16, 24])
 def test_an_over_estimated_order_keeps_the_physical_modes_consistent(lin, order: int) -> None:
     """Spurious modes are added and flagged; the three physical modes stay, consistent, to 0.1 %
