@@ -318,7 +318,9 @@ def identify(
         else:
             consistent = mode_consistency(fac, modes, chosen, float(dt))
         left_out = left_out_modes(fac, modes, chosen, float(dt))
-        uncertain = uncertain_modes(modes, refinement.frequency_ci_hz, refinement.damping_ci)
+        # a mode without an interval (withheld, and said so in the notes) is not called wide
+        uncertain = (uncertain_modes(modes, refinement.frequency_ci_hz, refinement.damping_ci)
+                     & np.isfinite(refinement.frequency_ci_hz).all(axis=1))
         notes += list(refinement.notes) + residual_warnings(y, refinement.errors)
         notes += phase_warnings(modes, refinement.phase_std(reference_sensor), outputs)
     units = _Units(u_scale, y_scale)
