@@ -75,12 +75,14 @@ def run(args: argparse.Namespace) -> int:
     if not (args.max_rate >= 0 and math.isfinite(args.max_rate)):
         raise InputError(f"--max-rate {args.max_rate:g}: expected a rate >= 0 Hz (0: every "
                          "sample)")
-    apply_priority(args)    # before the middleware's and the SDK's threads start
     limits = Limits()
     if args.scene is not None:
         scene = load_scene(args.scene, args.overrides)
         limits = Limits(scene.controller.limit, scene.actuators.torque_limit,
                         scene.actuators.force_limit, scene.controller.start)
+    # after every input is checked (a refused command leaves its caller's priority alone), and
+    # before the middleware's and the SDK's threads start (they inherit it)
+    apply_priority(args)
     node = create_node("stillframe_monitor", argv=sys.argv[:1])
     try:
         try:
