@@ -142,8 +142,12 @@ def test_busy_loops_run_while_the_block_runs_and_not_after() -> None:
     with busy_loops(2) as pids:
         assert len(pids) == 2 and all(os.getpgid(pid) == pid for pid in pids)
         ticks = [_cpu_ticks(pid) for pid in pids]
-        time.sleep(0.5)
-        assert all(_cpu_ticks(pid) > t for pid, t in zip(pids, ticks, strict=True))
+        # each loop gets CPU time: waited for (a loaded machine may take a while to run them),
+        # bounded against a loop that never runs
+        deadline = time.monotonic() + 60.0
+        while not all(_cpu_ticks(pid) > t for pid, t in zip(pids, ticks, strict=True)):
+            assert time.monotonic() < deadline, "a busy loop used no CPU time in 60 s"
+            time.sleep(0.05)
     for pid in pids:
         with pytest.raises(ProcessLookupError):
             os.kill(pid, 0)
