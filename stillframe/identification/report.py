@@ -32,16 +32,16 @@ def modes_document(modes: ModalTable, consistent: Sequence[bool],
         phase = (refinement.phase_std(reference) if isinstance(refinement, Refinement)
                  else None)
         for k, doc in enumerate(docs):
-            doc["frequency_ci_hz"] = _interval(refinement.frequency_ci_hz[k])
-            doc["damping_ci"] = _interval(refinement.damping_ci[k])
+            doc["frequency_ci_hz"] = interval(refinement.frequency_ci_hz[k])
+            doc["damping_ci"] = interval(refinement.damping_ci[k])
             if phase is not None:
                 doc["shape_phase_ci"] = [
-                    _interval(np.array([ph - Z95 * sd, ph + Z95 * sd]))
+                    interval(np.array([ph - Z95 * sd, ph + Z95 * sd]))
                     for (_, ph), sd in zip(modes.magnitude_phase(k), phase[:, k], strict=True)]
     return docs
 
 
-def _interval(pair: np.ndarray) -> list[float] | None:
+def interval(pair: np.ndarray) -> list[float] | None:
     """``[low, high]``, or None where there is no interval (NaN: the reason is in the
     warnings)."""
     return pair.tolist() if np.all(np.isfinite(pair)) else None

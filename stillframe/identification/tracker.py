@@ -26,6 +26,7 @@ from numpy.typing import NDArray
 
 from stillframe.errors import StillframeError
 from stillframe.identification.pipeline import identify
+from stillframe.identification.report import interval
 from stillframe.identification.ssi_cov import identify_output_only
 
 Array = NDArray[np.float64]
@@ -45,10 +46,12 @@ MODES_TOPIC = "identification/modes"
 
 def mode_record(row: Sequence[float]) -> dict[str, Any]:
     """One mode's row (:data:`FIELDS`) as ``{"frequency_hz", "damping_ratio", "frequency_ci",
-    "damping_ci"}``."""
+    "damping_ci"}``; an interval is None where the row holds NaN (none given: the update's
+    warnings say why)."""
     f, z, f_low, f_high, z_low, z_high = (float(v) for v in row)
-    return {"frequency_hz": f, "damping_ratio": z, "frequency_ci": [f_low, f_high],
-            "damping_ci": [z_low, z_high]}
+    return {"frequency_hz": f, "damping_ratio": z,
+            "frequency_ci": interval(np.array([f_low, f_high])),
+            "damping_ci": interval(np.array([z_low, z_high]))}
 
 
 def mode_records(data: Sequence[float]) -> list[dict[str, Any]]:

@@ -41,8 +41,11 @@ def test_launch_track_reports_the_modes_before_and_after_control(ros_domain: int
         assert set(update) == {"t", "modes", "warnings", "error"}
         for mode in update["modes"]:
             assert set(mode) == {"frequency_hz", "damping_ratio", "frequency_ci", "damping_ci"}
-            lo, hi = mode["frequency_ci"]
-            assert lo <= mode["frequency_hz"] <= hi
+            if mode["frequency_ci"] is None:     # withheld: the update says why
+                assert [w for w in update["warnings"] if w.startswith("no intervals")], update
+            else:
+                lo, hi = mode["frequency_ci"]
+                assert lo <= mode["frequency_hz"] <= hi
     scene = load_scene(SCENE)
     floors = floor_modes(scene)
     times = [u["t"] for u in tracked]
