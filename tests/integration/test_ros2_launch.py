@@ -88,5 +88,5 @@ def test_a_failed_run_fails_the_launch(install: Path, tmp_path: Path,  # noqa: F
     done = ros2_launch(install, tmp_path, "scene:=/nonexistent/scene.yaml", timeout=120)
     log = done.stdout + done.stderr
     assert done.returncode == 1, log[-4000:]
-    assert "sim_node: error: /nonexistent/scene.yaml: cannot read scene" in log
+    assert "sim_node: error: /nonexistent/scene.yaml: cannot read the scene file" in log
     assert "exited with code 2" in log and "the run failed" in log
