@@ -140,10 +140,13 @@ def test_kill_and_restart_estimator_then_kill_controller(ros_domain: int, tmp_pa
     last_estimate, first_after = estimates[gap], estimates[gap + 1]
     assert first_after - last_estimate > 3 * PERIOD_NS            # the estimator was gone
     commands = {ns: m.wrench.torque.z for ns, m in got["/frame/pendulum/torque_cmd"]}
-    zero_at = min(ns for ns, v in commands.items() if last_estimate < ns and v == 0.0)
-    periods_to_zero = (zero_at - last_estimate) / PERIOD_NS
-    print(f"estimator killed: zero command {periods_to_zero:g} periods after the last estimate")
-    assert periods_to_zero <= 3
+    # the watchdog: no command stamped more than its timeout (3 periods) after the last
+    # estimate holds a torque. When the first zero comes depends on when the loaded machine runs
+    # the controller; that no stale torque is ever sent does not.
+    late = [v for ns, v in commands.items() if last_estimate + 3 * PERIOD_NS < ns < first_after]
+    print(f"estimator killed: {len(late)} commands while it was gone, "
+          f"{sum(v != 0.0 for v in late)} not zero")
+    assert late and all(v == 0.0 for v in late)
     assert commands[last_estimate] != 0.0                         # control was on before
     truth = dict(got["/frame/state_truth"])
     stamps = sorted(truth)
