@@ -30,8 +30,11 @@ def test_a_forced_stall_is_seen_on_every_cpu_at_least_as_long_as_it_was() -> Non
         time.sleep(0.3)
     cpus = probe.summary["probe_cpus"]
     assert sorted(c["cpu"] for c in cpus) == sorted(os.sched_getaffinity(0))
-    # cyclictest's wake planned just after the stop is late by the whole stop, less one period
-    assert all(c["max_us"] >= held_us - 1000 for c in cpus), (held_us, cpus)
+    # cyclictest's wake planned just after the stop is late by the whole stop, less one period.
+    # The stop lasts at least the 0.2 s slept between the two signals (``held_us`` measures the
+    # same from this side and can only be longer), less one period for each signal's delivery
+    # on a loaded machine.
+    assert all(c["max_us"] >= 200_000 - 3 * 1000 for c in cpus), (held_us, cpus)
     assert all(c["stalls"] >= 1 for c in cpus)
     assert probe.summary["probe_max_us"] == max(c["max_us"] for c in cpus)
 
