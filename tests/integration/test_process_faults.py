@@ -140,13 +140,20 @@ def test_kill_and_restart_estimator_then_kill_controller(ros_domain: int, tmp_pa
     last_estimate, first_after = estimates[gap], estimates[gap + 1]
     assert first_after - last_estimate > 3 * PERIOD_NS            # the estimator was gone
     commands = {ns: m.wrench.torque.z for ns, m in got["/frame/pendulum/torque_cmd"]}
-    # the watchdog: no command stamped more than its timeout (3 periods) after the last
-    # estimate holds a torque. When the first zero comes depends on when the loaded machine runs
-    # the controller; that no stale torque is ever sent does not.
+    # the watchdogs: no command stamped more than the controller's timeout (3 periods) after
+    # the last estimate holds a torque, and the torque the sim applies (effort, for the period
+    # before its stamp) is zero from its own command timeout on (3 periods, one more for the
+    # period the effort covers). When the controller's first zero comes depends on when the
+    # loaded machine runs it (it may send none while the estimator is gone); that no stale
+    # torque is sent or applied does not.
     late = [v for ns, v in commands.items() if last_estimate + 3 * PERIOD_NS < ns < first_after]
+    efforts = {ns: m.effort[0] for ns, m in got["/frame/pendulum/joint_states"]}
+    applied = [v for ns, v in efforts.items() if last_estimate + 4 * PERIOD_NS < ns < first_after]
     print(f"estimator killed: {len(late)} commands while it was gone, "
-          f"{sum(v != 0.0 for v in late)} not zero")
-    assert late and all(v == 0.0 for v in late)
+          f"{sum(v != 0.0 for v in late)} not zero; {len(applied)} samples applied, "
+          f"{sum(v != 0.0 for v in applied)} not zero")
+    assert all(v == 0.0 for v in late)
+    assert applied and all(v == 0.0 for v in applied)
     assert commands[last_estimate] != 0.0                         # control was on before
     truth = dict(got["/frame/state_truth"])
     stamps = sorted(truth)
