@@ -154,7 +154,10 @@ def test_kill_and_restart_estimator_then_kill_controller(ros_domain: int, tmp_pa
           f"{sum(v != 0.0 for v in applied)} not zero")
     assert all(v == 0.0 for v in late)
     assert applied and all(v == 0.0 for v in applied)
-    assert commands[last_estimate] != 0.0                         # control was on before
+    # control was on before: the commands of the last ten periods (the one for the last estimate
+    # may never be sent when the kill lands between the estimate's two readers)
+    assert any(v != 0.0 for ns, v in commands.items()
+               if last_estimate - 10 * PERIOD_NS <= ns <= last_estimate)
     truth = dict(got["/frame/state_truth"])
     stamps = sorted(truth)
     during = [ns for ns in stamps if last_estimate <= ns <= first_after]

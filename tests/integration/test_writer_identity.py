@@ -98,7 +98,9 @@ def test_stray_simulator_is_ignored_counted_and_named(ros_domain: int, tmp_path:
             for name in ignored), ignored
     assert int(est["refused_writers"]) == 5 * total and int(ctl["refused_writers"]) == total
     assert ctl["excitation_wrench_writer"] == "/frame/sim_node"
-    assert level == 1 and "second writer on floor1/imu ignored" in message, message
+    # a warning; an error only once the simulator has gone long enough for the input to be stale
+    assert level == (2 if "stale input" in message else 1), message
+    assert "second writer on floor1/imu ignored" in message, message
     reference = run_closed_loop(thesis_scene("thesis_lqg", SHORT_LQG))
     evaluation = json.loads(result.read_text())
     with np.load(result.with_suffix(".npz")) as data:
