@@ -244,99 +244,160 @@ def identify(
         raise InputError("the refinement needs OKID's observer gain of the plain realization: "
                          "not with era-impulse or combined")
     refine = refinable if refine is None else bool(refine)
-    n_samples, r = u.shape
-    m = y.shape[1]
-    inputs = channel_names("input", r, input_names)
-    outputs = channel_names("output", m, output_names)
+    dt = float(dt)
+    inputs = channel_names("input", u.shape[1], input_names)
+    outputs = channel_names("output", y.shape[1], output_names)
     check_values(u, inputs)
     check_values(y, outputs)
-    u, u_repairs = repair_absurd(u, inputs, float(dt))
-    y, y_repairs = repair_absurd(y, outputs, float(dt))
-    needed_order = 2 if order == "auto" else int(order)
-    u_scale, y_scale = channel_scales(u), channel_scales(y)
-    u, y = u / u_scale, y / y_scale
+    u, u_repairs = repair_absurd(u, inputs, dt)
+    y, y_repairs = repair_absurd(y, outputs, dt)
+    units = _Units(channel_scales(u), channel_scales(y))
+    u, y = u / units.u_scale, y / units.y_scale
 
-    if method == "era-impulse":
-        markov, dims, fac = _impulse_factorization(u, y, needed_order, alpha, beta)
-        p = None
-    else:
-        correlated = method == "okid-eradc"
-        p = _observer_order(n_samples, r, m, needed_order, observer_order, [*inputs, *outputs])
-        check_excitation(u, needed_order, inputs)
-        fit = okid(u, y, p)
-        dims = EraDimensions(alpha=alpha or p, beta=beta or 4 * p,
-                             gamma=gamma if correlated else 0, delta=delta if correlated else 0,
-                             tau=tau)
-        count = dims.markov_count(correlated)
-        markov = fit.system_markov(count)
-        gain_markov = fit.observer_gain_markov(max(count, p + 1))
-        params = np.concatenate([markov, gain_markov[:count]], axis=2) if combined else markov
-        fac = factorize(params, dims, correlated=correlated)
-
-    s = fac.singular_values
+    hankel = _hankel(u, y, method=method, order=2 if order == "auto" else int(order),
+                     names=(inputs, outputs), observer_order=observer_order, combined=combined,
+                     alpha=alpha, beta=beta, gamma=gamma, delta=delta, tau=tau)
+    s = hankel.factorization.singular_values
     if order == "auto":
-        chosen, gap = auto_order(s, max_order or fac.max_rank // 2)
+        chosen, gap = auto_order(s, max_order or hankel.factorization.max_rank // 2)
         if method != "era-impulse":
             check_excitation(u, chosen, inputs)
     else:
-        chosen, gap = needed_order, order_gap(s, needed_order)
-    real = fac.realize(chosen)
-    if p is None:
+        chosen, gap = int(order), order_gap(s, int(order))
+    model = _Model.checked(_realize(hankel, chosen, combined), hankel.factorization, chosen, dt,
+                           reference_sensor)
+    notes: list[str] = u_repairs + y_repairs + ([] if refine else [NOT_REFINED])
+    if refine:
+        model, refine_notes = _refine(model, hankel, u, y, dt, search=order == "auto",
+                                      innovations=noise_model == "innovations",
+                                      feedthrough=feedthrough, reference=reference_sensor,
+                                      outputs=outputs)
+        notes += refine_notes
+    A, B, C, D, G = model.matrices
+    C = units.output_matrix(C)
+    refinement = (None if model.refinement is None
+                  else units.refinement(model.refinement, dt, reference_sensor))
+    return Identification(
+        A=A, B=units.input_matrix(B), C=C, D=units.feedthrough(D),
+        G=None if G is None else units.gain(G), dt=dt, order=model.order, order_gap=gap,
+        hankel_singular_values=s, markov=units.feedthrough(hankel.markov), method=method,
+        observer_order=hankel.observer_order, dimensions=hankel.dimensions,
+        factorization=hankel.factorization,
+        modes=(modal_parameters(A, C, dt, reference=reference_sensor) if refinement is None
+               else refinement.modes),            # the shapes in the records' units
+        consistent=model.consistent,
+        warnings=tuple(notes + quality_warnings(model.modes, model.consistent, model.order, gap,
+                                                model.left_out, model.uncertain)),
+        refinement=refinement,
+    )
+
+
+@dataclass(frozen=True)
+class _Hankel:
+    """The Markov parameters of the normalised records, the Hankel sizes and SVD, and OKID's
+    observer order and observer-gain Markov parameters (None for era-impulse)."""
+
+    markov: Array
+    dimensions: EraDimensions
+    factorization: HankelFactorization
+    observer_order: int | None
+    gain_markov: Array | None
+
+
+def _hankel(u: Array, y: Array, *, method: str, order: int, names: tuple[list[str], list[str]],
+            observer_order: int | None, combined: bool, alpha: int | None, beta: int | None,
+            gamma: int, delta: int, tau: int) -> _Hankel:
+    """The Hankel matrix of the method's Markov parameters, for a model of at least ``order``,
+    with the sizes of :func:`identify`."""
+    if method == "era-impulse":
+        markov, sizes, fac = _impulse_factorization(u, y, order, alpha, beta)
+        return _Hankel(markov, sizes, fac, None, None)
+    inputs, outputs = names
+    (n_samples, r), m = u.shape, y.shape[1]
+    correlated = method == "okid-eradc"
+    p = _observer_order(n_samples, r, m, order, observer_order, [*inputs, *outputs])
+    check_excitation(u, order, inputs)
+    fit = okid(u, y, p)
+    sizes = EraDimensions(alpha=alpha or p, beta=beta or 4 * p, gamma=gamma if correlated else 0,
+                          delta=delta if correlated else 0, tau=tau)
+    count = sizes.markov_count(correlated)
+    markov = fit.system_markov(count)
+    gain_markov = fit.observer_gain_markov(max(count, p + 1))
+    params = np.concatenate([markov, gain_markov[:count]], axis=2) if combined else markov
+    return _Hankel(markov, sizes, factorize(params, sizes, correlated=correlated), p,
+                   gain_markov[: p + 1])
+
+
+def _realize(hankel: _Hankel, order: int, combined: bool) -> tuple[Array, ...]:
+    """A, B, C, D, G of the order-``order`` realization (G: None for era-impulse)."""
+    real = hankel.factorization.realize(order)
+    r = hankel.markov.shape[2]
+    if hankel.gain_markov is None:
         B, G = real.B, None
     elif combined:
         B, G = real.B[:, :r], real.B[:, r:]  # eqs. 3.198, 3.199
     else:
-        B, G = real.B, observer_gain(real.A, real.C, gain_markov[: p + 1])
-    A, C, D = real.A, real.C, real.D[:, :r]  # the combined Gamma_0 is [D, 0]
-    modes = modal_parameters(A, C, float(dt), reference=reference_sensor)
-    consistent = mode_consistency(fac, modes, chosen, float(dt))
-    left_out = left_out_modes(fac, modes, chosen, float(dt))
-    refinement, uncertain = None, None
-    notes: list[str] = u_repairs + y_repairs + ([] if refine else [NOT_REFINED])
+        B, G = real.B, observer_gain(real.A, real.C, hankel.gain_markov)
+    return real.A, B, real.C, real.D[:, :r], G  # the combined Gamma_0 is [D, 0]
+
+
+@dataclass(frozen=True)
+class _Model:
+    """A model of the normalised records (A, B, C, D, G), its order, its modes and their
+    checks; ``uncertain`` and ``refinement`` only for a refined model."""
+
+    matrices: tuple[Array, ...]
+    order: int
+    modes: ModalTable
+    consistent: NDArray[np.bool_]
+    left_out: NDArray[np.float64]
+    uncertain: NDArray[np.bool_] | None = None
+    refinement: Refinement | None = None
+
+    @classmethod
+    def checked(cls, matrices: tuple[Array, ...], fac: HankelFactorization, order: int,
+                dt: float, reference: int | None) -> _Model:
+        """The realization's model: each mode persists at orders n + 2 and n + 4."""
+        modes = modal_parameters(matrices[0], matrices[2], dt, reference=reference)
+        return cls(matrices, order, modes, mode_consistency(fac, modes, order, dt),
+                   left_out_modes(fac, modes, order, dt))
+
+
+def _refine(model: _Model, hankel: _Hankel, u: Array, y: Array, dt: float, *, search: bool,
+            innovations: bool, feedthrough: Sequence[bool] | None, reference: int | None,
+            outputs: list[str]) -> tuple[_Model, list[str]]:
+    """The prediction-error refinement of ``model`` (``search``: over the candidate orders,
+    :func:`refine_candidates`) with its checks and notes; ``model`` itself, with the reason,
+    when the refinement cannot start."""
+    fac = hankel.factorization
     choice = None
-    innovations = noise_model == "innovations"
-    if refine:
-        try:
-            if order == "auto":
-                choice = refine_candidates(fac, gain_markov[: p + 1], r, u, y, float(dt), chosen,
-                                           innovations=innovations, feedthrough=feedthrough)
-                refinement = choice.refinement
-            else:
-                refinement = refine_prediction_error(A, B, C, D, G, u, y, float(dt),
-                                                     innovations=innovations,
-                                                     feedthrough=feedthrough)
-        except IdentificationError as exc:  # e.g. noise-free data: OKID's predictor diverges
-            notes.append(f"{NOT_REFINED}; the refinement could not start ({exc})")
-    if refinement is not None:
-        if choice is not None:
-            chosen = choice.order
-            notes += [choice.note] if choice.note else []
-        A, B, C, D, G = refinement.A, refinement.B, refinement.C, refinement.D, refinement.G
-        modes = modal_parameters(A, C, float(dt), reference=reference_sensor)
-        if choice is not None and choice.larger is not None:
-            consistent = persists(modes, choice.larger.modes)
+    try:
+        if search:
+            choice = refine_candidates(fac, hankel.gain_markov, u.shape[1], u, y, dt,
+                                       model.order, innovations=innovations,
+                                       feedthrough=feedthrough)
+            refinement = choice.refinement
         else:
-            consistent = mode_consistency(fac, modes, chosen, float(dt))
-        left_out = left_out_modes(fac, modes, chosen, float(dt))
-        # a mode without an interval (withheld, and said so in the notes) is not called wide
-        uncertain = (uncertain_modes(modes, refinement.frequency_ci_hz, refinement.damping_ci)
-                     & np.isfinite(refinement.frequency_ci_hz).all(axis=1))
-        notes += list(refinement.notes) + residual_warnings(y, refinement.errors)
-        notes += phase_warnings(modes, refinement.phase_std(reference_sensor), outputs)
-    units = _Units(u_scale, y_scale)
-    B, C, D = units.input_matrix(B), units.output_matrix(C), units.feedthrough(D)
-    G = None if G is None else units.gain(G)
-    return Identification(
-        A=A, B=B, C=C, D=D, G=G, dt=float(dt), order=chosen, order_gap=gap,
-        hankel_singular_values=s, markov=units.feedthrough(markov), method=method, observer_order=p,
-        dimensions=dims, factorization=fac,
-        modes=modal_parameters(A, C, float(dt), reference=reference_sensor),
-        consistent=consistent,
-        warnings=tuple(notes + quality_warnings(modes, consistent, chosen, gap, left_out,
-                                                uncertain)),
-        refinement=None if refinement is None else units.refinement(refinement, dt,
-                                                                    reference_sensor),
-    )
+            refinement = refine_prediction_error(*model.matrices, u, y, dt,
+                                                 innovations=innovations,
+                                                 feedthrough=feedthrough)
+    except IdentificationError as exc:  # e.g. noise-free data: OKID's predictor diverges
+        return model, [f"{NOT_REFINED}; the refinement could not start ({exc})"]
+    order = model.order if choice is None else choice.order
+    notes = [choice.note] if choice is not None and choice.note else []
+    modes = modal_parameters(refinement.A, refinement.C, dt, reference=reference)
+    if choice is not None and choice.larger is not None:
+        consistent = persists(modes, choice.larger.modes)
+    else:
+        consistent = mode_consistency(fac, modes, order, dt)
+    # a mode without an interval (withheld, and said so in the notes) is not called wide
+    uncertain = (uncertain_modes(modes, refinement.frequency_ci_hz, refinement.damping_ci)
+                 & np.isfinite(refinement.frequency_ci_hz).all(axis=1))
+    notes += list(refinement.notes) + residual_warnings(y, refinement.errors)
+    notes += phase_warnings(modes, refinement.phase_std(reference), outputs)
+    matrices = (refinement.A, refinement.B, refinement.C, refinement.D, refinement.G)
+    return _Model(matrices, order, modes, consistent, left_out_modes(fac, modes, order, dt),
+                  uncertain, refinement), notes
 
 
 @dataclass(frozen=True)
