@@ -21,7 +21,9 @@ from stillframe.locations import REPO_ROOT
 
 ROOT = REPO_ROOT
 
-pytestmark = pytest.mark.slow
+#: one identify-daisy run (two N4SID and four OKID identifications of 4261 samples at order 20)
+#: takes minutes: kept out of the default run
+pytestmark = [pytest.mark.slow, pytest.mark.long]
 
 
 @pytest.fixture(scope="module")

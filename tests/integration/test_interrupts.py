@@ -203,6 +203,7 @@ class Domains:
 
 
 @pytest.mark.slow
+@pytest.mark.long      # 147 runs of 7 commands: the phases test below holds each phase by default
 def test_sigint_at_any_moment_of_every_long_command(tmp_path: Path) -> None:
     """7 commands x 20 points, 4 at a time, each DDS one in a ROS domain of its own; the span
     of the points is each command's own uninterrupted run, measured first."""

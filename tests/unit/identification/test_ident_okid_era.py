@@ -128,6 +128,7 @@ def test_era_agrees_with_python_control(system, noise):
 
 
 @pytest.mark.slow
+@pytest.mark.long      # OKID at growing observer orders on long records: a minute
 def test_observer_gain_approaches_the_kalman_predictor_gain():
     """With process and measurement noise and a long record, OKID's observer is the steady-state
     Kalman predictor, G = -K (eq. 3.113). Compared coordinate-free: OKID's observer gain Markov

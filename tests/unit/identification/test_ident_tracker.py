@@ -80,6 +80,7 @@ def coverage_band(n: int, level: float = LEVEL) -> tuple[int, int]:
 
 
 @pytest.mark.slow
+@pytest.mark.long      # 12 seeds of a tracked run before and after control: minutes
 def test_tracked_damping_before_and_after_control_and_interval_coverage() -> None:
     """Before control the first mode's damping matches the open-loop model, after it the
     closed-loop pole's (python-control); the control raises it several-fold, so the two are told
