@@ -39,6 +39,8 @@ def test_bad_input_is_one_line_and_exit_2_before_anything_runs(args: list[str], 
 
 
 @pytest.mark.slow
+@pytest.mark.long      # three 70 s scenes (fixed, adaptive, oracle); test_adaptation_nodes and
+#                        tests/unit/loop/test_adaptation.py hold the hand-over by default
 def test_the_three_runs_and_the_issues_json(ros_domain: int, tmp_path: Path) -> None:
     args = [a for s in SHORT for a in ("--set", s)]
     done = run_stillframe("adapt", "scenes/change_mass_floor2.yaml", *args, "--out",

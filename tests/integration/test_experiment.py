@@ -148,6 +148,7 @@ def assert_goal(doc: dict) -> None:
 
 
 @pytest.mark.slow
+@pytest.mark.long      # the whole experiment (identify, design, control) through the nodes
 def test_lumped_experiment_through_the_nodes(tmp_path: Path, ros_domain: int) -> None:
     """Shortened: 32 s test, 30 s loops with control from 15 s."""
     doc = run_experiment_cli(tmp_path, LUMPED, "--test-duration", "32", "--set", "duration=30",

@@ -47,6 +47,15 @@ CASES = {"before": ("rogue_tuner", "/", None), "during": ("rogue_tuner", "/", 1.
 SET = [arg for override in SHORT_LQG for arg in ("--set", override)]
 
 
+def matrix(parity: int) -> list[object]:
+    """Every (case, backend): where both backends run, half of them are long, alternating, and
+    the lock-step and the real-time test (``parity`` 0 and 1) keep opposite halves by default,
+    so the default run has every case on every backend once and each test has every case."""
+    return [pytest.param(case, backend, marks=pytest.mark.long if len(BACKENDS) > 1 and
+                         (i + j + parity) % 2 else ())
+            for i, case in enumerate(CASES) for j, backend in enumerate(BACKENDS)]
+
+
 @functools.cache
 def reference() -> Any:
     return run_closed_loop(thesis_scene("thesis_lqg", SHORT_LQG))
@@ -86,8 +95,7 @@ def refused(report: dict) -> int:
     return sum(int(report[f"rejected_{r}"]) for r in REASONS)
 
 
-@pytest.mark.parametrize("backend", BACKENDS)
-@pytest.mark.parametrize("case", CASES)
+@pytest.mark.parametrize(("case", "backend"), matrix(0))
 def test_a_foreign_writer_changes_nothing_in_lock_step_and_is_named(
         ros_domain: int, tmp_path: Path, backend: str, case: str) -> None:
     done, sent = launch_beside(tmp_path, backend, case)
@@ -119,8 +127,7 @@ def test_strict_fails_a_run_beside_a_foreign_writer(ros_domain: int, tmp_path: P
     assert "/rogue_tuner on /frame/pendulum/torque_cmd" in done.stderr
 
 
-@pytest.mark.parametrize("backend", BACKENDS)
-@pytest.mark.parametrize("case", CASES)
+@pytest.mark.parametrize(("case", "backend"), matrix(1))
 def test_in_real_time_the_loops_commands_are_all_taken_beside_a_writer(
         ros_domain: int, tmp_path: Path, backend: str, case: str) -> None:
     """The issue's cases in real time, the writer at 50 Hz (started before the launch it took

@@ -244,6 +244,7 @@ def launch(*args: str) -> subprocess.Popen:
 
 
 @pytest.mark.slow
+@pytest.mark.long      # two whole launches side by side, each waiting out the other
 def test_two_launches_on_one_domain_never_both_stall(ros_domain: int) -> None:
     """Started in the same instant: the later launcher refuses with one line naming the earlier
     one (exit 2), before starting any node when discovery shows it within ``LOOK_S``, at once

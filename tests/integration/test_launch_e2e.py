@@ -136,6 +136,7 @@ def test_ctrl_c_stops_the_real_nodes_and_the_recorder(tmp_path: Path,
         assert {c.topic for c in reader.connections} >= {"/frame/floor1/imu", "/clock"}
 
 
+@pytest.mark.long      # every shipped thesis scene in turn; the demo test runs one by default
 def test_reproduce_prints_each_scene_beside_the_thesis(ros_domain: int) -> None:
     scenes = [str(SCENES / "thesis_lqg.yaml"), str(SCENES / "thesis_euk_ekf.yaml")]
     done = run_stillframe("reproduce", *scenes, *SHORT, "--json", timeout=600)

@@ -60,6 +60,7 @@ def test_launch_track_reports_the_modes_before_and_after_control(ros_domain: int
 
 
 @pytest.mark.slow
+@pytest.mark.long      # a second 50 s tracked launch; the 1 kHz one above runs by default
 def test_at_200_hz_the_tracker_reads_the_decimated_taps_and_finds_the_modes(
         ros_domain: int) -> None:
     """At 200 Hz the tracker reads sim_node's anti-alias-filtered taps at 50 Hz

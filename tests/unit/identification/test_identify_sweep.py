@@ -60,6 +60,7 @@ def test_clean_case_is_identified_by_every_method() -> None:
 
 
 @pytest.mark.slow
+@pytest.mark.long      # the bench sweep of every cell over its runs: a minute
 def test_bench_json_cells_count_their_runs() -> None:
     """Two cells picked with --snr / --samples, two seeds each: every cell's figures are those
     of its runs (the median of two is the lower one, ``inverted_cdf``)."""
