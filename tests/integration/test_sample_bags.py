@@ -66,12 +66,16 @@ def test_closed_loop_bag_equals_the_one_process_run() -> None:
                 torque.setdefault(round(t * 32), msg.wrench.torque.z)
     assert sorted(truth) == list(range(128))
     # the bag was made on another machine: OpenBLAS picks its kernels per CPU, so the same run
-    # agrees to round-off there (measured: up to 1.4e-11 relative), bit for bit only on one machine
-    # (the launch tests compare three processes with one process bit for bit)
-    np.testing.assert_allclose(np.array([truth[k] for k in range(128)]), history.truth,
-                               rtol=1e-9, atol=1e-15)
-    np.testing.assert_allclose([torque[k] for k in range(128)], history.command[:, 0],
-                               rtol=1e-9, atol=1e-15)
+    # agrees there to round-off grown over 128 samples of a damped, stable loop, bit for bit only
+    # on one machine (the launch tests compare three processes with one process bit for bit).
+    # Each channel is compared relative to its own largest value: the states and the torque
+    # cross zero, where a relative bound alone would ask for more than round-off gives.
+    def close(recorded: np.ndarray, computed: np.ndarray) -> None:
+        scale = np.maximum(np.max(np.abs(computed), axis=0), np.finfo(float).tiny)
+        np.testing.assert_allclose(recorded / scale, computed / scale, rtol=0, atol=1e-9)
+
+    close(np.array([truth[k] for k in range(128)]), history.truth)
+    close(np.array([torque[k] for k in range(128)]), history.command[:, 0])
     assert np.max(np.abs(history.command[64:, 0])) > 0.1  # control is on in the second half
 
 
