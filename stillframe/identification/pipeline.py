@@ -264,15 +264,18 @@ def identify(
             check_excitation(u, chosen, inputs)
     else:
         chosen, gap = int(order), order_gap(s, int(order))
-    model = _Model.checked(_realize(hankel, chosen, combined), hankel.factorization, chosen, dt,
-                           reference_sensor)
+    realized = _realize(hankel, chosen, combined)
     notes: list[str] = u_repairs + y_repairs + ([] if refine else [NOT_REFINED])
+    model = None
     if refine:
-        model, refine_notes = _refine(model, hankel, u, y, dt, search=order == "auto",
+        model, refine_notes = _refine(realized, chosen, hankel, u, y, dt,
+                                      search=order == "auto",
                                       innovations=noise_model == "innovations",
                                       feedthrough=feedthrough, reference=reference_sensor,
                                       outputs=outputs)
         notes += refine_notes
+    if model is None:                       # not refined: the realization's own checks
+        model = _Model.checked(realized, hankel.factorization, chosen, dt, reference_sensor)
     A, B, C, D, G = model.matrices
     C = units.output_matrix(C)
     refinement = (None if model.refinement is None
@@ -363,27 +366,27 @@ class _Model:
                    left_out_modes(fac, modes, order, dt))
 
 
-def _refine(model: _Model, hankel: _Hankel, u: Array, y: Array, dt: float, *, search: bool,
-            innovations: bool, feedthrough: Sequence[bool] | None, reference: int | None,
-            outputs: list[str]) -> tuple[_Model, list[str]]:
-    """The prediction-error refinement of ``model`` (``search``: over the candidate orders,
-    :func:`refine_candidates`) with its checks and notes; ``model`` itself, with the reason,
-    when the refinement cannot start."""
+def _refine(realized: tuple[Array, ...], order: int, hankel: _Hankel, u: Array, y: Array,
+            dt: float, *, search: bool, innovations: bool, feedthrough: Sequence[bool] | None,
+            reference: int | None, outputs: list[str]) -> tuple[_Model | None, list[str]]:
+    """The prediction-error refinement of the order-``order`` realization (``search``: over the
+    candidate orders around it, :func:`refine_candidates`) with its checks and notes; None, with
+    the reason, when the refinement cannot start."""
     fac = hankel.factorization
     choice = None
     try:
         if search:
             choice = refine_candidates(fac, hankel.gain_markov, u.shape[1], u, y, dt,
-                                       model.order, innovations=innovations,
+                                       order, innovations=innovations,
                                        feedthrough=feedthrough)
             refinement = choice.refinement
         else:
-            refinement = refine_prediction_error(*model.matrices, u, y, dt,
+            refinement = refine_prediction_error(*realized, u, y, dt,
                                                  innovations=innovations,
                                                  feedthrough=feedthrough)
     except IdentificationError as exc:  # e.g. noise-free data: OKID's predictor diverges
-        return model, [f"{NOT_REFINED}; the refinement could not start ({exc})"]
-    order = model.order if choice is None else choice.order
+        return None, [f"{NOT_REFINED}; the refinement could not start ({exc})"]
+    order = order if choice is None else choice.order
     notes = [choice.note] if choice is not None and choice.note else []
     modes = modal_parameters(refinement.A, refinement.C, dt, reference=reference)
     if choice is not None and choice.larger is not None:

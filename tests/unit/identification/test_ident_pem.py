@@ -129,3 +129,34 @@ def test_an_input_without_feedthrough_has_no_direct_term() -> None:
         identify(u, y, dt, "okid-eradc", 4, feedthrough=[False, True])
     with pytest.raises(InputError, match="unknown noise model 'arx'"):
         identify(u, y, dt, "okid-eradc", 4, noise_model="arx")
+
+
+def test_a_refinement_that_cannot_start_leaves_the_realizations_model_and_says_why(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """The fallback is the unrefined identification itself (``refine=False``, the second path):
+    the same matrices and modes, the same checks, and a note with the refinement's reason."""
+    from stillframe.errors import IdentificationError
+    from stillframe.identification import pipeline
+
+    rng = np.random.default_rng(3)
+    dt = 0.01
+    system = signal.cont2discrete((np.array([[0.0, 1.0], [-(2 * np.pi * 1.3) ** 2, -0.3]]),
+                                   np.array([[0.0], [1.0]]), np.array([[1.0, 0.0]]),
+                                   np.zeros((1, 1))), dt)
+    u = rng.standard_normal((800, 1))
+    _, y, _ = signal.dlsim(system, u)
+    y = y + 1e-3 * rng.standard_normal(y.shape) * y.std()
+    plain = identify(u, y, dt, "okid-eradc", 2, refine=False)
+
+    def cannot_start(*args: object, **kwargs: object) -> None:
+        raise IdentificationError("the predictor diverges")
+
+    monkeypatch.setattr(pipeline, "refine_prediction_error", cannot_start)
+    fallback = identify(u, y, dt, "okid-eradc", 2)
+    for name in ("A", "B", "C", "D", "G", "consistent"):
+        np.testing.assert_array_equal(getattr(fallback, name), getattr(plain, name))
+    np.testing.assert_array_equal(fallback.modes.frequency_hz, plain.modes.frequency_hz)
+    assert fallback.refinement is None
+    notes = [w for w in fallback.warnings if "could not start (the predictor diverges)" in w]
+    assert len(notes) == 1 and notes[0].startswith(pipeline.NOT_REFINED)
+    assert set(fallback.warnings) - set(notes) == set(plain.warnings) - {pipeline.NOT_REFINED}
