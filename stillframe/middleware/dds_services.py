@@ -175,15 +175,16 @@ class DdsClient(_Endpoints):
         self.waitset.attach(self.condition)
 
     def service_is_ready(self) -> bool:
-        """rmw_cyclonedds' check: one service's request reader and reply writer are both
-        matched; when no matched reader carries a ``serviceid`` (another rmw), any matched
-        reader and writer."""
+        """One service's request reader and reply writer are both matched (rmw_cyclonedds'
+        check). Unlike rmw_cyclonedds, a service whose matched readers carry no ``serviceid``
+        (another rmw, such as Fast DDS) is never ready: such a server reads rmw_cyclonedds'
+        in-payload request header as the request's fields, and a sequence length taken from
+        the header's bytes can make it allocate and initialise millions of strings, stalling it
+        for longer than any call waits (docs/middleware.md)."""
         readers = {user_data_field(self.writer.get_matched_subscription_data(h).qos, "serviceid")
                    for h in self.writer.get_matched_subscriptions()}
         writers = {user_data_field(self.reader.get_matched_publication_data(h).qos, "serviceid")
                    for h in self.reader.get_matched_publications()}
-        if readers == {""}:
-            return bool(writers)
         return bool((readers & writers) - {""})
 
     def wait_for_service(self, timeout_sec: float) -> bool:
