@@ -190,15 +190,18 @@ def print_partial(evaluation: dict[str, Any], scene: Scene, args: argparse.Names
 
 
 def bag_incomplete(bag: dict[str, Any] | None) -> str:
-    """One line on what the launch's bag lacks (the recorder's counts, as
+    """One line on what the launch's bag lacks (the recorder's counts, and the simulator's
+    samples the bag does not hold beyond those, as
     :func:`stillframe.recording.recorder.completeness` says it), "" when nothing."""
     from stillframe.recording.recorder import completeness
 
     if not bag or not bag.get("closed"):
         return ""
     stalls = bag.get("recorder_stalls", {})
-    line = completeness(bag.get("missing_samples", {}), stalls.get("count", 0),
-                        stalls.get("longest_s", 0.0))
+    missing = bag.get("missing_samples", {})
+    lacks = {t: max(n - missing.get(t, 0), 0) for t, n in bag.get("not_recorded", {}).items()}
+    line = completeness(missing, stalls.get("count", 0), stalls.get("longest_s", 0.0),
+                        lacks=lacks)
     return f"the bag {bag['path']} {line}" if line else ""
 
 

@@ -39,7 +39,7 @@ from stillframe.bags.metadata import load_metadata
 from stillframe.config import environment
 from stillframe.config.scene import Scene, load_scene
 from stillframe.contract import messages
-from stillframe.contract.topics import DEFAULT_NAMESPACE, STATUS_KEYS
+from stillframe.contract.topics import DEFAULT_NAMESPACE, PER_SAMPLE, STATUS_KEYS
 from stillframe.errors import BY_EXIT_CODE, BagError, InputError, StillframeError
 from stillframe.fidelity.auto_model import resolve_model
 from stillframe.files import write_text
@@ -791,7 +791,7 @@ class Launcher:
         evaluation = {**written, "complete": False, "died": {"node": died.name, "how": died.how},
                       "stopped": stopped, "diagnostics": dict(self.statuses)}
         if self.options.record_dir is not None:
-            evaluation["bag"] = _bag_state(self.options.record_dir)
+            evaluation["bag"] = _bag_state(self.options.record_dir, written.get("steps"))
         with contextlib.suppress(OSError, InputError):
             write_text(path, json.dumps(evaluation, indent=2) + "\n", what="result file")
         history = path.with_suffix(".npz")
@@ -827,7 +827,7 @@ class Launcher:
         except (OSError, ValueError) as exc:
             raise InputError(f"sim_node's result file {path}: cannot read it ({exc})") from None
         if self.options.record_dir is not None:
-            evaluation["bag"] = _bag_state(self.options.record_dir)
+            evaluation["bag"] = _bag_state(self.options.record_dir, evaluation.get("steps"))
         if self.scene.adaptation.enabled:
             try:
                 evaluation["adaptation"] = json.loads(self.options.adaptation_file.read_text())
@@ -843,9 +843,13 @@ def _how_stopped(code: int | None) -> str:
     return f"ended by {signal.Signals(-code).name}" if code < 0 else f"exit code {code}"
 
 
-def _bag_state(bag: Path) -> dict[str, Any]:
-    """Whether the recorder closed its bag (metadata written), how many messages it holds, and
-    what the recorder found missing (samples per topic, its stalls; its ``custom_data``)."""
+def _bag_state(bag: Path, steps: int | None) -> dict[str, Any]:
+    """Whether the recorder closed its bag (metadata written), how many messages it holds,
+    what the recorder found missing (samples per topic, its stalls; its ``custom_data``) and,
+    when the simulator ran ``steps`` samples, how many of each of its per-sample topics the bag
+    does not hold (``not_recorded``: the samples it sent, less the bag's messages of the topic;
+    this also counts what a stamp grid cannot show, the samples after the last one the bag holds
+    or before its first)."""
     try:
         meta = load_metadata(bag)
     except BagError:
@@ -855,6 +859,10 @@ def _bag_state(bag: Path) -> dict[str, Any]:
     for name, key in (("missing_samples", MISSING_KEY), ("recorder_stalls", STALLS_KEY)):
         with contextlib.suppress(KeyError, ValueError):
             state[name] = json.loads(meta.custom_data[key])
+    if isinstance(steps, int):
+        held = {t.name: t.message_count for t in meta.topics}
+        state["not_recorded"] = {topic: max(steps - held[topic], 0)
+                                 for topic in PER_SAMPLE if topic in held}
     return state
 
 

@@ -10,8 +10,8 @@ from dataclasses import dataclass
 
 __all__ = ["CLOCK", "CONDITIONAL", "CONTRACT", "DEFAULT_NAMESPACE", "DIAGNOSTICS", "ENERGY_BALANCE",
            "ENERGY_FIELDS", "EXCITATION_WRENCH", "FLOOR3_LOAD_CELL", "FLOOR_IMU", "FORCE_CMD",
-           "PENDULUM_JOINT_STATES", "STATE_COVARIANCE", "STATE_ESTIMATE", "STATE_TRUTH",
-           "STATUS_KEYS", "STRUCTURE_EVENTS", "TORQUE_CMD", "TopicSpec"]
+           "PENDULUM_JOINT_STATES", "PER_SAMPLE", "STATE_COVARIANCE", "STATE_ESTIMATE",
+           "STATE_TRUTH", "STATUS_KEYS", "STRUCTURE_EVENTS", "TORQUE_CMD", "TopicSpec"]
 
 DEFAULT_NAMESPACE = "/frame"
 
@@ -120,6 +120,12 @@ CONTRACT: tuple[TopicSpec, ...] = (
     FORCE_CMD,
     STATE_ESTIMATE, STATE_COVARIANCE, STATE_TRUTH, DIAGNOSTICS,
 )
+#: the topics the simulator publishes once per sample, by absolute name (in the default
+#: namespace): a run of N samples sends N messages on each
+PER_SAMPLE: tuple[str, ...] = tuple(
+    spec.name if spec.name.startswith("/") else f"{DEFAULT_NAMESPACE}/{spec.name}"
+    for spec in (CLOCK, *FLOOR_IMU, PENDULUM_JOINT_STATES, EXCITATION_WRENCH, FLOOR3_LOAD_CELL,
+                 STATE_TRUTH))
 #: topics a loop node publishes only for some scenes (not every launch has them)
 CONDITIONAL: tuple[TopicSpec, ...] = (ENERGY_BALANCE, STRUCTURE_EVENTS, ADAPTATION_EVENTS)
 

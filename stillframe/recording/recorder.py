@@ -275,19 +275,30 @@ class Recorder(TopicFollower):
             {"count": self.stalls, "longest_s": round(self.longest_stall_s, 3)})
 
 
-def completeness(missing: Mapping[str, int], stalls: int, longest_s: float) -> str:
+def completeness(missing: Mapping[str, int], stalls: int, longest_s: float, *,
+                 lacks: Mapping[str, int] | None = None) -> str:
     """What a bag lacks, one phrase to follow "the bag": ``is not complete: it misses N
-    samples (...)`` when the stamp grids show missing samples; ``may not be complete: ...`` when
-    the recorder only stalled (the topics on a stamp grid miss nothing, but those without one,
+    samples (...)`` when the stamp grids show missing samples, and ``it lacks N more samples the
+    simulator published`` for ``lacks``, the samples per topic beyond those (sent before the
+    first or after the last sample the bag holds of a topic, which no stamp grid shows: the
+    launch knows them from the simulator's count); ``may not be complete: ...`` when the
+    recorder only stalled (the topics on a stamp grid miss nothing, but those without one,
     such as ``/rosout`` and ``/diagnostics``, may have lost what was sent meanwhile); "" when
-    neither."""
+    none of these."""
     missing = {t: n for t, n in missing.items() if n}
+    lacks = {t: n for t, n in (lacks or {}).items() if n}
     stalled = (f"the recorder stalled {stalls} times, the longest {longest_s:.2f} s"
                if stalls else "")
+    parts = []
     if missing:
-        return (f"is not complete: it misses {sum(missing.values())} samples ("
-                + ", ".join(f"{t} {n}" for t, n in missing.items()) + ")"
-                + (f"; {stalled}" if stalled else ""))
+        parts.append(f"it misses {sum(missing.values())} samples ("
+                     + ", ".join(f"{t} {n}" for t, n in missing.items()) + ")")
+    if lacks:
+        parts.append(f"it lacks {sum(lacks.values())} more samples the simulator published, "
+                     "before the first or after the last it holds of their topics ("
+                     + ", ".join(f"{t} {n}" for t, n in lacks.items()) + ")")
+    if parts:
+        return "is not complete: " + "; ".join(parts) + (f"; {stalled}" if stalled else "")
     if stalled:
         return (f"may not be complete: {stalled}; no sample is missing from the topics on a "
                 "stamp grid, topics without one may have lost what was sent meanwhile")

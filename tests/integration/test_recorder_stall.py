@@ -5,13 +5,23 @@ the launch's recorder stopped (SIGSTOP) while the simulator runs 3 s of its time
 The stall is forced, not timed: the test follows the simulator's ``/clock`` itself and stops the
 recorder once sampling runs, resumes it once the simulator has gone 3 s (3072 samples of every
 topic at 1024 Hz, megabytes: more than the sockets and the publishers' histories keep for a
-stopped reader). What the bag misses is counted independently of the recorder: each per-step
-topic's stamps read back by rosbags, against every sample time from its first to its last. That
-count must be the recorder's, per topic, in its last line, in ``metadata.yaml``'s custom data
-(plain PyYAML) and in launch's JSON; launch ends with a warning line, and so does ``bag info``
-of the bag; the stall is logged while the recorder runs.
-"""
+stopped reader). What the bag lacks is counted independently of the recorder, each per-step
+topic's stamps read back by rosbags: against every sample time from its first to its last (the
+stamp grid's gaps, which the recorder counts), and against the 6144 samples the scene's 6 s at
+1024 Hz make (every sample the bag does not hold, which the launch counts from the simulator's
+own count). Those counts must be the recorder's and the launch's, per topic, in the recorder's
+last line, in ``metadata.yaml``'s custom data (plain PyYAML) and in launch's JSON; launch ends
+with a warning line, and so does ``bag info`` of the bag; the stall is logged while the recorder
+runs.
 
+Two outcomes are both right, and the test takes either. Under Cyclone DDS (and often under Fast
+DDS) the samples sent during the stop are lost in the middle of the bag: a gap in the stamp grid.
+Under Fast DDS the shared-memory transport can instead mark the stopped reader's port as dead
+after its health check: the simulator's writes then wait on that port (3 s of sim time took 9
+to 21 s of wall time here) and the recorder receives nothing more from the simulator after its
+stop. Those samples lie after the last stamp the bag holds, so no grid shows them: the launch's
+count against the simulator's does.
+"""
 from __future__ import annotations
 
 import json
@@ -45,6 +55,8 @@ PERIOD_NS = 1e9 / RATE_HZ
 BEFORE_S, STALLED_S = 1.0, 3.0
 OVERRIDES = ["--set", f"sensors.rate_hz={RATE_HZ}", "--set", "duration=6", "--set",
              "controller.start=3", "--set", "evaluation.window=2"]
+#: the samples of the scene's 6 s at 1024 Hz, one message each on every per-step topic
+STEPS = 6 * RATE_HZ
 #: a bound against a hung run, not a timing assertion [s]
 WAIT_S = 600.0
 BACKENDS = [pytest.param(b, marks=pytest.mark.skipif(b == "rclpy" and not api.has_rclpy(),
@@ -72,17 +84,23 @@ class Lines:
         return "\n".join(self.lines)
 
 
-def missing_in(bag: Path) -> dict[str, int]:
-    """Per per-step topic, the sample times from its first to its last that the bag lacks."""
-    held: dict[str, set[int]] = {}
+def sample_indices(bag: Path) -> dict[str, list[int]]:
+    """Per per-step topic, the sample index of each of its messages (its stamp over the
+    period), read back by rosbags message by message."""
+    held: dict[str, list[int]] = {topic: [] for topic in PER_STEP}
     with AnyReader([bag]) as reader:
         for conn, _, raw in reader.messages([c for c in reader.connections
                                              if c.topic in PER_STEP]):
             msg = reader.deserialize(raw, conn.msgtype)
             stamp = msg.clock if conn.topic == "/clock" else msg.header.stamp
-            held.setdefault(conn.topic, set()).add(
+            held[conn.topic].append(
                 round((stamp.sec * 1_000_000_000 + stamp.nanosec) / PERIOD_NS))
-    return {topic: max(k) - min(k) + 1 - len(k) for topic, k in held.items()}
+    return held
+
+
+def missing_in(held: dict[str, list[int]]) -> dict[str, int]:
+    """Per topic with samples, the sample times from its first to its last that it lacks."""
+    return {topic: max(k) - min(k) + 1 - len(set(k)) for topic, k in held.items() if k}
 
 
 @pytest.mark.parametrize("backend", BACKENDS)
@@ -126,9 +144,12 @@ def test_a_stopped_recorder_counts_what_the_bag_misses(tmp_path: Path, ros_domai
             launch.wait()
     text = err.join()
     assert launch.returncode == 0, text[-3000:]
-    missing = missing_in(bag)
-    assert sum(missing.values()) > 0, missing
+    held = sample_indices(bag)
+    missing = missing_in(held)
     doc = json.loads(out)["bag"]
+    assert json.loads(out)["steps"] == STEPS
+    assert doc["not_recorded"] == {topic: STEPS - len(k) for topic, k in held.items()}
+    assert sum(doc["not_recorded"].values()) > 0, doc
     counted = doc["missing_samples"]
     assert {t: counted[t] for t in missing} == missing
     custom = yaml.safe_load((bag / "metadata.yaml").read_text())[
@@ -139,12 +160,21 @@ def test_a_stopped_recorder_counts_what_the_bag_misses(tmp_path: Path, ros_domai
     assert doc["recorder_stalls"]["count"] >= 1
     assert doc["recorder_stalls"]["longest_s"] >= 1.0
     total = sum(n for n in counted.values())
+    beyond = sum(doc["not_recorded"][t] - counted.get(t, 0) for t in PER_STEP)
     assert re.search(r"\[recorder\] .*recorder stalled: no poll for", text), text[-3000:]
-    assert re.search(rf"\[recorder\] .*the bag is not complete: it misses {total} samples", text)
-    assert re.search(rf"stillframe launch: warning: the bag {re.escape(str(bag))} is not "
-                     rf"complete: it misses {total} samples", text)
+    said = rf"stillframe launch: warning: the bag {re.escape(str(bag))} is not complete: "
+    if total:
+        assert re.search(rf"\[recorder\] .*the bag is not complete: it misses {total} samples",
+                         text)
+        assert re.search(said + rf"it misses {total} samples", text)
+    else:
+        assert re.search(r"\[recorder\] .*the bag may not be complete: the recorder stalled",
+                         text)
+    if beyond:
+        assert re.search(said + rf"(it misses .*; )?it lacks {beyond} more samples the "
+                                "simulator published", text), text[-3000:]
     info = subprocess.run([sys.executable, "-m", "stillframe", "bag", "info", str(bag)],
                           env=child_env(), cwd=REPO_ROOT, capture_output=True, text=True,
                           timeout=WAIT_S)
     assert info.returncode == 0, info.stderr
-    assert f"warning: the recorder found {total} samples missing" in info.stderr
+    assert (f"warning: the recorder found {total} samples missing" in info.stderr) == (total > 0)

@@ -33,21 +33,11 @@ from mcap.writer import Writer as McapWriter
 
 from stillframe.bags.storage import BagWriter, bag_summary, read_bag
 from stillframe.contract import messages
-from stillframe.contract.topics import (
-    CLOCK,
-    DEFAULT_NAMESPACE,
-    EXCITATION_WRENCH,
-    FLOOR3_LOAD_CELL,
-    FLOOR_IMU,
-    PENDULUM_JOINT_STATES,
-    STATE_TRUTH,
-)
+from stillframe.contract.topics import PER_SAMPLE
 from stillframe.errors import BagError
 
 #: the topics the simulator publishes once per step
-PER_STEP = tuple(spec.name if spec.name.startswith("/") else f"{DEFAULT_NAMESPACE}/{spec.name}"
-                 for spec in (CLOCK, *FLOOR_IMU, PENDULUM_JOINT_STATES, EXCITATION_WRENCH,
-                              FLOOR3_LOAD_CELL, STATE_TRUTH))
+PER_STEP = PER_SAMPLE
 READY_LINE = "Recording to"
 _STAMP = struct.Struct("<iI")   # the header stamp (/clock: its time), first after the CDR header
 READY_TIMEOUT_S = 20.0

@@ -74,3 +74,17 @@ def test_completeness_says_missing_samples_apart_from_stalls_alone() -> None:
         "may not be complete: the recorder stalled 2 times, the longest 0.57 s; no sample is "
         "missing from the topics on a stamp grid")
     assert completeness({"/a": 0}, 0, 0.0) == ""
+
+
+def test_samples_beyond_the_stamp_grids_make_a_bag_not_complete() -> None:
+    """What the simulator sent outside the stamps a bag holds (a lost tail) is said apart from
+    the grids' gaps; with nothing on the grids missing, a stall and a lost tail are "not
+    complete", not "may not be"."""
+    assert completeness({"/a": 0, "/b": 2}, 0, 0.0, lacks={"/a": 7, "/b": 0}) == (
+        "is not complete: it misses 2 samples (/b 2); it lacks 7 more samples the simulator "
+        "published, before the first or after the last it holds of their topics (/a 7)")
+    assert completeness({"/a": 0}, 1, 11.3, lacks={"/a": 5120}) == (
+        "is not complete: it lacks 5120 more samples the simulator published, before the "
+        "first or after the last it holds of their topics (/a 5120); the recorder stalled 1 "
+        "times, the longest 11.30 s")
+    assert completeness({"/a": 0}, 0, 0.0, lacks={"/a": 0}) == ""
