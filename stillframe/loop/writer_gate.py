@@ -6,8 +6,10 @@ One :class:`WriterGate` per input topic. With the run's token (``run_token``, do
 sample is decoded), whatever its writer, its order of arrival or its node's name; every other
 sample is a foreign writer's, refused and counted (``foreign_writer``), and the writer named from
 the graph: by its GID where the middleware hands one, else as the topic's writers other than the
-loop's own node (by its fully qualified name). ``/clock`` carries no header, so no token: its
-gate (the controller's, with ``use_sim_time``) decides as below.
+loop's own node (by its fully qualified name; by its writer's GID in hex while the graph has no
+name for its node, which a launch replaces by the name its own graph has at the end of the run).
+``/clock`` carries no header, so no token: its gate (the controller's, with ``use_sim_time``)
+decides as below.
 
 Without a token (nodes started by hand without one), samples are taken only from the writers of
 *one* node, each identified by its writer GID (the DDS publication GUID the middleware hands
@@ -171,6 +173,8 @@ class WriterGate:
     #: the run came
     foreign: set[bytes] = field(default_factory=set)
     seen: bool = False
+    #: GIDs the graph named as the loop's own (or the taken) node's writers
+    own_gids: set[bytes] = field(default_factory=set)
 
     def __post_init__(self) -> None:
         self.pinned = resolve_node(self.pinned, self.namespace) if self.pinned else ""
@@ -263,11 +267,18 @@ class WriterGate:
         return None
 
     def suspects(self) -> list[str]:
-        """Without GIDs: the nodes writing the topic other than the taken one (with a token:
-        than the loop's own)."""
+        """Without GIDs: the writers of the topic other than the taken node's (with a token:
+        than the loop's own node's), by their node's name, or by their GID in hex while the
+        graph has no name for their node (as :meth:`name_of` gives a GID: a launch names those
+        from its own graph at the end of the run). A writer the graph named as that node once is
+        never a suspect."""
         wanted = self.own if self.token else self.pinned or self.owner
-        return sorted({name for _, name in self.writers()
-                       if name.strip("/") and not (wanted and name == wanted)})
+        listed = self.writers()
+        if wanted:
+            self.own_gids.update(g for g, name in listed if name == wanted)
+        return sorted({name if name.strip("/") else g.hex() for g, name in listed
+                       if not (wanted and name == wanted)
+                       and (name.strip("/") or (g and g not in self.own_gids))})
 
     def has_seen_samples(self) -> bool:
         """Whether samples came: of the run, from a writer taken, or without a GID (its writers
@@ -288,7 +299,8 @@ class WriterGate:
 
     def name_of(self, gid: bytes) -> str:
         """The node of writer ``gid`` in the graph, its GID in hex while the graph has none; a
-        stream's (no GID): the topic's other writers, or ``unnamed`` while the graph shows none."""
+        stream's (no GID): the topic's other writers (:meth:`suspects`), or ``unnamed`` while
+        the graph shows none."""
         if gid.startswith(STREAM_KEY):
             return " or ".join(self.suspects()) or "unnamed"
         return next((name for g, name in self.writers() if g == gid and name.strip("/")),

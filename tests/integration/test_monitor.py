@@ -76,7 +76,10 @@ class Launch:
         self.ready.set()
 
     def finish(self, timeout: float = 180) -> dict:
-        out, _ = self.proc.communicate(timeout=timeout)
+        """The launch's JSON once it exited (stderr stays the reader thread's: communicate()
+        would close it under the thread)."""
+        self.proc.wait(timeout=timeout)     # its JSON is far less than a pipe holds
+        out = self.proc.stdout.read()
         assert self.proc.returncode == 0, "".join(self.lines[-30:])
         return json.loads(out)
 
@@ -240,7 +243,7 @@ def test_dashboard_in_headless_chromium(tmp_path: Path, ros_domain_module: int) 
     finally:
         driver.quit()
         launch.proc.send_signal(signal.SIGINT)
-        launch.proc.communicate(timeout=120)
+        launch.proc.wait(timeout=120)   # stderr is the reader thread's
     (tmp_path / "dashboard.png").write_bytes(second)
     assert not errors, errors
     assert trace_pixels(first) > 500 and trace_pixels(second) > 500

@@ -222,8 +222,8 @@ class RmwGraph:
 
 def test_without_writer_ids_a_stranger_rmw_has_not_named_is_named_once_it_is() -> None:
     """The rclpy writing-peer case: the first refusal comes before rmw knows the stranger's node;
-    the log says "unnamed" (never rmw's placeholder), then names it at the next refusal after
-    the graph does."""
+    the log gives its writer's GID (never rmw's placeholder), then names it at the next refusal
+    after the graph does."""
     graph = RmwGraph((SIM, "/frame", "sim_node"),
                      (STRAY, "_NODE_NAMESPACE_UNKNOWN_", "_NODE_NAME_UNKNOWN_"))
     assert graph_writers(graph, "/cmd")()[1] == (STRAY, "/")
@@ -239,7 +239,7 @@ def test_without_writer_ids_a_stranger_rmw_has_not_named_is_named_once_it_is() -
         assert not gate.admits(b"", 2) and gates.announce(log)
         assert not gate.admits(b"", 3) and not gates.announce(log)    # said once
     said = "/cmd: refusing the samples of another writer: "
-    assert log.lines == [said + "unnamed (1 so far)", said + "/frame/topic_pub (2 so far)"]
+    assert log.lines == [said + f"{STRAY.hex()} (1 so far)", said + "/frame/topic_pub (2 so far)"]
     assert gate.report()["ignored_writers"] == "/frame/topic_pub"
 
 
@@ -382,3 +382,19 @@ def test_a_topic_without_a_header_keeps_the_rule_of_a_run_without_a_token() -> N
     tick = messages.serialize(messages.new("rosgraph_msgs/msg/Clock"))
     assert clock.token == b"" and stamped.token == token_suffix(TOKEN)
     assert clock.admits(SIM, 0, tick) and not stamped.admits(SIM, 0, tick)
+
+
+def test_with_the_token_and_no_writer_ids_an_unnamed_foreign_writer_is_given_by_its_gid() -> None:
+    """rclpy gives the samples no GID, and a loaded machine's graph may not have named the
+    foreign node when the last report is written: the report gives the writer's GID, which a
+    launch names from its own graph; the loop's own writer, once named, is never given, even
+    while the graph has lost its name again."""
+    graph = Graph((SIM, "/frame/sim_node"), (STRAY, "/"))
+    gate = WriterGate("", graph, clock=lambda: graph.now, token=token_suffix(TOKEN),
+                      own="/frame/sim_node")
+    assert gate.admits(b"", 1, command(TOKEN)) and not gate.admits(b"", 1, command(""))
+    assert gate.report()["ignored_writers"] == STRAY.hex()
+    graph.writers = [(SIM, "/"), (STRAY, "/")]
+    assert gate.report()["ignored_writers"] == STRAY.hex()
+    graph.writers = [(SIM, "/frame/sim_node"), (STRAY, "/controller_node")]
+    assert gate.report()["ignored_writers"] == "/controller_node"
