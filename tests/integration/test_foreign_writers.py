@@ -95,9 +95,31 @@ def refused(report: dict) -> int:
     return sum(int(report[f"rejected_{r}"]) for r in REASONS)
 
 
+#: lock-step runs beside the writer at most, until one in which the simulator heard it
+HEARD_WITHIN = 3
+
+
 @pytest.mark.parametrize(("case", "backend"), matrix(0))
 def test_a_foreign_writer_changes_nothing_in_lock_step_and_is_named(
         ros_domain: int, tmp_path: Path, backend: str, case: str) -> None:
+    """Every run beside the writer equals the reference to the last bit, names the writer and
+    only it. The simulator's gate is tested only by a run in which the simulator heard the
+    writer: the run lasts well under a second of wall time, and whether the simulator's graph
+    has found a foreign participant by then is discovery's timing (under load it had not, once
+    in seven runs; the estimator and the controller had). Runs are repeated, at most
+    :data:`HEARD_WITHIN`, until the simulator heard it; each is checked in full."""
+    for attempt in range(HEARD_WITHIN):
+        gate = check_run_beside(tmp_path / str(attempt), backend, case)
+        if gate["rejected_foreign_writer"]:
+            break
+    # the simulator heard the writer (it wrote all along): every sample it took was refused
+    assert refused(gate) == gate["rejected_foreign_writer"] > 0
+
+
+def check_run_beside(tmp_path: Path, backend: str, case: str) -> dict[str, Any]:
+    """One lock-step run beside the writer of ``case``: bit-identical to the reference, only the
+    writer named (where a node heard it), every refusal the simulator made the writer's; its
+    command gate's report."""
     done, sent = launch_beside(tmp_path, backend, case)
     assert done.returncode == 0, done.stderr[-3000:]
     result = json.loads(done.stdout)
@@ -107,17 +129,19 @@ def test_a_foreign_writer_changes_nothing_in_lock_step_and_is_named(
     assert result["complete"] is True
     gate = result["command_gates"]["pendulum/torque_cmd"]
     assert gate["writer"] == "/frame/controller_node"
-    # the simulator heard the writer (it wrote all along): every sample it took was refused
-    assert refused(gate) == gate["rejected_foreign_writer"] > 0
+    assert refused(gate) == gate["rejected_foreign_writer"] <= sent
     expected = f"/{CASES[case][0]}"
-    found = {(f["node"], f["topic"]): f for f in result["foreign_writers"]}
-    sim = found[("/frame/sim_node", "/frame/pendulum/torque_cmd")]
-    assert sim["writers"] == [expected] and sim["refused"] == refused(gate) <= sent
     for f in result["foreign_writers"]:
         assert f["writers"] == [expected], f           # never the loop's own controller
+    found = {(f["node"], f["topic"]): f for f in result["foreign_writers"]}
+    if refused(gate):
+        assert found[("/frame/sim_node", "/frame/pendulum/torque_cmd")]["refused"] == refused(gate)
     warning = [line for line in done.stderr.splitlines() if "warning:" in line]
-    assert len(warning) == 1 and f"{expected} on /frame/pendulum/torque_cmd" in warning[0]
-    assert "/frame/controller_node on" not in warning[0]
+    assert len(warning) == (1 if found else 0), done.stderr[-3000:]
+    for _, topic in found:
+        assert f"{expected} on {topic}" in warning[0], warning
+    assert not warning or "/frame/controller_node on" not in warning[0]
+    return gate
 
 
 def test_strict_fails_a_run_beside_a_foreign_writer(ros_domain: int, tmp_path: Path) -> None:
