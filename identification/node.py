@@ -18,7 +18,9 @@ filtered and thinned at the writer, :mod:`stillframe.loop.decimated_taps`) at th
 Samples are aligned by header stamp, and an update is due every ``update_period_s`` of sample
 time (the stamps: sim time in lock-step, which runs faster than the wall clock). Each due window
 is copied and identified on a worker thread of this process, in order, so the callbacks keep
-taking samples; more than :data:`MAX_PENDING` windows waiting are skipped (counted), and on
+taking samples. In real time, more than :data:`MAX_PENDING` windows waiting are skipped
+(counted); in lock-step (``reliable``) every due window waits its turn (up to
+:data:`MAX_PENDING_BYTES` of samples), so that the updates are the same on any machine. On
 shutdown the waiting ones are finished first. This process is not in the loop's path: it only
 subscribes.
 Each update publishes ``identification/modes`` (``std_msgs/msg/Float64MultiArray``, layout in
@@ -56,7 +58,13 @@ from stillframe.node_runtime.realtime import run_idle
 from stillframe.node_runtime.support import OK, WARN, Diagnostics
 
 MAX_PENDING = 4
-"""Windows waiting for the worker beyond which a due update is skipped."""
+"""Windows waiting for the worker beyond which a due update is skipped, in real time."""
+MAX_PENDING_BYTES = 512 * 2**20
+"""In lock-step (``reliable``): the samples the waiting windows may hold [bytes] beyond which a
+due update is skipped. A lock-step loop outruns the identifications (at 32 Hz it runs a 5 s
+update period in a tenth of a second, one identification takes a second), and skipping there
+would make its updates depend on the machine's speed; this bound only guards memory (it is
+some 700 windows of 60 s of four channels at 200 Hz)."""
 READ_DEPTH = 1000
 """Samples a ``reliable`` subscription holds for a callback that falls behind."""
 EXIT_GIVEN_UP = 1
@@ -137,6 +145,9 @@ class ModalTrackerNode:
         self.diagnostics = Diagnostics(node, period)
         self.pool = ThreadPoolExecutor(max_workers=1)
         self.pending_updates: list[Future] = []
+        #: the bytes of samples each waiting window holds (by id of its future)
+        self.pending_bytes: dict[int, int] = {}
+        self.reliable = values.reliable
         self.period = period
         self.next_update: float | None = None
         self.updates = self.skipped = 0
@@ -168,12 +179,18 @@ class ModalTrackerNode:
             return
         self.next_update = t + self.period
         self.pending_updates = [f for f in self.pending_updates if not f.done()]
-        if len(self.pending_updates) >= MAX_PENDING:
+        window = self.tracker.window()
+        size = window.u.nbytes + window.y.nbytes
+        waiting = {id(f) for f in self.pending_updates}
+        self.pending_bytes = {k: n for k, n in self.pending_bytes.items() if k in waiting}
+        if (sum(self.pending_bytes.values()) + size > MAX_PENDING_BYTES if self.reliable
+                else len(self.pending_updates) >= MAX_PENDING):
             self.skipped += 1
             return
-        future = self.pool.submit(identify_window, self.tracker.window())
+        future = self.pool.submit(identify_window, window)
         future.add_done_callback(lambda f: self.publish(f.result()))
         self.pending_updates.append(future)
+        self.pending_bytes[id(future)] = size
 
     def finish(self) -> None:
         """On stop: identify the windows already due, then return. The loop is gone by now

@@ -50,6 +50,10 @@ def test_launch_track_reports_the_modes_before_and_after_control(ros_domain: int
     floors = floor_modes(scene)
     times = [u["t"] for u in tracked]
     assert times == sorted(times) and times[-1] <= scene.duration  # sim time, in order
+    # lock-step: every due update, one each 5 s of sample time to the end, none skipped however
+    # far the loop ran ahead of the identifications (it runs the 50 s in a few seconds)
+    assert np.allclose(np.diff(times), 5.0, rtol=0, atol=1e-9), times
+    assert times[-1] > scene.duration - 5.0, times
     before = [u for u in tracked if u["t"] <= scene.controller.start and u["modes"]]
     assert before, tracked
     # the 25 s window under the plant's process noise resolves the upper floor modes (measured:
