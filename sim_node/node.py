@@ -121,6 +121,7 @@ class SimNode(base.LoopNode):
         super().__init__(node, params, values)
         settings = self.setting(SimParameterValues)
         self.await_recorder = [t for t in settings.await_recorder if t]
+        self.await_status_reader = settings.await_status_reader
         self.discovery_timeout_s = settings.discovery_timeout_s
         self.result_file = settings.result_file
         scene = params.scene
@@ -203,14 +204,19 @@ class SimNode(base.LoopNode):
     def peers_ready(self) -> bool:
         """The estimator reads every sensor (and the truth when it is the ``truth`` estimator),
         and the controller's command is heard: matched on both sides, with the peers named by the
-        ``command_writer`` pin or their default names (not only the recorder or a tool)."""
+        ``command_writer`` pin or their default names (not only the recorder or a tool); the
+        recorder subscribed (``await_recorder``) and the status reader matched
+        (``await_status_reader``: otherwise a short run across DDS vendors can end before the
+        launch hears any status, and its report loses the nodes' last ones)."""
         scene = self.params.scene
         command = command_topic(scene)
         return (all(reaches_peer(self.node, self.publishers[spec.name], ESTIMATOR)
                     for spec in estimator_inputs(scene))
                 and (command is None or hears_peer(
                     self.node, self.subscriptions[self.spec.active], self.controller_name))
-                and self.recorder_ready())
+                and self.recorder_ready()
+                and (not self.await_status_reader or reaches_peer(
+                    self.node, self.diagnostics.pub, self.await_status_reader)))
 
     @property
     def controller_name(self) -> str:

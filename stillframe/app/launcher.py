@@ -570,6 +570,8 @@ class Launcher:
                 names.resolve_topic(t) for t in o.record_topics] or ["*"]
         if o.lockstep_timeout_s is not None:
             sim_params["lockstep_timeout_s"] = float(o.lockstep_timeout_s)
+        # the nodes' last statuses reach this launch's report
+        sim_params["await_status_reader"] = fqn("/", self.node.get_name())
         # the run's token, which only this launch's nodes know (docs/nodes.md, writer identity)
         shared: dict[str, Any] = {"run_token": self.token}
         scene = self.scene_file()

@@ -135,6 +135,10 @@ class SimParameterValues(NodeParameters):
     await_recorder: list[str] = param([""], doc=(
         "topics the launch's recorder must subscribe before lock-step starts (`*`: every topic "
         "of the loop); empty: none"))
+    await_status_reader: str = param("", doc=(
+        "the node (fully qualified) whose `/diagnostics` reader must have matched this node's "
+        "status writer before the first sample: a launch's own node, whose report takes the "
+        "nodes' last statuses; empty: none"))
     command_writer: str = param("", doc=(
         "without a `run_token`: the node allowed to command (relative names in the node's "
         "namespace); empty: the first writer seen; other writers are ignored and reported"))

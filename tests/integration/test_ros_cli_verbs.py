@@ -187,7 +187,9 @@ def test_topic_pub_reaches_the_peer(peer: tuple, tools: str) -> None:
 
 
 def check_param_verbs(proc: subprocess.Popen, tmp_path: os.PathLike) -> None:
-    listing = ok("param", "list").splitlines()
+    result = run_stillframe("param", "list")
+    listing = result.stdout.splitlines()
+    assert result.returncode == 0 and "/cli_peer/talker:" in listing, (listing, result.stderr)
     start = listing.index("/cli_peer/talker:")
     names = [line.strip() for line in listing[start + 1:] if line.startswith("  ")]
     assert {"fixed", "gain", "label", "limits.upper", "use_sim_time"} <= set(names)
