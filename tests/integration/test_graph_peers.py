@@ -207,13 +207,15 @@ def test_a_writing_peer_is_refused_counted_and_named(
     # named within one second of the first refused sample. The first line naming the peer
     # counts the N samples refused so far: the peer's last writes before the line (one more may
     # have been on its way), so the first of them was written no earlier than the (N+1)-th last
-    # write before the line. It names the node, on dds by its GID while the graph has not named
-    # the Fast DDS participant yet (the only eProsima writer, vendor 01.0f); so does
-    # /diagnostics, as the peer received it. On rclpy (no GID) a line (and a status) before it may
-    # say "unnamed", while rclpy's graph does not know the peer's node yet, never rmw's placeholder
+    # write before the line. It names the node, or its writer's GID while the graph has not
+    # named the peer's node yet (the only eProsima writer, vendor 01.0f: on dds the graph takes
+    # seconds to name a Fast DDS participant; on rclpy, whose samples carry no GID, the gate
+    # gives the graph's GID of the writer that is not the loop's own); so does /diagnostics, as
+    # the peer received it. A line (and a status) before it may say "unnamed" (the graph shows no
+    # such writer yet), never rmw's placeholder
     refusing = [line for line in sim_log if REFUSING in line]
-    first = next(line for line in refusing if REFUSING + "/frame/topic_pub (" in line or (
-        backend == "dds" and REFUSING + "010f" in line))
+    first = next(line for line in refusing if REFUSING + "/frame/topic_pub (" in line
+                 or REFUSING + "010f" in line)
     assert all(REFUSING + "unnamed (" in line for line in refusing[:refusing.index(first)]), (
         refusing)
     logged_ns, refused = log_stamp_ns(first), int(first.rsplit("(", 1)[1].split()[0])
@@ -224,8 +226,8 @@ def test_a_writing_peer_is_refused_counted_and_named(
     # /diagnostics is published with each of those lines: its first status naming the peer,
     # after only "unnamed" ones (seen once in CI, on rclpy)
     statuses = [line.split() for line in said.lines if line.startswith("named")]
-    diagnosed = next(words for words in statuses if words[1] == "/frame/topic_pub" or (
-        backend == "dds" and words[1].startswith("010f")))
+    diagnosed = next(words for words in statuses if words[1] == "/frame/topic_pub"
+                     or words[1].startswith("010f"))
     assert all(words[1] == "unnamed" for words in statuses[:statuses.index(diagnosed)]), statuses
     assert int(diagnosed[2]) - first_ns <= 10**9, (diagnosed, writes)
     # control unaffected: the samples run equal the one-process loop's, a second of control in
