@@ -144,9 +144,8 @@ class ModalTrackerNode:
         self.modes_pub = node.create_publisher("std_msgs/msg/Float64MultiArray", MODES_TOPIC, 10)
         self.diagnostics = Diagnostics(node, period)
         self.pool = ThreadPoolExecutor(max_workers=1)
-        self.pending_updates: list[Future] = []
-        #: the bytes of samples each waiting window holds (by id of its future)
-        self.pending_bytes: dict[int, int] = {}
+        #: the windows submitted and not identified yet, with the bytes of samples each holds
+        self.pending_updates: list[tuple[Future, int]] = []
         self.reliable = values.reliable
         self.period = period
         self.next_update: float | None = None
@@ -178,19 +177,16 @@ class ModalTrackerNode:
         if t < self.next_update or self.tracker.samples < 0.5 * self.tracker.capacity:
             return
         self.next_update = t + self.period
-        self.pending_updates = [f for f in self.pending_updates if not f.done()]
+        self.pending_updates = [(f, n) for f, n in self.pending_updates if not f.done()]
         window = self.tracker.window()
         size = window.u.nbytes + window.y.nbytes
-        waiting = {id(f) for f in self.pending_updates}
-        self.pending_bytes = {k: n for k, n in self.pending_bytes.items() if k in waiting}
-        if (sum(self.pending_bytes.values()) + size > MAX_PENDING_BYTES if self.reliable
+        if (sum(n for _, n in self.pending_updates) + size > MAX_PENDING_BYTES if self.reliable
                 else len(self.pending_updates) >= MAX_PENDING):
             self.skipped += 1
             return
         future = self.pool.submit(identify_window, window)
         future.add_done_callback(lambda f: self.publish(f.result()))
-        self.pending_updates.append(future)
-        self.pending_bytes[id(future)] = size
+        self.pending_updates.append((future, size))
 
     def finish(self) -> None:
         """On stop: identify the windows already due, then return. The loop is gone by now
@@ -204,7 +200,7 @@ class ModalTrackerNode:
             self.pool.shutdown(wait=True)
         except KeyboardInterrupt:
             print(f"modal_tracker: stopped again while identifying; "
-                  f"{sum(not f.done() for f in self.pending_updates)} windows still due are "
+                  f"{sum(not f.done() for f, _ in self.pending_updates)} windows still due are "
                   "given up", file=sys.stderr, flush=True)
             os._exit(EXIT_GIVEN_UP)
 

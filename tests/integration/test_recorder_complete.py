@@ -17,7 +17,7 @@ from pathlib import Path
 import pytest
 from rosbags.highlevel import AnyReader
 
-from stillframe.app.bench.recorder_load import PER_STEP
+from stillframe.contract.topics import PER_SAMPLE
 from stillframe.locations import REPO_ROOT
 from stillframe.middleware import api
 from tests.support.middleware import child_env, run_stillframe, wait_for_line
@@ -41,7 +41,7 @@ def stamps_by_topic(bag: Path) -> dict[str, list[int]]:
     out: dict[str, list[int]] = {}
     with AnyReader([bag]) as reader:
         for conn, _, raw in reader.messages():
-            if conn.topic not in PER_STEP:
+            if conn.topic not in PER_SAMPLE:
                 out.setdefault(conn.topic, [])
                 continue
             msg = reader.deserialize(raw, conn.msgtype)
@@ -66,12 +66,12 @@ def test_launch_record_at_1khz_holds_every_sample_of_every_loop_topic(
     steps = json.loads(done.stdout)["steps"]
     assert steps == RATE_HZ
     stamps = stamps_by_topic(bag)
-    for topic in PER_STEP:
+    for topic in PER_SAMPLE:
         # every sample time once, in order (the header stamps are the simulator's, not ours)
         assert sample_indices(stamps[topic]) == list(range(1, steps + 1)) or \
             sample_indices(stamps[topic]) == list(range(steps)), topic
     # the launch's count against the simulator's: nothing beyond the stamp grids either
-    assert json.loads(done.stdout)["bag"]["not_recorded"] == dict.fromkeys(PER_STEP, 0)
+    assert json.loads(done.stdout)["bag"]["not_recorded"] == dict.fromkeys(PER_SAMPLE, 0)
     with AnyReader([bag]) as reader:
         counts = {c.topic: c.msgcount for c in reader.connections}
         log_times = [t for c, t, _ in reader.messages() if c.topic == "/frame/floor1/imu"]
@@ -119,7 +119,7 @@ def test_separate_record_all_beside_a_realtime_1khz_run_misses_no_sample(
     steps = json.loads(done.stdout)["steps"]
     stamps = stamps_by_topic(bag)
     assert stamps.get("/frame/floor1/imu"), "nothing recorded"
-    for topic in PER_STEP:
+    for topic in PER_SAMPLE:
         if not (indices := sample_indices(stamps.get(topic, []))):
             continue    # subscribed after the run (a loaded machine's discovery)
         assert indices == list(range(indices[0], indices[0] + len(indices))), topic
@@ -150,7 +150,7 @@ def test_launch_record_onto_a_full_disk_ends_in_one_line_with_the_bag_closed(
         with AnyReader([bag]) as reader:
             assert reader.message_count == kept
         stamps = stamps_by_topic(bag)
-        for topic in PER_STEP:
+        for topic in PER_SAMPLE:
             indices = sample_indices(stamps[topic])
             assert indices[:2] in ([0, 1], [1, 2]), topic
             assert indices == list(range(indices[0], indices[0] + len(indices))), topic
@@ -184,4 +184,4 @@ def test_launch_record_of_a_1khz_realtime_run_goes_on_dds_and_says_so(
     for node in ("sim_node", "estimator_node", "controller_node"):
         assert f"{node} dds" in chosen, chosen
     with AnyReader([bag]) as reader:
-        assert {c.topic for c in reader.connections} >= set(PER_STEP)
+        assert {c.topic for c in reader.connections} >= set(PER_SAMPLE)

@@ -38,7 +38,7 @@ import pytest
 import yaml
 from rosbags.highlevel import AnyReader
 
-from stillframe.app.bench.recorder_load import PER_STEP
+from stillframe.contract.topics import PER_SAMPLE
 from stillframe.locations import REPO_ROOT
 from stillframe.middleware import api
 from stillframe.recording.recorder import MISSING_KEY, STALLS_KEY
@@ -87,10 +87,10 @@ class Lines:
 def sample_indices(bag: Path) -> dict[str, list[int]]:
     """Per per-step topic, the sample index of each of its messages (its stamp over the
     period), read back by rosbags message by message."""
-    held: dict[str, list[int]] = {topic: [] for topic in PER_STEP}
+    held: dict[str, list[int]] = {topic: [] for topic in PER_SAMPLE}
     with AnyReader([bag]) as reader:
         for conn, _, raw in reader.messages([c for c in reader.connections
-                                             if c.topic in PER_STEP]):
+                                             if c.topic in PER_SAMPLE]):
             msg = reader.deserialize(raw, conn.msgtype)
             stamp = msg.clock if conn.topic == "/clock" else msg.header.stamp
             held[conn.topic].append(
@@ -160,7 +160,7 @@ def test_a_stopped_recorder_counts_what_the_bag_misses(tmp_path: Path, ros_domai
     assert doc["recorder_stalls"]["count"] >= 1
     assert doc["recorder_stalls"]["longest_s"] >= 1.0
     total = sum(n for n in counted.values())
-    beyond = sum(doc["not_recorded"][t] - counted.get(t, 0) for t in PER_STEP)
+    beyond = sum(doc["not_recorded"][t] - counted.get(t, 0) for t in PER_SAMPLE)
     assert re.search(r"\[recorder\] .*recorder stalled: no poll for", text), text[-3000:]
     said = rf"stillframe launch: warning: the bag {re.escape(str(bag))} is not complete: "
     if total:

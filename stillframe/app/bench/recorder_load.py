@@ -36,8 +36,6 @@ from stillframe.contract import messages
 from stillframe.contract.topics import PER_SAMPLE
 from stillframe.errors import BagError
 
-#: the topics the simulator publishes once per step
-PER_STEP = PER_SAMPLE
 READY_LINE = "Recording to"
 _STAMP = struct.Struct("<iI")   # the header stamp (/clock: its time), first after the CDR header
 READY_TIMEOUT_S = 20.0
@@ -113,8 +111,8 @@ def completeness(bag: Path, steps: int, rate_hz: float) -> dict[str, Any]:
     subscribed)."""
     summary = bag_summary(bag, messages.TYPESTORE)
     counts = {t.name: t.count for t in summary.topics}
-    per_step = {topic: counts.get(topic, 0) for topic in PER_STEP}
-    held: dict[str, set[int]] = {topic: set() for topic in PER_STEP if per_step[topic]}
+    per_step = {topic: counts.get(topic, 0) for topic in PER_SAMPLE}
+    held: dict[str, set[int]] = {topic: set() for topic in PER_SAMPLE if per_step[topic]}
     for m in read_bag(bag, messages.TYPESTORE, topics=list(held)):
         sec, nanosec = _STAMP.unpack_from(m.data, 4)
         held[m.topic].add(round((sec + nanosec * 1e-9) * rate_hz))

@@ -5,9 +5,10 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from stillframe.app.bench.recorder_load import PER_STEP, completeness
+from stillframe.app.bench.recorder_load import completeness
 from stillframe.bags.storage import BagWriter
 from stillframe.contract import messages
+from stillframe.contract.topics import PER_SAMPLE
 
 RATE_HZ = 1000.0
 TYPES = {"/clock": "rosgraph_msgs/msg/Clock"}
@@ -28,10 +29,10 @@ def test_completeness_counts_holes_only_after_the_first_sample(tmp_path: Path) -
     dropped = {"/frame/floor1/imu": {40, 41, 77}}   # lost while recording
     late = {"/frame/state_truth": 10}               # subscribed after 10 samples
     with BagWriter(tmp_path / "bag", messages.TYPESTORE) as bag:
-        for topic in PER_STEP:
+        for topic in PER_SAMPLE:
             bag.add_topic(topic, TYPES.get(topic, "std_msgs/msg/Header"))
         for index in range(1, steps + 1):
-            for topic in PER_STEP:
+            for topic in PER_SAMPLE:
                 if index in dropped.get(topic, ()) or index <= late.get(topic, 0):
                     continue
                 bag.write(topic, index, cdr(topic, index))
@@ -41,4 +42,4 @@ def test_completeness_counts_holes_only_after_the_first_sample(tmp_path: Path) -
     assert figures["per_step_counts"]["/frame/state_truth"] == steps - 10
     assert figures["per_step_min"] == steps - 10
     assert figures["complete"] is False
-    assert figures["bag_messages"] == len(PER_STEP) * steps - 13
+    assert figures["bag_messages"] == len(PER_SAMPLE) * steps - 13
