@@ -63,11 +63,15 @@ the score ``Jᵀ W e`` (Newey & West 1987, Bartlett weights; bandwidth by Andrew
 plug-in, :func:`hac_bandwidth`) and d the identifiable parameters. With white errors it reduces
 to σ² (JᵀJ)⁻¹ (Ljung eq. 9.17). Frequencies, damping ratios and mode-shape phases follow by the
 delta method through ``λ_c = ln(λ) / dt`` (thesis eq. 3.58); 95 % intervals are ± 1.96 standard
-deviations. Intervals are stated only where the prediction errors are white: errors coloured by
-a lightly damped mode (a missing mode, or noise the structure filters, left in an output-error
-model's errors) stay correlated over a good part of the record, which no score covariance
-estimated from that record captures (on the simulated hammer test at 128 samples, 15–75 % of
-such frequency intervals held the truth). A mode whose eigenvalue the data do not determine (its
+deviations. Intervals are stated only where the prediction errors are white and independent of
+the past inputs. White: errors coloured by a lightly damped mode (a missing mode, or noise the
+structure filters, left in an output-error model's errors) stay correlated over a good part of
+the record, which no score covariance estimated from that record captures (on the simulated
+hammer test at 128 samples, 15–75 % of such frequency intervals held the truth). Independent of
+the past inputs (the cross-correlation test of :mod:`stillframe.identification.residual_tests`):
+a model whose input-to-output part lacks a mode can leave white errors, and its modes are then
+biased by more than their intervals state (the covariance assumes the true system in the model
+set). A mode whose eigenvalue the data do not determine (its
 gradient leaves the row space of J) gets no interval either, and :attr:`Refinement.notes` says
 why; so does every mode of a search that did not converge.
 """
@@ -85,7 +89,7 @@ from stillframe.errors import IdentificationError, InputError
 from stillframe.identification.data_checks import channel_scales
 from stillframe.identification.modal import ModalTable, modal_parameters
 from stillframe.identification.predictor import prediction_errors
-from stillframe.identification.residual_tests import whiteness
+from stillframe.identification.residual_tests import independence, whiteness
 
 Array = NDArray[np.float64]
 ComplexArray = NDArray[np.complex128]
@@ -158,6 +162,10 @@ class Refinement:
     """Whether the search stopped on a convergence criterion (not the evaluation limit)."""
     stop: str = ""
     """Which criterion stopped the search (:data:`STOPS`)."""
+    independent: bool = True
+    """Whether the prediction errors pass as independent of the past inputs
+    (:func:`stillframe.identification.residual_tests.independence`): the input-to-output part
+    lacks nothing the record shows."""
     iterations: int = 0
     """Jacobian evaluations (Levenberg–Marquardt iterations)."""
     evaluations: int = 0
@@ -550,6 +558,7 @@ def refine_prediction_error(A: Array, B: Array, C: Array, D: Array, G: Array, u:
     modes = modal_parameters(A1, C1, dt)
     cov, rank, lags, basis = _covariance(chosen.jacobian, chosen.residuals, m)
     white = whiteness(chosen.errors())
+    inputs = independence(chosen.errors(), u)
     if not chosen.converged:
         notes.append(f"the refinement did not converge (stopped at {chosen.stop} after "
                      f"{evaluations} evaluations): no intervals")
@@ -558,8 +567,13 @@ def refine_prediction_error(A: Array, B: Array, C: Array, D: Array, G: Array, u:
                      f"= {white.p_value:.2g}); the covariance of the estimate needs errors whose "
                      "correlation dies out well within the record, which a lightly damped mode's "
                      "does not")
+    elif not inputs.independent:
+        notes.append(f"no intervals: the prediction errors are correlated with the past inputs "
+                     f"(cross-correlation test, p = {inputs.p_value:.2g}); the model leaves part "
+                     "of the input-to-output dynamics out, which biases its modes by more than "
+                     "an interval that assumes the model complete would state")
     stats = _mode_statistics(theta, cov, basis, layout, dt, modes,
-                             intervals=chosen.converged and white.white)
+                             intervals=chosen.converged and white.white and inputs.independent)
     notes += stats.notes
     e = chosen.errors()
     ref = Refinement(
@@ -571,7 +585,7 @@ def refine_prediction_error(A: Array, B: Array, C: Array, D: Array, G: Array, u:
         frequency_std_hz=stats.f_std, damping_std=stats.z_std,
         cost_start=output_error.cost_start, cost=float(chosen.residuals @ chosen.residuals),
         log_det_covariance=chosen.log_det(), parameter_count=rank, errors=e,
-        converged=chosen.converged, stop=chosen.stop,
+        converged=chosen.converged, stop=chosen.stop, independent=inputs.independent,
         iterations=sum(search.iterations for search in searches),
         evaluations=evaluations, hac_lags=lags, condition=basis.condition,
         shapes=stats.shapes, shape_covariance=stats.shape_cov, output_scale=np.ones(m),

@@ -396,7 +396,7 @@ def _refine(realized: tuple[Array, ...], order: int, hankel: _Hankel, u: Array, 
     # a mode without an interval (withheld, and said so in the notes) is not called wide
     uncertain = (uncertain_modes(modes, refinement.frequency_ci_hz, refinement.damping_ci)
                  & np.isfinite(refinement.frequency_ci_hz).all(axis=1))
-    notes += list(refinement.notes) + residual_warnings(y, refinement.errors)
+    notes += list(refinement.notes) + residual_warnings(y, refinement.errors, u)
     notes += phase_warnings(modes, refinement.phase_std(reference), outputs)
     matrices = (refinement.A, refinement.B, refinement.C, refinement.D, refinement.G)
     return _Model(matrices, order, modes, consistent, left_out_modes(fac, modes, order, dt),

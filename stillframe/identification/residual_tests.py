@@ -11,6 +11,19 @@ Pierce 1970):
 asymptotically χ²(M) when ``e_i`` is white. The record fails when the smallest p-value times the
 number of outputs (Bonferroni) is below :data:`WHITENESS_LEVEL`.
 
+Errors can be white and still carry the input: a model whose input-to-output part lacks a mode
+(or an order) fits the noise model around the gap, and the estimates of the modes it has are
+biased by more than any interval of theirs states. The *independence* test of the same section
+catches it: per output i, the errors' cross-covariances with the past inputs,
+``r̂_i = (1/N) Σ_k φ(k) e_i(k)`` with ``φ(k) = [u(k - 1), …, u(k - M)]`` (every input),
+
+    ξ_i = N r̂_iᵀ R̂_φ⁻¹ r̂_i / λ̂_i,    R̂_φ = (1/N) Σ_k φ(k) φ(k)ᵀ,  λ̂_i = (1/N) Σ_k e_i(k)²,
+
+asymptotically χ²(M r) when ``e_i`` is white and independent of the past inputs. Lag 0 is left
+out: a controller's command answers the sample it is computed from, so on closed-loop records it
+is correlated with that sample's error whatever the model; the past inputs are not (their noise
+is in the errors of past samples). The record fails at the same Bonferroni-corrected level.
+
 A missed mode whose response lies below the noise leaves no trace that any test can find. The
 *signal-to-noise ratio* of each output is read off the same errors,
 ``10 log10((var y_i - var e_i) / var e_i)`` dB; below :data:`LOW_SNR_DB` on every output,
@@ -65,6 +78,44 @@ def whiteness(errors: Array, lags: int = WHITENESS_LAGS) -> Whiteness:
     return Whiteness(statistic=statistic, p_value=p, lags=lags)
 
 
+@dataclass(frozen=True)
+class Independence:
+    """The cross-correlation test of the prediction errors against the past inputs."""
+
+    statistic: Array
+    """``(m,)``: ξ_i per output."""
+    p_value: float
+    """Bonferroni-corrected smallest p-value over the outputs (capped at 1)."""
+    lags: int
+
+    @property
+    def independent(self) -> bool:
+        """Whether the errors pass as independent of the past inputs: the corrected p-value at
+        least :data:`WHITENESS_LEVEL`."""
+        return self.p_value >= WHITENESS_LEVEL
+
+
+def independence(errors: Array, u: Array, lags: int = WHITENESS_LAGS) -> Independence:
+    """Cross-correlation test (module docstring) of the prediction errors ``errors (N, m)``
+    against the past inputs ``u (N, r)``; a record without inputs passes."""
+    e = np.asarray(errors, dtype=float)
+    u = np.asarray(u, dtype=float).reshape(len(e), -1)
+    n, m = e.shape
+    lags = max(1, min(lags, n // 4))
+    if u.shape[1] == 0:
+        return Independence(statistic=np.zeros(m), p_value=1.0, lags=lags)
+    e = e - e.mean(axis=0)
+    u = u - u.mean(axis=0)
+    phi = np.concatenate([u[lags - k:n - k] for k in range(1, lags + 1)], axis=1)
+    e = e[lags:]
+    r = phi.T @ e / len(e)
+    lam = np.sum(e * e, axis=0) / len(e)
+    solved = np.linalg.lstsq(phi.T @ phi / len(e), r, rcond=None)[0]
+    statistic = len(e) * np.sum(r * solved, axis=0) / np.where(lam > 0, lam, 1.0)
+    p = float(min(1.0, m * np.min(stats.chi2.sf(statistic, phi.shape[1]))))
+    return Independence(statistic=statistic, p_value=p, lags=lags)
+
+
 def snr_db(y: Array, errors: Array) -> Array:
     """``(m,)``: each output's signal-to-noise ratio in dB, taking the prediction errors as the
     noise (module docstring); -inf when they hold all of the output's variance."""
@@ -76,14 +127,26 @@ def snr_db(y: Array, errors: Array) -> Array:
                                                       / np.maximum(var_e, 1e-300)), -np.inf)
 
 
-def residual_warnings(y: Array, errors: Array) -> list[str]:
-    """One sentence per failed check of the prediction errors (whiteness, SNR)."""
+def independence_warning(test: Independence) -> str | None:
+    """The sentence for a failed independence test, None for a passed one."""
+    if test.independent:
+        return None
+    return (f"prediction errors are correlated with the past inputs (cross-correlation test over "
+            f"{test.lags} lags, p = {test.p_value:.2g}): the model leaves part of the "
+            "input-to-output dynamics out (a mode, or an order too few), which biases its modes")
+
+
+def residual_warnings(y: Array, errors: Array, u: Array | None = None) -> list[str]:
+    """One sentence per failed check of the prediction errors (whiteness, independence of the
+    past inputs ``u``, SNR)."""
     found = []
     white = whiteness(errors)
     if not white.white:
         found.append(f"prediction errors are not white (portmanteau test over {white.lags} "
                      f"lags, p = {white.p_value:.2g}): the model leaves dynamics unexplained (a "
                      "mode may be missing) or the noise is coloured")
+    if u is not None:
+        found += [text for text in [independence_warning(independence(errors, u))] if text]
     best = float(np.max(snr_db(y, errors)))
     if best < LOW_SNR_DB:
         found.append(f"low signal-to-noise ratio: {best:.3g} dB on the best output (below "

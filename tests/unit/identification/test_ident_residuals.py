@@ -1,7 +1,6 @@
 """Residual checks of the refined model (:mod:`stillframe.identification.residual_tests`): the
-portmanteau
-test against its χ² distribution, the SNR read off the errors, and the warning they give where a
-mode is missed without any other check firing (issue 12)."""
+portmanteau test and the independence test against their χ² distributions, the SNR read off the
+errors, and the warning they give where a mode is missed without any other check firing."""
 
 from __future__ import annotations
 
@@ -13,6 +12,7 @@ from stillframe.identification.pipeline import identify
 from stillframe.identification.residual_tests import (
     LOW_SNR_DB,
     WHITENESS_LEVEL,
+    independence,
     residual_warnings,
     snr_db,
     whiteness,
@@ -48,6 +48,48 @@ def test_whiteness_detects_a_narrow_band_component() -> None:
                              rng.standard_normal(1024))
     ringing *= 10 ** (-10 / 20) / ringing.std()
     assert not whiteness((rng.standard_normal(1024) + ringing)[:, None]).white
+
+
+def test_independence_rejects_independent_errors_at_its_level() -> None:
+    """400 records of white errors (3 outputs) and independent coloured inputs (2, 512 samples):
+    the Bonferroni-corrected test rejects in at most its level (1 %) plus three binomial
+    standard deviations."""
+    rng = np.random.default_rng(4)
+    rejected = 0
+    for _ in range(400):
+        u = signal.lfilter([1.0], [1.0, -0.8], rng.standard_normal((512, 2)), axis=0)
+        rejected += not independence(rng.standard_normal((512, 3)), u).independent
+    sd = np.sqrt(400 * WHITENESS_LEVEL * (1 - WHITENESS_LEVEL))
+    assert rejected <= 400 * WHITENESS_LEVEL + 3 * sd
+
+
+def test_independence_statistic_is_the_regression_on_the_past_inputs() -> None:
+    """The statistic against a second computation: N times the share of the (centred) errors'
+    sum of squares that a least-squares fit on the inputs lagged 1..M explains (numpy.lstsq on
+    the lagged matrix built column by column)."""
+    rng = np.random.default_rng(5)
+    u = rng.standard_normal((400, 2))
+    e = rng.standard_normal((400, 1)) + 0.1 * np.roll(u[:, :1], 3, axis=0)
+    lags = 7
+    uc, ec = u - u.mean(axis=0), e[:, 0] - e[:, 0].mean()
+    phi = np.column_stack([uc[lags - k:400 - k, j] for k in range(1, lags + 1) for j in range(2)])
+    target = ec[lags:]
+    fit = phi @ np.linalg.lstsq(phi, target, rcond=None)[0]
+    expected = target.size * (fit @ fit) / (target @ target)
+    assert independence(e, u, lags=lags).statistic[0] == pytest.approx(expected, rel=1e-10)
+
+
+def test_independence_finds_a_missing_input_path_that_whiteness_does_not() -> None:
+    """Errors that are white but carry the input through a short filter (a model whose
+    input-to-output part lacks a mode leaves such errors): white by the portmanteau test,
+    rejected by the independence test."""
+    rng = np.random.default_rng(6)
+    u = rng.standard_normal((2048, 1))
+    leak = signal.lfilter([0.0, 0.3, -0.2], [1.0], u[:, 0])
+    e = (rng.standard_normal(2048) + leak)[:, None]
+    assert whiteness(e).white
+    assert not independence(e, u).independent
+    assert any("correlated with the past inputs" in w for w in residual_warnings(e + 1, e, u))
 
 
 def test_snr_from_the_errors() -> None:
