@@ -31,24 +31,28 @@ updates, skipped updates, last error).
 from __future__ import annotations
 
 import json
-import os
 import sys
-from concurrent.futures import Future, ThreadPoolExecutor
+from concurrent.futures import CancelledError, Future, ThreadPoolExecutor
 from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 
+from stillframe import interrupts
 from stillframe.bags.channels import Channel, field_reader, stamp_ns
 from stillframe.contract import messages, topics
 from stillframe.errors import InputError
 from stillframe.identification.tracker import (
+    EXIT_GIVEN_UP,
+    GIVEN_UP,
     MODES_TOPIC,
     TRACKER_READY,
     ModalTracker,
     TrackedModes,
+    Window,
     identify_window,
     modes_array,
+    no_modes,
 )
 from stillframe.loop.decimated_taps import undecimated
 from stillframe.middleware import api
@@ -67,8 +71,6 @@ would make its updates depend on the machine's speed; this bound only guards mem
 some 700 windows of 60 s of four channels at 200 Hz)."""
 READ_DEPTH = 1000
 """Samples a ``reliable`` subscription holds for a callback that falls behind."""
-EXIT_GIVEN_UP = 1
-"""Exit code when stopped twice with windows still due (they are lost: not a clean stop)."""
 
 
 def contract_type(topic: str) -> str:
@@ -144,12 +146,13 @@ class ModalTrackerNode:
         self.modes_pub = node.create_publisher("std_msgs/msg/Float64MultiArray", MODES_TOPIC, 10)
         self.diagnostics = Diagnostics(node, period)
         self.pool = ThreadPoolExecutor(max_workers=1)
-        #: the windows submitted and not identified yet, with the bytes of samples each holds
-        self.pending_updates: list[tuple[Future, int]] = []
+        #: the windows submitted and not identified yet, each with its future
+        self.pending_updates: list[tuple[Future, Window]] = []
         self.reliable = values.reliable
         self.period = period
         self.next_update: float | None = None
         self.updates = self.skipped = 0
+        self.given_up = False
 
     def on_sample(self, k: int, msg: object, read) -> None:
         """The value ``read`` takes from channel ``k``'s message, filed under its header stamp; once
@@ -177,16 +180,29 @@ class ModalTrackerNode:
         if t < self.next_update or self.tracker.samples < 0.5 * self.tracker.capacity:
             return
         self.next_update = t + self.period
-        self.pending_updates = [(f, n) for f, n in self.pending_updates if not f.done()]
+        self.pending_updates = [(f, w) for f, w in self.pending_updates if not f.done()]
         window = self.tracker.window()
-        size = window.u.nbytes + window.y.nbytes
-        if (sum(n for _, n in self.pending_updates) + size > MAX_PENDING_BYTES if self.reliable
-                else len(self.pending_updates) >= MAX_PENDING):
+        if (sum(_size(w) for _, w in self.pending_updates) + _size(window) > MAX_PENDING_BYTES
+                if self.reliable else len(self.pending_updates) >= MAX_PENDING):
             self.skipped += 1
             return
         future = self.pool.submit(identify_window, window)
-        future.add_done_callback(lambda f: self.publish(f.result()))
-        self.pending_updates.append((future, size))
+        future.add_done_callback(lambda f, t=window.t: self.identified(f, t))
+        self.pending_updates.append((future, window))
+
+    def identified(self, future: Future, t: float) -> None:
+        """Publish a window's update; an identification that raised what
+        :func:`identify_window` does not expect is published as that window's error, not lost
+        (the tracker runs on beside the loop)."""
+        if self.given_up:
+            return              # written as given up by finish()
+        try:
+            tracked = future.result()
+        except CancelledError:
+            return
+        except Exception as exc:
+            tracked = no_modes(t, f"the identification failed: {type(exc).__name__}: {exc}")
+        self.publish(tracked)
 
     def finish(self) -> None:
         """On stop: identify the windows already due, then return. The loop is gone by now
@@ -199,18 +215,28 @@ class ModalTrackerNode:
         try:
             self.pool.shutdown(wait=True)
         except KeyboardInterrupt:
-            print(f"modal_tracker: stopped again while identifying; "
-                  f"{sum(not f.done() for f, _ in self.pending_updates)} windows still due are "
-                  "given up", file=sys.stderr, flush=True)
-            os._exit(EXIT_GIVEN_UP)
+            self.given_up = True
+            due = [(f, w) for f, w in self.pending_updates if not f.done()]
+            for future, window in due:
+                future.cancel()
+                self.write(no_modes(window.t, f"{GIVEN_UP}: the tracker was stopped again "
+                                              "before this window was identified"))
+            print(f"modal_tracker: stopped again while identifying; {len(due)} windows still "
+                  f"due are given up (written as such to {self.record_file or 'no record file'})",
+                  file=sys.stderr, flush=True)
+            interrupts.finish("modal_tracker", EXIT_GIVEN_UP)
+
+    def write(self, tracked: TrackedModes) -> None:
+        """Append the update to ``record_file`` as a JSON line (none set: nothing)."""
+        if self.record_file is not None:
+            with self.record_file.open("a") as stream:
+                stream.write(json.dumps(tracked.record()) + "\n")
 
     def publish(self, tracked: TrackedModes) -> None:
         """Publish one update: the JSON line to ``record_file`` (if set), the modes on
         ``identification/modes`` and a status on ``/diagnostics``."""
         self.updates += 1
-        if self.record_file is not None:
-            with self.record_file.open("a") as stream:
-                stream.write(json.dumps(tracked.record()) + "\n")
+        self.write(tracked)
         dims, data = modes_array(tracked)
         msg = messages.new("std_msgs/msg/Float64MultiArray")
         msg.layout.dim = [messages.new("std_msgs/msg/MultiArrayDimension", label=label,
@@ -225,6 +251,11 @@ class ModalTrackerNode:
         level = OK if tracked.error is None and not tracked.warnings else WARN
         self.diagnostics.publish(self.start_ns or 0, values, level,
                                  tracked.error or "; ".join(tracked.warnings))
+
+
+def _size(window: Window) -> int:
+    """The bytes of samples a window holds."""
+    return window.u.nbytes + window.y.nbytes
 
 
 @api.node_main

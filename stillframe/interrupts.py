@@ -68,7 +68,7 @@ def _say(line: str) -> None:
 def _exit_now(prog: str) -> Any:
     def handler(signum: int, _frame: FrameType | None) -> None:
         _say(f"{prog}: interrupted")
-        os._exit(128 + signum)
+        _end(128 + signum)
 
     return handler
 
@@ -104,7 +104,7 @@ def _unraisable(unraisable: Any) -> None:
         threading.Thread(target=again, name="interrupt again", daemon=True).start()
     except RuntimeError:        # no thread any more (the interpreter is ending): end here
         _say("interrupted")
-        os._exit(128 + signum)
+        _end(128 + signum)
     left.set()
 
 
@@ -187,8 +187,15 @@ def finish(prog: str, code: int) -> NoReturn:
             stream.flush()
     if "logging" in sys.modules:
         sys.modules["logging"].shutdown()
+    _end(code)
+
+
+def _end(code: int) -> NoReturn:
+    """The functions of :func:`at_finish` (a line written to a tapped stderr just before reaches
+    the real one), then the process ends with ``code`` at once."""
     for function in _at_finish:
-        function()
+        with contextlib.suppress(Exception):    # ending anyway: one failure must not hold it
+            function()
     os._exit(code)
 
 

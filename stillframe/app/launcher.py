@@ -43,7 +43,7 @@ from stillframe.contract.topics import DEFAULT_NAMESPACE, PER_SAMPLE, STATUS_KEY
 from stillframe.errors import BY_EXIT_CODE, BagError, InputError, StillframeError
 from stillframe.fidelity.auto_model import resolve_model
 from stillframe.files import write_text
-from stillframe.identification.tracker import TRACKER_READY
+from stillframe.identification.tracker import EXIT_GIVEN_UP, TRACKER_READY
 from stillframe.locations import REPO_ROOT
 from stillframe.loop.parts import check_loop
 from stillframe.loop.spec import MODES
@@ -88,6 +88,9 @@ STOPPED_CODES = (0, -signal.SIGINT, -signal.SIGTERM, 128 + signal.SIGINT, 128 + 
 STOP_GRACE_S = 10.0
 #: children that get longer to exit after SIGINT: the tracker finishes the windows due
 STOP_GRACES_S: dict[str, float] = {TRACKER: TRACKER_STOP_S}
+#: children that may also end so when asked to stop: the tracker, stopped again (SIGTERM after
+#: its grace) with windows still due, writes each as given up (the launch warns) and exits so
+STOP_CODES: dict[str, tuple[int, ...]] = {TRACKER: (*STOPPED_CODES, EXIT_GIVEN_UP)}
 #: seconds of the machine's time (:meth:`Child.time_given_s`) a child that is still running
 #: gets to log its ready line: a guard against a hung child, not a start-up time
 READY_TIMEOUT_S = 120.0
@@ -279,6 +282,8 @@ class Child:
     started_ns: int = field(default_factory=time.monotonic_ns)
     #: seconds it gets to exit after SIGINT
     grace_s: float = STOP_GRACE_S
+    #: the exit codes of a clean stop once asked (:data:`STOP_CODES`)
+    stopped_codes: tuple[int, ...] = STOPPED_CODES
     #: put back at the launcher's scheduling before it is asked to stop (a recorder that ran
     #: below the loop needs the CPU to close its bag on a busy machine)
     restore_on_stop: bool = False
@@ -315,7 +320,8 @@ class ProcessSet:
         self.echo = echo
 
     def start(self, name: str, argv: list[str], env_extra: dict[str, str] | None = None, *,
-              grace_s: float = STOP_GRACE_S, restore_on_stop: bool = False) -> Child:
+              grace_s: float = STOP_GRACE_S, restore_on_stop: bool = False,
+              stopped_codes: tuple[int, ...] = STOPPED_CODES) -> Child:
         env = dict(os.environ, PYTHONUNBUFFERED="1", **(env_extra or {}))
         env["PYTHONPATH"] = os.pathsep.join(
             p for p in (env.get("PYTHONPATH", ""), str(REPO_ROOT)) if p)
@@ -323,7 +329,8 @@ class ProcessSet:
             argv, env=env, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
             stderr=subprocess.STDOUT, text=True, errors="replace", process_group=0,
             preexec_fn=_prepare_child)
-        child = Child(name, proc, grace_s=grace_s, restore_on_stop=restore_on_stop)
+        child = Child(name, proc, grace_s=grace_s, restore_on_stop=restore_on_stop,
+                      stopped_codes=stopped_codes)
         self.children.append(child)
         self.echo(f"started {name} (pid {proc.pid})")
         threading.Thread(target=self._pump, args=(child,), daemon=True).start()
@@ -342,7 +349,7 @@ class ProcessSet:
             code = child.proc.poll()
             if code is None:
                 continue
-            if not child.stop_requested or code not in STOPPED_CODES:
+            if not child.stop_requested or code not in child.stopped_codes:
                 return child
         return None
 
@@ -659,7 +666,8 @@ class Launcher:
             for name, argv in commands:
                 child = self.processes.start(name, argv, {"STILLFRAME_RMW": self.backend(name)},
                                              grace_s=STOP_GRACES_S.get(name, STOP_GRACE_S),
-                                             restore_on_stop=name == "recorder")
+                                             restore_on_stop=name == "recorder",
+                                             stopped_codes=STOP_CODES.get(name, STOPPED_CODES))
                 if name in READY_LINES:
                     self._wait_for_line(child, READY_LINES[name])
                 elif mixed:

@@ -20,6 +20,7 @@ from typing import Any
 
 from stillframe.config.scene import Scene
 from stillframe.contract import topics
+from stillframe.identification.tracker import GIVEN_UP
 from stillframe.loop.decimated_taps import decimated_topic, decimation_factor
 
 TRACKER = "modal_tracker"
@@ -54,6 +55,17 @@ def tracker_command(scene: Scene, record_file: Path, *, lockstep: bool) -> list[
     for name, value in params.items():
         argv += ["-p", f"{name}:={value if isinstance(value, str) else json.dumps(value)}"]
     return argv
+
+
+def given_up(tracked: list[dict[str, Any]]) -> str:
+    """The launch's warning on the windows the tracker gave up at its stop (their updates say
+    so in ``error``), "" when none."""
+    times = [u["t"] for u in tracked if (u.get("error") or "").startswith(GIVEN_UP)]
+    if not times:
+        return ""
+    return (f"the modal tracker gave up {len(times)} windows due at its stop (t = "
+            f"{', '.join(f'{t:g}' for t in times)} s): their identification did not end within "
+            f"the {TRACKER_STOP_S:g} s the stop allows; tracked_modes holds them with that error")
 
 
 def read_tracked(record_file: Path) -> list[dict[str, Any]]:

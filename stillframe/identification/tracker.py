@@ -40,6 +40,11 @@ MAX_FILL = 8
 #: after it, so the window before control is whole however long the tracker's imports take
 TRACKER_READY = "Modal tracker ready"
 
+#: the tracker's exit code when stopped a second time with windows still due: each of them is
+#: written as an update whose ``error`` begins with :data:`GIVEN_UP` (none is lost in silence)
+EXIT_GIVEN_UP = 1
+GIVEN_UP = "given up at the stop"
+
 MODES_TOPIC = "identification/modes"
 """The tracker's topic, in the loop's namespace (``/frame/identification/modes``)."""
 
@@ -82,6 +87,12 @@ class TrackedModes:
         """``(modes, 6)`` in the order of :data:`FIELDS`."""
         return np.column_stack([self.frequency_hz, self.damping_ratio, self.frequency_ci_hz,
                                 self.damping_ci]) if self.frequency_hz.size else np.empty((0, 6))
+
+
+def no_modes(t: float, error: str) -> TrackedModes:
+    """An update of the window ending at ``t`` that gives no modes, and why."""
+    empty = np.empty(0)
+    return TrackedModes(t, empty, empty, np.empty((0, 2)), np.empty((0, 2)), error=error)
 
 
 def modes_array(tracked: TrackedModes) -> tuple[list[tuple[str, int, int]], list[float]]:
@@ -165,7 +176,6 @@ class Window:
 def identify_window(window: Window) -> TrackedModes:
     """The window's modes (module docstring); a refusal is returned as ``error``, not raised."""
     t, u, y = window.t, window.u, window.y
-    empty = np.empty(0)
     try:
         if u.size:
             ident = identify(u.reshape(len(u), -1), y, window.dt, order=window.order)
@@ -178,5 +188,4 @@ def identify_window(window: Window) -> TrackedModes:
         return TrackedModes(t, out.modes.frequency_hz, out.modes.damping_ratio,
                             out.frequency_ci_hz, out.damping_ci, out.warnings)
     except (StillframeError, np.linalg.LinAlgError, ValueError) as exc:
-        return TrackedModes(t, empty, empty, np.empty((0, 2)), np.empty((0, 2)),
-                            error=str(exc))
+        return no_modes(t, str(exc))

@@ -49,6 +49,7 @@ from stillframe.app.launch_cli import (
     report_death,
 )
 from stillframe.app.run_verdict import foreign_warning, foreign_writers, verdict
+from stillframe.app.tracking import given_up
 from stillframe.errors import DegradedRunError, InputError
 from stillframe.files import check_output
 
@@ -135,6 +136,8 @@ def run(args: argparse.Namespace) -> int:
     reasons = verdict(result.evaluation, result.diagnostics)
     if incomplete := bag_incomplete(result.evaluation.get("bag")):
         print(f"stillframe launch: warning: {incomplete}", file=sys.stderr)
+    if lost := given_up(result.tracked_modes):
+        print(f"stillframe launch: warning: {lost}", file=sys.stderr)
     foreign = foreign_writers(result.evaluation, result.diagnostics)
     if args.json:
         emit_json({"scene": scene.name, **result.evaluation, "degraded": bool(reasons),
