@@ -227,14 +227,21 @@ def _threads() -> list[int]:
     return [int(t) for t in os.listdir("/proc/self/task")]
 
 
-def run_idle(idle: bool = True) -> None:
+def run_idle(idle: bool = True) -> bool:
     """Put every thread of this process at SCHED_IDLE (``idle`` False: back at SCHED_OTHER), and
     so the threads they start later: a policy is per thread on Linux, and imports start some
-    (OpenBLAS's workers) before a process can ask."""
+    (OpenBLAS's workers) before a process can ask. Going back may be refused (it needs
+    CAP_SYS_NICE or an RLIMIT_NICE that allows the thread's niceness): False then, and the
+    threads stay idle."""
     policy = os.SCHED_IDLE if idle else os.SCHED_OTHER
     for tid in _threads():
-        with contextlib.suppress(ProcessLookupError):     # ended meanwhile
+        try:
             os.sched_setscheduler(tid, policy, os.sched_param(0))
+        except ProcessLookupError:      # ended meanwhile
+            continue
+        except PermissionError:
+            return False
+    return True
 
 
 def run_nicer(increment: int) -> None:

@@ -39,6 +39,7 @@ def run(args: argparse.Namespace) -> int:
     from stillframe.errors import InputError
     from stillframe.middleware.api import create_node, spin
     from stillframe.middleware.names import resolve_topic, validate_node_name
+    from stillframe.node_runtime.realtime import run_idle
     from stillframe.node_runtime.support import RECORDER_NODE
     from stillframe.recording.recorder import Recorder
 
@@ -48,15 +49,25 @@ def run(args: argparse.Namespace) -> int:
         raise InputError("give either --all or one or more TOPICs")
     topics = [resolve_topic(t) for t in args.topics]
     name = RECORDER_NODE if args.node_name is None else validate_node_name(args.node_name)
-    apply_priority(args)    # before the middleware starts its threads: they inherit it
+    # the niceness before the middleware starts its threads (they inherit it); SCHED_IDLE only
+    # once the bag is open and the readers exist, so that a busy machine, which leaves an idle
+    # process next to no CPU time, cannot hold the start (a launch waits for the line below
+    # before it starts the loop), and back off it on the stop, to close the bag
+    apply_priority(args, idle=False)
     # the node stays on system time: the recorder stamps on /clock itself (recording.recorder)
     node = create_node(name, argv=sys.argv[:1])
     try:
         with BagWriter(args.output, messages.TYPESTORE) as bag:
             recorder = Recorder(node, bag, topics, sim_time=args.use_sim_time)
+            if args.idle:
+                run_idle()
             node.get_logger().info(f"Recording to '{args.output}' "
                                    f"({'all topics' if args.all else ', '.join(topics)})")
-            spin(node)
+            try:
+                spin(node)
+            finally:
+                if args.idle:
+                    run_idle(False)
             recorder.drain()
             recorder.write_losses()
         for topic in recorder.missing():
