@@ -123,8 +123,6 @@ class ModalTrackerNode:
         outputs = [Channel.parse(s) for s in values.outputs if s]
         period = values.update_period_s
         self.idle = values.idle
-        if self.idle:
-            run_idle()  # SCHED_IDLE: only CPU time the loop leaves (the worker thread inherits)
         self.record_file = Path(values.record_file) if values.record_file else None
         self.tracker = ModalTracker(1.0 / values.rate_hz, values.window_s,
                                     "auto" if values.order == "auto" else int(values.order))
@@ -153,6 +151,11 @@ class ModalTrackerNode:
         self.next_update: float | None = None
         self.updates = self.skipped = 0
         self.given_up = False
+        if self.idle:
+            # SCHED_IDLE once set up (the worker thread, started later, inherits it): beside
+            # busy processes an idle one gets next to no CPU time, and the launch waits for the
+            # ready line before it starts the loop
+            run_idle()
 
     def on_sample(self, k: int, msg: object, read) -> None:
         """The value ``read`` takes from channel ``k``'s message, filed under its header stamp; once
