@@ -167,7 +167,7 @@ OWN = {
     ("stillframe/config/environment.py", "<module>"): "regenerates docs/middleware.md",
     ("stillframe/node_runtime/declarations.py", "<module>"): "regenerates docs/nodes.md",
     ("stillframe/node_runtime/qos_table.py", "<module>"): "regenerates docs/nodes.md",
-    ("identification/node.py", "ModalTrackerNode.publish"): "appends to the launch's record",
+    ("identification/node.py", "ModalTrackerNode.write"): "appends to the launch's record",
     ("stillframe/app/adaptation_plot.py", "plot_timeline"): "the histories of adapt's own runs",
     ("stillframe/app/launcher.py", "Launcher._name_writers"): "sim_node's result of this run",
     ("stillframe/bags/full_disk.py", "mcap_writer"): "the writer's own storage file",
