@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from stillframe.dynamics.ph.body import BeamSection, floating_beam, rigid_body
-from stillframe.dynamics.ph.integrator import MidpointDAE, balance_error
+from stillframe.dynamics.ph.integrator import NEWTON_TOL, MidpointDAE, balance_error
 from stillframe.dynamics.ph.joints import Link, Support, fixed
 from stillframe.dynamics.ph.reference import radau_reference
 from stillframe.dynamics.ph.system import PHSystem, RotaryDamper
@@ -45,14 +45,19 @@ def flexible_arm(damping: float) -> tuple[PHSystem, np.ndarray]:
 
 
 def test_discrete_power_balance_holds_to_round_off_with_gravity_and_a_damper():
+    """The AVF balance is exact at each step's Newton solution. Newton stops once its correction
+    is below NEWTON_TOL of the state and contracts by ≥ 4 per iteration (else it refactors), so
+    a step's balance residual is below NEWTON_TOL·H, and the run's sum below steps times that.
+    The drift (m) adds per step the rounding of q (u·|q| ≈ 1e-16) and h times the velocity
+    constraint's residual: 50 steps stay below 1e-13 m."""
     system, e0 = flexible_arm(damping=0.002)
     _, states, record, drift = MidpointDAE(system, 2e-4).run(e0, 0.01)
     scale = abs(system.hamiltonian(e0))
-    assert balance_error(record, scale) < 1e-13
+    assert balance_error(record, scale) < NEWTON_TOL
     dissipated = np.sum(record.dissipated)
     assert dissipated > 1e-3 * scale  # the damper works, and the balance accounts for it exactly
     H = [system.hamiltonian(e) for e in states]
-    assert abs((H[-1] - H[0]) + dissipated) < 1e-13 * scale
+    assert abs((H[-1] - H[0]) + dissipated) < len(record.delta_h) * NEWTON_TOL * scale
     assert drift.max() < 1e-13
 
 
