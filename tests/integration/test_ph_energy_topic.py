@@ -77,9 +77,12 @@ def test_published_powers_integrate_to_the_stored_energy_and_diagnostics_agree(
     assert np.all(rows[0, 2:] == 0)
     supplied = T * (rows[1:, 2] + rows[1:, 3] + rows[1:, 4] - rows[1:, 5])
     scale = np.max(np.abs(rows[:, 1]))
-    # per sample and over the run: ΔH = ∫(P_excitation + P_actuator + P_noise − P_dissipated)
-    assert np.max(np.abs(supplied - np.diff(rows[:, 1]))) < 1e-14 * scale
-    assert abs(supplied.sum() - (rows[-1, 1] - rows[0, 1])) < 1e-13 * scale
+    # per sample and over the run: ΔH = ∫(P_excitation + P_actuator + P_noise − P_dissipated).
+    # A sample is 8 AVF steps, each balanced to a few u·H, plus the rounding of two stored H and
+    # four powers: ≲ 100u·H (bound 900u); the run adds the samples' errors. The dissipation alone
+    # moves ≈ 2 % of H per sample, so a wrong port term is far above either bound.
+    assert np.max(np.abs(supplied - np.diff(rows[:, 1]))) < 1e-13 * scale
+    assert abs(supplied.sum() - (rows[-1, 1] - rows[0, 1])) < len(supplied) * 1e-13 * scale
     assert np.all(rows[1:, 5] > 0) and np.any(rows[:, 3] != 0)
     level, message, values = status
     energy, violations = recomputed_violations(rows, 1.0)

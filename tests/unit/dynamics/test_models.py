@@ -111,7 +111,10 @@ def test_fe_frequencies_converge_monotonically() -> None:
     freqs = np.array([frequencies_hz(build_model(scene(type="fe", elements_per_column=n)))[:4]
                       for n in meshes])
     steps = np.diff(freqs, axis=0)
-    assert np.all(steps <= 1e-12), steps
+    # low_modes_first solves M ψ = μ K ψ: each μ = 1/ω² to ≈ n·u·μ_max (n ≤ 238 unknowns), so
+    # f_k to ≈ n·u·f_k·(f_k/f_1)²/2; a mass or stiffness error shows as a step ≫ that
+    slack = 256 * np.finfo(float).eps * freqs[1:] * (freqs[1:] / freqs[1:, :1]) ** 2
+    assert np.all(steps <= slack), steps
     # and converged at 40 elements: the README's figures under our assumptions
     np.testing.assert_allclose(freqs[-1], [1.0995, 1.9115, 5.5743, 8.4802], rtol=1e-4)
 

@@ -42,8 +42,13 @@ def test_compiled_step_is_the_generic_phdae_midpoint_step():
     loads[:, 0] = force((np.arange(steps) + 0.5) * h)
     stepper.run(z, loads, CONTROL, np.zeros(4))
     # the same discrete solution (MidpointDAE: dense Newton on all 150 unknowns)
-    assert np.max(np.abs(stepper.expand(z) - e)) < 1e-8
-    assert abs(stepper.energy(z) - stepper.energy(stepper.reduce(e))) < 1e-10
+    difference = stepper.expand(z) - e
+    assert np.max(np.abs(difference)) < 1e-8
+    # the same H: the energies differ by what the states' difference moves it, |∇H|·|Δe| to
+    # first order (∇H = Eᵀz), plus the two evaluations' round-off, a few u·H
+    gradient = fs.system.descriptor.T @ fs.system.z(e)
+    bound = 2 * np.abs(gradient) @ np.abs(difference) + 1e-14 * abs(fs.system.hamiltonian(e))
+    assert abs(stepper.energy(z) - stepper.energy(stepper.reduce(e))) < bound
 
 
 def test_discrete_power_balance_per_step_holds_to_round_off_with_every_port():

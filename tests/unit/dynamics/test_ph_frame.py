@@ -9,7 +9,7 @@ import scipy.linalg as sla
 from stillframe.config.scene import load_scene
 from stillframe.dynamics.models import build_model
 from stillframe.dynamics.ph import frame
-from stillframe.dynamics.ph.integrator import MidpointDAE, balance_error
+from stillframe.dynamics.ph.integrator import NEWTON_TOL, MidpointDAE, balance_error
 from stillframe.dynamics.ph.linear import natural_frequencies
 
 FE40_HZ = np.array([1.0995, 1.9115, 5.5743, 8.4802])  # README: FE model, 40 el./column
@@ -46,19 +46,24 @@ def released(scene, rayleigh=None):
 
 @pytest.mark.slow
 def test_undamped_frame_conserves_h_and_a_damped_one_dissipates_exactly_z_r_z(scene):
+    """Each step balances to below NEWTON_TOL·H (Newton's stop rule: the AVF balance is exact at
+    the step's solution, see test_ph_integrator), so 100 steps keep H and the dissipated sum to
+    100·NEWTON_TOL·H, ≈ 1e-9 of the energy the damped run loses. The drift (m) adds per step the
+    rounding of q (u·|q| ≲ 1e-15) and h times the velocity constraint's Newton residual."""
     scene_u = load_scene("scenes/thesis_fe.yaml", ["rig.pendulum.hinge_damping=0"])
     system, e0 = released(scene_u)
     _, states, record, drift = MidpointDAE(system, 2e-3).run(e0, 0.2)
     H = np.array([system.hamiltonian(e) for e in states])
-    assert np.max(np.abs(H - H[0])) < 1e-12 * abs(H[0])
+    steps = len(record.delta_h)
+    assert np.max(np.abs(H - H[0])) < steps * NEWTON_TOL * abs(H[0])
     assert drift.max() < 1e-12
     system, e0 = released(scene, rayleigh=(0.5, 1e-4))
     _, states, record, _ = MidpointDAE(system, 2e-3).run(e0, 0.2)
     H = np.array([system.hamiltonian(e) for e in states])
     lost = H[0] - H[-1]
     assert lost > 1e-3  # J: the columns' and floors' Rayleigh R and the hinge damper work
-    assert abs(lost - np.sum(record.dissipated)) < 1e-10 * lost
-    assert balance_error(record, abs(H[0])) < 1e-13
+    assert abs(lost - np.sum(record.dissipated)) < steps * NEWTON_TOL * abs(H[0])
+    assert balance_error(record, abs(H[0])) < NEWTON_TOL
 
 
 def test_modes_command_runs_the_ph_scene(capsys):

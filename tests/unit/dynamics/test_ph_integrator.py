@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from stillframe.dynamics.ph.body import BeamSection, floating_beam, rigid_body
-from stillframe.dynamics.ph.integrator import MidpointDAE, balance_error
+from stillframe.dynamics.ph.integrator import NEWTON_TOL, MidpointDAE, balance_error
 from stillframe.dynamics.ph.joints import Link, Support, fixed
 from stillframe.dynamics.ph.reference import radau_reference
 from stillframe.dynamics.ph.system import PHSystem, RotaryDamper
@@ -45,14 +45,19 @@ def flexible_arm(damping: float) -> tuple[PHSystem, np.ndarray]:
 
 
 def test_discrete_power_balance_holds_to_round_off_with_gravity_and_a_damper():
+    """The AVF balance is exact at each step's Newton solution. Newton stops once its correction
+    is below NEWTON_TOL of the state and contracts by ≥ 4 per iteration (else it refactors), so
+    a step's balance residual is below NEWTON_TOL·H, and the run's sum below steps times that.
+    The drift (m) adds per step the rounding of q (u·|q| ≈ 1e-16) and h times the velocity
+    constraint's residual: 50 steps stay below 1e-13 m."""
     system, e0 = flexible_arm(damping=0.002)
     _, states, record, drift = MidpointDAE(system, 2e-4).run(e0, 0.01)
     scale = abs(system.hamiltonian(e0))
-    assert balance_error(record, scale) < 1e-13
+    assert balance_error(record, scale) < NEWTON_TOL
     dissipated = np.sum(record.dissipated)
     assert dissipated > 1e-3 * scale  # the damper works, and the balance accounts for it exactly
     H = [system.hamiltonian(e) for e in states]
-    assert abs((H[-1] - H[0]) + dissipated) < 1e-13 * scale
+    assert abs((H[-1] - H[0]) + dissipated) < len(record.delta_h) * NEWTON_TOL * scale
     assert drift.max() < 1e-13
 
 
@@ -83,6 +88,11 @@ def test_constraint_drift_and_balance_stay_at_round_off():
 
 @pytest.mark.long
 def test_constraint_drift_stays_bounded_over_1e5_steps():
-    drift, balance = drift_run(100_000)
-    assert drift < 1e-12
+    """Each step adds the rounding of g's terms (u times the two 0.3 m links) and h times the
+    velocity constraint's Newton residual (h·NEWTON_TOL·|ν|, smaller): each below u·0.6 m, so
+    linear in the steps at worst (a random walk, √steps of it, in practice); a scheme that lets
+    positions drift adds truncation terms of order h³ per step, ≫ that."""
+    steps = 100_000
+    drift, balance = drift_run(steps)
+    assert drift < steps * 2 * 0.6 * np.finfo(float).eps / 2
     assert balance < 1e-12
