@@ -224,8 +224,8 @@ class ModalTrackerNode:
                 future.cancel()
                 self.write(no_modes(window.t, f"{GIVEN_UP}: the tracker was stopped again "
                                               "before this window was identified"))
-            print(f"modal_tracker: stopped again while identifying; {len(due)} windows still "
-                  f"due are given up (written as such to {self.record_file or 'no record file'})",
+            print(f"modal_tracker: stopped again while identifying; windows still due, given "
+                  f"up: {len(due)} (written as such to {self.record_file or 'no record file'})",
                   file=sys.stderr, flush=True)
             interrupts.finish("modal_tracker", EXIT_GIVEN_UP)
 

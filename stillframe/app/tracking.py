@@ -63,7 +63,7 @@ def given_up(tracked: list[dict[str, Any]]) -> str:
     times = [u["t"] for u in tracked if (u.get("error") or "").startswith(GIVEN_UP)]
     if not times:
         return ""
-    return (f"the modal tracker gave up {len(times)} windows due at its stop (t = "
+    return (f"the modal tracker gave up the windows due at its stop (t = "
             f"{', '.join(f'{t:g}' for t in times)} s): their identification did not end within "
             f"the {TRACKER_STOP_S:g} s the stop allows; tracked_modes holds them with that error")
 
