@@ -137,7 +137,7 @@ def refine_candidates(factorization: HankelFactorization, gain_markov: Array, r:
             fits[order - 2], fits[order]):
         order -= 2
     order, raised = _complete(fits, order, _fit, factorization.numerical_rank, samples)
-    scores = {n: bic(fit, samples) for n, fit in fits.items()}
+    scores.update({n: bic(fits[n], samples) for n in fits.keys() - scores.keys()})
     notes = [raised] if raised else []
     notes += [dropped_by_bic(fits[order], fits[n], samples) for n in sorted(fits) if n > order
               and aic(fits[n], samples) < aic(fits[order], samples)]

@@ -145,8 +145,8 @@ def residual_warnings(y: Array, errors: Array, u: Array | None = None) -> list[s
         found.append(f"prediction errors are not white (portmanteau test over {white.lags} "
                      f"lags, p = {white.p_value:.2g}): the model leaves dynamics unexplained (a "
                      "mode may be missing) or the noise is coloured")
-    if u is not None:
-        found += [text for text in [independence_warning(independence(errors, u))] if text]
+    if u is not None and (text := independence_warning(independence(errors, u))):
+        found.append(text)
     best = float(np.max(snr_db(y, errors)))
     if best < LOW_SNR_DB:
         found.append(f"low signal-to-noise ratio: {best:.3g} dB on the best output (below "
