@@ -94,13 +94,13 @@ def add_priority_arguments(parser: argparse.ArgumentParser, *, nice: int, who: s
                              "loop)")
 
 
-def apply_priority(args: argparse.Namespace, *, idle: bool = True) -> None:
-    """Apply ``--nice`` and (with ``idle``) ``--idle`` to this process; call it before the
-    middleware starts its threads, which inherit both."""
+def apply_priority(args: argparse.Namespace) -> None:
+    """Apply ``--nice`` and ``--idle`` to this process; call it before the middleware starts
+    its threads, which inherit both."""
     from stillframe.node_runtime.realtime import run_idle, run_nicer
 
     run_nicer(args.nice)
-    if idle and args.idle:
+    if args.idle:
         run_idle()
 
 

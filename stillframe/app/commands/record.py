@@ -9,7 +9,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from stillframe.app.arguments import add_priority_arguments, apply_priority
+from stillframe.app.arguments import add_priority_arguments
 from stillframe.files import check_output
 
 
@@ -39,7 +39,7 @@ def run(args: argparse.Namespace) -> int:
     from stillframe.errors import InputError
     from stillframe.middleware.api import create_node, spin
     from stillframe.middleware.names import resolve_topic, validate_node_name
-    from stillframe.node_runtime.realtime import run_idle
+    from stillframe.node_runtime.realtime import run_idle, run_nicer
     from stillframe.node_runtime.support import RECORDER_NODE
     from stillframe.recording.recorder import Recorder
 
@@ -53,7 +53,7 @@ def run(args: argparse.Namespace) -> int:
     # once the bag is open and the readers exist, so that a busy machine, which leaves an idle
     # process next to no CPU time, cannot hold the start (a launch waits for the line below
     # before it starts the loop), and back off it on the stop, to close the bag
-    apply_priority(args, idle=False)
+    run_nicer(args.nice)
     # the node stays on system time: the recorder stamps on /clock itself (recording.recorder)
     node = create_node(name, argv=sys.argv[:1])
     try:
