@@ -30,10 +30,10 @@ stationary covariance and gain) is recomputed before the next sample. Every othe
 read-only.
 
 An estimator started while the loop runs (its first sample stamped after 0, e.g. restarted after
-a crash) starts a Kalman filter's mean from that sample's measurements
-(:meth:`stillframe.estimation.kalman.LinearFilter.initialise_from`) rather than the scene's initial
-state,
-at the first sample that carries all four measurements (earlier ones are skipped and counted).
+a crash) starts a Kalman filter from that sample's measurements rather than the scene's initial
+state (:meth:`stillframe.estimation.kalman.LinearFilter.initialise_from`: its estimate at that
+sample, with the covariance the measurements and ``estimator.restart_velocity_std`` give), at the
+first sample that carries all four measurements (earlier ones are skipped and counted).
 
 The design (``design`` parameter, filters only): ``scene`` or a model file, optionally ``@T``;
 checked when set (:class:`stillframe.loop.adaptation.DesignSwitch`: refused with the reason, the
@@ -285,6 +285,7 @@ class EstimatorNode(base.LoopNode):
         timing.mark_at(slot["ready"], now_ns)
         self.sample_start_ns = ready.first_ns
         sample, control = ready.sample, ready.control
+        joined = False
         if (self.assembly.last_ns < 0 and ready.ns > 0
                 and isinstance(self.estimator, LinearFilter)):
             # joined a running loop (restarted): start from the measurements, not the scene,
@@ -293,7 +294,10 @@ class EstimatorNode(base.LoopNode):
                 self.counts["skipped_before_initialisation"] += 1
                 return
             self.estimator.initialise_from(sample, control)
+            joined = True
             self.counts["initialised_from_measurements"] += 1
+            self.node.get_logger().info(
+                f"joined a running loop: started from the measurements at t = {sample.t:.9g} s")
         if self.designs is not None and (due := self.designs.due(ready.ns)) is not None:
             new = due[1]
             assert isinstance(self.estimator, Filter)
@@ -301,7 +305,8 @@ class EstimatorNode(base.LoopNode):
             self.estimator = new
             self.node.get_logger().info(f"design {self.designs.current!r} taken at "
                                         f"t = {sample.t:.6g} s")
-        estimate = self.estimator.step(sample, control)
+        # a filter started from this sample has used it
+        estimate = self.estimator.estimate() if joined else self.estimator.step(sample, control)
         timing.mark(slot["computed"])
         self.assembly.used(ready.ns)
         if self.adaptation is not None:

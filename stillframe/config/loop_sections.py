@@ -132,6 +132,10 @@ class Estimator(Section):
         "mean initial estimate minus the true initial state (5.219)"))
     initial_std: Floats8 = key((1e-4,) * 4 + (1e-5,) * 4, up_to(1e3),
                                doc="square roots of the initial covariance diagonal (5.220)")
+    restart_velocity_std: Floats4 = key((1.0, 1.0, 1.0, 10.0), in_range(0.0, 1e6), doc=(
+        "kf, tvkf started from a sample of a running loop: standard deviations of the floor "
+        "velocities [m/s] and of phi' [rad/s], which one sample does not measure (the "
+        "displacements and phi take the spread of their measurements)"))
     max_substep: float = key(5e-3, up_to(1.0), doc="EKF: longest RK4 prediction step [s]")
 
 

@@ -11,7 +11,8 @@ acceleration rows of the continuous state equation. Process noise: discrete, per
   checks; filterpy has no stationary filter); the gain for the channels present is
   P∞ Cₛᵀ (Cₛ P∞ Cₛᵀ + Rₛ)⁻¹, the stationary gain when all arrive. After a gap (an interval
   longer than the period) the mean is propagated over the true interval but the covariance
-  stays P∞.
+  stays P∞. Started from one sample (an estimator joining a running loop), it propagates its
+  covariance as the time-varying filter does until that reaches P∞.
 - :class:`TimeVaryingKalman`: filterpy's ``KalmanFilter`` (predict with our input matrices,
   update with the rows present).
 """
@@ -23,13 +24,17 @@ import scipy.linalg as sla
 from filterpy.kalman import KalmanFilter
 
 from stillframe.config.loop_sections import Estimator
-from stillframe.contract.signals import Sample, full_inputs
+from stillframe.contract.signals import Estimate, Sample, full_inputs
 from stillframe.design.discrete import Discrete, first_order_hold
 from stillframe.design.riccati import solve_dare
 from stillframe.dynamics.models import FrameModel
 from stillframe.estimation.base import Filter
 
-__all__ = ["LinearFilter", "SteadyStateKalman", "TimeVaryingKalman"]
+__all__ = ["CONVERGED", "LinearFilter", "SteadyStateKalman", "TimeVaryingKalman"]
+
+CONVERGED = 1e-6
+"""A stationary filter started from one sample takes P∞ once its propagated prior is this close
+to it (relative, Frobenius norm): the gains then differ by about as much."""
 
 
 class LinearFilter(Filter):
@@ -44,6 +49,7 @@ class LinearFilter(Filter):
         self.C = np.vstack([self.A[rows], np.eye(2 * n)[model.phi_index]])
         self.D = np.vstack([self.B[rows], np.zeros((1, 4))])
         self.period = period
+        self.restart_velocity_std = config.restart_velocity_std
         self._discrete: dict[float, Discrete] = {}
 
     def discrete(self, dt: float) -> Discrete:
@@ -64,21 +70,32 @@ class LinearFilter(Filter):
         self.x = d.phi @ self.x + d.gamma0 @ u0 + d.gamma1 @ (u1 - u0)
         return d
 
-    def initialise_from(self, sample: Sample, control: np.ndarray) -> None:
-        """Restart the mean from one sample (an estimator that joins a running loop): φ from
-        the encoder, the velocities zero, the floor displacements that explain the measured
-        accelerations with the model's y = C z + D u (least squares; the sample's excitation
-        and ``control`` as inputs). The covariance restarts at the scene's initial one."""
-        u = full_inputs(control, sample.force if np.isfinite(sample.force) else 0.0,
-                        self.excited_floor)
-        y = np.asarray(sample.measurements, dtype=float)
+    def initialise_from(self, sample: Sample, control: np.ndarray) -> Estimate:
+        """Start from one sample, in place of :meth:`step` for it (an estimator that joins a
+        running loop); returns the estimate at the sample.
+
+        The mean: φ from the encoder, the floor displacements that explain the measured
+        accelerations with the model's y = C z + D u (the sample's excitation and ``control`` as
+        inputs), the velocities zero. The covariance: what the measurement noise R gives those
+        four through the same map, and ``estimator.restart_velocity_std`` for the velocities,
+        which one sample does not measure. The sample is used once: the next one is predicted
+        from it."""
+        force = float(sample.force) if np.isfinite(sample.force) else 0.0
+        u = full_inputs(control, force, self.excited_floor)
+        read = np.asarray(sample.measurements, dtype=float) - self.D @ u
+        floors = np.linalg.pinv(self.C[:3] @ self.T[:, :3])
+        L = np.eye(4)          # [x1, x2, x3, φ] = L (y − D u)
+        L[:3, :3] = floors
+        L[:3, 3] = -floors @ self.C[:3] @ self.T[:, 3]
         physical = np.zeros(8)
-        physical[3] = y[3]
-        floors = self.C[:3] @ self.T[:, :3]
-        rest = y[:3] - self.D[:3] @ u - self.C[:3] @ self.T @ physical
-        physical[:3] = np.linalg.lstsq(floors, rest, rcond=None)[0]
-        self.x = self.T @ physical
-        self.t = None
+        physical[:4] = L @ read
+        spread = np.zeros((8, 8))
+        spread[:4, :4] = L @ self.R @ L.T
+        spread[4:, 4:] = np.diag(np.square(self.restart_velocity_std))
+        self.x, self.P = self.T @ physical, self.T @ spread @ self.T.T
+        self.t, self.force = sample.t, force
+        self.counters.updates += 1
+        return self.estimate()
 
     def innovation(self, y: np.ndarray, present: np.ndarray, force: float,
                    control: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -90,13 +107,18 @@ class LinearFilter(Filter):
 
 
 class SteadyStateKalman(LinearFilter):
-    """Stationary Kalman filter (fixed covariance P∞ at the nominal period)."""
+    """Stationary Kalman filter (fixed covariance P∞ at the nominal period).
+
+    Started from one sample (:meth:`LinearFilter.initialise_from`), its covariance is far from
+    P∞: it is propagated and updated as a time-varying filter's until its prior is within
+    :data:`CONVERGED` of P∞ (relative, Frobenius norm), and is P∞ from there on."""
 
     def __init__(self, model: FrameModel, config: Estimator, excited_floor: int,
                  initial_physical: np.ndarray, period: float) -> None:
         super().__init__(model, config, excited_floor, initial_physical, period)
         self.design(self.Q, self.R)
         self.P = self.prior
+        self.converging = False
 
     def design(self, Q: np.ndarray, R: np.ndarray) -> None:
         """P∞ and the full gain for Q, R (InputError, nothing changed, if the DARE fails)."""
@@ -111,22 +133,43 @@ class SteadyStateKalman(LinearFilter):
         """Design P∞ and the gains again for the new standard deviations (:meth:`design`)."""
         self.design(*self.noise_covariances(process_std, measurement_std))
 
-    def gain_for(self, present: np.ndarray) -> np.ndarray:
-        """The gain P∞ Cₛᵀ (Cₛ P∞ Cₛᵀ + Rₛ)⁻¹ for the rows ``present`` of y."""
+    def initialise_from(self, sample: Sample, control: np.ndarray) -> Estimate:
+        """Start from one sample (:meth:`LinearFilter.initialise_from`); the covariance converges
+        to P∞ from the one the sample gives."""
+        self.converging = True
+        return super().initialise_from(sample, control)
+
+    def gain_for(self, present: np.ndarray, prior: np.ndarray | None = None) -> np.ndarray:
+        """The gain P Cₛᵀ (Cₛ P Cₛᵀ + Rₛ)⁻¹ for the rows ``present`` of y; P is ``prior``, by
+        default P∞."""
+        P = self.prior if prior is None else prior
         C, R = self.C[present], self.R[np.ix_(present, present)]
-        return sla.solve(C @ self.prior @ C.T + R, C @ self.prior, assume_a="pos").T
+        return sla.solve(C @ P @ C.T + R, C @ P, assume_a="pos").T
 
     def predict(self, dt: float, force0: float, force1: float, control: np.ndarray) -> None:
-        """Propagate the mean over ``dt`` [s]; the covariance stays the stationary prior P∞."""
-        self.propagate_mean(dt, force0, force1, control)
-        self.P = self.prior
+        """Propagate the mean over ``dt`` [s]; the covariance stays the stationary prior P∞, or,
+        while it converges, is propagated (Φ P Φᵀ + Q)."""
+        d = self.propagate_mean(dt, force0, force1, control)
+        if not self.converging:
+            self.P = self.prior
+            return
+        P = d.phi @ self.P @ d.phi.T + self.Q
+        if np.linalg.norm(P - self.prior) <= CONVERGED * np.linalg.norm(self.prior):
+            self.converging, P = False, self.prior
+        self.P = P
 
     def update(self, y: np.ndarray, present: np.ndarray, force: float,
                control: np.ndarray) -> None:
         """Correct the mean with the measurement rows ``present``: the stationary gain when all are
         present, else the gain for those rows (:meth:`gain_for`) and the posterior covariance it
-        gives."""
-        z, C, _ = self.innovation(y, present, force, control)
+        gives; while the covariance converges, the gain of the propagated one (Joseph form)."""
+        z, C, R = self.innovation(y, present, force, control)
+        if self.converging:
+            K = self.gain_for(present, self.P)
+            self.x = self.x + K @ (z - C @ self.x)
+            keep = np.eye(self.x.size) - K @ C
+            self.P = keep @ self.P @ keep.T + K @ R @ K.T
+            return
         if present.all():
             self.x = self.x + self.gain @ (z - C @ self.x)
             self.P = self.posterior
@@ -150,11 +193,12 @@ class TimeVaryingKalman(LinearFilter):
         super().set_noise(process_std, measurement_std)
         self.kf.Q, self.kf.R = self.Q, self.R
 
-    def initialise_from(self, sample: Sample, control: np.ndarray) -> None:
-        """Restart the mean from one sample (:meth:`LinearFilter.initialise_from`) in filterpy's
-        filter too."""
-        super().initialise_from(sample, control)
-        self.kf.x = self.x
+    def initialise_from(self, sample: Sample, control: np.ndarray) -> Estimate:
+        """Start from one sample (:meth:`LinearFilter.initialise_from`), filterpy's filter taking
+        the mean and covariance too."""
+        estimate = super().initialise_from(sample, control)
+        self.kf.x, self.kf.P = self.x, self.P
+        return estimate
 
     def continue_from(self, previous: Filter) -> None:
         """Go on from ``previous`` (:meth:`Filter.continue_from`), filterpy's filter taking the
