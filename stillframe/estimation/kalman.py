@@ -76,22 +76,29 @@ class LinearFilter(Filter):
 
         The mean: φ from the encoder, the floor displacements that explain the measured
         accelerations with the model's y = C z + D u (the sample's excitation and ``control`` as
-        inputs), the velocities zero. The covariance: what the measurement noise R gives those
-        four through the same map, and ``estimator.restart_velocity_std`` for the velocities,
-        which one sample does not measure. The sample is used once: the next one is predicted
-        from it."""
+        inputs), the velocities zero. The covariance: the velocities' is
+        ``estimator.restart_velocity_std`` (one sample does not measure them); the
+        displacements' is what the measurement noise R and the velocities (through the damping
+        terms of the acceleration rows, which the mean takes as zero) give them through the
+        same map. The sample is used once: the next one is predicted from it."""
         force = float(sample.force) if np.isfinite(sample.force) else 0.0
         u = full_inputs(control, force, self.excited_floor)
         read = np.asarray(sample.measurements, dtype=float) - self.D @ u
-        floors = np.linalg.pinv(self.C[:3] @ self.T[:, :3])
-        L = np.eye(4)          # [x1, x2, x3, φ] = L (y − D u)
+        accelerations = self.C[:3] @ self.T        # per physical state
+        floors = np.linalg.pinv(accelerations[:, :3])
+        # [x1, x2, x3, φ] = L (y − D u) − V v for the velocities v
+        L, V = np.eye(4), np.zeros((4, 4))
         L[:3, :3] = floors
-        L[:3, 3] = -floors @ self.C[:3] @ self.T[:, 3]
+        L[:3, 3] = -floors @ accelerations[:, 3]
+        V[:3] = floors @ accelerations[:, 4:]
         physical = np.zeros(8)
         physical[:4] = L @ read
+        velocities = np.diag(np.square(self.restart_velocity_std))
         spread = np.zeros((8, 8))
-        spread[:4, :4] = L @ self.R @ L.T
-        spread[4:, 4:] = np.diag(np.square(self.restart_velocity_std))
+        spread[:4, :4] = L @ self.R @ L.T + V @ velocities @ V.T
+        spread[:4, 4:] = -V @ velocities
+        spread[4:, :4] = spread[:4, 4:].T
+        spread[4:, 4:] = velocities
         self.x, self.P = self.T @ physical, self.T @ spread @ self.T.T
         self.t, self.force = sample.t, force
         self.counters.updates += 1
