@@ -135,7 +135,7 @@ class Estimator(Section):
     restart_velocity_std: Floats4 = key((1.0, 1.0, 1.0, 10.0), in_range(0.0, 1e6), doc=(
         "kf, tvkf started from a sample of a running loop: standard deviations of the floor "
         "velocities [m/s] and of phi' [rad/s], which one sample does not measure (the "
-        "displacements and phi take the spread of their measurements)"))
+        "displacements and phi take the spread that the measurements and these give them)"))
     max_substep: float = key(5e-3, up_to(1.0), doc="EKF: longest RK4 prediction step [s]")
 
 

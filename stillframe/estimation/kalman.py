@@ -86,19 +86,13 @@ class LinearFilter(Filter):
         read = np.asarray(sample.measurements, dtype=float) - self.D @ u
         accelerations = self.C[:3] @ self.T        # per physical state
         floors = np.linalg.pinv(accelerations[:, :3])
-        # [x1, x2, x3, φ] = L (y − D u) − V v for the velocities v
-        L, V = np.eye(4), np.zeros((4, 4))
-        L[:3, :3] = floors
-        L[:3, 3] = -floors @ accelerations[:, 3]
-        V[:3] = floors @ accelerations[:, 4:]
-        physical = np.zeros(8)
-        physical[:4] = L @ read
-        velocities = np.diag(np.square(self.restart_velocity_std))
-        spread = np.zeros((8, 8))
-        spread[:4, :4] = L @ self.R @ L.T + V @ velocities @ V.T
-        spread[:4, 4:] = -V @ velocities
-        spread[4:, :4] = spread[:4, 4:].T
-        spread[4:, 4:] = velocities
+        # the physical state = M [y − D u, v] for the velocities v, taken as zero in the mean
+        M = np.eye(8)
+        M[:3, :3] = floors
+        M[:3, 3] = -floors @ accelerations[:, 3]
+        M[:3, 4:] = -floors @ accelerations[:, 4:]
+        physical = M[:, :4] @ read
+        spread = M @ sla.block_diag(self.R, np.diag(np.square(self.restart_velocity_std))) @ M.T
         self.x, self.P = self.T @ physical, self.T @ spread @ self.T.T
         self.t, self.force = sample.t, force
         self.counters.updates += 1
