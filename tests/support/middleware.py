@@ -47,18 +47,32 @@ def run_stillframe(*args: str, timeout: float = 60) -> subprocess.CompletedProce
 
 
 def wait_for_line(proc: subprocess.Popen, text: str, timeout: float = 30) -> str:
-    """Read the process's stdout until a line containing ``text`` (fails on exit or timeout)."""
+    """Read the process's stdout until a line containing ``text`` (fails on exit or timeout).
+
+    The pipe is read a byte at a time, straight from its descriptor: ``select`` on a buffered
+    stream misses the lines its buffer already holds (a process that logs two lines in one
+    instant hands both to the first ``readline``, and the second then never wakes ``select``),
+    and reading no further than the line leaves the rest in the pipe for later readers."""
+    fd = proc.stdout.fileno()
     deadline = time.monotonic() + timeout
+    lines: list[str] = []
+    line = bytearray()
     while (remaining := deadline - time.monotonic()) > 0:
-        if not select.select([proc.stdout], [], [], remaining)[0]:
+        if not select.select([fd], [], [], remaining)[0]:
             break
-        line = proc.stdout.readline()
-        if text in line:
-            return line
-        if not line and proc.poll() is not None:
+        byte = os.read(fd, 1)
+        if not byte:
             break
+        if byte != b"\n":
+            line += byte
+            continue
+        lines.append(line.decode(errors="replace"))
+        line.clear()
+        if text in lines[-1]:
+            return lines[-1] + "\n"
     proc.kill()
-    raise AssertionError(f"no line with {text!r}; stderr: {proc.stderr.read()[-2000:]}")
+    said = "\n".join([*lines, line.decode(errors="replace")])
+    raise AssertionError(f"no line with {text!r} in {timeout:g} s; it wrote: {said[-2000:]}")
 
 
 def finish(proc: subprocess.Popen, timeout: float = 30) -> tuple[str, str]:
