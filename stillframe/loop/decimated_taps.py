@@ -32,7 +32,6 @@ from collections.abc import Callable
 from typing import Any
 
 import numpy as np
-from scipy import signal
 
 from stillframe.contract.codecs import SAMPLE_TOPICS, SensorMessages
 from stillframe.contract.signals import Sample
@@ -66,6 +65,10 @@ def decimation_factor(rate_hz: float) -> int:
 def anti_alias_taps(factor: int) -> np.ndarray:
     """The FIR's coefficients for decimation by ``factor``: odd length L with (L - 1) / 2 a
     multiple of ``factor`` (the centre falls on the decimated grid), unit gain at DC."""
+    # imported here: scipy.signal takes longer to import than the rest of a node, and a
+    # simulator below MIN_RATE_HZ never designs a filter
+    from scipy import signal
+
     nyquist_out = 1.0 / factor                     # in units of the input's Nyquist frequency
     width = (STOP_EDGE - PASS_EDGE) * 2 * nyquist_out
     numtaps, beta = signal.kaiserord(STOPBAND_DB, width)

@@ -114,7 +114,8 @@ def test_lowpassed_record_keeps_the_modes(noisy_bag: Path) -> None:
                                rtol=5e-3)
 
 
-@pytest.mark.parametrize("method", ["okid-era", "okid-eradc"])
+# ERA/DC's modes are checked by default in test_noisy_bag_recovers_frequencies
+@pytest.mark.parametrize("method", ["okid-era", pytest.param("okid-eradc", marks=pytest.mark.long)])
 def test_json_schema_and_auto_order(noisy_bag: Path, method: str) -> None:
     doc = identify_json(noisy_bag, "--order", "auto", "--method", method)
     assert {"order", "dt", "modes", "hankel_singular_values", "method"} <= doc.keys()

@@ -33,7 +33,9 @@ def one_process(scene: str, *overrides: str) -> dict:
     return json.loads(done.stdout)
 
 
-@pytest.mark.parametrize("scene", ["thesis_lqg.yaml", "thesis_euk_ekf.yaml"])
+# thesis_lqg's launch equals its one-process run by default in test_ros2_interop (rclpy)
+@pytest.mark.parametrize("scene", [pytest.param("thesis_lqg.yaml", marks=pytest.mark.long),
+                                   "thesis_euk_ekf.yaml"])
 def test_launch_equals_one_process_run(scene: str, ros_domain: int) -> None:
     done = run_stillframe("launch", str(SCENES / scene), *SHORT, "--json", timeout=300)
     assert done.returncode == 0, done.stderr[-3000:]

@@ -53,7 +53,9 @@ PEER = textwrap.dedent("""
     else:
         got = []
         node.create_subscription("sensor_msgs/msg/JointState", "js", got.append, "default")
-        spin_until(node, lambda: len(got) >= 5, 40)
+        # all 20 before leaving: a Fast DDS writer waiting for the acks of a Cyclone reader
+        # that has left waits out the reader's lease (10 s)
+        spin_until(node, lambda: len(got) >= 20, 40)
         print("received", len(got), flush=True)
         seen = lambda: ("peer_pub", "/t") in node.get_node_names_and_namespaces()
         print("publisher node seen", spin_until(node, seen, 10), flush=True)
