@@ -109,6 +109,8 @@ MONITOR_READY = re.compile(r"Monitor ready: foxglove (ws://\S+?), dashboard (htt
 
 
 @pytest.mark.slow
+@pytest.mark.long   # the monitor's transport runs by default in test_monitor; the balance's
+                    # numbers in test_published_powers_integrate_to_the_stored_energy…
 def test_energy_balance_reaches_foxglove_and_the_dashboard(ros_domain: int) -> None:
     """A real-time launch with the monitor: a foxglove.websocket client decodes
     ``energy_balance`` with the advertised ros2msg schema (the layout label included), and the

@@ -53,12 +53,13 @@ PEER = textwrap.dedent("""
     else:
         got = []
         node.create_subscription("sensor_msgs/msg/JointState", "js", got.append, "default")
-        # all 20 before leaving: a Fast DDS writer waiting for the acks of a Cyclone reader
-        # that has left waits out the reader's lease (10 s)
-        spin_until(node, lambda: len(got) >= 20, 40)
+        spin_until(node, lambda: len(got) >= 5, 40)
         print("received", len(got), flush=True)
         seen = lambda: ("peer_pub", "/t") in node.get_node_names_and_namespaces()
         print("publisher node seen", spin_until(node, seen, 10), flush=True)
+        # the rest of the 20 before leaving (at most 5 s more): a Fast DDS writer that waits
+        # for the acks of a Cyclone reader that has left waits out the reader's lease (10 s)
+        spin_until(node, lambda: len(got) >= 20, 5)
     node.destroy_node()
 """)
 
@@ -88,7 +89,10 @@ def bag_counts(path: Path) -> dict[str, int]:
     pytest.param(["--backend", "dds"], None, marks=pytest.mark.long),
     (["--backend", "rclpy"], None),
     (["--backend", "rclpy", "--backend", "sim_node=dds"], "rclpy"),
-    (["--backend", "dds", "--backend", "sim_node=rclpy"], "dds"),
+    # the mixed loop the other way round crosses the same vendor boundary on every topic, and
+    # its dds recorder is the other tests' default one
+    pytest.param(["--backend", "dds", "--backend", "sim_node=rclpy"], "dds",
+                 marks=pytest.mark.long),
 ], ids=["all-dds", "all-rclpy", "sim-dds-rest-rclpy", "sim-rclpy-rest-dds"])
 def test_mixed_vendor_loops_are_bit_identical_and_recorded_whole(
         backends: list[str], recorder: str | None, tmp_path: Path,
