@@ -111,12 +111,15 @@ def add_compose_arguments(parser: argparse.ArgumentParser) -> None:
 def add_realtime_arguments(parser: argparse.ArgumentParser, *, launch: bool = True) -> None:
     """``--rt [PRACTICES]`` and ``--rt-cpus`` (shared with ``bench loop``, which has no default
     practices: ``launch`` False)."""
-    default = ("all in --mode realtime, each practice where you may (one line says which), "
+    from stillframe.node_runtime.realtime import DEFAULT_PRACTICES, PRACTICES
+
+    practice = ",".join(DEFAULT_PRACTICES)
+    default = (f"{practice} in --mode realtime, each where you may (one line says which), "
                "none in lock-step" if launch else "none")
-    parser.add_argument("--rt", nargs="?", const="all", default=None, metavar="PRACTICES",
-                        help="real-time mode for the loop nodes: 'all' (the default with --rt), "
-                             "'none', or a comma list of mlock, gc, fifo, affinity, spin, "
-                             f"cpu_latency (docs/realtime.md; default {default})")
+    parser.add_argument("--rt", nargs="?", const=practice, default=None, metavar="PRACTICES",
+                        help=f"real-time mode for the loop nodes: '--rt' alone is {practice}; "
+                             "'all', 'none', or a comma list of "
+                             f"{', '.join(PRACTICES)} (docs/realtime.md; default {default})")
     parser.add_argument("--rt-cpus", default="", metavar="CPUS",
                         help="with --rt affinity: pin the loop nodes to these CPUs (e.g. 1)")
 

@@ -51,6 +51,7 @@ from stillframe.middleware import api, discovery, names
 from stillframe.middleware.graph import UNNAMED_NODES, fqn
 from stillframe.node_runtime.declarations import NODE_PARAMETERS, ManagedParameterValues
 from stillframe.node_runtime.realtime import (
+    DEFAULT_PRACTICES,
     RealtimeOptions,
     parse_practices,
     permissions_line,
@@ -166,7 +167,7 @@ def node_command(package: str, scene: Path, overrides: Sequence[str], mode: str,
 RECORDED_ABOVE_HZ = 200.0
 #: the loop nodes' real-time practices in a real-time run unless ``--rt`` says otherwise, each
 #: where the user may (:func:`stillframe.node_runtime.realtime.may`; docs/realtime.md)
-REALTIME_PRACTICES = "all"
+REALTIME_PRACTICES = ",".join(DEFAULT_PRACTICES)
 
 
 def recorded_default(specs: Sequence[str], *, record: bool, mode: str,

@@ -46,6 +46,12 @@ from threadpoolctl import threadpool_limits
 from stillframe.errors import InputError
 
 PRACTICES = ("mlock", "gc", "fifo", "affinity", "spin", "cpu_latency")
+#: what a real-time launch applies unless ``--rt`` says otherwise (each where the user may):
+#: every practice but ``affinity``, which needs CPUs named, and ``cpu_latency``, which keeps
+#: every CPU of the machine polling, not only the loop's, and whose effect depends on the
+#: platform: on a virtual machine whose host takes polling virtual CPUs for busy ones, it makes
+#: the host stop them for milliseconds (docs/realtime.md, "The PM QoS request")
+DEFAULT_PRACTICES = ("mlock", "gc", "fifo", "spin")
 MCL_CURRENT, MCL_FUTURE = 1, 2
 PR_SET_TIMERSLACK = 29
 #: name prefixes of the threads a sample passes through: Cyclone's receive threads (``recv``,

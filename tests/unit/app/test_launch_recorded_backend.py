@@ -7,9 +7,12 @@ choice; lock-step, unrecorded and slow runs keep the defaults (no practices, the
 
 from __future__ import annotations
 
+import argparse
+
 import pytest
 
 from stillframe.app import launcher
+from stillframe.app.launch_cli import add_realtime_arguments, realtime_arguments
 from stillframe.app.launcher import (
     BACKEND_TARGETS,
     RECORDED_ABOVE_HZ,
@@ -75,8 +78,21 @@ def test_otherwise_the_recorder_as_ros2_bag_runs_it(record: bool, mode: str,
 
 
 def test_every_realtime_run_gets_the_practices_and_lockstep_none() -> None:
-    assert parse_practices(practices_default(None, mode="realtime")) == frozenset(PRACTICES)
+    given = parse_practices(practices_default(None, mode="realtime"))
+    # every practice but the two that need a choice: CPUs to pin to, and holding every CPU of
+    # the machine out of idle (docs/realtime.md, "The PM QoS request")
+    assert given == frozenset(PRACTICES) - {"affinity", "cpu_latency"}
     assert practices_default(None, mode="lockstep") == ""
+
+
+def test_rt_alone_is_the_default_practice_and_all_is_every_one() -> None:
+    parser = argparse.ArgumentParser()
+    add_realtime_arguments(parser)
+    alone = realtime_arguments(parser.parse_args(["--rt"]))[0]
+    assert alone is not None
+    assert parse_practices(alone) == parse_practices(practices_default(None, mode="realtime"))
+    every = realtime_arguments(parser.parse_args(["--rt", "all"]))[0]
+    assert every is not None and parse_practices(every) == frozenset(PRACTICES)
 
 
 def test_the_users_choice_is_kept() -> None:
