@@ -10,6 +10,9 @@ import numpy as np
 
 __all__ = ["Durations"]
 
+#: the quantiles a report gives besides the max (p50, p99)
+QUANTILES = (0.5, 0.99)
+
 
 class Durations:
     """Wall-clock durations [s] (latencies, compute times) kept in a preallocated ring of the
@@ -43,8 +46,15 @@ class Durations:
 
     @staticmethod
     def _percentiles(seconds: np.ndarray) -> dict[str, float]:
-        if not len(seconds):
+        """p50, p99 and max in ms: numpy's default (linear) percentiles, from one partial sort
+        (``np.percentile`` costs ten times more, in a node's status inside the loop)."""
+        n = len(seconds)
+        if not n:
             return {"p50": float("nan"), "p99": float("nan"), "max": float("nan")}
-        p50, p99 = np.percentile(seconds, (50, 99))
-        return {"p50": 1e3 * float(p50), "p99": 1e3 * float(p99),
-                "max": 1e3 * float(seconds.max())}
+        ranks = [(n - 1) * q for q in QUANTILES]
+        below = [int(r) for r in ranks]
+        kth = sorted({*below, *(min(k + 1, n - 1) for k in below), n - 1})
+        ordered = np.partition(seconds, kth)
+        p50, p99 = (float(ordered[k]) + (float(ordered[min(k + 1, n - 1)]) - float(ordered[k]))
+                    * (r - k) for r, k in zip(ranks, below, strict=True))
+        return {"p50": 1e3 * p50, "p99": 1e3 * p99, "max": 1e3 * float(ordered[n - 1])}
