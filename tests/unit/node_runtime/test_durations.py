@@ -37,3 +37,13 @@ def test_an_empty_window_reports_nan() -> None:
     durations.add(1e-3)
     durations.recent()
     assert all(np.isnan(v) for v in durations.recent().values())
+
+
+@pytest.mark.parametrize("n", [1, 2, 3, 99, 100, 101, 1000])
+def test_every_window_length_gives_numpys_linear_percentiles(n: int) -> None:
+    # the rank (n - 1) q falls on an order statistic, between two, or on the last one
+    values = np.random.default_rng(n).exponential(1e-4, n)
+    durations = Durations(keep=2000)
+    for v in values:
+        durations.add(v)
+    assert durations.recent() == pytest.approx(expected(values), rel=1e-12)
