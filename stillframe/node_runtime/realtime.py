@@ -21,6 +21,8 @@ The node parameter ``rt`` names the practices to apply (``all``, or a comma list
   message wakes its reader without an idle exit (on a VM, without the host rescheduling the
   virtual CPU). It holds for the whole machine and ends when the process does.
 
+A real-time launch applies :data:`DEFAULT_PRACTICES` unless told otherwise.
+
 What the user may (:func:`may`), no root needed: ``SCHED_FIFO`` with ``CAP_SYS_NICE`` or up to
 ``RLIMIT_RTPRIO`` (the ``rtprio`` of ``/etc/security/limits.conf``; the priority asked is lowered
 to it), memory locking with ``CAP_IPC_LOCK`` or an ``RLIMIT_MEMLOCK`` with room for the process to
