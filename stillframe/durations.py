@@ -52,10 +52,10 @@ class Durations:
         n = len(seconds)
         if not n:
             return {"p50": float("nan"), "p99": float("nan"), "max": float("nan")}
-        ranks = [(n - 1) * q for q in QUANTILES]
-        below = [int(r) for r in ranks]
-        kth = sorted({*below, *(min(k + 1, n - 1) for k in below), n - 1})
-        ordered = np.partition(seconds, kth)
-        p50, p99 = (float(ordered[k]) + (float(ordered[min(k + 1, n - 1)]) - float(ordered[k]))
-                    * (r - k) for r, k in zip(ranks, below, strict=True))
-        return {"p50": 1e3 * p50, "p99": 1e3 * p99, "max": 1e3 * float(ordered[n - 1])}
+        ranks = (n - 1) * np.asarray(QUANTILES)
+        below = ranks.astype(int)
+        above = np.minimum(below + 1, n - 1)
+        ordered = np.partition(seconds, np.unique(np.concatenate([below, above, [n - 1]])))
+        p50, p99 = ordered[below] + (ordered[above] - ordered[below]) * (ranks - below)
+        return {"p50": 1e3 * float(p50), "p99": 1e3 * float(p99),
+                "max": 1e3 * float(ordered[n - 1])}

@@ -15,7 +15,7 @@ from stillframe.app.arguments import (
     seconds,
     whole,
 )
-from stillframe.app.launcher import MODES, RECORDED_ABOVE_HZ
+from stillframe.app.launcher import MODES, REALTIME_PRACTICES, RECORDED_ABOVE_HZ
 from stillframe.app.net_faults import FAULTS
 from stillframe.config.scene import Scene
 from stillframe.errors import BagError, InputError
@@ -111,9 +111,9 @@ def add_compose_arguments(parser: argparse.ArgumentParser) -> None:
 def add_realtime_arguments(parser: argparse.ArgumentParser, *, launch: bool = True) -> None:
     """``--rt [PRACTICES]`` and ``--rt-cpus`` (shared with ``bench loop``, which has no default
     practices: ``launch`` False)."""
-    from stillframe.node_runtime.realtime import DEFAULT_PRACTICES, PRACTICES
+    from stillframe.node_runtime.realtime import PRACTICES
 
-    practice = ",".join(DEFAULT_PRACTICES)
+    practice = REALTIME_PRACTICES
     default = (f"{practice} in --mode realtime, each where you may (one line says which), "
                "none in lock-step" if launch else "none")
     parser.add_argument("--rt", nargs="?", const=practice, default=None, metavar="PRACTICES",
