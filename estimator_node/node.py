@@ -17,10 +17,10 @@ taken as zero (the sim refuses its commands), whatever arrives on its topics.
 - ``mode: lockstep``: a stamp is used once all its channels arrived and the command stamped
   t_k−1 did (the previous step's answer), as long as that takes: no wall time enters a
   lock-step run (the simulator publishes the next stamp only once this one is answered). Only
-  when a newer stamp arrives first (a restarted simulator) is it used with what arrived (a
-  partial update).
-- ``mode: realtime``: a stamp is used when complete, when a newer one arrives, or
-  ``partial_after_s`` after its first message, with what arrived.
+  when a newer stamp arrives first (a restarted simulator) on the topic of each channel it lacks
+  is it used with what arrived (a partial update).
+- ``mode: realtime``: a stamp is used when complete, when each channel it lacks has brought a
+  newer stamp, or ``partial_after_s`` after its first message, with what arrived.
 
 Parameters settable at run time (Kalman filters and EKF; refused with a reason, and the loop goes
 on, when the value is wrong): ``process_noise_std`` (8 finite values ≥ 0) and

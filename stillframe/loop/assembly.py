@@ -3,8 +3,12 @@ lock-step protocol, step 3). No clock is read here: the caller passes ``now_ns``
 nanoseconds in the node, any integer in a test).
 
 A stamp is used, oldest first, when it is complete (every input arrived, and in lock-step the
-command answering the previous stamp too), when a newer stamp has arrived, or ``wait_ns`` after
-its first message; anything but complete is a partial update and counted. Negative stamps are
+command answering the previous stamp too), when each input it lacks has brought a newer stamp, or
+``wait_ns`` after its first message; anything but complete is a partial update and counted. A
+topic's messages arrive in the order they were written (one writer, DDS), but topics are not
+ordered among themselves: a newer stamp on one topic says nothing of an older one still on its way
+on another, while a newer stamp on the input's own topic says its message for the older stamp is
+lost. Negative stamps are
 rejected and counted (``negative_stamps``).
 
 A stamp at or before the last stamp used (``stale_messages``), or more than :data:`JUMP_NS`
@@ -38,6 +42,8 @@ RTOL, ATOL = 1e-9, 1e-12
 _NO_VALUES = np.full(len(SENSOR_TOPICS), np.nan)
 _NONE_PRESENT = np.zeros(len(SENSOR_TOPICS), dtype=bool)
 _NO_ACTUATION = np.full(2, np.nan)
+#: the inputs beyond the sensor channels, as indices into :attr:`SampleAssembly.newest`
+_TRUTH, _FORCE = len(SENSOR_TOPICS), len(SENSOR_TOPICS) + 1
 
 
 class Pending:
@@ -85,6 +91,9 @@ class SampleAssembly:
         self.held: dict[int, Pending] = {}      # far-off stamps, until one is complete
         self.jumped = False
         self.last_ns = -1               # the last stamp used
+        #: per input (the sensor channels, then truth and the applied force), the newest stamp
+        #: that arrived on its topic
+        self.newest = np.full(_FORCE + 1, -1, dtype=np.int64)
         self.command_ns = [-1, -1]      # the newest command's stamp, per actuator
         #: per actuator, the commands received by the sample they answer
         self.commands = [CommandLog(), CommandLog()]
@@ -116,6 +125,7 @@ class SampleAssembly:
         if self.held.get(p.ns) is p and self.complete(p):
             self.pending, self.held = {p.ns: p}, {}
             self.last_ns, self.command_ns = -1, [-1, -1]
+            self.newest[:] = -1
             self.commands = [CommandLog(), CommandLog()]
             self.last_applied, self.applying = np.zeros(2), np.ones(2, dtype=bool)
             self.counts["time_jumps"] += 1
@@ -126,11 +136,16 @@ class SampleAssembly:
         jumped, self.jumped = self.jumped, False
         return jumped
 
+    def _arrived(self, index: int, ns: int) -> None:
+        if ns in self.pending:      # a held stamp is no evidence until the loop jumps there
+            self.newest[index] = max(self.newest[index], ns)
+
     def reading(self, channel: int, ns: int, value: float, now_ns: int,
                 applied_torque: float = np.nan) -> None:
         """Sensor ``channel`` (index in ``SENSOR_TOPICS``) read ``value`` at stamp ``ns``; the
         encoder also reports the torque applied over the previous period."""
         if (p := self._slot(ns, now_ns)) is not None:
+            self._arrived(channel, ns)
             p.values[channel] = value
             p.present[channel] = True
             if channel == ENCODER_CHANNEL:
@@ -140,12 +155,14 @@ class SampleAssembly:
     def applied_force(self, ns: int, value: float, now_ns: int) -> None:
         """The floor-3 force applied over the period before stamp ``ns``."""
         if (p := self._slot(ns, now_ns)) is not None:
+            self._arrived(_FORCE, ns)
             p.applied[1] = value
             self._filled(p)
 
     def truth(self, ns: int, physical: np.ndarray, now_ns: int) -> None:
         """The simulator's true physical state at stamp ``ns``."""
         if (p := self._slot(ns, now_ns)) is not None:
+            self._arrived(_TRUTH, ns)
             p.truth = physical
             self._filled(p)
 
@@ -170,6 +187,16 @@ class SampleAssembly:
         return (bool(p.present.all()) and (p.truth is not None or not self.needs_truth)
                 and (not self.needs_force or not np.isnan(p.applied[1])))
 
+    def lost(self, p: Pending) -> bool:
+        """Every input ``p`` lacks has brought a newer stamp on its own topic, so its message for
+        ``p`` will not come."""
+        missing = [*np.flatnonzero(~p.present)]
+        if self.needs_truth and p.truth is None:
+            missing.append(_TRUTH)
+        if self.needs_force and np.isnan(p.applied[1]):
+            missing.append(_FORCE)
+        return bool((self.newest[missing] > p.ns).all())
+
     def command_in(self) -> bool:
         """In lock-step, the answer to the previous stamp has arrived (or none is expected)."""
         return (not self.lockstep or self.active is None or self.last_ns < 0
@@ -181,7 +208,7 @@ class SampleAssembly:
         if not self.pending:
             return None
         p = self.pending[min(self.pending)]
-        newer = len(self.pending) > 1
+        newer = len(self.pending) > 1 and self.lost(p)
         timed_out = self.wait_ns is not None and now_ns - p.first_ns >= self.wait_ns
         complete = self.complete(p)
         command_in = self.command_in()

@@ -1,7 +1,8 @@
 """estimator_node as a process, fed by a probe playing simulator and controller: its estimates
 equal the in-process estimator's on the same samples and commands, including a NaN reading
 (dropped and counted), a stale message (rejected and counted) and a missing channel (a partial
-update: in lock-step only once the next stamp arrives, never after a wall-clock wait). The
+update: in lock-step only once the next stamp arrives on the missing channel's own topic, never
+after a wall-clock wait, and not before a late message of that stamp on another topic). The
 probe's "simulator" saturates the torque at :data:`TORQUE_LIMIT` and reports the applied torque
 in the encoder's ``effort``: the estimator uses that, not the command (no windup); where no
 effort is reported, the command in effect while the sim's last report matched the commands, else
@@ -68,21 +69,26 @@ def test_estimates_nan_stale_and_missing_channels(ros_domain: int, tmp_path: Pat
         assert spin_until(probe, lambda: all(p.get_subscription_count() for p in sensors), 60)
         spin_until(probe, lambda: False, 0.3)
         wire = SensorMessages(scene.sensors)
-        def send(s: Sample) -> None:
+        def send(s: Sample, channels: range = range(5)) -> None:
             ns = round(s.t * 1e9)
             for channel, (pub, msg) in enumerate(zip(sensors, wire.fill(s, ns)[:5], strict=True)):
-                if s.present[channel]:
+                if s.present[channel] and channel in channels:
                     pub.publish(msg)
 
         for k, s in enumerate(samples):
             ns = round(s.t * 1e9)
             if k != MISSING_STEP + 1:       # sent already, right after the incomplete one
-                send(s)
+                send(s, range(4) if k == MISSING_STEP else range(5))
             if k == NAN_STEP:   # a late floor-1 reading of the previous stamp: stale
                 stale = wire.fill(samples[k - 1], round(samples[k - 1].t * 1e9))[0]
                 sensors[0].publish(stale)
             if k == MISSING_STEP:   # lock-step: the next stamp makes the incomplete one partial
-                send(samples[k + 1])
+                # but only with all of it that comes: the excitation, late (after the next
+                # stamp's other topics, before its own), still goes into it
+                send(samples[k + 1], range(4))
+                spin_until(probe, lambda: False, 0.3)
+                send(s, range(4, 5))
+                send(samples[k + 1], range(4, 5))
             assert spin_until(probe, lambda k=k: len(estimates) == k + 1, 10), k
             answer = messages.new("geometry_msgs/msg/WrenchStamped")
             answer.header.stamp = messages.time_msg(ns)

@@ -70,21 +70,44 @@ def test_stale_stamps_are_rejected_and_counted() -> None:
     assert a.pop_ready(10 * WAIT_NS) is None
 
 
-def test_a_newer_stamp_ends_the_wait_for_an_older_one() -> None:
-    """Out of order: stamp 1 starts before stamp 0 is complete; stamp 0 is used at once (partial,
-    long before its timeout), stamp 1 waits for its own channels."""
-    a = _assembly(lockstep=False)
-    _feed(a, 0, now_ns=0, channels=range(4))
-    _feed(a, 1, now_ns=5, channels=[2])
-    ready = a.pop_ready(6)
-    assert ready.ns == 0 and not ready.complete
-    a.used(ready.ns)
-    assert a.pop_ready(7) is None                        # stamp 1 is alone and incomplete
-    _feed(a, 0, now_ns=8, channels=[4])                  # stamp 0's load cell, too late: stale
-    _feed(a, 1, now_ns=9, channels=[0, 1, 3, 4])
+@pytest.mark.parametrize("lockstep", [True, False])
+def test_only_a_newer_stamp_on_the_missing_inputs_own_topic_ends_the_wait(lockstep: bool) -> None:
+    """Topics are not ordered among themselves: stamp 1 on the other topics leaves stamp 0
+    waiting for its load cell, which arrives after them and is used; stamp 1 on the encoder's
+    topic, whose stamp-0 message is lost, then ends the wait at once (partial, long before the
+    timeout), and the encoder's late stamp-0 message is stale."""
+    a = _assembly(lockstep=lockstep, active=None)
+    _feed(a, 0, now_ns=0, channels=[0, 1, 2])           # the encoder's message is lost
+    _feed(a, 1, now_ns=5, channels=[0, 1, 2, 4])
+    assert a.pop_ready(6) is None                        # stamp 0's load cell is on its way
+    _feed(a, 0, now_ns=7, channels=[4])
+    assert a.pop_ready(8) is None                        # nothing says the encoder is lost
+    _feed(a, 1, now_ns=9, channels=[3])
     ready = a.pop_ready(9)
+    assert ready.ns == 0 and not ready.complete
+    np.testing.assert_array_equal(ready.sample.present, [True, True, True, False, True])
+    assert ready.sample.force == READINGS[4]
+    a.used(ready.ns)
+    _feed(a, 0, now_ns=10, channels=[3])                 # too late: stale
+    ready = a.pop_ready(10)
     assert ready.ns == PERIOD_NS and ready.complete
     assert a.counts["partial_updates"] == 1 and a.counts["stale_messages"] == 1
+
+
+def test_truth_and_the_applied_force_are_given_up_on_by_their_own_topics() -> None:
+    """The inputs beyond the sensors follow the same rule: stamp 1's sensors leave stamp 0
+    waiting for its truth and load cell until their own topics bring stamp 1."""
+    inputs = (*SENSOR_TOPICS, topics.STATE_TRUTH, topics.FLOOR3_LOAD_CELL)
+    a = _assembly(lockstep=False, inputs=inputs, active=None)
+    assert a.needs_truth and a.needs_force
+    _feed(a, 0, now_ns=0)
+    _feed(a, 1, now_ns=1)
+    assert a.pop_ready(2) is None
+    a.truth(PERIOD_NS, np.zeros(8), 3)
+    assert a.pop_ready(3) is None                        # the load cell of stamp 0 may still come
+    a.applied_force(PERIOD_NS, 0.5, 4)
+    ready = a.pop_ready(4)
+    assert ready.ns == 0 and not ready.complete and ready.sample.truth is None
 
 
 def test_interleaved_stamps_are_assembled_by_stamp() -> None:
