@@ -225,7 +225,8 @@ class LoopNode(Cycle):
         closes after them."""
         self.gates.keep_graph_read()
         self.check()
-        published = self.gates.announce(self.node.get_logger()) or self.diagnostics.due()
+        published = (self.gates.announce(self.node.get_logger())
+                     or self.diagnostics.due(self.slack_ns(time.monotonic_ns())))
         if published:
             self.publish_status()
         self.timing.end(self.slot["done"])

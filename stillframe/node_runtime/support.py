@@ -127,8 +127,14 @@ def malformed_samples(node: api.Node) -> int:
 
 class Diagnostics:
     """One ``diagnostic_msgs/DiagnosticStatus`` per node on ``/diagnostics``: the node publishes
-    one when :meth:`due` says ``period_s`` of wall time have passed, when it has news of its own
-    (a writer gate's) and a last one when it finishes."""
+    one when :meth:`due` says ``period_s`` of wall time have passed and the next sample leaves
+    time for it, when it has news of its own (a writer gate's) and a last one when it finishes.
+
+    A status takes a node hundreds of microseconds (its values, the message, the write): in real
+    time it waits for a turn whose time before the next sample holds what the last one took
+    (:attr:`cost_ns`), the way the collector's work does (:meth:`.realtime.Realtime.idle`), but
+    never more than one more ``period_s``.
+    """
 
     def __init__(self, node: api.Node, period_s: float) -> None:
         self.pub = node.create_publisher(topics.DIAGNOSTICS.type_name, topics.DIAGNOSTICS.name,
@@ -137,11 +143,24 @@ class Diagnostics:
         self.name = f"{node.get_namespace().rstrip('/')}/{node.get_name()}"
         self.period_s = period_s
         self.next = time.monotonic() + period_s
+        #: what the last status took from :meth:`due` saying yes to its write [ns]
+        self.cost_ns = 0
+        #: statuses that waited for a turn with time enough before the next sample
+        self.deferred = 0
+        self._asked_ns: int | None = None
 
-    def due(self) -> bool:
-        """Whether ``period_s`` of wall time has passed since the last status (or since the
-        start)."""
-        return time.monotonic() >= self.next
+    def due(self, slack_ns: int | None = None) -> bool:
+        """Whether to publish a status now: ``period_s`` of wall time has passed since the last
+        (or since the start), and ``slack_ns`` (the time left before the next sample; None: no
+        deadline) holds :attr:`cost_ns` or the status is a whole period late."""
+        now = time.monotonic()
+        if now < self.next:
+            return False
+        if slack_ns is not None and slack_ns < self.cost_ns and now < self.next + self.period_s:
+            self.deferred += 1
+            return False
+        self._asked_ns = time.monotonic_ns()
+        return True
 
     def publish(self, stamp_ns: int, values: dict[str, Any], level: int = OK,
                 message: str = "") -> None:
@@ -149,7 +168,8 @@ class Diagnostics:
         the samples that did not decode, at ``level`` with ``message`` ("OK" or "degraded" when
         empty); the next is due ``period_s`` later."""
         kv = messages.msg_class("diagnostic_msgs/msg/KeyValue")
-        values = {**values, "malformed_samples": malformed_samples(self.node)}
+        values = {**values, "malformed_samples": malformed_samples(self.node),
+                  "statuses_deferred": self.deferred}
         status = messages.new(
             "diagnostic_msgs/msg/DiagnosticStatus", level=level, name=self.name,
             message=message or ("OK" if level == OK else "degraded"), hardware_id="stillframe",
@@ -159,6 +179,8 @@ class Diagnostics:
         array.header.stamp = messages.time_msg(stamp_ns)
         self.pub.publish(array)
         self.next = time.monotonic() + self.period_s
+        if self._asked_ns is not None:
+            self.cost_ns, self._asked_ns = time.monotonic_ns() - self._asked_ns, None
 
 
 def _text(value: Any) -> str:
