@@ -417,8 +417,7 @@ class SimNode(base.LoopNode):
         self.publish_after(sample, step.now_ns)
         timing.mark(slot["tapped"])
         self.idle()
-        if (self.gates.announce(self.node.get_logger())
-                or self.diagnostics.due(self.slack_ns(time.monotonic_ns()))):
+        if self.status_due():
             self.publish_status()
         timing.end(slot["done"])
         return np.concatenate([[sample.t], sample.truth, period.command, [sample.force]])

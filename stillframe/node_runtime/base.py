@@ -225,12 +225,16 @@ class LoopNode(Cycle):
         closes after them."""
         self.gates.keep_graph_read()
         self.check()
-        published = (self.gates.announce(self.node.get_logger())
-                     or self.diagnostics.due(self.slack_ns(time.monotonic_ns())))
-        if published:
+        if published := self.status_due():
             self.publish_status()
         self.timing.end(self.slot["done"])
         return published
+
+    def status_due(self) -> bool:
+        """A writer gate has news, or the periodic status is due (:meth:`.support.Diagnostics.due`
+        with the time left before the next sample)."""
+        return (self.gates.announce(self.node.get_logger())
+                or self.diagnostics.due(self.slack_ns(time.monotonic_ns())))
 
     def check(self) -> None:
         """Every cycle not in the middle of a sample, before the status (the controller's

@@ -147,6 +147,7 @@ class Diagnostics:
         self.cost_ns = 0
         #: statuses that waited for a turn with time enough before the next sample
         self.deferred = 0
+        self._waiting = False
         self._asked_ns: int | None = None
 
     def due(self, slack_ns: int | None = None) -> bool:
@@ -157,8 +158,10 @@ class Diagnostics:
         if now < self.next:
             return False
         if slack_ns is not None and slack_ns < self.cost_ns and now < self.next + self.period_s:
-            self.deferred += 1
+            self.deferred += not self._waiting
+            self._waiting = True
             return False
+        self._waiting = False
         self._asked_ns = time.monotonic_ns()
         return True
 
