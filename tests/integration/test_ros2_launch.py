@@ -21,7 +21,7 @@ import pytest
 from stillframe.locations import REPO_ROOT
 from stillframe.loop.closed_loop import run_closed_loop
 from tests.integration.test_colcon import install, sourced, workspace_env  # noqa: F401
-from tests.integration.test_foreign_writers import start_writer, stop_writer
+from tests.integration.test_foreign_writers import HEARD_WITHIN, start_writer, stop_writer
 from tests.support.nodes import SHORT_LQG
 from tests.support.ros2_peer import PEER_ENV, ros2_or_skip
 from tests.support.scenes import thesis_scene
@@ -55,7 +55,23 @@ def rclpy_nodes(ros_domain: int, monkeypatch: pytest.MonkeyPatch) -> None:
 def test_the_launch_brings_the_loop_up_and_ends_with_the_scene(
         install: Path, tmp_path: Path, rclpy_nodes: None, beside: bool) -> None:  # noqa: F811
     """Alone, and beside a foreign writer named ``controller_node`` in the root namespace,
-    writing before the launch starts (the launch's run token keeps it out: the same numbers)."""
+    writing before the launch starts (the launch's run token keeps it out: the same numbers).
+    Beside the writer, the gate is tested only by a run in which the simulator heard it (as in
+    ``test_foreign_writers``: whether the simulator's graph found a foreign participant within a
+    run of well under a second is discovery's timing); runs are repeated, at most
+    :data:`HEARD_WITHIN`, until it did, and each is checked in full."""
+    for attempt in range(HEARD_WITHIN if beside else 1):
+        gate = check_ros2_launch(install, tmp_path / str(attempt), beside)
+        if gate["rejected_foreign_writer"] or not beside:
+            break
+    assert (gate["rejected_foreign_writer"] > 0) == beside
+
+
+def check_ros2_launch(install: Path, tmp_path: Path, beside: bool) -> dict:  # noqa: F811
+    """One ``ros2 launch`` of the short LQG scene (beside the foreign writer): the lifecycle and
+    the end in its log, the one-process loop's numbers to the last bit, the writer alone named
+    where the simulator refused anything; the torque command's gate report."""
+    tmp_path.mkdir()
     writer = start_writer("controller_node", "/", 500.0, None) if beside else None
     try:
         done = ros2_launch(install, tmp_path, f"overrides:={json.dumps(SHORT_LQG)}")
@@ -76,11 +92,11 @@ def test_the_launch_brings_the_loop_up_and_ends_with_the_scene(
         np.testing.assert_array_equal(hist["command"], reference.command)
         np.testing.assert_array_equal(hist["truth"], reference.truth)
     gate = result["command_gates"]["pendulum/torque_cmd"]
-    assert (gate["rejected_foreign_writer"] > 0) == beside
-    if beside:
+    if gate["rejected_foreign_writer"]:
         assert gate["ignored_writers"] == "/controller_node", gate
         assert ("[frame.sim_node]: pendulum/torque_cmd: refusing the samples of a foreign "
                 "writer (without the run's token): /controller_node") in log
+    return gate
 
 
 def test_a_failed_run_fails_the_launch(install: Path, tmp_path: Path,  # noqa: F811
