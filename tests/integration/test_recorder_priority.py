@@ -8,7 +8,6 @@ import os
 import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import pytest
@@ -68,26 +67,24 @@ def recorder_pid(bag: Path) -> int | None:
 
 def test_launch_hands_its_recorder_the_priority_asked(tmp_path: Path, ros_domain: int) -> None:
     """``launch --record DIR --recorder-nice 5 --recorder-idle``: the recorder the launcher
-    starts runs every thread at SCHED_IDLE and nice 5 (the kernel's view), and the run ends
-    with its bag closed."""
+    starts runs every thread at SCHED_IDLE and nice 5 (the kernel's view) from its ready line
+    on, which the launch waits for before it starts the nodes (the bag is open before that, at
+    the niceness only), and the run ends with its bag closed."""
     bag = tmp_path / "bag"
     launch = subprocess.Popen(
         [sys.executable, "-m", "stillframe", "launch", "thesis_lqg", "--set", "duration=2",
          "--set", "controller.start=1", "--set", "evaluation.window=0.5", "--record", str(bag),
          "--recorder-nice", "5", "--recorder-idle", "--json"],
-        env=child_env(), cwd=REPO_ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+        env=child_env(), cwd=REPO_ROOT, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
         text=True)
-    seen: set[tuple[int, int]] = set()
     try:
-        deadline = time.monotonic() + 120
-        while not seen and launch.poll() is None and time.monotonic() < deadline:
-            if (pid := recorder_pid(bag)) is not None and list(bag.glob("*.mcap")):
-                seen = scheduling(pid)
-            time.sleep(0.05)
-        _, err = finish(launch, timeout=300)
+        wait_for_line(launch, "Recording to", timeout=120)
+        pid = recorder_pid(bag)
+        seen = scheduling(pid) if pid is not None else set()
+        out, _ = finish(launch, timeout=300)
     finally:
         if launch.poll() is None:
             launch.kill()
-    assert launch.returncode == 0, err[-2000:]
+    assert launch.returncode == 0, out[-2000:]
     assert seen == {(os.SCHED_IDLE, niced(5))}, seen
     assert (bag / "metadata.yaml").is_file()
