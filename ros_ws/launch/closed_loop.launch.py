@@ -96,7 +96,7 @@ def generate_launch_description() -> LaunchDescription:
     ]
     parameters = [str(PARAMS), {
         "scene": LaunchConfiguration("scene"), "mode": LaunchConfiguration("mode"),
-        "overrides": LaunchConfiguration("overrides"), "run_token": secrets.token_hex(8)}]
+        "overrides": LaunchConfiguration("overrides"), "run_token": "t" + secrets.token_hex(8)}]
     brought_up = os.environ.get("STILLFRAME_RMW", "") != "dds"
     simulator = Node(package=SIMULATOR, executable=SIMULATOR, name=SIMULATOR, namespace="frame",
                      output="screen", parameters=parameters)

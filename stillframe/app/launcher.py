@@ -137,9 +137,12 @@ class NodeDiedError(RuntimeError):
 
 
 def new_run_token() -> str:
-    """A new run's token (64 random bits, hex): what its nodes write in every stamped sample
-    and require of every sample they take (docs/nodes.md, writer identity)."""
-    return secrets.token_hex(8)
+    """A new run's token (64 random bits, hex, after a ``t``): what its nodes write in every
+    stamped sample and require of every sample they take (docs/nodes.md, writer identity). The
+    letter keeps it a string where ROS reads a parameter's value as YAML: bare hex digits can
+    read as a number (``12e45…`` as inf, all digits as an integer), which a string parameter
+    refuses."""
+    return "t" + secrets.token_hex(8)
 
 
 def node_command(package: str, scene: Path, overrides: Sequence[str], mode: str, *,

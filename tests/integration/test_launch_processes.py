@@ -163,7 +163,7 @@ def test_launch_passes_sim_nodes_result_through_and_stops_the_others(
     assert "mode:=realtime" in sim_argv and not any("overrides:=" in a for a in sim_argv)
     assert any(a.startswith("scene:=") and a.endswith("/scene.resolved.yaml") for a in sim_argv)
     # the run's token (docs/nodes.md, writer identity): 64 random bits
-    assert sum(bool(re.fullmatch(r"run_token:=[0-9a-f]{16}", a)) for a in sim_argv) == 1
+    assert sum(bool(re.fullmatch(r"run_token:=t[0-9a-f]{16}", a)) for a in sim_argv) == 1
     assert not any(alive(pid) for pid in pids.values())
 
 
