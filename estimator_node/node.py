@@ -20,7 +20,11 @@ taken as zero (the sim refuses its commands), whatever arrives on its topics.
   when a newer stamp arrives first (a restarted simulator) on the topic of each channel it lacks
   is it used with what arrived (a partial update).
 - ``mode: realtime``: a stamp is used when complete, when each channel it lacks has brought a
-  newer stamp, or ``partial_after_s`` after its first message, with what arrived.
+  newer stamp, or ``partial_after_s`` after its first message, with what arrived. A channel
+  that comes later, within ``refilter_periods`` of the last stamp used, is taken into its stamp
+  and the filter steps again from there (``late_inputs``, ``refilters``): the estimates already
+  published stay, the next ones carry it. Not with ``adaptation.enabled`` (the adaptation has
+  taken those samples) nor past the filter's start or a new design.
 
 Parameters settable at run time (Kalman filters and EKF; refused with a reason, and the loop goes
 on, when the value is wrong): ``process_noise_std`` (8 finite values ≥ 0) and
@@ -104,6 +108,7 @@ from stillframe.files import write_text
 from stillframe.loop import fast_inputs
 from stillframe.loop.adaptation import Adaptation, DesignSwitch, Handover, check_adaptation
 from stillframe.loop.assembly import Ready, SampleAssembly
+from stillframe.loop.refilter import StepHistory
 from stillframe.loop.wiring import command_topic, design_model, estimator_inputs
 from stillframe.middleware import api
 from stillframe.middleware.param_messages import value_msg
@@ -147,8 +152,14 @@ class EstimatorNode(base.LoopNode):
         partial_after_s = self.setting(EstimatorParameterValues).partial_after_s
         # lock-step waits for the whole sample, as long as it takes: no wall time enters it
         wait_ns = None if params.lockstep else round(partial_after_s * 1e9)
+        # a late input re-runs a filter's last steps; an adaptation has already taken them
+        revisable = (0 if params.lockstep or scene.adaptation.enabled
+                     or not isinstance(self.estimator, Filter)
+                     else self.setting(EstimatorParameterValues).refilter_periods)
         self.assembly = SampleAssembly(self.inputs, self.active, SampleGrid(params.period),
-                                       wait_ns, params.lockstep, scene.actuators.delay_periods)
+                                       wait_ns, params.lockstep, scene.actuators.delay_periods,
+                                       revisable=revisable)
+        self.history = StepHistory(revisable)
         spec, cov = topics.STATE_ESTIMATE, topics.STATE_COVARIANCE
         self.state_pub = TappedPublisher(node, spec.type_name, spec.name, spec.qos)
         self.cov_pub = TappedPublisher(node, cov.type_name, cov.name, cov.qos)
@@ -159,7 +170,8 @@ class EstimatorNode(base.LoopNode):
                                   functools.partial(self.on_command, i),
                                   self.gates.add(spec.name, "command_writer"))
         self.counts = {"estimates": 0, "initialised_from_measurements": 0,
-                       "skipped_before_initialisation": 0, "held_while_inactive": 0}
+                       "skipped_before_initialisation": 0, "held_while_inactive": 0,
+                       "refilters": 0}
         self.compute = Durations()
         self.rate = RateMeter()
         self.input_at: float | None = None   # when the last sample input arrived
@@ -226,6 +238,7 @@ class EstimatorNode(base.LoopNode):
         counters = self.estimator.counters
         self.estimator = make_estimator(self.params.scene, design_model(self.params.scene))
         self.estimator.counters = counters
+        self.history.clear()
         if self.noise:
             self.set_noise(self.noise)
 
@@ -270,6 +283,9 @@ class EstimatorNode(base.LoopNode):
         """Use every pending stamp that is ready, oldest first; how many were used."""
         if self.assembly.take_jump():        # a new run of the loop: a new filter
             self.reset()
+        if (revised := self.assembly.take_revision()) and self.history.refilter(
+                self.estimator, revised):
+            self.counts["refilters"] += 1
         used = 0
         while (ready := self.assembly.pop_ready(now := time.monotonic_ns())) is not None:
             self.use(ready, now)
@@ -295,6 +311,7 @@ class EstimatorNode(base.LoopNode):
                 return
             self.estimator.initialise_from(sample, control)
             joined = True
+            self.history.clear()        # no stepping back past the filter's start
             self.counts["initialised_from_measurements"] += 1
             self.node.get_logger().info(
                 f"joined a running loop: started from the measurements at t = {sample.t:.9g} s")
@@ -303,10 +320,12 @@ class EstimatorNode(base.LoopNode):
             assert isinstance(self.estimator, Filter)
             new.continue_from(self.estimator)
             self.estimator = new
+            self.history.clear()        # no stepping back past a new design
             self.node.get_logger().info(f"design {self.designs.current!r} taken at "
                                         f"t = {sample.t:.6g} s")
         # a filter started from this sample has used it
-        estimate = self.estimator.estimate() if joined else self.estimator.step(sample, control)
+        estimate = (self.estimator.estimate() if joined
+                    else self.history.step(self.estimator, ready))
         timing.mark(slot["computed"])
         self.assembly.used(ready.ns)
         if self.adaptation is not None:

@@ -6,7 +6,8 @@ from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 
@@ -16,7 +17,7 @@ from stillframe.design.coordinates import design_map, physical_selector
 from stillframe.dynamics.models import FrameModel
 from stillframe.errors import IntegrationError, StillframeError
 
-__all__ = ["Counters", "Filter"]
+__all__ = ["Counters", "Filter", "FilterState"]
 
 
 @dataclass
@@ -32,6 +33,20 @@ class Counters:
     def rejected(self) -> int:
         """Samples refused: stale ones and those with non-finite readings."""
         return self.stale + self.non_finite
+
+
+@dataclass(frozen=True)
+class FilterState:
+    """What a filter's steps change, taken between two samples (:meth:`Filter.state`) to go back
+    to (:meth:`Filter.restore`): a late reading re-runs the samples after it from here."""
+
+    x: np.ndarray
+    P: np.ndarray
+    t: float | None
+    force: float
+    counters: Counters
+    extra: Any = None
+    """What a subclass keeps besides (:meth:`Filter._extra_state`)."""
 
 
 class Filter(ABC):
@@ -70,6 +85,27 @@ class Filter(ABC):
         covariance stays this filter's own (the stationary one, or the initial one)."""
         self.x = self.T @ (previous.S @ previous.x)
         self.t, self.force, self.counters = previous.t, previous.force, previous.counters
+
+    def state(self) -> FilterState:
+        """The filter as it stands, to :meth:`restore` later."""
+        return FilterState(self.x.copy(), self.P.copy(), self.t, self.force,
+                           replace(self.counters), self._extra_state())
+
+    def restore(self, state: FilterState) -> None:
+        """Go back to ``state`` (taken from this filter by :meth:`state`): the samples after it
+        are then stepped again."""
+        self.x, self.P, self.t, self.force = state.x.copy(), state.P.copy(), state.t, state.force
+        self.counters = replace(state.counters)
+        self._restore_extra(state.extra)
+
+    def _extra_state(self) -> Any:
+        """What a subclass's steps change besides x, P, t and the force (none here)."""
+        return None
+
+    def _restore_extra(self, extra: Any) -> None:
+        """Take back what :meth:`_extra_state` gave, after x and P were restored (nothing
+        here)."""
+        return None
 
     def step(self, sample: Sample, control: np.ndarray) -> Estimate | None:
         """Use one sample; ``control`` = [torque, force] applied since the previous sample.

@@ -140,6 +140,13 @@ class SteadyStateKalman(LinearFilter):
         self.converging = True
         return super().initialise_from(sample, control)
 
+    def _extra_state(self) -> bool:
+        """Whether the covariance is still converging to P∞."""
+        return self.converging
+
+    def _restore_extra(self, extra: bool) -> None:
+        self.converging = extra
+
     def gain_for(self, present: np.ndarray, prior: np.ndarray | None = None) -> np.ndarray:
         """The gain P Cₛᵀ (Cₛ P Cₛᵀ + Rₛ)⁻¹ for the rows ``present`` of y; P is ``prior``, by
         default P∞."""
@@ -206,6 +213,10 @@ class TimeVaryingKalman(LinearFilter):
         mapped mean too."""
         super().continue_from(previous)
         self.kf.x = self.x
+
+    def _restore_extra(self, extra: None) -> None:
+        """filterpy's filter takes the restored mean and covariance."""
+        self.kf.x, self.kf.P = self.x, self.P
 
     def predict(self, dt: float, force0: float, force1: float, control: np.ndarray) -> None:
         """filterpy's predict with Φ and the inputs [u0, u1 − u0] through [Γ0, Γ1] over ``dt``

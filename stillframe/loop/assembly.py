@@ -17,6 +17,12 @@ after it (``future_stamps``), is counted and not taken at its word: it is held a
 far-future or zero stamp on one topic never gets there and is dropped; a simulator restarted at
 t = 0 (or resumed after a long loss) does, and the assembly starts again at that stamp as if new
 (``time_jumps``; :meth:`SampleAssembly.take_jump` tells the caller to start its filter again).
+
+In real time an input may come after its stamp was used without it (a link's jitter, a loaded
+host). Within ``revisable`` stamps of the last one used, it is not dropped: it fills in that
+stamp (``late_inputs``), and :meth:`SampleAssembly.take_revision` hands the caller the stamps so
+revised, to step its filter again from the oldest (the estimator's ``refilter_periods``; the
+lagged-data smoothing of robot_localization does the same). Older or repeated ones are stale.
 """
 
 from __future__ import annotations
@@ -80,7 +86,7 @@ class SampleAssembly:
 
     def __init__(self, inputs: tuple[topics.TopicSpec, ...], active: int | None,
                  grid: SampleGrid, wait_ns: int | None, lockstep: bool,
-                 delay_periods: int = 0) -> None:
+                 delay_periods: int = 0, *, revisable: int = 0) -> None:
         self.needs_truth = topics.STATE_TRUTH in inputs
         self.needs_force = topics.FLOOR3_LOAD_CELL in inputs
         self.active = active
@@ -103,15 +109,23 @@ class SampleAssembly:
         #: whether it was the command in effect then (the simulator applying the commands)
         self.last_applied = np.zeros(2)
         self.applying = np.ones(2, dtype=bool)
+        #: how many stamps back a late input still revises its stamp (0: never)
+        self.revisable = revisable
+        #: the partial stamps used within ``revisable`` of the last one, as used
+        self.recent: dict[int, tuple[Pending, Ready]] = {}
+        self.revised: set[int] = set()
         self.counts = {"stale_messages": 0, "partial_updates": 0, "rejected_commands": 0,
                        "command_waits_timed_out": 0, "applied_reported": 0,
-                       "negative_stamps": 0, "future_stamps": 0, "time_jumps": 0}
+                       "negative_stamps": 0, "future_stamps": 0, "time_jumps": 0,
+                       "late_inputs": 0}
 
     # -- inputs --------------------------------------------------------------------------
     def _slot(self, ns: int, now_ns: int) -> Pending | None:
         if ns < 0:
             self.counts["negative_stamps"] += 1
             return None
+        if ns in self.recent:
+            return self.recent[ns][0]
         far_ahead = self.last_ns >= 0 and ns > self.last_ns + JUMP_NS
         if far_ahead or ns <= self.last_ns:
             self.counts["future_stamps" if far_ahead else "stale_messages"] += 1
@@ -120,14 +134,21 @@ class SampleAssembly:
             return self.held.setdefault(ns, Pending(ns, now_ns))
         return self.pending.setdefault(ns, Pending(ns, now_ns))
 
-    def _filled(self, p: Pending) -> None:
-        """A held stamp that is now complete: the loop's time jumped there; start again."""
+    def _filled(self, p: Pending, new: bool) -> None:
+        """A used stamp's late input (``new``: one it lacked) revises it; a held stamp that is now
+        complete: the loop's time jumped there; start again."""
+        if p.ns in self.recent:
+            if new:
+                self.revised.add(p.ns)
+            self.counts["late_inputs" if new else "stale_messages"] += 1
+            return
         if self.held.get(p.ns) is p and self.complete(p):
             self.pending, self.held = {p.ns: p}, {}
             self.last_ns, self.command_ns = -1, [-1, -1]
             self.newest[:] = -1
             self.commands = [CommandLog(), CommandLog()]
             self.last_applied, self.applying = np.zeros(2), np.ones(2, dtype=bool)
+            self.recent, self.revised = {}, set()
             self.counts["time_jumps"] += 1
             self.jumped = True
 
@@ -146,25 +167,28 @@ class SampleAssembly:
         encoder also reports the torque applied over the previous period."""
         if (p := self._slot(ns, now_ns)) is not None:
             self._arrived(channel, ns)
+            new = not p.present[channel]
             p.values[channel] = value
             p.present[channel] = True
             if channel == ENCODER_CHANNEL:
                 p.applied[0] = applied_torque
-            self._filled(p)
+            self._filled(p, new)
 
     def applied_force(self, ns: int, value: float, now_ns: int) -> None:
         """The floor-3 force applied over the period before stamp ``ns``."""
         if (p := self._slot(ns, now_ns)) is not None:
             self._arrived(_FORCE, ns)
+            new = bool(np.isnan(p.applied[1]))
             p.applied[1] = value
-            self._filled(p)
+            self._filled(p, new)
 
     def truth(self, ns: int, physical: np.ndarray, now_ns: int) -> None:
         """The simulator's true physical state at stamp ``ns``."""
         if (p := self._slot(ns, now_ns)) is not None:
             self._arrived(_TRUTH, ns)
+            new = p.truth is None and self.needs_truth
             p.truth = physical
-            self._filled(p)
+            self._filled(p, new)
 
     def command_received(self, actuator: int, ns: int, value: float) -> bool:
         """A command stamped ``ns``; rejected and counted when non-finite or older than the
@@ -217,9 +241,29 @@ class SampleAssembly:
         self.counts["command_waits_timed_out"] += complete and not command_in
         self.counts["partial_updates"] += not complete
         del self.pending[p.ns]
-        return Ready(p.ns, Sample(self.grid.seconds(p.ns), p.values[:4].copy(), float(p.values[4]),
-                                  p.present.copy(), p.truth),
-                     self._control(p), complete, p.first_ns)
+        ready = Ready(p.ns, self._sample(p), self._control(p), complete, p.first_ns)
+        if self.revisable and not complete:
+            self.recent[p.ns] = (p, ready)
+        return ready
+
+    def _sample(self, p: Pending) -> Sample:
+        return Sample(self.grid.seconds(p.ns), p.values[:4].copy(), float(p.values[4]),
+                      p.present.copy(), p.truth)
+
+    def take_revision(self) -> list[Ready]:
+        """The used stamps that late inputs revised since the last call, oldest first, each as it
+        now stands: its sample with every input arrived so far, its actuation the simulator's
+        report where that came late (else as used)."""
+        revised = sorted(ns for ns in self.revised if ns in self.recent)
+        self.revised = set()
+        out = []
+        for ns in revised:
+            p, ready = self.recent[ns]
+            control = ready.control.copy()
+            if self.active is not None and math.isfinite(p.applied[self.active]):
+                control[self.active] = p.applied[self.active]
+            out.append(Ready(ns, self._sample(p), control, self.complete(p), p.first_ns))
+        return out
 
     def _control(self, p: Pending) -> np.ndarray:
         """The actuation in effect over the period before ``p``: what the simulator reports it
@@ -246,8 +290,14 @@ class SampleAssembly:
         return control
 
     def used(self, ns: int) -> None:
-        """The stamp ``ns`` went into the estimate: older messages are stale from now on."""
+        """The stamp ``ns`` went into the estimate: older messages are stale from now on, but for
+        those that revise one of the last ``revisable`` stamps."""
         self.last_ns = ns
+        if self.recent:
+            oldest = self.grid.index(ns) - self.revisable
+            for old in [k for k in self.recent if self.grid.index(k) < oldest]:
+                del self.recent[old]
+                self.revised.discard(old)
 
     def wait_ns_left(self, now_ns: int) -> int | None:
         """Nanoseconds until the first pending stamp times out (None: nothing pending, or no

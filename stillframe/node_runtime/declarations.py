@@ -155,6 +155,11 @@ class SimParameterValues(NodeParameters):
         "missed their command (`degraded_samples`); 0: never"))
 
 
+#: Stamps a late input may still revise: a link's jitter of a few periods at 100 Hz, and at
+#: most this many extra filter steps per spin at 1 kHz.
+REFILTER_PERIODS = 5
+
+
 def _half_period(scene: Any) -> float:
     return 0.5 / scene.sensors.rate_hz
 
@@ -167,6 +172,11 @@ class EstimatorParameterValues(NodeParameters):
                                    unit="s", doc=(
         "real time: how long after a stamp's first message the estimator updates with the "
         "channels that have arrived"))
+    refilter_periods: int = param(REFILTER_PERIODS, at_least(0), unit="periods", doc=(
+        "real time, filters without `adaptation`: an input that comes after its stamp was used "
+        "without it, at most this many periods back, is taken into that stamp and the filter "
+        "steps again from there (the estimates already published stay; the next ones carry it; "
+        "counted in `late_inputs` and `refilters`); 0: it is dropped as stale"))
     sensor_writer: str = param("", doc=(
         "without a `run_token`: the node whose sensor samples (and `state_truth`) are taken, "
         "e.g. `sim_node`; empty: the first writer seen"))
