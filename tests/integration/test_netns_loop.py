@@ -113,9 +113,8 @@ def test_realtime_100hz_with_5ms_delays_keeps_control_through_a_playout_delay(
     ``actuators.delay_periods=5`` the sim applies each command 50 ms after its sample and the LQG
     predicts over it: the loop keeps the one-process loop's control (the same reductions within
     10 points: a sensor message held past ``partial_after_s`` gives the estimator a partial
-    update) and the estimate tracks the truth (under 10 % of the floors' RMS displacement: a
-    late channel re-runs the filter from its stamp, ``refilter_periods``; without it a loaded
-    machine's many partial updates left the estimate off by half the floors' RMS).
+    update, and a channel that comes later re-runs the filter from its stamp) and the estimate
+    tracks the truth (under 10 % of the floors' RMS displacement).
     Five periods, not the three the links alone need: the 29 ms beyond the links' worst are the
     three nodes' own time, which a slow or loaded machine stretches."""
     require_netns("iptables")

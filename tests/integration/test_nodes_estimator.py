@@ -6,7 +6,8 @@ after a wall-clock wait, and not before a late message of that stamp on another 
 probe's "simulator" saturates the torque at :data:`TORQUE_LIMIT` and reports the applied torque
 in the encoder's ``effort``: the estimator uses that, not the command (no windup); where no
 effort is reported, the command in effect while the sim's last report matched the commands, else
-(here: saturated) that report."""
+(here: saturated) that report. In real time, a reading that comes after its stamp was used
+without it re-runs the filter from that stamp."""
 
 from __future__ import annotations
 
@@ -15,8 +16,9 @@ from pathlib import Path
 
 import numpy as np
 
+from stillframe.config.scene import Scene
 from stillframe.contract import messages, topics
-from stillframe.contract.codecs import SensorMessages
+from stillframe.contract.codecs import ENCODER_CHANNEL, SensorMessages
 from stillframe.contract.signals import Sample
 from stillframe.estimation.factory import make_estimator
 from stillframe.loop.wiring import design_model
@@ -126,3 +128,86 @@ def test_estimates_nan_stale_and_missing_channels(ros_domain: int, tmp_path: Pat
     assert values["rejected"] == "2"
     assert values["applied_reported"] == str(STEPS - 1)
     assert diagnostics[-1].status[0].level == 1   # WARN
+
+
+LATE = 3            # the stamp whose encoder reading comes after its stamp was used
+
+
+def _plant_samples(scene: Scene) -> list[Sample]:
+    """STEPS complete samples of the thesis plant from the scene's start, each reporting the
+    torque applied over the period before it."""
+    plant = FramePlant(scene)
+    out = []
+    for k in range(STEPS):
+        s = plant.sample()
+        s.present = np.ones(5, dtype=bool)
+        s.applied = np.array([0.01 * k, 0.0])
+        out.append(s)
+        plant.advance(s.applied)
+    return out
+
+
+def test_realtime_late_reading_refilters_to_the_in_time_estimates(ros_domain: int,
+                                                                  tmp_path: Path) -> None:
+    """Real time: stamp LATE's encoder reading (with the torque applied) is held back until the
+    estimator has used that stamp without it (a partial update after ``partial_after_s``, with
+    the command in effect: none yet, zero); sent then, it is taken (``late_inputs``) and the
+    filter steps again from that stamp (``refilters``). Every later estimate equals, to the last
+    bit, the in-process filter's on the complete samples; the partial one stays as published."""
+    scene = thesis_scene("thesis_lqg", SHORT_LQG)
+    samples = _plant_samples(scene)
+    proc = start_node("estimator_node", params_file(tmp_path, "thesis_lqg", SHORT_LQG,
+                                                    mode="realtime", partial_after_s=3.0,
+                                                    diagnostics_period_s=0.2,
+                                                    command_writer="probe"))
+    probe = create_node("probe", namespace=topics.DEFAULT_NAMESPACE, argv=["test"])
+    try:
+        loop = LoopParameters(scene, "realtime", 0.2)
+        sensors = [probe.create_publisher(s.type_name, s.name, loop.qos(s)) for s in
+                   (*topics.FLOOR_IMU, topics.PENDULUM_JOINT_STATES, topics.EXCITATION_WRENCH)]
+        estimates, diagnostics = [], []
+        probe.create_subscription(topics.STATE_ESTIMATE.type_name, topics.STATE_ESTIMATE.name,
+                                  estimates.append, topics.STATE_ESTIMATE.qos)
+        probe.create_subscription(topics.DIAGNOSTICS.type_name, topics.DIAGNOSTICS.name,
+                                  diagnostics.append, topics.DIAGNOSTICS.qos)
+        assert spin_until(probe, lambda: all(p.get_subscription_count() for p in sensors), 60)
+        spin_until(probe, lambda: False, 0.3)
+        wire = SensorMessages(scene.sensors)
+
+        def send(s: Sample, channels: list[int]) -> None:
+            msgs = wire.fill(s, round(s.t * 1e9))[:5]
+            for channel in channels:
+                sensors[channel].publish(msgs[channel])
+
+        def counts(**want: str) -> bool:
+            return bool(diagnostics) and all(
+                diagnostic_values(diagnostics[-1]).get(k) == v for k, v in want.items())
+
+        for k, s in enumerate(samples):
+            send(s, [c for c in range(5) if k != LATE or c != ENCODER_CHANNEL])
+            assert spin_until(probe, lambda k=k: len(estimates) == k + 1, 30), k
+            if k == LATE:       # used without it (partial): now the encoder's reading comes
+                send(s, [ENCODER_CHANNEL])
+                assert spin_until(probe, lambda: counts(late_inputs="1", refilters="1"), 10)
+        assert spin_until(probe, lambda: counts(estimates=str(STEPS)), 5)
+    finally:
+        probe.destroy_node()
+        code, err = stop(proc, signal.SIGTERM)
+    assert code == 0, err[-2000:]
+
+    values = diagnostic_values(diagnostics[-1])
+    assert (values["partial_updates"], values["stale_messages"]) == ("1", "0")
+    design = design_model(scene)
+    in_time, partial = make_estimator(scene, design), make_estimator(scene, design)
+    for k, s in enumerate(samples):
+        e = in_time.step(s, s.applied)
+        if k == LATE:   # as used: no encoder, no report of the torque, no command yet
+            held = Sample(s.t, s.measurements.copy(), s.force, s.present.copy())
+            held.present[ENCODER_CHANNEL] = False
+            held.measurements[ENCODER_CHANNEL] = np.nan
+            e = partial.step(held, np.zeros(2))
+        elif k < LATE:
+            partial.step(s, s.applied)
+        msg = estimates[k]
+        assert messages.stamp_ns(msg.header.stamp) == round(s.t * 1e9)
+        np.testing.assert_array_equal(np.r_[msg.position, msg.velocity], e.physical, err_msg=k)
