@@ -24,7 +24,7 @@ from rcl_interfaces.msg import SetParametersResult as RclpySetParametersResult
 from rclpy._rclpy_pybind11 import NodeNameNonExistentError, RCLError
 from rclpy.clock import ClockType
 from rclpy.duration import Duration
-from rclpy.exceptions import InvalidParameterValueException
+from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 from rclpy.qos import (
@@ -357,11 +357,15 @@ class RclpyNode:
         the range."""
         descriptor = params.described(descriptor, read_only=read_only)
         try:
-            declared = self._node.declare_parameter(
-                name, default, rclpy_descriptor(descriptor, default))
-        except InvalidParameterValueException:
-            declared = self._node.declare_parameter(name, default, rclpy_descriptor(
-                replace(descriptor, range=None), default))
+            try:
+                declared = self._node.declare_parameter(
+                    name, default, rclpy_descriptor(descriptor, default))
+            except InvalidParameterValueException:
+                declared = self._node.declare_parameter(name, default, rclpy_descriptor(
+                    replace(descriptor, range=None), default))
+        except InvalidParameterTypeException as exc:     # an override of another type
+            raise InputError(f"parameter {name!r} of node "
+                             f"{self._node.get_fully_qualified_name()}: {exc.args[0]}") from None
         return Parameter(name, plain_value(declared.value))
 
     def get_parameter(self, name: str) -> Parameter:

@@ -160,10 +160,13 @@ def test_realtime_three_nodes_close_the_loop(ros_domain: int, tmp_path: Path) ->
     ("sim_node", (), "parameter 'scene'"),
     ("estimator_node", ("-p", "mode:=fast"), "parameter 'mode'"),
     ("controller_node", ("-p", "overrides:=[nokey]"), "--set nokey"),
+    ("estimator_node", ("-p", "run_token:=12e45"), "parameter 'run_token'"),
+    ("container_node", ("-p", "run_token:=12e45"), "parameter 'run_token'"),
 ])
 def test_bad_parameters_exit_2_with_one_line(ros_domain: int, package: str, args: tuple,
                                              message: str) -> None:
-    """The three share the parameter code; one wrong parameter each."""
+    """The three share the parameter code; one wrong parameter each, and one of another type (a
+    string parameter given what ROS reads as a float) for a node and for the container."""
     scene = () if message == "parameter 'scene'" else (
         "-p", f"scene:={REPO_ROOT / 'scenes' / 'thesis_lqg.yaml'}")
     proc = subprocess.run([sys.executable, "-m", f"{package}.node", "--ros-args", *scene, *args],
