@@ -52,7 +52,7 @@ from stillframe.contract.codecs import (
     CommandMessage,
     SampleGrid,
     clock_reader,
-    state_reader,
+    estimate_reader,
     wrench_reader,
 )
 from stillframe.contract.signals import Command, Estimate
@@ -153,7 +153,7 @@ class ControllerNode(base.LoopNode):
         est, wrench, clock = topics.STATE_ESTIMATE, topics.EXCITATION_WRENCH, topics.CLOCK
         token = self.params.run_token
         fast_inputs.subscribe(self.node, est.type_name, est.name, self.params.reader_qos(est),
-                              state_reader(token), self.on_estimate,
+                              estimate_reader(token), self.on_estimate,
                               self.gates.add(est.name, "estimate_writer"))
         fast_inputs.subscribe(self.node, wrench.type_name, wrench.name,
                               self.params.reader_qos(wrench),
@@ -173,10 +173,10 @@ class ControllerNode(base.LoopNode):
         """The simulator's ``/clock`` [ns], the time the watchdog follows with ``use_sim_time``."""
         self.clock_ns = ns
 
-    def on_estimate(self, ns: int, physical: np.ndarray) -> None:
-        """The state estimate stamped ``ns`` (physical coordinates) into the matching, to be
-        answered when its load cell is in."""
-        self.matching.add_estimate(ns, physical, time.monotonic_ns())
+    def on_estimate(self, ns: int, physical: np.ndarray, applied: np.ndarray) -> None:
+        """The state estimate stamped ``ns`` (physical coordinates, the actuation it took as
+        applied) into the matching, to be answered when its load cell is in."""
+        self.matching.add_estimate(ns, physical, time.monotonic_ns(), applied)
 
     def process_ready(self) -> int:
         """Answer pending estimates in order (in lock-step each waits for its load cell); how
@@ -199,7 +199,7 @@ class ControllerNode(base.LoopNode):
                 self.node.get_logger().info(f"design {self.designs.current!r} taken at "
                                             f"t = {self.grid.seconds(m.ns):.6g} s")
             t = self.grid.seconds(m.ns)
-            estimate = Estimate(t, self.to_design @ m.physical, m.physical)
+            estimate = Estimate(t, self.to_design @ m.physical, m.physical, applied=m.applied)
             command = self.controller.command(t, estimate, m.force)
             timing.mark(slot["computed"])
             self.send(command)

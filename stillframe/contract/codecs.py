@@ -131,9 +131,7 @@ class SensorMessages:
         self.load_cell.header.frame_id = stamped_frame("floor1", token)
         self.actuator_load_cell = messages.new("geometry_msgs/msg/WrenchStamped")
         self.actuator_load_cell.header.frame_id = stamped_frame("floor3", token)
-        self.truth = _joint_state(list(STATE_NAMES))
-        self.truth.header.frame_id = stamped_frame("", token)
-        self.truth.position, self.truth.velocity = np.zeros(4), np.zeros(4)
+        self.truth = _state_message(token)
         self._imu_cdr = [FixedWriter(imu, (*STAMP, "linear_acceleration.x"))
                          for imu in self.imus]
         self._encoder_cdr = FixedWriter(self.encoder, (*STAMP, "position", "effort"))
@@ -216,26 +214,51 @@ def physical_state(msg: Any) -> np.ndarray:
     return out
 
 
+def _state_message(token: str) -> Any:
+    """A ``state_truth``/``state_estimate`` JointState of the run with ``token``: x1 x2 x3 phi,
+    4 positions and 4 velocities."""
+    msg = _joint_state(list(STATE_NAMES))
+    msg.header.frame_id = stamped_frame("", token)
+    msg.position, msg.velocity = np.zeros(4), np.zeros(4)
+    return msg
+
+
+def estimate_efforts(applied: np.ndarray | None) -> np.ndarray:
+    """``state_estimate``'s ``effort`` for x1 x2 x3 phi from the actuation applied, [torque,
+    force]: the floor-3 force on x3, the torque on φ, 0 on x1 and x2 (NaN where not known)."""
+    torque, force = (np.nan, np.nan) if applied is None else applied
+    return np.array([0.0, 0.0, force, torque])
+
+
+def applied_of(efforts: Any) -> np.ndarray:
+    """[torque, force] from ``state_estimate``'s ``effort`` (:func:`estimate_efforts`); NaN
+    where a writer gave none."""
+    return (np.array([efforts[3], efforts[2]], dtype=float) if len(efforts) >= 4
+            else np.full(2, np.nan))
+
+
 class EstimateMessages:
-    """``state_estimate`` (its ``frame_id`` the run's ``token``) and its 8×8 covariance (zeros
-    for the exact ``truth`` estimator; a ``Float64MultiArray`` has no header)."""
+    """``state_estimate`` (its ``frame_id`` the run's ``token``; its ``effort`` the actuation the
+    estimator took as applied over the period before the stamp, :func:`estimate_efforts`) and its
+    8×8 covariance (zeros for the exact ``truth`` estimator; a ``Float64MultiArray`` has no
+    header)."""
 
     def __init__(self, token: str = "") -> None:
-        self.state = _joint_state(list(STATE_NAMES))
-        self.state.header.frame_id = stamped_frame("", token)
+        self.state = _state_message(token)
+        self.state.effort = np.zeros(4)
         dims = [messages.new("std_msgs/msg/MultiArrayDimension", label=label, size=8,
                              stride=stride) for label, stride in (("rows", 64), ("cols", 8))]
         self.covariance = messages.new("std_msgs/msg/Float64MultiArray")
         self.covariance.layout.dim = dims
-        self.state.position, self.state.velocity = np.zeros(4), np.zeros(4)
         self.covariance.data = np.zeros(64)
-        self._state_cdr = FixedWriter(self.state, (*STAMP, "position", "velocity"))
+        self._state_cdr = FixedWriter(self.state, (*STAMP, "position", "velocity", "effort"))
         self._cov_cdr = FixedWriter(self.covariance, ("data",))
 
     def fill(self, estimate: Estimate, ns: int) -> tuple[Any, Any]:
         """The ``state_estimate`` and its covariance message filled in place (zeros for an estimator
         without a covariance), stamped ``ns``."""
         fill_joint_state(self.state, ns, estimate.physical)
+        self.state.effort = estimate_efforts(estimate.applied)
         cov = np.zeros((8, 8)) if estimate.covariance is None else estimate.covariance
         self.covariance.data = np.ascontiguousarray(cov, dtype=np.float64).ravel()
         return self.state, self.covariance
@@ -243,7 +266,8 @@ class EstimateMessages:
     def cdr(self, estimate: Estimate, ns: int) -> tuple[bytearray, bytearray]:
         """The CDR of :meth:`fill`, in preallocated buffers that the next call rewrites."""
         sec, nanosec = divmod(ns, 1_000_000_000)
-        state = self._state_cdr.pack(sec, nanosec, *estimate.physical[:8].tolist())
+        state = self._state_cdr.pack(sec, nanosec, *estimate.physical[:8].tolist(),
+                                     *estimate_efforts(estimate.applied).tolist())
         cov = (np.zeros(64) if estimate.covariance is None
                else np.asarray(estimate.covariance, dtype=np.float64).ravel())
         return state, self._cov_cdr.pack(*cov.tolist())
@@ -368,17 +392,32 @@ def wrench_reader(frame: str, field: str, token: str = "") -> TopicReader:
 
 
 def state_reader(token: str = "") -> TopicReader:
-    """(stamp ns, [x1, x2, x3, φ, ẋ1, ẋ2, ẋ3, φ̇]) of ``state_estimate`` or ``state_truth``
-    (:func:`physical_state`)."""
-    template = EstimateMessages(token).state
-
+    """(stamp ns, [x1, x2, x3, φ, ẋ1, ẋ2, ẋ3, φ̇]) of ``state_truth`` (:func:`physical_state`),
+    read in place from the layout the simulator writes."""
     def from_values(v: tuple[Any, ...]) -> tuple[Any, ...]:
         return v[0] * 1_000_000_000 + v[1], np.array(v[2:])
 
     def from_msg(msg: Any) -> tuple[Any, ...]:
         return messages.stamp_ns(msg.header.stamp), physical_state(msg)
 
-    return TopicReader(template, (*STAMP, "position", "velocity"), from_values, from_msg)
+    return TopicReader(_state_message(token), (*STAMP, "position", "velocity"), from_values,
+                       from_msg)
+
+
+def estimate_reader(token: str = "") -> TopicReader:
+    """(stamp ns, [x1, x2, x3, φ, ẋ1, ẋ2, ẋ3, φ̇], [torque, force] applied) of
+    ``state_estimate`` (:func:`physical_state`, :func:`applied_of`), read in place from the
+    layout the estimator writes."""
+    def from_values(v: tuple[Any, ...]) -> tuple[Any, ...]:
+        return v[0] * 1_000_000_000 + v[1], np.array(v[2:10]), applied_of(v[10:14])
+
+    def from_msg(msg: Any) -> tuple[Any, ...]:
+        ordered = list(msg.name) == list(STATE_NAMES)
+        return (messages.stamp_ns(msg.header.stamp), physical_state(msg),
+                applied_of(msg.effort if ordered else ()))
+
+    return TopicReader(EstimateMessages(token).state, (*STAMP, "position", "velocity", "effort"),
+                       from_values, from_msg)
 
 
 def command_reader(actuator: int, token: str = "") -> TopicReader:

@@ -36,12 +36,15 @@ class Sample:
 @dataclass
 class Estimate:
     """State estimate at ``t``: ``z`` in the design model's coordinates [q, q̇], ``physical``
-    the 8 physical components, ``covariance`` their 8×8 covariance (None when exact)."""
+    the 8 physical components, ``covariance`` their 8×8 covariance (None when exact);
+    ``applied`` the [torque, force] the estimator took as applied over the period before ``t``
+    (the simulator's report, or its stand-in where that was lost; None: not known)."""
 
     t: float
     z: np.ndarray
     physical: np.ndarray
     covariance: np.ndarray | None = None
+    applied: np.ndarray | None = None
 
 
 @dataclass

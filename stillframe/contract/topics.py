@@ -67,7 +67,8 @@ FORCE_CMD = TopicSpec(
 )
 STATE_ESTIMATE = TopicSpec(
     "state_estimate", "sensor_msgs/msg/JointState", "default",
-    "names x1 x2 x3 phi, position and velocity",
+    "names x1 x2 x3 phi, position and velocity; effort: the actuation taken as applied over "
+    "the previous period (floor-3 force on x3, pendulum torque on phi, 0 on x1 x2)",
 )
 STATE_COVARIANCE = TopicSpec(
     "state_estimate/covariance", "std_msgs/msg/Float64MultiArray", "default",

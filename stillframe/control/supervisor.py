@@ -150,7 +150,9 @@ class Controller:
         if t < self.start - tolerance or not self.enabled:
             return out
         out.enabled = True
-        z = latest.z if self.predictor is None else self.predictor.ahead(latest.t, latest.z)
+        z = latest.z if self.predictor is None else self.predictor.ahead(
+            latest.t, latest.z,
+            None if latest.applied is None else float(latest.applied[self.actuator]))
         started, started_cpu = time.perf_counter(), time.thread_time()
         value, singular = self.law(z, force)
         value, out.singular = float(value), bool(singular)

@@ -108,7 +108,8 @@ class Filter(ABC):
         return None
 
     def step(self, sample: Sample, control: np.ndarray) -> Estimate | None:
-        """Use one sample; ``control`` = [torque, force] applied since the previous sample.
+        """Use one sample; ``control`` = [torque, force] applied since the previous sample (the
+        estimate's ``applied``).
 
         Returns None (and counts it) for a sample not newer than the last one used; raises
         :class:`~stillframe.errors.IntegrationError` when the estimate leaves the finite range
@@ -147,7 +148,9 @@ class Filter(ABC):
             raise self.diverged(sample.t)
         self.t, self.force = sample.t, force
         c.updates += 1
-        return self.estimate()
+        estimate = self.estimate()
+        estimate.applied = control
+        return estimate
 
     def diverged(self, t: float) -> IntegrationError:
         """The error of an estimate that left the finite range at ``t`` (the filter's model and

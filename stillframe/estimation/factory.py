@@ -35,7 +35,8 @@ class TruthEstimator:
             return None
         self.t = sample.t
         self.counters.updates += 1
-        return Estimate(sample.t, to_design(self.model, sample.truth), sample.truth.copy())
+        return Estimate(sample.t, to_design(self.model, sample.truth), sample.truth.copy(),
+                        applied=np.asarray(control, dtype=float))
 
 
 def initial_physical(scene: Scene) -> np.ndarray:

@@ -37,6 +37,8 @@ class Matched:
     force: float
     arrival_ns: int = 0
     """When the estimate arrived (the caller's ``now_ns``)."""
+    applied: np.ndarray | None = None
+    """The [torque, force] the estimate took as applied over the period before it."""
 
 
 class ForceMatching:
@@ -49,7 +51,8 @@ class ForceMatching:
         self.forces: dict[int, float] = {}
         self.force = 0.0            # the newest finite reading
         self.sample_ns = -1         # the newest load-cell stamp: the newest sample time seen
-        self.pending: list[tuple[int, np.ndarray, int]] = []   # (ns, physical, arrival ns)
+        #: (ns, physical, arrival ns, applied)
+        self.pending: list[tuple[int, np.ndarray, int, np.ndarray | None]] = []
         self.last_ns = -1           # the newest estimate accepted
         self.jumped = False
         self.counts = {"stale_estimates": 0, "rejected_estimates": 0,
@@ -70,9 +73,10 @@ class ForceMatching:
         if len(self.forces) > self.kept:
             self.forces.pop(next(iter(self.forces)))
 
-    def add_estimate(self, ns: int, physical: np.ndarray, now_ns: int) -> None:
-        """An estimate stamped ``ns`` arrived; one not newer than the last, or non-finite, is
-        rejected and counted."""
+    def add_estimate(self, ns: int, physical: np.ndarray, now_ns: int,
+                     applied: np.ndarray | None = None) -> None:
+        """An estimate stamped ``ns`` arrived (with the actuation it took as ``applied``); one
+        not newer than the last, or non-finite, is rejected and counted."""
         first = self.pending[0][0] if self.pending else self.last_ns + 1
         if ns < first and ns in self.forces:     # the loop started again at ns
             self.pending, self.last_ns, self.jumped = [], -1, True
@@ -84,7 +88,7 @@ class ForceMatching:
         elif not np.all(np.isfinite(physical)):
             self.counts["rejected_estimates"] += 1
         else:
-            self.pending.append((ns, physical, now_ns))
+            self.pending.append((ns, physical, now_ns, applied))
             self.last_ns = ns
 
     def take_jump(self) -> bool:
@@ -101,7 +105,7 @@ class ForceMatching:
         """The oldest estimate with its force, when it may be answered now (else None)."""
         if not self.pending:
             return None
-        ns, physical, arrival = self.pending[0]
+        ns, physical, arrival, applied = self.pending[0]
         if ns not in self.forces:
             if self.lockstep and (self.wait_ns is None or now_ns - arrival < self.wait_ns):
                 return None
@@ -109,7 +113,7 @@ class ForceMatching:
         self.pending.pop(0)
         force = self.forces.get(ns, self.force)
         self.forces = {k: v for k, v in self.forces.items() if k > ns}
-        return Matched(ns, physical, force, arrival)
+        return Matched(ns, physical, force, arrival, applied)
 
     def wait_ns_left(self, now_ns: int) -> int | None:
         """Nanoseconds until the oldest estimate stops waiting for its force (None: none waits

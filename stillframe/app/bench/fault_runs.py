@@ -7,9 +7,10 @@ One lab (:mod:`~stillframe.app.netns_lab`) for the whole bench; per fault
   makes them); its wall time, whether it completed and whether truth, commands and forces are
   bit-identical to the same scene in one process (``closed-loop``, computed once);
 - real time at 100 Hz (``sensors.rate_hz=100``): the same scene paced by the wall clock, sensor
-  topics best effort (``sensor_data``): sim_node's deadline misses and overruns, the estimate's
-  RMS error against the truth over the controlled half (an observer in this process collects
-  ``state_estimate``), and the displacement reductions.
+  topics best effort (``sensor_data``): sim_node's deadline misses, overruns, samples the
+  guard held at zero and largest command, the estimate's RMS error against the truth over the
+  controlled half (an observer in this process collects ``state_estimate``), estimator_node's
+  partial updates and late inputs (:data:`ESTIMATOR_COUNTS`), and the displacement reductions.
 """
 
 from __future__ import annotations
@@ -31,11 +32,14 @@ from stillframe.config.scene import load_scene
 from stillframe.contract.topics import DEFAULT_NAMESPACE, STATE_ESTIMATE
 from stillframe.locations import SCENES_DIR
 from stillframe.loop.closed_loop import LoopHistory, run_closed_loop
+from stillframe.node_runtime.declarations import ESTIMATOR
 
 SCENE = SCENES_DIR / "thesis_lqg.yaml"
 RATE_HZ = 100.0
 #: the histories compared bit for bit
 COMPARED = ("t", "truth", "command", "force")
+#: estimator_node's counts of what came late, from its last status
+ESTIMATOR_COUNTS = ("partial_updates", "late_inputs", "refilters", "stale_messages")
 
 
 def lockstep_overrides(duration: float) -> list[str]:
@@ -92,8 +96,11 @@ def realtime_row(lab: Lab, fault: Fault, duration: float, out: Path,
         truth = data["truth"]
     e = result.evaluation
     error = log.rms_error(truth, from_k=round(duration / 2 * RATE_HZ))
+    status = result.diagnostics.get(f"{DEFAULT_NAMESPACE}/{ESTIMATOR}", {})
     return {"steps": e["steps"], "deadline_misses": e["deadline_misses"],
-            "overruns": e["overruns"], "estimate": error,
+            "overruns": e["overruns"], "degraded_samples": e["degraded_samples"],
+            "peak_command": e["peak_command"], "estimate": error,
+            "estimator": {key: int(status[key]) for key in ESTIMATOR_COUNTS if key in status},
             "reduction_pct": e["reduction_pct"]["displacement"]}
 
 

@@ -32,8 +32,8 @@ from stillframe.contract.codecs import (
     EstimateMessages,
     SensorMessages,
     command_reader,
+    estimate_reader,
     sensor_reader,
-    state_reader,
 )
 from stillframe.contract.signals import actuator_of
 from stillframe.control.factory import make_controller
@@ -78,7 +78,7 @@ def compute_hops(scene: Scene, number: int = 200, repeats: int = 7) -> list[dict
     state_cdr, _ = (bytes(b) for b in est_out.cdr(estimate, ns))
     cmd_cdr = bytes(cmd_out.cdr(command, ns))
     sensors = [sensor_reader(ch, scene.sensors) for ch in range(len(SENSOR_TOPICS))]
-    state, cmd = state_reader(), command_reader(actuator)
+    state, cmd = estimate_reader(), command_reader(actuator)
     sensor_types = [spec.type_name for spec in SENSOR_TOPICS]
     all_msgs = [*out.fill(sample, ns), out.fill_truth(sample, ns)]
     control = np.zeros(2)

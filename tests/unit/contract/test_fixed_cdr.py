@@ -16,6 +16,7 @@ from stillframe.contract.codecs import (
     EstimateMessages,
     SensorMessages,
     command_reader,
+    estimate_reader,
     sensor_reader,
     state_reader,
     wrench_reader,
@@ -126,10 +127,18 @@ def test_estimate_and_command_cdr_equal_rosbags() -> None:
     commands = [CommandMessage(0), CommandMessage(1)]
     for k in range(5):
         cov = None if k == 0 else rng.normal(size=(8, 8))
-        estimate = Estimate(k * 1e-3, rng.normal(size=8), rng.normal(size=8), cov)
+        applied = None if k == 1 else rng.normal(size=2)
+        estimate = Estimate(k * 1e-3, rng.normal(size=8), rng.normal(size=8), cov, applied)
         ns = k * 31_250_000
-        assert [bytes(b) for b in out.cdr(estimate, ns)] == [
-            rosbags_cdr(m) for m in out.fill(estimate, ns)]
+        cdr = [bytes(b) for b in out.cdr(estimate, ns)]
+        assert cdr == [rosbags_cdr(m) for m in out.fill(estimate, ns)]
+        # the estimate's reader: in place and through rosbags, the same values
+        reader = estimate_reader()
+        fast = reader.read(cdr[0])
+        slow = reader._from_msg(messages.deserialize(cdr[0], reader.type_name))
+        np.testing.assert_equal(fast, slow)
+        assert fast[0] == ns and np.array_equal(fast[1], estimate.physical)
+        np.testing.assert_array_equal(fast[2], np.full(2, np.nan) if applied is None else applied)
         command = Command(k * 1e-3, torque=float(rng.normal()), force=float(rng.normal()))
         for c in commands:
             assert bytes(c.cdr(command, ns)) == rosbags_cdr(c.fill(command, ns))

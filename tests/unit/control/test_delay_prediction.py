@@ -73,3 +73,51 @@ def test_feedback_on_the_prediction_keeps_the_delay_free_poles(d: int) -> None:
     assert max(abs(delay_free)) < 1
     if d >= 2:   # without prediction, the same gain destabilises the delayed loop
         assert max(abs(np.linalg.eigvals(closed_loop(design, d, predict=False)))) > 1
+
+
+def command_recursion(design, d: int, periods: int, *, report: bool) -> np.ndarray:
+    """The commands u_k = −K x̂_{k+d|k} while the actuator applies zero (a safe state) and the
+    structure rests at x = 0: ``report`` tells the predictor the zero actuation applied, as the
+    estimate carries it; without it the predictor assumes its commands act."""
+    n = design.A.shape[0]
+    predictor = DelayPredictor(design.A, design.B, d, PERIOD)
+    for j in range(-d - 1, 0):      # the commands in flight when the safe state began
+        predictor.sent(j * PERIOD, 1.0)
+    u = []
+    for k in range(periods):
+        z = predictor.ahead(k * PERIOD, np.zeros(n), 0.0 if report else None)
+        u.append(-float(design.gain[0] @ z))
+        predictor.sent(k * PERIOD, u[-1])
+    return np.array(u)
+
+
+@pytest.mark.parametrize("d", [1, 3, 5])
+def test_commands_that_do_not_act_do_not_wind_the_prediction_up(d: int) -> None:
+    """The recursion's roots (z^d + Σ K A^{i−1} B z^{d−i}) lie outside the unit circle: the
+    commands the predictor assumes applied grow by that root each period. Told the actuation
+    applied (zero), it takes the commands in flight as zero held: u_k = −K A^d x̂_k, here 0."""
+    design = _design()
+    K, A, B = design.gain[0], design.A, design.B[:, 0]
+    roots = np.roots([1.0, *(K @ np.linalg.matrix_power(A, i - 1) @ B for i in range(1, d + 1))])
+    growth = max(abs(roots))
+    assert growth > 1
+    wound = command_recursion(design, d, 200, report=False)
+    assert abs(wound[-1]) > 0.1 * growth ** 150        # the recursion's growth, roughly
+    np.testing.assert_array_equal(command_recursion(design, d, 200, report=True), 0.0)
+
+
+def test_a_report_of_the_command_sent_changes_nothing() -> None:
+    """Applying the commands (the report equals the command sent for that period), the
+    prediction is the sum over the commands in flight, as without a report."""
+    design = _design()
+    rng = np.random.default_rng(5)
+    d, n = 3, design.A.shape[0]
+    told, untold = (DelayPredictor(design.A, design.B, d, PERIOD) for _ in range(2))
+    u = rng.normal(size=30)
+    for k in range(30):
+        x = rng.normal(size=n)
+        applied = u[k - 1 - d] if k - 1 - d >= 0 else 0.0
+        np.testing.assert_array_equal(told.ahead(k * PERIOD, x, applied),
+                                      untold.ahead(k * PERIOD, x))
+        for p in (told, untold):
+            p.sent(k * PERIOD, u[k])
