@@ -11,25 +11,22 @@ predictor form of state feedback for input delay; Åström & Wittenmark, *Comput
 Systems*, §7.6, "sampled-data systems with time delay"). A command that was not sent for some
 sample (no estimate came) is taken as held, as the actuators hold it.
 
-The sum holds only while the actuator applies the commands. When it does not (the simulator's
-safe state or degraded control path applying zero, a held command, saturation), the commands
-sent stop reaching the state, and u_k = −K (A^d x̂_k + Σ A^{k−1−j} B u_j) becomes a recursion in
-u alone: its roots are those of z^d + Σ_{i=1}^{d} K A^{i−1} B z^{d−i}, outside the unit circle
-for the thesis LQG at 100 Hz (1.15 for d = 3), so the commands grow each period and the first
-one applied again throws the structure. This is the predictor's windup; as for the estimator
+The sum holds only while the actuator applies the commands. In the simulator's safe state (its
+command timeout, or the guard of a degraded control path) it applies zero, the commands sent stop
+reaching the state, and u_k = −K (A^d x̂_k + Σ A^{k−1−j} B u_j) becomes a recursion in u alone:
+its roots are those of z^d + Σ_{i=1}^{d} K A^{i−1} B z^{d−i}, outside the unit circle for the
+thesis LQG at 100 Hz (1.15 for d = 3), so the commands grow each period and the first one
+applied again throws the structure. This is the predictor's windup; as for the estimator
 (observer-based anti-windup), the cure is the actuation applied. The estimate carries what the
-simulator reported it applied over the period before it: when that is not the command sent for
-that period, the commands in flight are taken as that actuation held, as the actuator holds it.
+simulator reported it applied over the period before it: zero where the command sent for that
+period was not zero is the safe state, and the commands in flight are then taken as zero. Any
+other difference is a command held for one late one, or a saturation: the commands in flight
+still reach the actuator then, and the prediction stays the sum over them.
 """
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
-
-#: an applied actuation equals the command sent when within these (np.isclose's test)
-RTOL, ATOL = 1e-9, 1e-12
 
 
 class CommandLog:
@@ -79,15 +76,11 @@ class DelayPredictor:
 
     def ahead(self, t: float, z: np.ndarray, applied: float | None = None) -> np.ndarray:
         """x̂_{k+d|k} from the estimate ``z`` of the sample at ``t``; ``applied``: the actuation
-        over the period before it, as the estimate took it (None or NaN: not known). When that is
-        not the command sent for that period, the actuator is not applying the commands, and
-        those in flight are taken as ``applied`` held (module docstring)."""
+        over the period before it, as the estimate took it (None or NaN: not known). Zero where
+        the command sent for that period was not is the simulator's safe state: the commands in
+        flight are then taken as zero (module docstring)."""
         k = self.index(t)
-        held = None
-        if applied is not None and math.isfinite(applied):
-            sent = self._sent.in_effect(k - 1 - self.periods)
-            if abs(applied - sent) > ATOL + RTOL * abs(sent):
-                held = applied
+        safe_state = applied == 0.0 and self._sent.in_effect(k - 1 - self.periods) != 0.0
         for j in range(k - self.periods, k):
-            z = self.A @ z + self.B * (self._sent.in_effect(j) if held is None else held)
+            z = self.A @ z + self.B * (0.0 if safe_state else self._sent.in_effect(j))
         return z

@@ -95,7 +95,8 @@ def command_recursion(design, d: int, periods: int, *, report: bool) -> np.ndarr
 def test_commands_that_do_not_act_do_not_wind_the_prediction_up(d: int) -> None:
     """The recursion's roots (z^d + Σ K A^{i−1} B z^{d−i}) lie outside the unit circle: the
     commands the predictor assumes applied grow by that root each period. Told the actuation
-    applied (zero), it takes the commands in flight as zero held: u_k = −K A^d x̂_k, here 0."""
+    applied (zero, for a command that was not), it takes the commands in flight as zero:
+    u_k = −K A^d x̂_k, here 0."""
     design = _design()
     K, A, B = design.gain[0], design.A, design.B[:, 0]
     roots = np.roots([1.0, *(K @ np.linalg.matrix_power(A, i - 1) @ B for i in range(1, d + 1))])
@@ -106,9 +107,11 @@ def test_commands_that_do_not_act_do_not_wind_the_prediction_up(d: int) -> None:
     np.testing.assert_array_equal(command_recursion(design, d, 200, report=True), 0.0)
 
 
-def test_a_report_of_the_command_sent_changes_nothing() -> None:
-    """Applying the commands (the report equals the command sent for that period), the
-    prediction is the sum over the commands in flight, as without a report."""
+@pytest.mark.parametrize("report", ["sent", "held", "saturated"])
+def test_a_report_other_than_the_safe_state_changes_nothing(report: str) -> None:
+    """The command sent for that period applied, the one before it held (that command came
+    late) or a saturated one: the commands in flight still reach the actuator, and the
+    prediction is the sum over them, as without a report."""
     design = _design()
     rng = np.random.default_rng(5)
     d, n = 3, design.A.shape[0]
@@ -116,7 +119,10 @@ def test_a_report_of_the_command_sent_changes_nothing() -> None:
     u = rng.normal(size=30)
     for k in range(30):
         x = rng.normal(size=n)
-        applied = u[k - 1 - d] if k - 1 - d >= 0 else 0.0
+        lag = 1 + d + (report == "held")
+        applied = None if k < lag else float(u[k - lag])     # None: nothing applied yet
+        if report == "saturated" and applied is not None:
+            applied = float(np.clip(applied, -0.5, 0.5))
         np.testing.assert_array_equal(told.ahead(k * PERIOD, x, applied),
                                       untold.ahead(k * PERIOD, x))
         for p in (told, untold):
