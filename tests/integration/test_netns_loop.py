@@ -106,7 +106,7 @@ def test_realtime_100hz_under_5pct_loss_keeps_tracking(ros_domain: int) -> None:
 
 
 @pytest.mark.long
-@pytest.mark.xfail(reason="not met reliably (docs/reliability.md): in about one run in eight "
+@pytest.mark.xfail(reason="not met reliably (docs/reliability.md): in 2 of 22 runs "
                           "on a loaded machine the loop loses control after a few deadline "
                           "misses (peak command 14 - 34 N m against 2.1, floor 3 at -183 to "
                           "-237 %), and CI once saw an estimate error of 0.49; the cause is "
