@@ -28,6 +28,11 @@ from __future__ import annotations
 
 import numpy as np
 
+#: periods of commands kept before the newest one's prediction window: an estimate this late
+#: (behind a command the controller's watchdog sent for a later sample) still predicts over the
+#: commands that were sent, not over forgotten ones read as 0
+KEPT_PERIODS = 64
+
 
 class CommandLog:
     """Commands by the sample index they answer. The one in effect at sample j is the newest
@@ -72,7 +77,9 @@ class DelayPredictor:
         k + 1 − d)."""
         k = self.index(t)
         self._sent.record(k, value)
-        self._sent.forget_before(k + 1 - self.periods)
+        # an estimate may come after a later sample's command (the watchdog's zero): the
+        # commands it predicts over are kept for KEPT_PERIODS
+        self._sent.forget_before(k + 1 - self.periods - KEPT_PERIODS)
 
     def ahead(self, t: float, z: np.ndarray, applied: float | None = None) -> np.ndarray:
         """x̂_{k+d|k} from the estimate ``z`` of the sample at ``t``; ``applied``: the actuation

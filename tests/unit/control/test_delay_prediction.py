@@ -127,3 +127,20 @@ def test_a_report_other_than_the_safe_state_changes_nothing(report: str) -> None
                                       untold.ahead(k * PERIOD, x))
         for p in (told, untold):
             p.sent(k * PERIOD, u[k])
+
+
+def test_an_estimate_behind_a_later_watchdog_command_predicts_over_the_commands_sent() -> None:
+    """The controller's watchdog sends zero for sample 15 while the estimates of 10 – 14 are
+    late; the estimate of 10 then comes. Its prediction runs over the commands sent for 5 – 9,
+    as if the watchdog had not fired, not over forgotten ones read as 0."""
+    design = _design()
+    rng = np.random.default_rng(6)
+    d, n = 5, design.A.shape[0]
+    late, in_order = (DelayPredictor(design.A, design.B, d, PERIOD) for _ in range(2))
+    u = rng.normal(size=10)
+    for k in range(10):
+        for p in (late, in_order):
+            p.sent(k * PERIOD, u[k])
+    late.sent(15 * PERIOD, 0.0)
+    x = rng.normal(size=n)
+    np.testing.assert_array_equal(late.ahead(10 * PERIOD, x), in_order.ahead(10 * PERIOD, x))
