@@ -107,15 +107,22 @@ def test_commands_that_do_not_act_do_not_wind_the_prediction_up(d: int) -> None:
     np.testing.assert_array_equal(command_recursion(design, d, 200, report=True), 0.0)
 
 
+def _twins(d: int, *, seed: int) -> tuple[tuple[DelayPredictor, DelayPredictor],
+                                         np.random.Generator, int]:
+    """Two predictors of the thesis LQG's design for delay ``d``, a generator and the state's
+    size."""
+    design = _design()
+    pair = tuple(DelayPredictor(design.A, design.B, d, PERIOD) for _ in range(2))
+    return pair, np.random.default_rng(seed), design.A.shape[0]     # type: ignore[return-value]
+
+
 @pytest.mark.parametrize("report", ["sent", "held", "saturated"])
 def test_a_report_other_than_the_safe_state_changes_nothing(report: str) -> None:
     """The command sent for that period applied, the one before it held (that command came
     late) or a saturated one: the commands in flight still reach the actuator, and the
     prediction is the sum over them, as without a report."""
-    design = _design()
-    rng = np.random.default_rng(5)
-    d, n = 3, design.A.shape[0]
-    told, untold = (DelayPredictor(design.A, design.B, d, PERIOD) for _ in range(2))
+    d = 3
+    (told, untold), rng, n = _twins(d, seed=5)
     u = rng.normal(size=30)
     for k in range(30):
         x = rng.normal(size=n)
@@ -133,10 +140,7 @@ def test_an_estimate_behind_a_later_watchdog_command_predicts_over_the_commands_
     """The controller's watchdog sends zero for sample 15 while the estimates of 10 – 14 are
     late; the estimate of 10 then comes. Its prediction runs over the commands sent for 5 – 9,
     as if the watchdog had not fired, not over forgotten ones read as 0."""
-    design = _design()
-    rng = np.random.default_rng(6)
-    d, n = 5, design.A.shape[0]
-    late, in_order = (DelayPredictor(design.A, design.B, d, PERIOD) for _ in range(2))
+    (late, in_order), rng, n = _twins(5, seed=6)
     u = rng.normal(size=10)
     for k in range(10):
         for p in (late, in_order):
