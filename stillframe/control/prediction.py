@@ -26,6 +26,8 @@ still reach the actuator then, and the prediction stays the sum over them.
 
 from __future__ import annotations
 
+import bisect
+
 import numpy as np
 
 #: periods of commands kept before the newest one's prediction window: an estimate this late
@@ -36,25 +38,32 @@ KEPT_PERIODS = 64
 
 class CommandLog:
     """Commands by the sample index they answer. The one in effect at sample j is the newest
-    at or before j (the actuators hold the last command; 0 before any)."""
+    at or before j (the actuators hold the last command; 0 before any). The indices are kept
+    sorted, so a lookup is a bisection, however many the log keeps."""
 
     def __init__(self) -> None:
         self._by_index: dict[int, float] = {}
+        self._indices: list[int] = []
 
     def record(self, k: int, value: float) -> None:
         """Remember ``value`` as the command issued at sample ``k``."""
+        if k not in self._by_index:
+            bisect.insort(self._indices, k)
         self._by_index[k] = value
 
     def in_effect(self, j: int) -> float:
         """The command in effect at sample ``j``: the newest recorded at or before it (0 before
         any)."""
-        older = [i for i in self._by_index if i <= j]
-        return self._by_index[max(older)] if older else 0.0
+        i = bisect.bisect_right(self._indices, j)
+        return self._by_index[self._indices[i - 1]] if i else 0.0
 
     def forget_before(self, k: int) -> None:
         """Drop what no sample from k on needs: the commands before k but the newest of them."""
-        for j in sorted(j for j in self._by_index if j < k)[:-1]:
-            del self._by_index[j]
+        drop = bisect.bisect_left(self._indices, k) - 1
+        if drop > 0:
+            for j in self._indices[:drop]:
+                del self._by_index[j]
+            del self._indices[:drop]
 
 
 class DelayPredictor:

@@ -10,7 +10,7 @@ import pytest
 
 from stillframe.control.factory import TORQUE_INPUT
 from stillframe.control.lqg import design_lqr
-from stillframe.control.prediction import DelayPredictor
+from stillframe.control.prediction import CommandLog, DelayPredictor
 from stillframe.design.identified import frame_for
 from tests.support.scenes import thesis_scene
 
@@ -148,3 +148,23 @@ def test_an_estimate_behind_a_later_watchdog_command_predicts_over_the_commands_
     late.sent(15 * PERIOD, 0.0)
     x = rng.normal(size=n)
     np.testing.assert_array_equal(late.ahead(10 * PERIOD, x), in_order.ahead(10 * PERIOD, x))
+
+
+def test_the_command_log_answers_as_a_scan_of_every_command_kept() -> None:
+    """Commands recorded out of order, some indices twice, the old ones forgotten: each lookup
+    equals the newest kept at or before it, found by scanning them all."""
+    rng = np.random.default_rng(8)
+    log, kept = CommandLog(), {}
+    for _ in range(400):
+        k = int(rng.integers(0, 200))
+        log.record(k, float(k) + rng.normal())
+        kept[k] = log.in_effect(k)
+        if rng.random() < 0.1:
+            edge = int(rng.integers(0, 200))
+            older = sorted(i for i in kept if i < edge)[:-1]
+            for i in older:
+                del kept[i]
+            log.forget_before(edge)
+        j = int(rng.integers(-5, 205))
+        before = [i for i in kept if i <= j]
+        assert log.in_effect(j) == (kept[max(before)] if before else 0.0)
