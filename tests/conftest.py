@@ -12,6 +12,7 @@ other ranges set their own, inside network namespaces of their own.
 
 import contextlib
 import os
+from collections.abc import Iterator
 from pathlib import Path
 
 os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
@@ -23,16 +24,17 @@ os.environ["STILLFRAME_DAEMON_IDLE_S"] = "60"
 
 import pytest
 
-from tests.support.middleware import isolate_domain
+from tests.support.middleware import isolated_domain
 
 INTEGRATION = Path(__file__).with_name("integration")
 
 
 @pytest.fixture
-def ros_domain(monkeypatch: pytest.MonkeyPatch) -> int:
-    """A random ROS_DOMAIN_ID (1..200) so parallel test runs never see each other; discovery
-    on this machine only (no multicast leaves it)."""
-    return isolate_domain(monkeypatch)
+def ros_domain(monkeypatch: pytest.MonkeyPatch) -> Iterator[int]:
+    """A ROS_DOMAIN_ID (1..200) no other test run on this machine holds, so parallel test runs
+    never see each other; discovery on this machine only (no multicast leaves it)."""
+    with isolated_domain(monkeypatch) as domain:
+        yield domain
 
 
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:

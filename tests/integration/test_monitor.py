@@ -35,7 +35,7 @@ from stillframe.middleware.names import is_hidden
 from stillframe.middleware.taps import TappedPublisher, tap_topic
 from stillframe.monitor.dashboard import ERROR_KEYS
 from stillframe.monitor.foxglove_client import Capture, capture, churn, stall
-from tests.support.middleware import child_env, isolate_domain, niced, scheduling
+from tests.support.middleware import child_env, isolated_domain, niced, scheduling
 
 pytestmark = pytest.mark.slow
 
@@ -115,8 +115,8 @@ def monitored_run(tmp_path_factory: pytest.TempPathFactory, ros_domain_module: i
 @pytest.fixture(scope="module")
 def ros_domain_module() -> Iterator[int]:
     """A random ROS_DOMAIN_ID for the module's launches (as the ``ros_domain`` fixture)."""
-    with pytest.MonkeyPatch.context() as patch:
-        yield isolate_domain(patch)
+    with pytest.MonkeyPatch.context() as patch, isolated_domain(patch) as domain:
+        yield domain
 
 
 def test_a_foxglove_client_decodes_what_the_recorder_recorded(monitored_run: dict) -> None:

@@ -2,27 +2,53 @@
 
 from __future__ import annotations
 
+import contextlib
+import fcntl
 import os
 import random
 import select
 import subprocess
 import sys
+import tempfile
 import time
+from collections.abc import Iterator
+from pathlib import Path
 
 import pytest
 
 from stillframe.locations import REPO_ROOT
 
+#: one lock file per ROS_DOMAIN_ID a test holds; ``flock`` so that a killed run frees its ids
+DOMAIN_LOCKS = Path(tempfile.gettempdir()) / "stillframe-test-domains"
+#: the ids tests draw from (Jazzy's default ports reach 232; 0 is everyone's default)
+TEST_DOMAINS = range(1, 201)
 
-def isolate_domain(monkeypatch: pytest.MonkeyPatch) -> int:
-    """Set a random ROS_DOMAIN_ID (1..200), discovery on this machine only and the dds backend
-    for this test or module."""
-    domain = random.SystemRandom().randint(1, 200)
-    monkeypatch.setenv("ROS_DOMAIN_ID", str(domain))
-    monkeypatch.delenv("CYCLONEDDS_URI", raising=False)
-    monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
-    monkeypatch.setenv("STILLFRAME_RMW", "dds")
-    return domain
+
+@contextlib.contextmanager
+def isolated_domain(monkeypatch: pytest.MonkeyPatch) -> Iterator[int]:
+    """A ROS_DOMAIN_ID (1..200) no other test run on this machine holds, discovery on this
+    machine only and the dds backend, for as long as the ``with`` lasts. The id is drawn at
+    random and held by an exclusive lock on its file, so two suites run side by side never share
+    a domain; when every id is held the draw waits for one."""
+    DOMAIN_LOCKS.mkdir(exist_ok=True)
+    ids = list(TEST_DOMAINS)
+    random.SystemRandom().shuffle(ids)
+    while True:
+        for domain in ids:
+            handle = (DOMAIN_LOCKS / f"{domain}.lock").open("a")
+            try:
+                fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except BlockingIOError:
+                handle.close()
+                continue
+            with handle:
+                monkeypatch.setenv("ROS_DOMAIN_ID", str(domain))
+                monkeypatch.delenv("CYCLONEDDS_URI", raising=False)
+                monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+                monkeypatch.setenv("STILLFRAME_RMW", "dds")
+                yield domain
+            return
+        time.sleep(0.1)
 
 
 def child_env() -> dict[str, str]:
