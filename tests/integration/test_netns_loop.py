@@ -106,11 +106,11 @@ def test_realtime_100hz_under_5pct_loss_keeps_tracking(ros_domain: int) -> None:
 
 
 @pytest.mark.long
-@pytest.mark.xfail(reason="not met reliably (docs/reliability.md): in 2 of 22 runs "
-                          "on a loaded machine the loop loses control after a few deadline "
-                          "misses (peak command 14 - 34 N m against 2.1, floor 3 at -183 to "
-                          "-237 %), and CI once saw an estimate error of 0.49; the cause is "
-                          "not found", strict=False)
+@pytest.mark.xfail(reason="not met reliably (docs/reliability.md): on a loaded machine 4 of "
+                          "35 runs lost control (floor 3 at 6 to -418 %), each with commands "
+                          "past their slot (5 in a row at the start of control, or 10 to 50 % "
+                          "of the samples), which the predictor takes as applied; their "
+                          "verdict is degraded", strict=False)
 def test_realtime_100hz_with_5ms_delays_keeps_control_through_a_playout_delay(
         ros_domain: int) -> None:
     """5 ± 2 ms on every host's link: sensor, estimate and command each come 3 – 7 ms late, so
