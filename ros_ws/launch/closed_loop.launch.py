@@ -14,17 +14,18 @@ workspace built (``colcon build`` in ``ros_ws/``; see docs/launch.md). Without R
   lifecycle-aware launch does. The transitions are service calls from the launch's own rclpy
   node (Fast DDS), which do not reach nodes on the ``dds`` backend (services do not cross DDS
   vendors): with ``STILLFRAME_RMW=dds`` the two configure and activate themselves.
-- Every node gets the run's token (``run_token``, 64 random bits drawn for each launch as
-  ``stillframe launch`` draws it): only the samples of this launch's nodes reach the loop
-  (docs/nodes.md, writer identity).
+- Every node gets the run's token (``run_token``, drawn for each launch by
+  ``stillframe/contract/run_token.py``, as ``stillframe launch`` draws it; loaded by its path,
+  since this file runs in the ROS 2 installation's Python): only the samples of this launch's
+  nodes reach the loop (docs/nodes.md, writer identity).
 - The run ends when ``sim_node`` exits at the end of the scene (``OnProcessExit``, then a
   ``Shutdown`` event, which stops the other two with SIGINT). A simulator that exits with a failure
   code, or a managed node that exits while the run goes on, fails the launch: its exit code then
   is 1 (``ros2 launch`` gives no other), with the node's own code in the error line.
 """
 
+import importlib.util
 import os
-import secrets
 from pathlib import Path
 
 from launch import LaunchDescription
@@ -41,7 +42,16 @@ WORKSPACE = Path(__file__).resolve().parents[1]
 PARAMS = WORKSPACE / "config" / "closed_loop.params.yaml"
 DEFAULT_SCENE = WORKSPACE.parent / "scenes" / "thesis_lqg.yaml"
 NODES = ("sim_node", "estimator_node", "controller_node")
+RUN_TOKEN = WORKSPACE.parent / "stillframe" / "contract" / "run_token.py"
 SIMULATOR, MANAGED = NODES[0], NODES[1:]
+
+
+def run_token_module():
+    """stillframe's run-token module (standard library only), loaded from its file."""
+    spec = importlib.util.spec_from_file_location("stillframe_run_token", RUN_TOKEN)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
 
 
 class RunFailedError(RuntimeError):
@@ -96,7 +106,8 @@ def generate_launch_description() -> LaunchDescription:
     ]
     parameters = [str(PARAMS), {
         "scene": LaunchConfiguration("scene"), "mode": LaunchConfiguration("mode"),
-        "overrides": LaunchConfiguration("overrides"), "run_token": "t" + secrets.token_hex(8)}]
+        "overrides": LaunchConfiguration("overrides"),
+        "run_token": run_token_module().new_run_token()}]
     brought_up = os.environ.get("STILLFRAME_RMW", "") != "dds"
     simulator = Node(package=SIMULATOR, executable=SIMULATOR, name=SIMULATOR, namespace="frame",
                      output="screen", parameters=parameters)

@@ -18,7 +18,6 @@ import ctypes
 import json
 import os
 import re
-import secrets
 import shutil
 import signal
 import subprocess
@@ -39,6 +38,7 @@ from stillframe.bags.metadata import load_metadata
 from stillframe.config import environment
 from stillframe.config.scene import Scene, load_scene
 from stillframe.contract import messages
+from stillframe.contract.run_token import new_run_token
 from stillframe.contract.topics import DEFAULT_NAMESPACE, PER_SAMPLE, STATUS_KEYS
 from stillframe.errors import BY_EXIT_CODE, BagError, InputError, StillframeError
 from stillframe.fidelity.auto_model import resolve_model
@@ -134,15 +134,6 @@ class NodeDiedError(RuntimeError):
         if kind is None or line is None:
             return None
         return kind(f"{self.name}: {line.split(': error: ', 1)[1]}")
-
-
-def new_run_token() -> str:
-    """A new run's token (64 random bits, hex, after a ``t``): what its nodes write in every
-    stamped sample and require of every sample they take (docs/nodes.md, writer identity). The
-    letter keeps it a string where ROS reads a parameter's value as YAML: bare hex digits can
-    read as a number (``12e45…`` as inf, all digits as an integer), which a string parameter
-    refuses."""
-    return "t" + secrets.token_hex(8)
 
 
 def node_command(package: str, scene: Path, overrides: Sequence[str], mode: str, *,

@@ -6,7 +6,7 @@ import lazy_loader as lazy
 __getattr__, __dir__, __all__ = lazy.attach(
     __name__,
     submodules=["adaptation_events", "codecs", "fixed_cdr", "message_yaml", "messages",
-                "model_file", "signals", "structure_events", "topics"],
+                "model_file", "run_token", "signals", "structure_events", "topics"],
     submod_attrs={
         "signals": ["Command", "Estimate", "Sample"],
         "topics": ["CONTRACT", "TopicSpec"],

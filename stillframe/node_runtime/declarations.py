@@ -12,6 +12,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
 
+from stillframe.contract.run_token import TOKEN_LIMITS, token_problem
 from stillframe.errors import InputError
 from stillframe.loop.adaptation import SCENE_DESIGN, design_check
 from stillframe.loop.spec import (
@@ -48,14 +49,6 @@ def _refusal(parse: Callable[[Any], object], name: str) -> Callable[[Any], str |
 
 
 #: what a run token may hold (it ends every ``frame_id`` the loop writes)
-TOKEN_LIMITS = "letters, digits, - and _; at most 64"
-
-
-def _token(value: str) -> str | None:
-    ok = len(value) <= 64 and all(c.isascii() and (c.isalnum() or c in "-_") for c in value)
-    return None if ok else f"expected {TOKEN_LIMITS}"
-
-
 def _scene_file(value: str) -> str | None:
     return None if value else "give the scene file (--ros-args -p scene:=FILE)"
 
@@ -77,7 +70,7 @@ class LoopParameterValues(NodeParameters):
         "lock-step (the one-process numbers, bit for bit) or real time (below)"))
     diagnostics_period_s: float = param(1.0, positive, unit="s", doc=(
         "wall time between `/diagnostics` messages"))
-    run_token: str = param("", limited(_token, TOKEN_LIMITS), doc=(
+    run_token: str = param("", limited(token_problem, TOKEN_LIMITS), doc=(
         "the run's token: every stamped sample the node writes carries it in "
         "`header.frame_id` (`floor1#TOKEN`), and it takes only the samples that do (writer "
         "identity, below); `stillframe launch` and the launch file give each run a new one; "
