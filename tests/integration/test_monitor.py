@@ -114,7 +114,7 @@ def monitored_run(tmp_path_factory: pytest.TempPathFactory, ros_domain_module: i
 
 @pytest.fixture(scope="module")
 def ros_domain_module() -> Iterator[int]:
-    """A random ROS_DOMAIN_ID for the module's launches (as the ``ros_domain`` fixture)."""
+    """A ROS_DOMAIN_ID held for the module's launches (as the ``ros_domain`` fixture)."""
     with pytest.MonkeyPatch.context() as patch, isolated_domain(patch) as domain:
         yield domain
 
