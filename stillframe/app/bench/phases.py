@@ -120,12 +120,17 @@ class SamplePaths:
         return np.where(found, order[np.maximum(pos, 0)], -1)
 
     def span_us(self, start: tuple[str, str], end: tuple[str, str]) -> np.ndarray:
-        """Per sample, ``end`` − ``start`` [µs]; NaN where either mark is missing."""
+        """Per sample, ``end`` − ``start`` [µs]; NaN where either mark is missing, and for a hop
+        between two nodes where ``end`` came first: the marks are then of two messages, not
+        one (the simulator took the controller watchdog's zero for that stamp, which the
+        controller's ring does not time, before the law's command was written)."""
         a = self.marks.get(start)
         b = self.marks.get(end)
         if a is None or b is None:
             return np.full(len(self.stamps), np.nan)
         ok = (a > 0) & (b > 0)
+        if start[0] != end[0]:
+            ok &= b >= a
         return np.where(ok, (b - a) * 1e-3, np.nan)
 
     def table(self, steps: tuple[tuple[str, str, tuple[str, str], tuple[str, str]], ...]

@@ -96,6 +96,21 @@ def test_a_sample_missing_from_a_node_is_nan_not_zero(paths: SamplePaths) -> Non
     assert np.isnan(span[5]) and span[4] == pytest.approx(80.0)
 
 
+def test_a_hop_whose_end_came_first_is_not_a_hop() -> None:
+    """The simulator took sample 2's command 200 µs before the controller wrote the law's (the
+    watchdog's zero for that stamp came first, and the controller's ring does not time it): the
+    hop is not that sample's, so it is NaN and left out of the table, not a negative time."""
+    made = rings()
+    made[SIM].columns["command_in"][2] = 2 * PERIOD + (USUAL[CTL]["serialized"] - 200) * US
+    paths = SamplePaths(made)
+    hop = paths.span_us((CTL, "serialized"), (SIM, "command_in"))
+    assert np.isnan(hop[2]) and hop[1] == pytest.approx(35.0)
+    row = {r["what"]: r for r in paths.table(PATH)}["write, wake-up, take, read the command"]
+    assert row["samples"] == 5 and row["mean_us"] == pytest.approx(35.0)
+    # within one node a mark before another is the node's own order, kept
+    assert paths.span_us((SIM, "command_in"), (SIM, "answered"))[2] == pytest.approx(245.0)
+
+
 def test_histogram_counts_as_numpy_does() -> None:
     rng = np.random.default_rng(3)
     latency = rng.gamma(2.0, 300.0, 5000)
