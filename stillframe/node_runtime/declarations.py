@@ -48,7 +48,6 @@ def _refusal(parse: Callable[[Any], object], name: str) -> Callable[[Any], str |
     return check
 
 
-#: what a run token may hold (it ends every ``frame_id`` the loop writes)
 def _scene_file(value: str) -> str | None:
     return None if value else "give the scene file (--ros-args -p scene:=FILE)"
 
