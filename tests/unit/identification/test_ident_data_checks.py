@@ -37,6 +37,18 @@ def named(u, y, **kw):
                     output_names=NAMES_Y[: y.shape[1]], **kw)
 
 
+@pytest.fixture(scope="module")
+def reference(record):
+    """The record's identification by the default path, unnamed (the tests only read it)."""
+    return identify(record[1].u, record[1].y, record[1].dt)
+
+
+@pytest.fixture(scope="module")
+def sound(record):
+    """The record's identification with its channels named (the tests only read it)."""
+    return named(record[1].u, record[1].y)
+
+
 def test_all_zero_input_is_refused_naming_topic_and_field(record) -> None:
     _, rec = record
     with pytest.raises(IdentificationError, match=r"channel /frame/excitation/wrench:wrench"
@@ -107,13 +119,14 @@ def test_channel_scales_survive_the_float_range() -> None:
 
 @pytest.mark.parametrize(("u_scale", "y_scale"), [(1.0, 1e300), (1e-300, 1.0),
                                                    (1e300, 1e-300), (1e-300, 1e-300)])
-def test_identification_does_not_depend_on_units(record, u_scale: float, y_scale: float) -> None:
+def test_identification_does_not_depend_on_units(record, reference, u_scale: float,
+                                                 y_scale: float) -> None:
     """Issue 31 item 5, issue 37: the same modes to 1e-9 (the records differ only by the
     rounding of the unit change; the refinement converges to its optimum, whose sensitivity to
     that rounding is the Jacobian's condition times eps, far below), the same warnings and
     intervals, and B, C, D in the data's units (the Markov parameters scale as y / u)."""
     _, rec = record
-    ref = identify(rec.u, rec.y, rec.dt)
+    ref = reference
     got = identify(rec.u * u_scale, rec.y * y_scale, rec.dt)
     assert got.order == ref.order and got.warnings == ref.warnings
     assert ref.refinement.converged and got.refinement.converged
@@ -127,9 +140,9 @@ def test_identification_does_not_depend_on_units(record, u_scale: float, y_scale
                                    atol=1e-9 * np.abs(ref.markov).max())
 
 
-def test_default_is_refined_and_the_fast_path_warns(record) -> None:
+def test_default_is_refined_and_the_fast_path_warns(record, reference) -> None:
     building, rec = record
-    default = identify(rec.u, rec.y, rec.dt)
+    default = reference
     assert default.refinement is not None and NOT_REFINED not in default.warnings
     fast = identify(rec.u, rec.y, rec.dt, refine=False)
     assert fast.refinement is None and NOT_REFINED in fast.warnings
@@ -197,7 +210,7 @@ of the channel's RMS: each beyond any converter's dynamic range (ABSURD_FACTOR).
 
 
 @pytest.mark.parametrize("seed", range(6))
-def test_one_absurd_sample_is_named_and_replaced(record, seed: int) -> None:
+def test_one_absurd_sample_is_named_and_replaced(record, sound, seed: int) -> None:
     """Issue 38 item 7: one sample of a random channel, at a random time, set to a random
     magnitude class and sign: identify names it (channel, time, value), replaces it by
     interpolation and gives the modes of the sound record (within a tenth of their 95 %
@@ -211,7 +224,6 @@ def test_one_absurd_sample_is_named_and_replaced(record, seed: int) -> None:
     value = float(rng.choice([-1, 1]) * rng.choice(FLIP_CLASSES)
                   * np.sqrt(np.mean(target[:, j] ** 2)))
     target[k, j] = value
-    sound = named(rec.u, rec.y)
     got = named(u, y)
     name = (NAMES_U + NAMES_Y)[column]
     note = next(w for w in got.warnings if "no physical signal makes" in w)
