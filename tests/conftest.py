@@ -7,7 +7,9 @@ command, all marked ``processes`` here (``pytest -m "not processes"`` runs the n
 
 Every DDS participant a test starts (in this process or a child) discovers only this machine:
 ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``, so no discovery traffic leaves the host. Tests of the
-other ranges set their own, inside network namespaces of their own.
+other ranges set their own, inside network namespaces of their own. Each test process holds a
+ROS_DOMAIN_ID of its own for the whole session (a test that asks for ``ros_domain`` gets another
+for itself), so the workers of ``pytest -n`` and a loop running on the default domain never meet.
 """
 
 import contextlib
@@ -24,9 +26,18 @@ os.environ["STILLFRAME_DAEMON_IDLE_S"] = "60"
 
 import pytest
 
-from tests.support.middleware import isolated_domain
+from tests.support.middleware import held_domain, isolated_domain
 
 INTEGRATION = Path(__file__).with_name("integration")
+
+
+@pytest.fixture(scope="session", autouse=True)
+def _a_domain_of_the_sessions_own() -> Iterator[int]:
+    """The ROS_DOMAIN_ID of the tests that do not ask for one: held by this process for the
+    session (the commands a test starts inherit it)."""
+    with held_domain() as domain, pytest.MonkeyPatch.context() as patch:
+        patch.setenv("ROS_DOMAIN_ID", str(domain))
+        yield domain
 
 
 @pytest.fixture

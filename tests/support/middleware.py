@@ -25,11 +25,11 @@ TEST_DOMAINS = range(1, 201)
 
 
 @contextlib.contextmanager
-def isolated_domain(monkeypatch: pytest.MonkeyPatch) -> Iterator[int]:
-    """A ROS_DOMAIN_ID (1..200) no other test run on this machine holds, discovery on this
-    machine only and the dds backend, for as long as the ``with`` lasts. The id is drawn at
-    random and held by an exclusive lock on its file, so two suites run side by side never share
-    a domain; when every id is held the draw waits for one."""
+def held_domain() -> Iterator[int]:
+    """A ROS_DOMAIN_ID (1..200) no other test run on this machine holds, for as long as the
+    ``with`` lasts. The id is drawn at random and held by an exclusive lock on its file, so two
+    suites (or two workers of one suite) never share a domain; when every id is held the draw
+    waits for one."""
     DOMAIN_LOCKS.mkdir(exist_ok=True)
     ids = list(TEST_DOMAINS)
     random.SystemRandom().shuffle(ids)
@@ -42,13 +42,21 @@ def isolated_domain(monkeypatch: pytest.MonkeyPatch) -> Iterator[int]:
                 handle.close()
                 continue
             with handle:
-                monkeypatch.setenv("ROS_DOMAIN_ID", str(domain))
-                monkeypatch.delenv("CYCLONEDDS_URI", raising=False)
-                monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
-                monkeypatch.setenv("STILLFRAME_RMW", "dds")
                 yield domain
             return
         time.sleep(0.1)
+
+
+@contextlib.contextmanager
+def isolated_domain(monkeypatch: pytest.MonkeyPatch) -> Iterator[int]:
+    """A domain of :func:`held_domain`, discovery on this machine only and the dds backend, for
+    as long as the ``with`` lasts."""
+    with held_domain() as domain:
+        monkeypatch.setenv("ROS_DOMAIN_ID", str(domain))
+        monkeypatch.delenv("CYCLONEDDS_URI", raising=False)
+        monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+        monkeypatch.setenv("STILLFRAME_RMW", "dds")
+        yield domain
 
 
 def child_env() -> dict[str, str]:
