@@ -8,6 +8,11 @@ VENV := .venv
 BIN := $(VENV)/bin
 LATEST := .venv-latest
 CONSTRAINTS := constraints.txt
+# the suite runs in this many pytest-xdist workers, a test file per worker at a time (loadfile
+# keeps a file's module fixtures in one process); its tests wait on processes and DDS more than
+# they compute, so three keep two cores busy
+TEST_WORKERS ?= 3
+PYTEST := python -m pytest -q --durations=25 -n $(TEST_WORKERS) --dist loadfile
 NO_ROS := echo "make: real ROS 2 (rclpy) has no wheels for this platform; nodes run on the dds backend"
 
 .PHONY: setup demo test test-latest lock lint clean
@@ -26,7 +31,7 @@ demo: setup
 
 test: setup
 	$(BIN)/ruff check .
-	$(BIN)/python -m pytest -q --durations=25
+	$(BIN)/$(PYTEST)
 
 # the newest releases pyproject.toml allows, in a venv of their own, and the suite on them
 test-latest:
@@ -36,7 +41,7 @@ test-latest:
 	$(LATEST)/bin/pip install --quiet -e '.[test,colcon]'
 	$(LATEST)/bin/pip install --quiet -e '.[test,colcon,ros]' 2>/dev/null || $(NO_ROS)
 	$(LATEST)/bin/ruff check .
-	$(LATEST)/bin/python -m pytest -q --durations=25
+	$(LATEST)/bin/$(PYTEST)
 
 # the versions of the last `make test-latest` become the pins (run it first, and only on green)
 lock:
