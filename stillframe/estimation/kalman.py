@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import numpy as np
 import scipy.linalg as sla
-from filterpy.kalman import KalmanFilter
 
 from stillframe.config.loop_sections import Estimator
 from stillframe.contract.signals import Estimate, Sample, full_inputs
@@ -193,6 +192,10 @@ class TimeVaryingKalman(LinearFilter):
     def __init__(self, model: FrameModel, config: Estimator, excited_floor: int,
                  initial_physical: np.ndarray, period: float) -> None:
         super().__init__(model, config, excited_floor, initial_physical, period)
+        # imported where the filter is built, before any loop runs: filterpy imports scipy.stats,
+        # which costs every node process a second of start-up that only this filter needs
+        from filterpy.kalman import KalmanFilter
+
         self.kf = KalmanFilter(dim_x=self.x.size, dim_z=4)
         self.kf.x, self.kf.P, self.kf.Q, self.kf.R = self.x, self.P, self.Q, self.R
 

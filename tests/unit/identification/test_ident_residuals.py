@@ -12,12 +12,23 @@ from stillframe.identification.pipeline import identify
 from stillframe.identification.residual_tests import (
     LOW_SNR_DB,
     WHITENESS_LEVEL,
+    chi2_tail,
     independence,
     residual_warnings,
     snr_db,
     whiteness,
 )
 from stillframe.identification.sweep import score, shear_building, simulate
+
+
+def test_the_chi2_tail_is_scipy_stats_own() -> None:
+    """The tail the tests take their p-values from is scipy.stats.chi2.sf's, value for value,
+    over statistics from 0 to far in the tail and the degrees of freedom the tests use."""
+    from scipy import stats
+
+    statistic = np.concatenate([[0.0], np.geomspace(1e-3, 2e3, 200)])
+    for dof in (1, 3, 25, 75, 300):
+        np.testing.assert_array_equal(chi2_tail(statistic, dof), stats.chi2.sf(statistic, dof))
 
 
 def test_whiteness_rejects_white_noise_at_its_level() -> None:
