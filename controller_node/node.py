@@ -14,7 +14,7 @@ and ≥ 0, 0: none; starts at ``controller.limit``; every law takes it at its ne
 and the anti-windup LQG plan with it), and ``design`` (``scene`` or a model file, optionally
 ``@T``: checked when set, refused with the reason and the running design kept when it fails,
 else the law of the LQG designed on it taken from the estimate stamped at or after T:
-:class:`stillframe.loop.adaptation.DesignSwitch`). Every other parameter is read-only.
+:class:`stillframe.loop.designs.DesignSwitch`). Every other parameter is read-only.
 
 Watchdog (``/diagnostics`` level ERROR while it holds the command at zero): once armed by a
 first estimate, when the newest estimate is ``watchdog_periods`` periods older than the newest
@@ -61,7 +61,7 @@ from stillframe.control.supervisor import RUNAWAY_FACTOR
 from stillframe.design.coordinates import design_map
 from stillframe.durations import Durations
 from stillframe.loop import fast_inputs
-from stillframe.loop.adaptation import DesignSwitch
+from stillframe.loop.designs import DesignSwitch
 from stillframe.loop.matching import ForceMatching
 from stillframe.loop.watchdog import EstimateWatchdog
 from stillframe.loop.wiring import design_model

@@ -40,7 +40,7 @@ sample, with the covariance the measurements and ``estimator.restart_velocity_st
 first sample that carries all four measurements (earlier ones are skipped and counted).
 
 The design (``design`` parameter, filters only): ``scene`` or a model file, optionally ``@T``;
-checked when set (:class:`stillframe.loop.adaptation.DesignSwitch`: refused with the reason, the
+checked when set (:class:`stillframe.loop.designs.DesignSwitch`: refused with the reason, the
 running filter kept) and taken at the first sample stamped at or after T: the new filter goes on
 from the old one's estimate (:meth:`stillframe.estimation.base.Filter.continue_from`).
 
@@ -79,7 +79,7 @@ import tempfile
 import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -106,8 +106,8 @@ from stillframe.estimation.factory import FILTERS, make_estimator
 from stillframe.estimation.kalman import LinearFilter
 from stillframe.files import write_text
 from stillframe.loop import fast_inputs
-from stillframe.loop.adaptation import Adaptation, DesignSwitch, Handover, check_adaptation
 from stillframe.loop.assembly import Ready, SampleAssembly
+from stillframe.loop.designs import DesignSwitch, Handover, check_adaptation
 from stillframe.loop.refilter import StepHistory
 from stillframe.loop.wiring import command_topic, design_model, estimator_inputs
 from stillframe.middleware import api
@@ -133,6 +133,9 @@ from stillframe.node_runtime.support import (
     reaches_peer,
     wait_for_peers,
 )
+
+if TYPE_CHECKING:
+    from stillframe.loop.adaptation import Adaptation
 
 
 class EstimatorNode(base.LoopNode):
@@ -185,8 +188,13 @@ class EstimatorNode(base.LoopNode):
         self.designs = (DesignSwitch(scene, lambda built: built[0])
                         if DesignParameterValues in self.declarations(scene) else None)
         check_adaptation(scene, mode=params.mode)
-        self.adaptation = (Adaptation(scene, round(scene.duration / params.period))
-                           if scene.adaptation.enabled else None)
+        self.adaptation: Adaptation | None = None
+        if scene.adaptation.enabled:
+            # imported here, at configure, only by a node that adapts: the adaptation brings
+            # identification, a second of start-up every other estimator does without
+            from stillframe.loop.adaptation import Adaptation
+
+            self.adaptation = Adaptation(scene, round(scene.duration / params.period))
         self.grid = SampleGrid(params.period)
         if self.adaptation is not None:
             settings = self.setting(AdaptationParameterValues)

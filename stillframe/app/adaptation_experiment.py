@@ -31,7 +31,7 @@ from stillframe.app.launcher import LaunchResult, run_scene
 from stillframe.config.scene import Scene, changed_scene, load_scene, scene_from_dict
 from stillframe.dynamics.models import build_model
 from stillframe.errors import InputError
-from stillframe.loop.adaptation import check_adaptation, design_frequencies
+from stillframe.loop.designs import check_adaptation, design_frequencies
 
 RUNS = ("fixed", "adaptive", "oracle")
 #: the adaptation's targets: detection delay [s], frequency error [-], adaptive / oracle

@@ -7,8 +7,8 @@ import lazy_loader as lazy
 __getattr__, __dir__, __all__ = lazy.attach(
     __name__,
     submodules=["adaptation", "assembly", "closed_loop", "command_gate", "decimated_taps",
-                "energy_balance", "evaluation", "fast_inputs", "matching", "pacing", "parts",
-                "refilter", "spec", "step", "watchdog", "wiring", "writer_gate"],
+                "designs", "energy_balance", "evaluation", "fast_inputs", "matching", "pacing",
+                "parts", "refilter", "spec", "step", "watchdog", "wiring", "writer_gate"],
     submod_attrs={
         "spec": ["LoopSpec"],
         "step": ["LoopStep"],

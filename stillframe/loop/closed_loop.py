@@ -27,7 +27,8 @@ import numpy as np
 from stillframe.config.scene import Scene
 from stillframe.contract.codecs import COMMAND_TOPICS
 from stillframe.estimation.base import Filter
-from stillframe.loop.adaptation import Adaptation, Handover
+from stillframe.loop.adaptation import Adaptation
+from stillframe.loop.designs import Handover
 from stillframe.loop.energy_balance import EnergyLedger
 from stillframe.loop.evaluation import LoopHistory, evaluate, open_loop_truth, plant_report
 from stillframe.loop.parts import controller_of, estimator_of, simulator_of

@@ -16,7 +16,7 @@ from stillframe.control.factory import make_controller
 from stillframe.control.supervisor import Controller
 from stillframe.dynamics.models.frame import FrameModel
 from stillframe.estimation.factory import Estimator, make_estimator
-from stillframe.loop.adaptation import check_adaptation
+from stillframe.loop.designs import check_adaptation
 from stillframe.loop.spec import LoopSpec
 from stillframe.loop.wiring import design_model
 from stillframe.plant.frame_plant import make_plant

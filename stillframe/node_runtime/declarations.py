@@ -14,7 +14,7 @@ from typing import Any, Literal
 
 from stillframe.contract.run_token import TOKEN_LIMITS, token_problem
 from stillframe.errors import InputError
-from stillframe.loop.adaptation import SCENE_DESIGN, design_check
+from stillframe.loop.designs import SCENE_DESIGN, design_check
 from stillframe.loop.spec import (
     COMMAND_MISS_LIMIT,
     COMMAND_TIMEOUT_PERIODS,

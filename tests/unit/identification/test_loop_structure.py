@@ -26,7 +26,7 @@ from stillframe.identification.loop_structure import (
     torque_recorded_late,
 )
 from stillframe.identification.mkr import mkr
-from stillframe.loop.adaptation import design_frequencies
+from stillframe.loop.designs import design_frequencies
 from tests.support.loop_records import loop_records
 from tests.support.scenes import characteristic_frequencies, thesis_scene
 

@@ -18,8 +18,8 @@ from stillframe.control.lqg import state_weight
 from stillframe.design.identified import storeys, storeys_frame
 from stillframe.errors import InputError
 from stillframe.locations import REPO_ROOT
-from stillframe.loop.adaptation import Handover, check_adaptation, check_design
 from stillframe.loop.closed_loop import run_closed_loop
+from stillframe.loop.designs import Handover, check_adaptation, check_design
 from stillframe.loop.parts import check_loop
 from stillframe.loop.wiring import design_model
 from tests.support.scenes import characteristic_frequencies, thesis_scene
