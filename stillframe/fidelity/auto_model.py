@@ -27,18 +27,23 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import lazy_loader as lazy
 import numpy as np
 import scipy.linalg as sla
 
 from stillframe.config.scene import Scene, apply_overrides, scene_from_dict
 from stillframe.dynamics.models import build_model
-from stillframe.dynamics.ph import scene_model as ph_scene
 from stillframe.errors import InputError
-from stillframe.fidelity.work_precision import MODELS, REFERENCE_MODEL, SCENE_BANDS_HZ
 from stillframe.files import write_text
 from stillframe.locations import DATA_DIR
 
 __all__ = ["Choice", "choose", "energy_note", "load_table", "resolve_model", "write_table"]
+
+#: loaded on first use: they bring the compiled kernels (numba) and scipy.integrate, which only a
+#: ``model.type: auto`` scene needs; every loop node resolves its scene through this module. (Their
+#: packages load at once, which lazy_loader warns of: both are lazy ``__init__`` files themselves.)
+work_precision = lazy.load("stillframe.fidelity.work_precision", suppress_warning=True)
+ph_scene = lazy.load("stillframe.dynamics.ph.scene_model", suppress_warning=True)
 
 TABLE = DATA_DIR / "fidelity_table.json"
 log = logging.getLogger("stillframe.auto")
@@ -49,7 +54,8 @@ def write_table(result: dict, path: Path, argv: list[str]) -> None:
     runs: dict[tuple[str, str, float], dict[str, Any]] = {}
     for p in result["points"]:
         key = (p["model"], p["method"], p["dt"])
-        run = runs.setdefault(key, {"model": p["model"], "overrides": MODELS[p["model"]],
+        run = runs.setdefault(key, {"model": p["model"],
+                                    "overrides": work_precision.MODELS[p["model"]],
                                     "dofs": p["dofs"], "method": p["method"], "dt": p["dt"],
                                     "error": {}, "cpu_per_s": {}, "energy_error": {}})
         run["error"][p["scene"]] = p["error"]
@@ -77,7 +83,7 @@ def write_table(result: dict, path: Path, argv: list[str]) -> None:
             "energy_error": "largest |dH - h(y.u - z.Rz)| of a step over the largest H of the run "
                             "(pH runs: discrete power balance); null: no discrete balance",
         },
-        "scene_bands_hz": {k: list(v) for k, v in SCENE_BANDS_HZ.items()},
+        "scene_bands_hz": {k: list(v) for k, v in work_precision.SCENE_BANDS_HZ.items()},
         "runs": list(runs.values()),
     }
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -137,10 +143,10 @@ def choose(scene_data: dict, band: list[float], tolerance: float,
     table = table or load_table()
     bands = table["scene_bands_hz"]
     scenes = [s for s, (_, hi) in bands.items() if hi <= band[1]] or list(bands)
-    ref = _frequencies(scene_data, MODELS[f"fe{REFERENCE_MODEL[1]}"])
+    reference = work_precision.MODELS[f"fe{work_precision.REFERENCE_MODEL[1]}"]
+    ref = _frequencies(scene_data, reference)
     if ref is None:
-        ref = _frequencies({**scene_data, "damping": {"model": "modal"}},
-                           MODELS[f"fe{REFERENCE_MODEL[1]}"])
+        ref = _frequencies({**scene_data, "damping": {"model": "modal"}}, reference)
     freqs: dict[str, np.ndarray | None] = {}
     qualified, rejected = [], []
     for run in table["runs"]:
