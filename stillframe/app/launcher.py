@@ -298,12 +298,29 @@ class Child:
         run under load waited 60 s of wall time for a controller still importing), yet a child
         that sleeps or hangs uses it up as wall time. The wall time where the kernel keeps no
         schedstat."""
-        wall = (time.monotonic_ns() - self.started_ns) * 1e-9
+        return (time.monotonic_ns() - self.started_ns) * 1e-9 - self.waited_s()
+
+    def waited_s(self) -> float:
+        """Seconds its main thread has waited on a run queue (``/proc/PID/schedstat``); 0 where
+        the kernel keeps no schedstat."""
         try:
-            waited_ns = int(Path(f"/proc/{self.pid}/schedstat").read_text().split()[1])
+            return int(Path(f"/proc/{self.pid}/schedstat").read_text().split()[1]) * 1e-9
         except (OSError, IndexError, ValueError):
-            waited_ns = 0
-        return wall - waited_ns * 1e-9
+            return 0.0
+
+
+def run_ended(processes: ProcessSet, sim: Child, result_file: Path) -> bool:
+    """Whether the run has ended: ``sim`` exited with 0 after writing ``result_file`` (it is
+    then marked as asked to stop). Raises NodeDiedError for a child that exited otherwise. The
+    failures are looked at first, the simulator's end second: a simulator that ends between the
+    two looks is seen ended by the second, never as a child that died."""
+    dead = processes.first_failure()
+    if (dead is None or dead is sim) and sim.proc.poll() == 0 and result_file.exists():
+        sim.stop_requested = True
+        return True
+    if dead is not None:
+        raise NodeDiedError.exited(dead)
+    return False
 
 
 class ProcessSet:
@@ -679,11 +696,8 @@ class Launcher:
                     watch = time.monotonic()
                 if self.statuses:
                     self.status.update(status_text(self.statuses, self.status.width()))
-                if sim.proc.poll() == 0 and self.options.result_file.exists():
-                    sim.stop_requested = True
+                if run_ended(self.processes, sim, self.options.result_file):
                     break
-                if (dead := self.processes.first_failure()) is not None:
-                    raise NodeDiedError.exited(dead)
             else:
                 raise KeyboardInterrupt
             for child in reversed(self.processes.children):
