@@ -35,20 +35,29 @@ def stop(*_):
     sys.exit(0)
 signal.signal(signal.SIGINT, stop)
 print("sim argv", json.dumps(sys.argv[1:]), flush=True)
-deadline = time.monotonic() + 60    # a condition to wait for, forced rather than timed
-while {wait_for!r} and not os.path.exists({wait_for!r}) and time.monotonic() < deadline:
+open("sim_node.up", "w").close()
+deadline = time.monotonic() + 600   # conditions to wait for, forced rather than timed
+while not all(map(os.path.exists, {wait_for!r})) and time.monotonic() < deadline:
     time.sleep(0.05)
 time.sleep(float({sim_seconds!r}))
 with open(args["result_file"], "w") as f:
     json.dump({result!r}, f)
 """
+#: a node that waits for SIGINT (exit 0), or exits with ``code`` ``life`` seconds after every
+#: stand-in has started (so that each has printed its first line before one ends the run)
 WAITER = """\
-import signal, sys, time
+import os, signal, sys, time
 signal.signal(signal.SIGINT, lambda *a: sys.exit(0))
 print("waiting", flush=True)
+open(__package__ + ".up", "w").close()
+deadline = time.monotonic() + 600
+while not all(map(os.path.exists, {up!r})) and time.monotonic() < deadline:
+    time.sleep(0.05)
 time.sleep({life!r})
 sys.exit({code!r})
 """
+#: the files the stand-ins write once they have printed their first line
+UP = tuple(f"{name}.up" for name in ("sim_node", "estimator_node", "controller_node"))
 #: a controller that reports once, as it stops (a real node's last status counts the whole run)
 STATUS_AT_STOP = """\
 from stillframe.contract import topics
@@ -69,17 +78,20 @@ RESULT = {"reduction_pct": {"displacement": [71.0, 75.0, 57.0], "velocity": [73.
 
 
 def write_stand_ins(root: Path, sim_seconds: float = 1.0, life: float = 3600,
-                    code: int = 0, wait_for: str = "") -> None:
+                    code: int = 0, wait_for: tuple[str, ...] = UP) -> None:
     """Packages sim_node/estimator_node/controller_node with a ``__main__`` module each (what
-    the launcher runs): the sim writes RESULT after ``sim_seconds``; the others wait for SIGINT
-    (exit 0) or exit with ``code`` after ``life`` seconds."""
+    the launcher runs): the sim writes RESULT ``sim_seconds`` after the files ``wait_for``
+    exist (by default: after every stand-in has started); the others wait for SIGINT (exit 0)
+    or exit with ``code`` ``life`` seconds after every stand-in has started."""
     for name in ("sim_node", "estimator_node", "controller_node"):
         (root / name).mkdir()
         (root / name / "__init__.py").write_text("")
     (root / "sim_node" / "__main__.py").write_text(
         SIM.format(sim_seconds=sim_seconds, result=RESULT, wait_for=wait_for))
-    (root / "estimator_node" / "__main__.py").write_text(WAITER.format(life=3600, code=0))
-    (root / "controller_node" / "__main__.py").write_text(WAITER.format(life=life, code=code))
+    (root / "estimator_node" / "__main__.py").write_text(
+        WAITER.format(life=3600, code=0, up=UP))
+    (root / "controller_node" / "__main__.py").write_text(
+        WAITER.format(life=life, code=code, up=UP))
 
 
 def start_launch(cwd: Path, *args: str) -> subprocess.Popen:
@@ -90,9 +102,9 @@ def start_launch(cwd: Path, *args: str) -> subprocess.Popen:
 
 
 def wait_for_children(proc: subprocess.Popen, count: int = 3,
-                      timeout: float = 30) -> tuple[dict[str, int], list[str]]:
+                      timeout: float = 600) -> tuple[dict[str, int], list[str]]:
     """Read the launcher's stderr until ``count`` children announced their pid and every one
-    printed its first line."""
+    printed its first line (``timeout`` only ends a hang: a loaded machine starts them late)."""
     pids: dict[str, int] = {}
     lines: list[str] = []
     deadline = time.monotonic() + timeout
@@ -152,7 +164,7 @@ def test_launch_passes_sim_nodes_result_through_and_stops_the_others(
     write_stand_ins(tmp_path)
     proc = start_launch(tmp_path, "--json", "--set", "duration=60", "--mode", "realtime")
     pids, lines = wait_for_children(proc)
-    out, err = proc.communicate(timeout=60)
+    out, err = proc.communicate(timeout=300)
     assert proc.returncode == 0, err
     assert json.loads(out) == {"scene": "thesis_lqg", **RESULT, "degraded": False,
                                "degraded_reasons": [], "foreign_writers": [], "diagnostics": {}}
@@ -174,10 +186,10 @@ def test_the_nodes_last_statuses_written_as_they_stop_are_in_the_result(
     ends only once the controller's status writer matched the launcher's reader (forced: it
     waits for the file the controller writes then, not for a time that a loaded machine may
     not keep)."""
-    write_stand_ins(tmp_path, sim_seconds=0.2, wait_for="controller_matched")
+    write_stand_ins(tmp_path, sim_seconds=0.2, wait_for=("controller_matched",))
     (tmp_path / "controller_node" / "__main__.py").write_text(STATUS_AT_STOP.format())
     proc = start_launch(tmp_path, "--json", "--mode", "realtime")
-    out, err = proc.communicate(timeout=120)
+    out, err = proc.communicate(timeout=300)
     assert proc.returncode == 0, err
     assert json.loads(out)["diagnostics"]["/frame/controller_node"]["watchdog"] == "7"
 
@@ -188,7 +200,7 @@ def test_ctrl_c_stops_every_child(tmp_path: Path, ros_domain: int) -> None:
     pids, _ = wait_for_children(proc)
     assert all(alive(pid) for pid in pids.values())
     proc.send_signal(signal.SIGINT)
-    _out, err = proc.communicate(timeout=60)
+    _out, err = proc.communicate(timeout=300)
     assert proc.returncode == 130, err
     assert "interrupted; every node stopped" in err
     assert not any(alive(pid) for pid in pids.values())
@@ -205,7 +217,7 @@ def test_a_dead_node_is_named_and_the_rest_stopped(
     pids, _ = wait_for_children(proc)
     if how == "killed":
         os.kill(pids["controller_node"], signal.SIGKILL)
-    out, err = proc.communicate(timeout=60)
+    out, err = proc.communicate(timeout=300)
     assert proc.returncode == 1, err
     expected = "killed by SIGKILL" if how == "killed" else "exit code 3"
     assert f"stillframe launch: error: controller_node died ({expected})" in err
@@ -226,7 +238,7 @@ def test_a_killed_simulator_still_leaves_the_statuses_and_who_died(
     proc = start_launch(tmp_path, "--out", "out")
     pids, _ = wait_for_children(proc)
     os.kill(pids["sim_node"], signal.SIGKILL)
-    out, err = proc.communicate(timeout=60)
+    out, err = proc.communicate(timeout=300)
     assert proc.returncode == 1, err
     assert "stillframe launch: error: sim_node died (killed by SIGKILL)" in err
     assert "partial result (complete: false): no samples; written to out/result.json" in out

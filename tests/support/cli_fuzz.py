@@ -12,8 +12,13 @@ from collections.abc import Iterator
 
 from stillframe.app import cli
 
-#: seconds any one case may take (a hang fails the test instead of the suite)
+#: CPU seconds any one case may use: a runaway loop or an endless read (/dev/zero) fails the
+#: test instead of the suite. CPU time, so that a loaded machine, which gives the case its CPU
+#: late, does not run it out
 BOUND_S = 30.0
+#: wall seconds any one case may take: only a blocked case (an open of a FIFO, which uses no
+#: CPU) reaches it, however loaded the machine
+HANG_S = 300.0
 #: hostile YAML values for --set (and scene text): non-finite, huge, tiny, wrong types, broken
 #: syntax, deep nesting, non-ASCII and non-UTF-8 text
 HOSTILE = [".nan", "nan", ".inf", "-.inf", "inf", "1e308", "-1e308", "1e-308", "-1", "0",
@@ -23,21 +28,31 @@ HOSTILE = [".nan", "nan", ".inf", "-.inf", "inf", "1e308", "-1e308", "1e-308", "
 
 
 class Hang(BaseException):
-    """A case that ran past :data:`BOUND_S` (a BaseException: nothing under test catches it)."""
+    """A case that ran past :data:`BOUND_S` of CPU or :data:`HANG_S` of wall time (a
+    BaseException: nothing under test catches it)."""
+
+
+#: the interval timers of :func:`bounded` and the signal each sends
+TIMERS = {signal.ITIMER_PROF: signal.SIGPROF, signal.ITIMER_REAL: signal.SIGALRM}
 
 
 @contextlib.contextmanager
-def bounded(seconds: float = BOUND_S) -> Iterator[None]:
-    def expire(*_: object) -> None:
-        raise Hang(f"no answer within {seconds} s")
+def bounded(cpu_s: float = BOUND_S, wall_s: float = HANG_S) -> Iterator[None]:
+    """Raise Hang in the block once this process has used ``cpu_s`` of CPU in it, or once
+    ``wall_s`` have passed."""
+    def expire(signum: int, _frame: object) -> None:
+        raise Hang(f"no answer within {cpu_s} s of CPU" if signum == signal.SIGPROF
+                   else f"no answer within {wall_s} s")
 
-    previous = signal.signal(signal.SIGALRM, expire)
-    signal.setitimer(signal.ITIMER_REAL, seconds)
+    previous = {sig: signal.signal(sig, expire) for sig in TIMERS.values()}
+    signal.setitimer(signal.ITIMER_PROF, cpu_s)
+    signal.setitimer(signal.ITIMER_REAL, wall_s)
     try:
         yield
     finally:
-        signal.setitimer(signal.ITIMER_REAL, 0)
-        signal.signal(signal.SIGALRM, previous)
+        for timer, sig in TIMERS.items():
+            signal.setitimer(timer, 0)
+            signal.signal(sig, previous[sig])
 
 
 def run(*argv: str) -> tuple[int, str, str]:
