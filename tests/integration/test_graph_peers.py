@@ -198,7 +198,7 @@ def test_a_writing_peer_is_refused_counted_and_named(
                                                command_writer="controller_node")
     finally:
         peer.send_signal(signal.SIGTERM)
-        peer.wait(20)
+        peer.wait(120)
         said.reader.join(10)
         peer_err.reader.join(10)
     assert peer.returncode == 0 and said.lines[-1].startswith("sent"), peer_err.text()[-2000:]
@@ -426,7 +426,7 @@ def test_a_real_time_run_beside_a_writer_names_it_and_strict_fails(ros_domain: i
         out, err = run.communicate(timeout=300)
     finally:
         peer.send_signal(signal.SIGTERM)
-        sent = int(finish(peer, timeout=20)[0].split()[-1])
+        sent = int(finish(peer, timeout=120)[0].split()[-1])
     result = json.loads(out)
     gate = result["command_gates"]["pendulum/torque_cmd"]
     assert sent > 0 and gate["rejected_foreign_writer"] > 0, gate

@@ -165,7 +165,7 @@ def _flood_run(tmp_path: Path, topic_set: str, flood_s: float, duration: float) 
         spin_until(watch, lambda: False, 0.5)
     finally:
         # the last line (Fast DDS logs its errors on stdout too)
-        sent = [finish(w, timeout=20)[0].splitlines()[-1].split() for w in writers]
+        sent = [finish(w, timeout=120)[0].splitlines()[-1].split() for w in writers]
         watch.destroy_node()
         codes = [stop(p) for p in peers]
         if sim.poll() is None:

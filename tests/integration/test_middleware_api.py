@@ -41,7 +41,7 @@ def test_offered_qos_is_discovered_as_offered(ros_domain: int) -> None:
                 found[topic] = node.get_publishers_info_by_topic(topic)
             return all(found.values())
 
-        assert spin_until(node, discovered, 10)
+        assert spin_until(node, discovered, 60)
         assert found["/frame/latched"][0].qos_profile == latched
         assert found["/frame/floor1/imu"][0].qos_profile == qos.SENSOR_DATA
         assert found["/frame/floor1/imu"][0].topic_type_hash == messages.TYPESTORE.hash_rihs01(
@@ -146,7 +146,7 @@ def test_raw_subscription_gets_cdr_and_timestamps(ros_domain: int) -> None:
         before = time.time_ns()
         pub.publish(msg)
         after = time.time_ns()
-        assert spin_until(node, lambda: got, 10)
+        assert spin_until(node, lambda: got, 60)
         data, info = got[0]
         cdr = bytes(messages.TYPESTORE.serialize_cdr(msg, "sensor_msgs/msg/JointState"))
         assert data == cdr + b"\0" * (-len(cdr) % 4)

@@ -82,7 +82,7 @@ def test_a_live_view_hands_on_the_newest_sample_once_a_poll(
             every.poll()
             return sum(map(len, every.polls)) >= 20
 
-        assert api.spin_until(node, all_handed, 10)
+        assert api.spin_until(node, all_handed, 60)
         assert [v for values in every.polls for v in values] == list(range(20))
         assert max(map(len, every.polls)) > 1      # several waited at one poll, all handed on
         assert view.poll() == 1 and view.poll() == 0

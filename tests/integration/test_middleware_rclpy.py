@@ -37,7 +37,7 @@ def test_round_trip_over_rclpy(ros_domain: int, monkeypatch: pytest.MonkeyPatch)
         before = time.time_ns()
         pub.publish(msg)
         after = time.time_ns()
-        assert spin_until(node, lambda: got and raw, 10)
+        assert spin_until(node, lambda: got and raw, 60)
         assert got[0].name == ["phi"] and got[0].position.tolist() == [0.5]
         data, info = raw[0]
         assert messages.deserialize(data, "sensor_msgs/msg/JointState").position[0] == 0.5

@@ -69,7 +69,7 @@ def test_commands_and_watchdog(ros_domain: int, tmp_path: Path, time_source: str
                 wrench.publish(load)
             if k < ESTIMATED:
                 est.publish(out.fill(Estimate(k * period, states[k], states[k]), ns)[0])
-                assert spin_until(probe, lambda k=k: len(commands) == k + 1, 10), k
+                assert spin_until(probe, lambda k=k: len(commands) == k + 1, 60), k
             else:
                 spin_until(probe, lambda: False, 0.1)
 
@@ -79,7 +79,7 @@ def test_commands_and_watchdog(ros_domain: int, tmp_path: Path, time_source: str
             return len(commands) == ESTIMATED + trips and bool(diagnostics) and (
                 diagnostic_values(diagnostics[-1])["watchdog"] == str(trips))
 
-        assert spin_until(probe, tripped, 5)
+        assert spin_until(probe, tripped, 60)
     finally:
         probe.destroy_node()
         code, err = stop(proc)

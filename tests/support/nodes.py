@@ -70,7 +70,7 @@ def stop(proc: subprocess.Popen, sig: int = signal.SIGINT) -> tuple[int, str]:
     """Send ``sig``, wait; the exit code and stderr."""
     if proc.poll() is None:
         proc.send_signal(sig)
-    _out, err = finish(proc, timeout=20)
+    _out, err = finish(proc, timeout=120)
     return proc.returncode, err
 
 
@@ -155,7 +155,7 @@ def run_loop_beside(tmp_path: Path, writer_code: str, scene: str, overrides: lis
         result, hist = run_loop(tmp_path, scene, overrides, log=log, **params)
     finally:
         writer.send_signal(signal.SIGTERM)
-        out, err = finish(writer, timeout=20)
+        out, err = finish(writer, timeout=120)
     assert writer.returncode == 0, err[-2000:]
     return result, hist, int(out.split()[-1])
 
