@@ -140,7 +140,7 @@ NOT_FILES = {"os.open", "archive.zip.open", "self._writer.open", "reader.open"}
 #: written in this run or by this package, /proc, generated documentation
 OWN = {
     ("stillframe/app/cli.py", "synopsis"): "the source of a command module of this package",
-    ("stillframe/app/launcher.py", "Child.time_given_s"): "/proc/PID/schedstat",
+    ("stillframe/app/launcher.py", "Child.waited_s"): "/proc/PID/schedstat",
     ("stillframe/app/launcher.py", "catches_sigint"): "/proc/PID/status",
     ("stillframe/app/launcher.py", "Launcher._partial"): "sim_node's result of this run",
     ("stillframe/app/launcher.py", "Launcher._result"): "sim_node's result of this run",
