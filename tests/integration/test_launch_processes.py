@@ -18,7 +18,7 @@ from pathlib import Path
 
 import pytest
 
-from stillframe.app.launcher import StatusLine, node_command, status_text
+from stillframe.app.launcher import NODES, StatusLine, node_command, status_text
 from stillframe.locations import REPO_ROOT
 from stillframe.middleware.params import node_overrides, parse_ros_args
 from tests.support.middleware import run_stillframe
@@ -57,7 +57,7 @@ time.sleep({life!r})
 sys.exit({code!r})
 """
 #: the files the stand-ins write once they have printed their first line
-UP = tuple(f"{name}.up" for name in ("sim_node", "estimator_node", "controller_node"))
+UP = tuple(f"{name}.up" for name in NODES)
 #: a controller that reports once, as it stops (a real node's last status counts the whole run)
 STATUS_AT_STOP = """\
 from stillframe.contract import topics
@@ -83,7 +83,7 @@ def write_stand_ins(root: Path, sim_seconds: float = 1.0, life: float = 3600,
     the launcher runs): the sim writes RESULT ``sim_seconds`` after the files ``wait_for``
     exist (by default: after every stand-in has started); the others wait for SIGINT (exit 0)
     or exit with ``code`` ``life`` seconds after every stand-in has started."""
-    for name in ("sim_node", "estimator_node", "controller_node"):
+    for name in NODES:
         (root / name).mkdir()
         (root / name / "__init__.py").write_text("")
     (root / "sim_node" / "__main__.py").write_text(
