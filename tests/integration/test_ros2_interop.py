@@ -9,13 +9,13 @@ import json
 import subprocess
 import sys
 import textwrap
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
 from rosbags.highlevel import AnyReader
 
-from stillframe.app import launcher
+from stillframe.app import launcher, netns_lab
 from stillframe.app.launcher import node_command
 from stillframe.contract.topics import CONTRACT, FORCE_CMD
 from stillframe.errors import InputError
@@ -24,6 +24,7 @@ from stillframe.middleware import api, backend_choice, discovery
 from stillframe.middleware.names import resolve_topic
 from stillframe.middleware.qos import PROFILES, Reliability
 from tests.support.middleware import child_env, run_stillframe, wait_for_line
+from tests.support.netns import require_netns
 
 pytest.importorskip("rclpy", reason="real rclpy is installed by `make setup` ([ros] extra)")
 
@@ -206,31 +207,16 @@ def test_localhost_peers_of_both_vendors_exchange_messages(
 
 
 @pytest.fixture
-def two_hosts() -> tuple[str, str]:
-    """Two network namespaces joined by a veth pair (multicast-capable, private addresses of
-    this test only): the stand-in for two machines on one subnet. Needs root (CI is root)."""
-    names = ("sf_host_a", "sf_host_b")
-    commands = [
-        *[["ip", "netns", "add", n] for n in names],
-        ["ip", "link", "add", "sfveth_a", "netns", names[0], "type", "veth", "peer", "name",
-         "sfveth_b", "netns", names[1]],
-    ]
-    for i, name in enumerate(names):
-        dev = f"sfveth_{'ab'[i]}"
-        commands += [["ip", "-n", name, "link", "set", "lo", "up"],
-                     ["ip", "-n", name, "addr", "add", f"10.231.0.{i + 1}/24", "dev", dev],
-                     ["ip", "-n", name, "link", "set", dev, "up", "multicast", "on"],
-                     ["ip", "-n", name, "route", "add", "default", "dev", dev]]
-    try:
-        for command in commands:
-            subprocess.run(command, check=True, capture_output=True, timeout=10)
-    except (OSError, subprocess.CalledProcessError) as exc:
-        for name in names:
-            subprocess.run(["ip", "netns", "del", name], capture_output=True, timeout=10)
-        pytest.skip(f"network namespaces need root and iproute2: {exc}")
-    yield names
-    for name in names:
-        subprocess.run(["ip", "netns", "del", name], capture_output=True, timeout=10)
+def two_hosts() -> Iterator[tuple[str, str]]:
+    """Two hosts of a network lab (:mod:`stillframe.app.netns_lab`: namespaces on one bridge
+    that floods multicast, a /24 no route here uses), the stand-in for two machines on one
+    subnet. The lab's prefix is this process's id, so parallel test runs never share or delete
+    each other's namespaces. Skipped without root or iproute2 (CI has both); a lab that cannot
+    be made is an error, not a skip."""
+    require_netns()
+    with netns_lab.lab() as made:
+        yield made.namespace(netns_lab.HOSTS["sim_node"]), made.namespace(
+            netns_lab.HOSTS["estimator_node"])
 
 
 @pytest.mark.parametrize(("pub_backend", "sub_backend"), [("dds", "rclpy"), ("rclpy", "dds")])
