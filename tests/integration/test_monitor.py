@@ -323,17 +323,33 @@ def stop_monitor(monitor: subprocess.Popen) -> str:
     return err
 
 
-async def watch(url: str, topics: list[str] | None, seconds: float,
-                probe: Any, read: str) -> tuple[Capture, int]:
-    """Connect to ``url``, subscribe to ``topics`` for ``seconds``; what came, and the monitor's
-    readers of ``read`` (the IMU topic or its tap) just before leaving."""
+#: the least time a client watches, and the samples a watched topic must bring before it leaves
+LEAST_S, LEAST_SAMPLES = 3.0, 10
+#: wall time after which a watch is a hang
+HANG_S = 120.0
+
+
+async def watch(url: str, topics: list[str], probe: Any, read: str, *,
+                readers: int) -> tuple[Capture, int]:
+    """Connect to ``url`` and subscribe to ``topics``; leave once :data:`LEAST_S` have passed, the
+    IMU channel is advertised, at least :data:`LEAST_SAMPLES` of each watched topic came and the
+    monitor's readers of ``read`` (the IMU topic or its tap) are ``readers``, however late a
+    loaded machine gets there (:data:`HANG_S` ends a hang). What came, and the readers just
+    before leaving."""
     seen, until = Capture(), asyncio.Event()
     task = asyncio.create_task(capture(url, topics, until, seen))
-    await asyncio.sleep(seconds)
-    readers = monitor_readers(probe, read)
+    began = time.monotonic()
+    while True:
+        await asyncio.sleep(0.1)
+        now, found = time.monotonic(), monitor_readers(probe, read)
+        came = IMU in seen.channels and all(
+            len(seen.messages.get(topic, ())) >= LEAST_SAMPLES for topic in topics)
+        if (now - began >= LEAST_S and came and found == readers) or now - began > HANG_S \
+                or task.done():
+            break
     until.set()
     await task
-    return seen, readers
+    return seen, found
 
 
 def test_a_topic_is_subscribed_only_while_a_client_watches_it(imu_source: ImuSource) -> None:
@@ -346,14 +362,14 @@ def test_a_topic_is_subscribed_only_while_a_client_watches_it(imu_source: ImuSou
     probe, read = imu_source.node, tap_topic(IMU) if imu_source.tapped else IMU
     monitor, url, _ = start_monitor()
     try:
-        looked, idle_readers = asyncio.run(watch(url, [], 3.0, probe, read))
+        looked, idle_readers = asyncio.run(watch(url, [], probe, read, readers=0))
         assert IMU in looked.channels and not any(map(is_hidden, looked.channels))
         began = time.monotonic()
-        watched, readers = asyncio.run(watch(url, [IMU], 3.0, probe, read))
+        watched, readers = asyncio.run(watch(url, [IMU], probe, read, readers=1))
         watched_s = time.monotonic() - began    # at least the 3 s: a loaded machine ends late
         assert (idle_readers, readers) == (0, 1)
         assert monitor_readers(probe, IMU if imu_source.tapped else tap_topic(IMU)) == 0
-        assert api.spin_until(probe, lambda: monitor_readers(probe, read) == 0, 10)
+        assert api.spin_until(probe, lambda: monitor_readers(probe, read) == 0, HANG_S)
     finally:
         err = stop_monitor(monitor)
     assert f"Unsubscribed from topic '{read}' (not watched)" in err
@@ -361,7 +377,7 @@ def test_a_topic_is_subscribed_only_while_a_client_watches_it(imu_source: ImuSou
     assert stamps == sorted(set(stamps))
     # 50 Hz at most over the time the client was connected (+1 for the phase), of the 200 a
     # second published: one sample a poll (152 in 3.0 s came when a poll took until empty)
-    assert 10 <= len(stamps) <= 50 * watched_s + 1, (len(stamps), watched_s)
+    assert LEAST_SAMPLES <= len(stamps) <= 50 * watched_s + 1, (len(stamps), watched_s)
 
 
 def test_every_sample_with_max_rate_zero(imu_source: ImuSource) -> None:
