@@ -44,6 +44,7 @@ from tests.support.nodes import (
     stop,
 )
 from tests.support.scenes import thesis_scene
+from tests.support.waits import HANG_S
 
 WRITER = REPO_ROOT / "tests" / "support" / "hostile_writer.py"
 
@@ -159,9 +160,9 @@ def _flood_run(tmp_path: Path, topic_set: str, flood_s: float, duration: float) 
 
     try:
         assert all(w.stdout.readline().strip() == "ready" for w in writers)
-        assert spin_until(watch, lambda: all(w.poll() is not None for w in writers), 120)
+        assert spin_until(watch, lambda: all(w.poll() is not None for w in writers), HANG_S)
         flooded = loop_time() - 3.0                 # the writers started at the loop's 3 s
-        assert spin_until(watch, lambda: sim.poll() is not None, 300)
+        assert spin_until(watch, lambda: sim.poll() is not None, HANG_S)
         spin_until(watch, lambda: False, 0.5)
     finally:
         # the last line (Fast DDS logs its errors on stdout too)

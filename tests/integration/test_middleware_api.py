@@ -11,6 +11,7 @@ from stillframe.contract import messages
 from stillframe.middleware import qos
 from stillframe.middleware.api import create_node, spin_until
 from stillframe.middleware.logger import Logger
+from tests.support.waits import HANG_S
 
 
 def test_profiles_are_rmws() -> None:
@@ -41,7 +42,7 @@ def test_offered_qos_is_discovered_as_offered(ros_domain: int) -> None:
                 found[topic] = node.get_publishers_info_by_topic(topic)
             return all(found.values())
 
-        assert spin_until(node, discovered, 60)
+        assert spin_until(node, discovered, HANG_S)
         assert found["/frame/latched"][0].qos_profile == latched
         assert found["/frame/floor1/imu"][0].qos_profile == qos.SENSOR_DATA
         assert found["/frame/floor1/imu"][0].topic_type_hash == messages.TYPESTORE.hash_rihs01(
@@ -60,11 +61,11 @@ def test_remap_and_destroy(ros_domain: int) -> None:
         got: list = []
         sub = node.create_subscription("sensor_msgs/msg/Imu", "/rig/imu_a", got.append,
                                        "sensor_data")
-        assert spin_until(node, lambda: pub.get_subscription_count() == 1, 10)
+        assert spin_until(node, lambda: pub.get_subscription_count() == 1, HANG_S)
         node.destroy_subscription(sub)
-        assert spin_until(node, lambda: pub.get_subscription_count() == 0, 10)
+        assert spin_until(node, lambda: pub.get_subscription_count() == 0, HANG_S)
         node.destroy_publisher(pub)
-        assert spin_until(node, lambda: not node.get_publishers_info_by_topic("/rig/imu_a"), 10)
+        assert spin_until(node, lambda: not node.get_publishers_info_by_topic("/rig/imu_a"), HANG_S)
     finally:
         node.destroy_node()
 
@@ -85,7 +86,7 @@ def test_the_graph_reads_only_what_changed(ros_domain: int,
         def topics() -> set[str]:
             return {t for t, _ in node.get_topic_names_and_types() if "/many_" in t}
 
-        assert spin_until(node, lambda: len(topics()) == 30, 10)
+        assert spin_until(node, lambda: len(topics()) == 30, HANG_S)
         read = BuiltinDataReader.read
         counted: list[bytes] = []
 
@@ -96,13 +97,13 @@ def test_the_graph_reads_only_what_changed(ros_domain: int,
 
         monkeypatch.setattr(BuiltinDataReader, "read", counting)
         extra = node.create_publisher("std_msgs/msg/Header", "many_extra", 10)
-        assert spin_until(node, lambda: "/frame/many_extra" in topics(), 10)
+        assert spin_until(node, lambda: "/frame/many_extra" in topics(), HANG_S)
         (new,) = set(counted)                       # the new one's instance, none of the 30
         assert len(counted) <= 2
         counted.clear()
         node.destroy_publisher(extra)
         node.destroy_publisher(pubs[0])
-        assert spin_until(node, lambda: len(topics()) == 29, 10)
+        assert spin_until(node, lambda: len(topics()) == 29, HANG_S)
         vanished = set(counted)
         assert len(vanished) == 2 and new in vanished   # the two that vanished, nothing else
         assert len(counted) <= 4                    # at most one read per state of each
@@ -141,18 +142,18 @@ def test_raw_subscription_gets_cdr_and_timestamps(ros_domain: int) -> None:
         node.create_subscription("sensor_msgs/msg/JointState", "js",
                                  lambda data, info: got.append((data, info)), 10, raw=True)
         pub = node.create_publisher("sensor_msgs/msg/JointState", "js", 10)
-        assert spin_until(node, lambda: pub.get_subscription_count() == 1, 10)
+        assert spin_until(node, lambda: pub.get_subscription_count() == 1, HANG_S)
         msg = messages.new("sensor_msgs/msg/JointState", name=["phi"], position=[0.25])
         before = time.time_ns()
         pub.publish(msg)
         after = time.time_ns()
-        assert spin_until(node, lambda: got, 60)
+        assert spin_until(node, lambda: got, HANG_S)
         data, info = got[0]
         cdr = bytes(messages.TYPESTORE.serialize_cdr(msg, "sensor_msgs/msg/JointState"))
         assert data == cdr + b"\0" * (-len(cdr) % 4)
         assert before <= info.source_timestamp <= after <= info.received_timestamp
         pub.publish(data)  # CDR bytes are published as they are
-        assert spin_until(node, lambda: len(got) == 2, 10)
+        assert spin_until(node, lambda: len(got) == 2, HANG_S)
         assert got[1][0] == data
     finally:
         node.destroy_node()
@@ -169,7 +170,7 @@ def test_matched_counts_follow_endpoints_as_they_join(ros_domain: int) -> None:
         for joined in range(1, 4):
             subs.append(node.create_subscription("std_msgs/msg/String", "/matched",
                                                  lambda _m: None, "default"))
-            assert spin_until(node, lambda j=joined: pub.get_subscription_count() == j, 10)
+            assert spin_until(node, lambda j=joined: pub.get_subscription_count() == j, HANG_S)
             assert pub.get_subscription_count() == len(pub._writer.get_matched_subscriptions())
         assert all(s.get_publisher_count() == 1 for s in subs)
     finally:
@@ -195,7 +196,7 @@ def test_writer_guid_is_the_writers_own(ros_domain: int) -> None:
         topic = Topic(other, dds_types.dds_topic("/guids"),
                       dds_types.idl_struct("std_msgs/msg/Header"))
         writers = [DataWriter(other, topic) for _ in range(2)]
-        assert spin_until(node, lambda: sub.get_publisher_count() == 2, 10)
+        assert spin_until(node, lambda: sub.get_publisher_count() == 2, HANG_S)
         reader = sub._reader
         handles = reader.get_matched_publications()
         assert {writer_guid(reader, h) for h in handles} == {w.guid.bytes for w in writers}

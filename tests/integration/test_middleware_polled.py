@@ -10,6 +10,7 @@ from stillframe.contract import messages
 from stillframe.middleware import api
 from stillframe.middleware.qos import DEFAULT, QoSProfile
 from stillframe.middleware.topic_follower import RawCallback, TopicFollower
+from tests.support.waits import HANG_S
 
 BACKENDS = ["dds", pytest.param("rclpy", marks=pytest.mark.skipif(
     not api.has_rclpy(), reason="rclpy is not importable here"))]
@@ -25,7 +26,7 @@ def test_a_polled_subscription_keeps_samples_until_taken(
         deep = node.create_polled_subscription("std_msgs/msg/UInt32", "n", DEFAULT.with_depth(50))
         newest = node.create_polled_subscription("std_msgs/msg/UInt32", "n",
                                                  DEFAULT.with_depth(1))
-        assert api.spin_until(node, lambda: pub.get_subscription_count() == 2, 10)
+        assert api.spin_until(node, lambda: pub.get_subscription_count() == 2, HANG_S)
         assert len(node.get_subscriptions_info_by_topic("/n")) == 2
         for i in range(20):
             pub.publish(messages.new("std_msgs/msg/UInt32", data=i))
@@ -38,7 +39,7 @@ def test_a_polled_subscription_keeps_samples_until_taken(
                 for data, _ in newest.take()] == [19]
         assert deep.take() == [] and newest.take() == []
         node.destroy_subscription(deep)
-        assert api.spin_until(node, lambda: pub.get_subscription_count() == 1, 10)
+        assert api.spin_until(node, lambda: pub.get_subscription_count() == 1, HANG_S)
     finally:
         node.destroy_node()
 
@@ -73,7 +74,7 @@ def test_a_live_view_hands_on_the_newest_sample_once_a_poll(
     try:
         pub = node.create_publisher("std_msgs/msg/UInt32", "n", DEFAULT)
         every, view = Kept(node, newest_only=False), Kept(node, newest_only=True)
-        assert api.spin_until(node, lambda: pub.get_subscription_count() == 2, 10)
+        assert api.spin_until(node, lambda: pub.get_subscription_count() == 2, HANG_S)
         for i in range(20):
             pub.publish(messages.new("std_msgs/msg/UInt32", data=i))
 
@@ -82,7 +83,7 @@ def test_a_live_view_hands_on_the_newest_sample_once_a_poll(
             every.poll()
             return sum(map(len, every.polls)) >= 20
 
-        assert api.spin_until(node, all_handed, 60)
+        assert api.spin_until(node, all_handed, HANG_S)
         assert [v for values in every.polls for v in values] == list(range(20))
         assert max(map(len, every.polls)) > 1      # several waited at one poll, all handed on
         assert view.poll() == 1 and view.poll() == 0

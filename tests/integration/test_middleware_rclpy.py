@@ -16,6 +16,7 @@ from stillframe.middleware import rclpy_wait  # noqa: E402
 from stillframe.middleware.api import create_node, spin_until  # noqa: E402
 from stillframe.middleware.clock import SYSTEM_CLOCK, ClockPublisher  # noqa: E402
 from stillframe.middleware.qos import SENSOR_DATA, Durability, Reliability  # noqa: E402
+from tests.support.waits import HANG_S  # noqa: E402
 
 
 def test_round_trip_over_rclpy(ros_domain: int, monkeypatch: pytest.MonkeyPatch) -> None:
@@ -32,12 +33,12 @@ def test_round_trip_over_rclpy(ros_domain: int, monkeypatch: pytest.MonkeyPatch)
         node.create_subscription("sensor_msgs/msg/JointState", "js",
                                  lambda data, info: raw.append((data, info)), SENSOR_DATA,
                                  raw=True)
-        assert spin_until(node, lambda: pub.get_subscription_count() == 2, 10)
+        assert spin_until(node, lambda: pub.get_subscription_count() == 2, HANG_S)
         msg = messages.new("sensor_msgs/msg/JointState", name=["phi"], position=[0.5])
         before = time.time_ns()
         pub.publish(msg)
         after = time.time_ns()
-        assert spin_until(node, lambda: got and raw, 60)
+        assert spin_until(node, lambda: got and raw, HANG_S)
         assert got[0].name == ["phi"] and got[0].position.tolist() == [0.5]
         data, info = raw[0]
         assert messages.deserialize(data, "sensor_msgs/msg/JointState").position[0] == 0.5
@@ -72,7 +73,7 @@ def test_one_spin_takes_every_waiting_sample_in_order(
                 "std_msgs/msg/String", name,
                 lambda msg, name=name: got.append((name, msg.data)), 10)
         assert spin_until(node, lambda: all(p.get_subscription_count() for p in pubs.values()),
-                          10)
+                          HANG_S)
         written = [("a", "1"), ("b", "1"), ("a", "2"), ("b", "2"), ("a", "3")]
         for name, data in written:
             pubs[name].publish(messages.new("std_msgs/msg/String", data=data))
@@ -97,11 +98,11 @@ def test_rclpy_s_own_clock_subscription_and_timers_still_run(
         clock = ClockPublisher(follower)
         ticks: list[int] = []
         follower.create_timer(0.01, lambda: ticks.append(1), clock=SYSTEM_CLOCK)
-        assert spin_until(follower, lambda: len(ticks) >= 3, 10)
+        assert spin_until(follower, lambda: len(ticks) >= 3, HANG_S)
         sim_ns = 123_456_789_000
         # rclpy's time source keeps the latest /clock sample; published until it is read back
         assert spin_until(follower, lambda: clock.publish(sim_ns)
-                          or follower.get_clock().now().nanoseconds == sim_ns, 10)
+                          or follower.get_clock().now().nanoseconds == sim_ns, HANG_S)
     finally:
         follower.destroy_node()
 
@@ -119,7 +120,7 @@ def test_a_subscription_destroyed_by_an_earlier_callback_of_the_same_wait_is_ski
             lambda msg: (got.append(f"a{msg.data}"), node.destroy_subscription(subs[1])), 10))
         subs.append(node.create_subscription(
             "std_msgs/msg/String", "b", lambda msg: got.append(f"b{msg.data}"), 10))
-        assert spin_until(node, lambda: all(p.get_subscription_count() for p in pubs), 10)
+        assert spin_until(node, lambda: all(p.get_subscription_count() for p in pubs), HANG_S)
         for pub in pubs:
             pub.publish(messages.new("std_msgs/msg/String", data="1"))
         assert all(p.wait_for_all_acked(10.0) for p in pubs)

@@ -6,6 +6,7 @@ from __future__ import annotations
 from stillframe.contract import messages
 from stillframe.middleware.api import create_node, spin_until
 from stillframe.middleware.clock import SYSTEM_CLOCK, ClockPublisher
+from tests.support.waits import HANG_S
 
 SIM_START_NS = 1000 * 10**9   # sim time starts at 1000 s, far from the wall clock's epoch time
 CLOCK_STEP_NS = 100 * 10**6   # every 10 ms of wall time, sim time advances 100 ms: 10x
@@ -40,7 +41,7 @@ def test_timers_and_stamps_follow_a_10x_clock(ros_domain: int) -> None:
         # No /clock yet: sim time is 0 and the sim-time timer has not fired.
         assert follower.get_clock().now().nanoseconds == 0 and stamps == []
         clock_pub.publish(SIM_START_NS)
-        assert spin_until(follower, lambda: follower.get_clock().now().nanoseconds > 0, 10)
+        assert spin_until(follower, lambda: follower.get_clock().now().nanoseconds > 0, HANG_S)
         simulator.create_timer(CLOCK_STEP_NS / 10 * 1e-9, advance, clock=SYSTEM_CLOCK)
         end = SIM_START_NS + SIM_SPAN_NS
 
@@ -49,7 +50,7 @@ def test_timers_and_stamps_follow_a_10x_clock(ros_domain: int) -> None:
             follower.spin_once(0.002)
             return follower.get_clock().now().nanoseconds >= end
 
-        assert spin_until(follower, step_both, 60)
+        assert spin_until(follower, step_both, HANG_S)
         period_ns = round(TIMER_PERIOD_S * 1e9)
         # Every call at an exact multiple of the period after the first /clock: the timer runs
         # on sim time (on wall time, 10 s of sim would be ~1 s of wall: ~5 calls, not 50).

@@ -12,6 +12,7 @@ from stillframe.contract import messages
 from stillframe.middleware import api, names
 from stillframe.middleware.qos import DEFAULT, QoSProfile, Reliability
 from stillframe.middleware.taps import TAP_PREFIX, TappedPublisher, tap_topic
+from tests.support.waits import HANG_S
 
 BACKENDS = ["dds", pytest.param("rclpy", marks=pytest.mark.skipif(
     not api.has_rclpy(), reason="rclpy is not importable here"))]
@@ -39,7 +40,7 @@ def test_a_tap_carries_the_first_sample_of_each_tap_period(
         assert pub.topic_name == "/n" and tap_topic("/n") == TAP_PREFIX + "/n"
         assert names.is_hidden(tap_topic("/n")) and not names.is_hidden("/n")
         assert api.spin_until(node, lambda: pub.tap.get_subscription_count() == 1
-                              and pub.get_subscription_count() == 1, 10)
+                              and pub.get_subscription_count() == 1, HANG_S)
         got_every: list[int] = []
         got_thinned: list[int] = []
         for start in range(0, SAMPLES, 50):

@@ -33,6 +33,7 @@ from stillframe.middleware.api import create_node, spin_until
 from stillframe.middleware.dds_types import idl_struct
 from stillframe.middleware.discovery import cyclone_config
 from tests.support.middleware import finish, start_python, wait_for_line
+from tests.support.waits import HANG_S
 
 STORE = get_typestore(Stores.ROS2_JAZZY)
 ANY = SampleState.Any | ViewState.Any | InstanceState.Any
@@ -101,12 +102,12 @@ def test_bytes_on_the_wire_are_rosbags_cdr(ros_domain: int, ros_type: str) -> No
                        Policy.DataRepresentation(use_cdrv0_representation=True))
         reader = DataReader(participant, Topic(participant, "rt/frame/wire", struct), reliable)
         pub = node.create_publisher(ros_type, "wire", "default")
-        assert spin_until(node, lambda: pub.get_subscription_count() > 0, 10)
+        assert spin_until(node, lambda: pub.get_subscription_count() > 0, HANG_S)
         msg = filled(ros_type)
         pub.publish(msg)
         samples: list = []
         assert spin_until(node, lambda: samples.extend(ddspy_take(reader._ref, ANY, 8)) or samples,
-                          10)
+                          HANG_S)
         wire = bytes(samples[0][0])
         expected = bytes(STORE.serialize_cdr(msg, ros_type))
         assert wire[:4] == b"\x00\x01\x00\x00"  # CDR little endian, XCDR1
@@ -263,7 +264,7 @@ from stillframe.contract import messages
 from stillframe.middleware.api import create_node, spin_until
 node = create_node("talker")
 pub = node.create_publisher("sensor_msgs/msg/JointState", "chatter", "default")
-assert spin_until(node, lambda: pub.get_subscription_count() > 0, 30), "no listener"
+assert spin_until(node, lambda: pub.get_subscription_count() > 0, HANG_S), "no listener"
 sent = [0]
 def tick():
     if sent[0] < 1000:

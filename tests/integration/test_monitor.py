@@ -36,6 +36,7 @@ from stillframe.middleware.taps import TappedPublisher, tap_topic
 from stillframe.monitor.dashboard import ERROR_KEYS
 from stillframe.monitor.foxglove_client import Capture, capture, churn, stall
 from tests.support.middleware import child_env, isolated_domain, niced, scheduling
+from tests.support.waits import HANG_S
 
 pytestmark = pytest.mark.slow
 
@@ -64,7 +65,7 @@ class Launch:
             text=True)
         launch = cls(proc)
         threading.Thread(target=launch._read, daemon=True).start()
-        assert launch.ready.wait(120), "".join(launch.lines[-30:])
+        assert launch.ready.wait(HANG_S), "".join(launch.lines[-30:])
         return launch
 
     def _read(self) -> None:
@@ -75,7 +76,7 @@ class Launch:
                 self.ready.set()
         self.ready.set()
 
-    def finish(self, timeout: float = 180) -> dict:
+    def finish(self, timeout: float = HANG_S) -> dict:
         """The launch's JSON once it exited (stderr stays the reader thread's: communicate()
         would close it under the thread)."""
         self.proc.wait(timeout=timeout)     # its JSON is far less than a pipe holds
@@ -217,23 +218,24 @@ def test_dashboard_in_headless_chromium(tmp_path: Path, ros_domain_module: int) 
     error. The loop's nodes run without the real-time practices (``--rt none``): under
     SCHED_FIFO a loop that cannot keep up at 1 kHz (a slow or loaded machine) leaves the monitor
     and the browser the kernel's 5 % of the CPU, and the page freezes (docs/monitor.md). The run
-    (120 s) outlasts every wait of the test and is ended by SIGINT once the checks are done, so
-    the page is checked while the loop runs however late the monitor gets its share of the CPU."""
-    overrides = [*realtime_overrides(1000.0, 120.0), "controller.limit=0.5",
+    (twice :data:`HANG_S`) outlasts every wait of the test and is ended by SIGINT once the checks
+    are done, so the page is checked while the loop runs however late the monitor gets its share
+    of the CPU."""
+    overrides = [*realtime_overrides(1000.0, 2 * HANG_S), "controller.limit=0.5",
                  "controller.start=1.5", "evaluation.window=1"]
     launch = Launch.start("--mode", "realtime", "--no-monitor-idle", "--rt", "none",
                           *(a for o in overrides for a in ("--set", o)))
     driver = browser(tmp_path / "profile")
     try:
         driver.get(launch.urls[1])
-        deadline = time.monotonic() + 60
+        deadline = time.monotonic() + HANG_S
         # until every chart has data and the controller has been saturating for a while
         while not all(t is not None and t > 2 for t in plotted_ends(driver)):
             assert time.monotonic() < deadline, plotted_ends(driver)
             time.sleep(0.2)
         first, first_ends = driver.get_screenshot_as_png(), plotted_ends(driver)
         time.sleep(1.0)
-        deadline = time.monotonic() + 30
+        deadline = time.monotonic() + HANG_S
         # a second apart at least, and until every chart has plotted newer data (on a loaded
         # machine the loop, and so the data, can advance slower than the wall clock)
         while not all(b > a for a, b in zip(first_ends, plotted_ends(driver), strict=True)):
@@ -247,7 +249,7 @@ def test_dashboard_in_headless_chromium(tmp_path: Path, ros_domain_module: int) 
     finally:
         driver.quit()
         launch.proc.send_signal(signal.SIGINT)
-        launch.proc.wait(timeout=120)   # stderr is the reader thread's
+        launch.proc.wait(timeout=HANG_S)   # stderr is the reader thread's
     (tmp_path / "dashboard.png").write_bytes(second)
     assert not errors, errors
     assert trace_pixels(first) > 500 and trace_pixels(second) > 500
@@ -318,15 +320,13 @@ def start_monitor(*args: str) -> tuple[subprocess.Popen, str, str | None]:
 def stop_monitor(monitor: subprocess.Popen) -> str:
     """SIGINT, then its stderr; it must exit 0."""
     monitor.send_signal(signal.SIGINT)
-    _, err = monitor.communicate(timeout=30)
+    _, err = monitor.communicate(timeout=HANG_S)
     assert monitor.returncode == 0, err[-2000:]
     return err
 
 
 #: the least time a client watches, and the samples a watched topic must bring before it leaves
 LEAST_S, LEAST_SAMPLES = 3.0, 10
-#: wall time after which a watch is a hang
-HANG_S = 120.0
 
 
 async def watch(url: str, topics: list[str], probe: Any, read: str, *,
@@ -384,13 +384,13 @@ def test_every_sample_with_max_rate_zero(imu_source: ImuSource) -> None:
     """``--max-rate 0``: every sample of the 200 Hz publisher reaches the client, in order,
     none missing between the first and the last: read from the topic, tapped or not (a tap
     carries at most 50 a second). Watched until 300 samples came, however slowly a loaded
-    machine publishes and forwards them (120 s only ends a hang)."""
+    machine publishes and forwards them (:data:`HANG_S` only ends a hang)."""
     monitor, url, _ = start_monitor("--max-rate", "0")
 
     async def until_300() -> Capture:
         seen, done = Capture(), asyncio.Event()
         task = asyncio.create_task(capture(url, [IMU], done, seen))
-        deadline = time.monotonic() + 120
+        deadline = time.monotonic() + HANG_S
         while len(seen.messages.get(IMU, ())) < 300 and time.monotonic() < deadline \
                 and not task.done():
             await asyncio.sleep(0.1)
@@ -441,7 +441,7 @@ def test_tracked_modes_reach_the_dashboard_and_foxglove(ros_domain: int) -> None
     async def watch_both() -> tuple[Capture, dict]:
         done, seen, board = asyncio.Event(), Capture(), {}
         task = asyncio.create_task(capture(url, [topic], done, seen))
-        deadline = time.monotonic() + 30
+        deadline = time.monotonic() + HANG_S
         while not (board.get("updates") and seen.messages.get(topic)):
             assert time.monotonic() < deadline, (board, seen.channels)
             await asyncio.sleep(0.3)

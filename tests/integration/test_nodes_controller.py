@@ -21,6 +21,7 @@ from stillframe.middleware.clock import ClockPublisher
 from stillframe.node_runtime.support import LoopParameters, diagnostic_values
 from tests.support.nodes import params_file, start_node, stop
 from tests.support.scenes import thesis_scene
+from tests.support.waits import HANG_S
 
 OVERRIDES = ["duration=1", "controller.start=0.0625", "evaluation.window=0.0625",
              "controller.feedforward=true"]
@@ -55,7 +56,7 @@ def test_commands_and_watchdog(ros_domain: int, tmp_path: Path, time_source: str
                                   commands.append, topics.TORQUE_CMD.qos)
         probe.create_subscription(topics.DIAGNOSTICS.type_name, topics.DIAGNOSTICS.name,
                                   diagnostics.append, topics.DIAGNOSTICS.qos)
-        assert spin_until(probe, lambda: est.get_subscription_count() > 0, 60)
+        assert spin_until(probe, lambda: est.get_subscription_count() > 0, HANG_S)
         spin_until(probe, lambda: False, 0.3)
         out = EstimateMessages()
         load = messages.new("geometry_msgs/msg/WrenchStamped")
@@ -69,7 +70,7 @@ def test_commands_and_watchdog(ros_domain: int, tmp_path: Path, time_source: str
                 wrench.publish(load)
             if k < ESTIMATED:
                 est.publish(out.fill(Estimate(k * period, states[k], states[k]), ns)[0])
-                assert spin_until(probe, lambda k=k: len(commands) == k + 1, 60), k
+                assert spin_until(probe, lambda k=k: len(commands) == k + 1, HANG_S), k
             else:
                 spin_until(probe, lambda: False, 0.1)
 
@@ -79,7 +80,7 @@ def test_commands_and_watchdog(ros_domain: int, tmp_path: Path, time_source: str
             return len(commands) == ESTIMATED + trips and bool(diagnostics) and (
                 diagnostic_values(diagnostics[-1])["watchdog"] == str(trips))
 
-        assert spin_until(probe, tripped, 60)
+        assert spin_until(probe, tripped, HANG_S)
     finally:
         probe.destroy_node()
         code, err = stop(proc)

@@ -27,6 +27,7 @@ from stillframe.node_runtime.support import LoopParameters, diagnostic_values
 from stillframe.plant.frame_plant import FramePlant
 from tests.support.nodes import SHORT_LQG, params_file, start_node, stop
 from tests.support.scenes import thesis_scene
+from tests.support.waits import HANG_S
 
 STEPS = 6
 NAN_STEP, MISSING_STEP = 2, 4   # floor-2 reading NaN; encoder not sent
@@ -68,7 +69,7 @@ def test_estimates_nan_stale_and_missing_channels(ros_domain: int, tmp_path: Pat
                            (topics.STATE_COVARIANCE, covariances),
                            (topics.DIAGNOSTICS, diagnostics)):
             probe.create_subscription(spec.type_name, spec.name, sink.append, spec.qos)
-        assert spin_until(probe, lambda: all(p.get_subscription_count() for p in sensors), 60)
+        assert spin_until(probe, lambda: all(p.get_subscription_count() for p in sensors), HANG_S)
         spin_until(probe, lambda: False, 0.3)
         wire = SensorMessages(scene.sensors)
         def send(s: Sample, channels: range = range(5)) -> None:
@@ -91,7 +92,7 @@ def test_estimates_nan_stale_and_missing_channels(ros_domain: int, tmp_path: Pat
                 spin_until(probe, lambda: False, 0.3)
                 send(s, range(4, 5))
                 send(samples[k + 1], range(4, 5))
-            assert spin_until(probe, lambda k=k: len(estimates) == k + 1, 10), k
+            assert spin_until(probe, lambda k=k: len(estimates) == k + 1, HANG_S), k
             answer = messages.new("geometry_msgs/msg/WrenchStamped")
             answer.header.stamp = messages.time_msg(ns)
             answer.wrench.torque.z = commands[k]
@@ -101,7 +102,7 @@ def test_estimates_nan_stale_and_missing_channels(ros_domain: int, tmp_path: Pat
             return len(covariances) == STEPS and bool(diagnostics) and diagnostic_values(
                 diagnostics[-1]).get("estimates") == str(STEPS)
 
-        assert spin_until(probe, counted, 60)
+        assert spin_until(probe, counted, HANG_S)
     finally:
         probe.destroy_node()
         code, err = stop(proc, signal.SIGTERM)
@@ -170,7 +171,7 @@ def test_realtime_late_reading_refilters_to_the_in_time_estimates(ros_domain: in
                                   estimates.append, topics.STATE_ESTIMATE.qos)
         probe.create_subscription(topics.DIAGNOSTICS.type_name, topics.DIAGNOSTICS.name,
                                   diagnostics.append, topics.DIAGNOSTICS.qos)
-        assert spin_until(probe, lambda: all(p.get_subscription_count() for p in sensors), 60)
+        assert spin_until(probe, lambda: all(p.get_subscription_count() for p in sensors), HANG_S)
         spin_until(probe, lambda: False, 0.3)
         wire = SensorMessages(scene.sensors)
 
@@ -185,11 +186,11 @@ def test_realtime_late_reading_refilters_to_the_in_time_estimates(ros_domain: in
 
         for k, s in enumerate(samples):
             send(s, [c for c in range(5) if k != LATE or c != ENCODER_CHANNEL])
-            assert spin_until(probe, lambda k=k: len(estimates) == k + 1, 30), k
+            assert spin_until(probe, lambda k=k: len(estimates) == k + 1, HANG_S), k
             if k == LATE:       # used without it (partial): now the encoder's reading comes
                 send(s, [ENCODER_CHANNEL])
-                assert spin_until(probe, lambda: counts(late_inputs="1", refilters="1"), 10)
-        assert spin_until(probe, lambda: counts(estimates=str(STEPS)), 5)
+                assert spin_until(probe, lambda: counts(late_inputs="1", refilters="1"), HANG_S)
+        assert spin_until(probe, lambda: counts(estimates=str(STEPS)), HANG_S)
     finally:
         probe.destroy_node()
         code, err = stop(proc, signal.SIGTERM)

@@ -18,6 +18,7 @@ from stillframe.plant.frame_plant import FramePlant
 from tests.support.middleware import finish
 from tests.support.nodes import params_file, start_node
 from tests.support.scenes import thesis_scene
+from tests.support.waits import HANG_S
 
 OVERRIDES = ["duration=1", "controller.start=0.5", "evaluation.window=0.25"]  # 32 samples
 STEPS = 32
@@ -67,7 +68,7 @@ class Probe:
             self.cmd.publish(msg)
 
     def run(self, sim) -> None:
-        assert spin_until(self.node, lambda: sim.poll() is not None, 120)
+        assert spin_until(self.node, lambda: sim.poll() is not None, HANG_S)
         spin_until(self.node, lambda: False, 0.3)   # the last diagnostics
 
 
@@ -82,7 +83,7 @@ def _run_sim(tmp_path: Path, answers: int, code: int = 0, leave: bool = False,
                                                  result_file=str(result), command_writer=NAME,
                                                  **params))
         if leave:
-            assert spin_until(probe.node, lambda: len(probe.received["/clock"]) > answers, 120)
+            assert spin_until(probe.node, lambda: len(probe.received["/clock"]) > answers, HANG_S)
             probe.node.destroy_node()
             assert sim.wait(120) is not None
         else:

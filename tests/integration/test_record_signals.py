@@ -38,7 +38,7 @@ topics = [t.split("=") for t in sys.argv[2:]]
 n = int(sys.argv[1])
 node = api.create_node("load_generator")
 pubs = [node.create_publisher(kind, name, QoSProfile(depth=n)) for name, kind in topics]
-assert api.spin_until(node, lambda: all(p.get_subscription_count() for p in pubs), 60)
+assert api.spin_until(node, lambda: all(p.get_subscription_count() for p in pubs), HANG_S)
 api.spin_until(node, lambda: False, 0.5)
 msgs = [messages.new(kind) for _, kind in topics]
 start = time.monotonic()

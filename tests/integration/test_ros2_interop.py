@@ -25,6 +25,7 @@ from stillframe.middleware.names import resolve_topic
 from stillframe.middleware.qos import PROFILES, Reliability
 from tests.support.middleware import child_env, run_stillframe, wait_for_line
 from tests.support.netns import require_netns
+from tests.support.waits import HANG_S
 
 pytest.importorskip("rclpy", reason="real rclpy is installed by `make setup` ([ros] extra)")
 
@@ -268,7 +269,7 @@ def test_rclpy_graph_api_sees_the_dds_nodes_as_the_contract_says(
                 node.get_node_names_and_namespaces()) >= LOOP_NODES and all(
                 reader in reader_names(name) for name, reader in readers_expected.items())
 
-        assert api.spin_until(node, complete, 60), node.get_topic_names_and_types()
+        assert api.spin_until(node, complete, HANG_S), node.get_topic_names_and_types()
         topics = dict(node.get_topic_names_and_types())
         for name, spec in expected.items():
             assert topics[name] == [spec.type_name], name

@@ -23,6 +23,7 @@ from stillframe.locations import REPO_ROOT
 from stillframe.middleware.api import create_node, spin_until
 from stillframe.middleware.qos import SENSOR_DATA, Durability, Reliability
 from tests.support.middleware import child_env, finish, scheduling, wait_for_line
+from tests.support.waits import HANG_S
 
 
 def test_the_idle_tracker_runs_at_sched_idle(tmp_path: Path, ros_domain: int) -> None:
@@ -84,7 +85,7 @@ def test_a_tracker_stopped_twice_writes_each_window_due_as_given_up(tmp_path: Pa
         imus = [probe.create_publisher(spec.type_name, spec.name, qos)
                 for spec in topics.FLOOR_IMU]
         assert spin_until(probe, lambda: all(p.get_subscription_count() > 0
-                                             for p in (wrench, *imus)), 60)
+                                             for p in (wrench, *imus)), HANG_S)
         rng = np.random.default_rng(0)
         load, imu = (messages.new("geometry_msgs/msg/WrenchStamped"),
                      messages.new("sensor_msgs/msg/Imu"))

@@ -29,6 +29,7 @@ from stillframe.middleware.api import create_node, spin_until
 from tests.support.middleware import child_env, finish
 from tests.support.nodes import SHORT_LQG, Statuses, params_file, start_node, stop
 from tests.support.scenes import thesis_scene
+from tests.support.waits import HANG_S
 
 STRAY = REPO_ROOT / "tests" / "support" / "stray_sensors.py"
 BACKENDS = ("rclpy", "dds") if importlib.util.find_spec("rclpy") else ("dds",)
@@ -62,7 +63,7 @@ def test_stray_simulator_is_ignored_counted_and_named(ros_domain: int, tmp_path:
         return statuses.latest.get(f"/frame/{node}", (0, "", {}))[2]
 
     try:
-        assert spin_until(probe, lambda: sim.poll() is not None, 300)
+        assert spin_until(probe, lambda: sim.poll() is not None, HANG_S)
         for s in strays:
             s.send_signal(signal.SIGTERM)
             out, err = finish(s, timeout=60)

@@ -11,14 +11,12 @@ import signal
 from collections.abc import Iterator
 
 from stillframe.app import cli
+from tests.support.waits import HANG_S
 
 #: CPU seconds any one case may use: a runaway loop or an endless read (/dev/zero) fails the
 #: test instead of the suite. CPU time, so that a loaded machine, which gives the case its CPU
 #: late, does not run it out
 BOUND_S = 30.0
-#: wall seconds any one case may take: only a blocked case (an open of a FIFO, which uses no
-#: CPU) reaches it, however loaded the machine
-HANG_S = 300.0
 #: hostile YAML values for --set (and scene text): non-finite, huge, tiny, wrong types, broken
 #: syntax, deep nesting, non-ASCII and non-UTF-8 text
 HOSTILE = [".nan", "nan", ".inf", "-.inf", "inf", "1e308", "-1e308", "1e-308", "-1", "0",

@@ -17,6 +17,7 @@ from pathlib import Path
 import pytest
 
 from stillframe.locations import REPO_ROOT
+from tests.support.waits import HANG_S
 
 #: one lock file per ROS_DOMAIN_ID a test holds; ``flock`` so that a killed run frees its ids
 DOMAIN_LOCKS = Path(tempfile.gettempdir()) / "stillframe-test-domains"
@@ -64,10 +65,11 @@ def child_env() -> dict[str, str]:
     return dict(os.environ, PYTHONPATH=str(REPO_ROOT), PYTHONUNBUFFERED="1")
 
 
-def start_python(code: str, *args: str) -> subprocess.Popen:
-    """Run ``python -c code args...`` in the background, text pipes for stdout and stderr."""
+def start_python(code: str, *args: str, env: dict[str, str] | None = None) -> subprocess.Popen:
+    """Run ``python -c code args...`` in the background (:func:`child_env` and ``env``), text pipes
+    for stdout and stderr."""
     return subprocess.Popen(
-        [sys.executable, "-c", code, *args], env=child_env(), cwd=REPO_ROOT,
+        [sys.executable, "-c", code, *args], env={**child_env(), **(env or {})}, cwd=REPO_ROOT,
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
     )
 
@@ -80,7 +82,7 @@ def run_stillframe(*args: str, timeout: float = 60) -> subprocess.CompletedProce
     )
 
 
-def wait_for_line(proc: subprocess.Popen, text: str, timeout: float = 30) -> str:
+def wait_for_line(proc: subprocess.Popen, text: str, timeout: float = HANG_S) -> str:
     """Read the process's stdout until a line containing ``text`` (fails on exit or timeout).
 
     The pipe is read a byte at a time, straight from its descriptor: ``select`` on a buffered
@@ -109,7 +111,7 @@ def wait_for_line(proc: subprocess.Popen, text: str, timeout: float = 30) -> str
     raise AssertionError(f"no line with {text!r} in {timeout:g} s; it wrote: {said[-2000:]}")
 
 
-def finish(proc: subprocess.Popen, timeout: float = 30) -> tuple[str, str]:
+def finish(proc: subprocess.Popen, timeout: float = HANG_S) -> tuple[str, str]:
     """Wait for the process, killing it on timeout; its remaining stdout and stderr."""
     try:
         return proc.communicate(timeout=timeout)

@@ -19,6 +19,7 @@ import yaml
 from stillframe.contract import topics
 from stillframe.locations import REPO_ROOT
 from tests.support.middleware import child_env, finish, start_python
+from tests.support.waits import HANG_S
 
 SCENES = REPO_ROOT / "scenes"
 SHORT_LQG = ["duration=6", "controller.start=3", "evaluation.window=2"]
@@ -44,7 +45,7 @@ def start_node(package: str, params: Path, *args: str) -> subprocess.Popen:
     )
 
 
-def wait_for_log(proc: subprocess.Popen, text: str, timeout: float = 30) -> str:
+def wait_for_log(proc: subprocess.Popen, text: str, timeout: float = HANG_S) -> str:
     """Read the node's log (stderr) until a line containing ``text``. The lines are read in a
     thread, not by ``select`` on the pipe: a burst of lines sits in the text stream's buffer
     after the first ``readline``, where ``select`` on the empty pipe cannot see it."""

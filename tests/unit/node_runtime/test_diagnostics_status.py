@@ -11,6 +11,7 @@ from stillframe.contract import topics
 from stillframe.middleware import api
 from stillframe.node_runtime import support
 from stillframe.node_runtime.support import Diagnostics, diagnostic_values
+from tests.support.waits import HANG_S
 
 
 class FakeClock:
@@ -38,7 +39,7 @@ def test_a_status_waits_for_slack_that_holds_its_cost_at_most_one_period(
                                statuses.append, topics.DIAGNOSTICS.qos)
     try:
         d = Diagnostics(node, period_s=1.0)
-        assert api.spin_until(reader, lambda: d.pub.get_subscription_count() > 0, 30)
+        assert api.spin_until(reader, lambda: d.pub.get_subscription_count() > 0, HANG_S)
         clock.ns = 999_999_999
         assert not d.due(None)                          # not a period yet
         clock.ns = 1_000_000_000
@@ -64,7 +65,7 @@ def test_a_status_waits_for_slack_that_holds_its_cost_at_most_one_period(
         assert d.due(0)
         d.publish(4, {"step": 4})
         assert d.deferred == 3                          # statuses 2, 3 and 4 waited
-        assert api.spin_until(reader, lambda: len(statuses) == 4, 30)
+        assert api.spin_until(reader, lambda: len(statuses) == 4, HANG_S)
     finally:
         reader.destroy_node()
         node.destroy_node()
