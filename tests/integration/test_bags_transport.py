@@ -34,6 +34,7 @@ from stillframe.locations import REPO_ROOT as ROOT
 from stillframe.middleware import api
 from stillframe.middleware.discovery import cyclone_config
 from tests.support.middleware import child_env
+from tests.support.waits import HANG_S
 
 TS = get_typestore(Stores.ROS2_JAZZY)
 INF = T(9223372036, 854775807)
@@ -398,7 +399,7 @@ def test_records_a_foreign_publisher_and_skips_a_different_type_hash(
                 participant, Topic(participant, f"rt/{name}", DdsString), qos)
         recorder.wait_for("Subscribed to topic '/frame/native'")
         recorder.wait_for("/frame/foreign: publishers announce type hash RIHS01_abab")
-        deadline = time.monotonic() + 30
+        deadline = time.monotonic() + HANG_S
         while not writers["frame/native"].get_matched_subscriptions():
             assert time.monotonic() < deadline, "the recorder never matched"
             time.sleep(0.05)

@@ -74,7 +74,7 @@ def start_writer(name: str, namespace: str, rate: float, from_s: float | None,
 
 def stop_writer(proc: subprocess.Popen) -> int:
     proc.send_signal(signal.SIGTERM)
-    out, err = finish(proc, timeout=30)
+    out, err = finish(proc)
     assert proc.returncode == 0, err[-2000:]
     return int(out.split()[-1])
 

@@ -35,6 +35,7 @@ from stillframe.monitor.foxglove_client import Capture, capture
 from tests.support.middleware import child_env, finish, start_python
 from tests.support.nodes import SCENES, SHORT_LQG, read_lines, run_loop_beside, run_loop_until
 from tests.support.scenes import thesis_scene
+from tests.support.waits import HANG_S
 
 BACKENDS = ("rclpy", "dds") if importlib.util.find_spec("rclpy") else ("dds",)
 
@@ -317,13 +318,14 @@ def imu_stamps(bag: Path) -> list[int]:
 
 
 def stop_all(procs: list[subprocess.Popen], sig: int = signal.SIGINT) -> None:
-    """Send ``sig`` to each process still running, then wait for each (killed after 30 s)."""
+    """Send ``sig`` to each process still running, then wait for each (killed after
+    :data:`HANG_S`)."""
     for proc in procs:
         if proc.poll() is None:
             proc.send_signal(sig)
     for proc in procs:
         try:
-            proc.wait(30)
+            proc.wait(HANG_S)
         except subprocess.TimeoutExpired:
             proc.kill()
             proc.wait()

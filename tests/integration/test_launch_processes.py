@@ -22,6 +22,7 @@ from stillframe.app.launcher import NODES, StatusLine, node_command, status_text
 from stillframe.locations import REPO_ROOT
 from stillframe.middleware.params import node_overrides, parse_ros_args
 from tests.support.middleware import run_stillframe
+from tests.support.waits import HANG_S
 
 SCENE = REPO_ROOT / "scenes" / "thesis_lqg.yaml"
 
@@ -254,8 +255,8 @@ def test_killed_launcher_leaves_no_orphans(tmp_path: Path, ros_domain: int) -> N
     proc = start_launch(tmp_path)
     pids, _ = wait_for_children(proc)
     proc.kill()
-    proc.communicate(timeout=30)
-    deadline = time.monotonic() + 30
+    proc.communicate(timeout=HANG_S)
+    deadline = time.monotonic() + HANG_S
     while any(alive(pid) for pid in pids.values()) and time.monotonic() < deadline:
         time.sleep(0.1)
     assert not any(alive(pid) for pid in pids.values())

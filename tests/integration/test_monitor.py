@@ -410,7 +410,7 @@ def test_every_sample_with_max_rate_zero(imu_source: ImuSource) -> None:
 
 def dashboard_data(page: str) -> dict:
     """The dashboard's ``/data`` answer."""
-    with urllib.request.urlopen(page + "data", timeout=5) as response:
+    with urllib.request.urlopen(page + "data", timeout=HANG_S) as response:
         return json.loads(response.read())
 
 

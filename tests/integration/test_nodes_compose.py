@@ -19,6 +19,7 @@ from stillframe.loop.closed_loop import run_closed_loop
 from tests.support.middleware import finish, start_python, wait_for_line
 from tests.support.nodes import SHORT_LQG
 from tests.support.scenes import thesis_scene
+from tests.support.waits import HANG_S
 
 SCENE = REPO_ROOT / "scenes" / "thesis_lqg.yaml"
 
@@ -78,7 +79,7 @@ def test_compose_all_runs_every_node_in_the_container(ros_domain: int) -> None:
 
 #: two nodes of one process with intra-process delivery, and a node in a second process: the
 #: in-process subscription gets each sample once (not again through DDS), with the writer's GID
-INTRA = """
+INTRA = f"""
 import sys, time
 from stillframe.middleware import api, intra_process
 intra_process.enable()
@@ -89,20 +90,20 @@ got = []
 sub = reader.create_subscription("std_msgs/msg/Int32", "/intra_test",
                                  lambda cdr, info: got.append((bytes(cdr), info.publisher_gid)),
                                  "default", raw=True)
-deadline = time.monotonic() + 30
+deadline = time.monotonic() + {HANG_S}
 while pub.get_subscription_count() < 2 and time.monotonic() < deadline:   # + the other process
     writer.spin_once(0.05)
 print("counts", pub.get_subscription_count(), sub.get_publisher_count(), flush=True)
 for i in range(50):
     pub.publish(bytes([0, 1, 0, 0]) + i.to_bytes(4, "little"))
-deadline = time.monotonic() + 30    # each sample arrives: waited for, not timed
+deadline = time.monotonic() + {HANG_S}    # each sample arrives: waited for, not timed
 while len(got) < 50 and time.monotonic() < deadline:
     reader.spin_once(0.05)
 for _ in range(5):      # a second delivery (through DDS too) would show here
     reader.spin_once(0.05)
 values = [int.from_bytes(cdr[4:8], "little") for cdr, _ in got]
 print("got", len(got), values == list(range(50)), all(g == pub.gid for _, g in got), flush=True)
-pub.wait_for_all_acked(30)   # the other process has every sample before this one exits
+pub.wait_for_all_acked({HANG_S})   # the other process has every sample before this one exits
 """
 
 LISTENER = """
@@ -126,7 +127,7 @@ def test_intra_process_hands_each_sample_over_once_and_still_publishes(ros_domai
         out, err = finish(start_python(INTRA), timeout=90)
         assert "counts 2 1" in out, err[-2000:]
         assert "got 50 True True" in out, err[-2000:]
-        out, err = finish(listener, timeout=30)
+        out, err = finish(listener)
         assert "listener 50" in out, err[-2000:]
     finally:
         listener.kill()

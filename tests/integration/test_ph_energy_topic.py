@@ -24,6 +24,7 @@ from stillframe.contract.messages import TYPESTORE
 from stillframe.locations import REPO_ROOT
 from stillframe.monitor.foxglove_client import Capture, capture
 from tests.support.middleware import child_env, run_stillframe
+from tests.support.waits import HANG_S
 
 SHORT = ["duration=3", "controller.start=1", "evaluation.window=1"]
 WARN = 1
@@ -139,7 +140,7 @@ def test_energy_balance_reaches_foxglove_and_the_dashboard(ros_domain: int) -> N
         while proc.poll() is None:
             await asyncio.sleep(0.5)
             try:
-                with urllib.request.urlopen(urls[1] + "data", timeout=5) as response:
+                with urllib.request.urlopen(urls[1] + "data", timeout=HANG_S) as response:
                     data = json.loads(response.read())["series"]["energy"]
             except OSError:    # the monitor stops with the launch: keep the last answer
                 break

@@ -48,6 +48,7 @@ from stillframe.middleware.api import create_node, spin_until
 from tests.support.middleware import child_env, finish
 from tests.support.nodes import Statuses, params_file, start_node, stop
 from tests.support.scenes import thesis_scene
+from tests.support.waits import HANG_S
 
 RATE_HZ = 32.0
 PERIOD_NS = round(1e9 / RATE_HZ)
@@ -126,7 +127,7 @@ def test_kill_and_restart_estimator_then_kill_controller(ros_domain: int, tmp_pa
         logs = {proc: stop(proc)[1] for proc in (sim, estimator, controller)
                 if proc.poll() is None}
         recorder.send_signal(signal.SIGINT)
-        finish(recorder, timeout=30)
+        finish(recorder)
         for proc in procs:
             if proc.poll() is None:
                 proc.kill()
@@ -225,7 +226,7 @@ def test_sim_killed_loop_idles_reports_stale_input_and_resumes_with_a_new_sim(
         sim.kill()                                                 # SIGKILL the sim
         sim.wait()
         watch.until(lambda: all(statuses.stale(n) for n in ("estimator_node", "controller_node")),
-                    timeout=30)
+                    timeout=HANG_S)
         before = [_cpu_s(p.pid) for p in peers]
         spin_until(watch.node, lambda: False, 1.0)
         used = [_cpu_s(p.pid) - b for p, b in zip(peers, before, strict=True)]

@@ -43,6 +43,7 @@ from stillframe.locations import REPO_ROOT
 from stillframe.middleware import api
 from stillframe.recording.recorder import MISSING_KEY, STALLS_KEY
 from tests.support.middleware import child_env
+from tests.support.waits import HANG_S
 
 pytestmark = pytest.mark.slow
 
@@ -83,7 +84,7 @@ class Lines:
         return next((m for line in list(self.lines) if (m := re.search(pattern, line))), None)
 
     def join(self) -> str:
-        self._thread.join(timeout=30)
+        self._thread.join(timeout=HANG_S)
         return "\n".join(self.lines)
 
 

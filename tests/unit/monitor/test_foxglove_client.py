@@ -11,6 +11,7 @@ import foxglove
 
 from stillframe.monitor.foxglove_bridge import ros2msg_schema
 from stillframe.monitor.foxglove_client import Capture, capture
+from tests.support.waits import HANG_S
 
 CHANNELS = 300
 
@@ -26,7 +27,7 @@ def test_every_channel_advertised_while_connected_delivers() -> None:
     connected, created = threading.Event(), threading.Event()
 
     def create_and_log() -> None:
-        connected.wait(10)
+        connected.wait(HANG_S)
         schema = ros2msg_schema("std_msgs/msg/UInt32")
         for i in range(CHANNELS):
             channels.append(foxglove.Channel(f"/c{i}", schema=schema, message_encoding="cdr",
