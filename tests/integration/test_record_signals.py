@@ -34,6 +34,7 @@ import sys, time
 from stillframe.contract import messages
 from stillframe.middleware import api
 from stillframe.middleware.qos import QoSProfile
+from tests.support.waits import HANG_S
 topics = [t.split("=") for t in sys.argv[2:]]
 n = int(sys.argv[1])
 node = api.create_node("load_generator")
