@@ -78,14 +78,17 @@ def test_compose_all_runs_every_node_in_the_container(ros_domain: int) -> None:
 
 
 #: two nodes of one process with intra-process delivery, and a node in a second process: the
-#: in-process subscription gets each sample once (not again through DDS), with the writer's GID
+#: in-process subscription gets each sample once (not again through DDS), with the writer's GID.
+#: The writer keeps all 50 samples (reliable, depth 100, as the listener), so a listener that a
+#: loaded machine runs late still gets every one: with the default depth of 10 it would not
 INTRA = f"""
 import sys, time
 from stillframe.middleware import api, intra_process
+from stillframe.middleware.qos import QoSProfile
 intra_process.enable()
 writer = api.create_node("intra_writer", backend="dds")
 reader = api.create_node("intra_reader", backend="dds")
-pub = writer.create_publisher("std_msgs/msg/Int32", "/intra_test", "default")
+pub = writer.create_publisher("std_msgs/msg/Int32", "/intra_test", QoSProfile(depth=100))
 got = []
 sub = reader.create_subscription("std_msgs/msg/Int32", "/intra_test",
                                  lambda cdr, info: got.append((bytes(cdr), info.publisher_gid)),
@@ -103,7 +106,8 @@ for _ in range(5):      # a second delivery (through DDS too) would show here
     reader.spin_once(0.05)
 values = [int.from_bytes(cdr[4:8], "little") for cdr, _ in got]
 print("got", len(got), values == list(range(50)), all(g == pub.gid for _, g in got), flush=True)
-pub.wait_for_all_acked({HANG_S})   # the other process has every sample before this one exits
+# the other process has every sample before this one exits
+print("acked", pub.wait_for_all_acked({HANG_S}), flush=True)
 """
 
 LISTENER = """
@@ -127,6 +131,7 @@ def test_intra_process_hands_each_sample_over_once_and_still_publishes(ros_domai
         out, err = finish(start_python(INTRA), timeout=90)
         assert "counts 2 1" in out, err[-2000:]
         assert "got 50 True True" in out, err[-2000:]
+        assert "acked True" in out, err[-2000:]
         out, err = finish(listener)
         assert "listener 50" in out, err[-2000:]
     finally:
