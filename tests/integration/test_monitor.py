@@ -15,7 +15,7 @@ import sys
 import threading
 import time
 import urllib.request
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -329,27 +329,35 @@ def stop_monitor(monitor: subprocess.Popen) -> str:
 LEAST_S, LEAST_SAMPLES = 3.0, 10
 
 
-async def watch(url: str, topics: list[str], probe: Any, read: str, *,
-                readers: int) -> tuple[Capture, int]:
-    """Connect to ``url`` and subscribe to ``topics``; leave once :data:`LEAST_S` have passed, the
-    IMU channel is advertised, at least :data:`LEAST_SAMPLES` of each watched topic came and the
-    monitor's readers of ``read`` (the IMU topic or its tap) are ``readers``, however late a
-    loaded machine gets there (:data:`HANG_S` ends a hang). What came, and the readers just
-    before leaving."""
+async def watch_until(url: str, topics: list[str],
+                      enough: Callable[[Capture], bool]) -> Capture:
+    """Connect to ``url``, subscribe to ``topics`` and leave once ``enough(what came)`` holds,
+    however late a loaded machine gets there (:data:`HANG_S` ends a hang); what came."""
     seen, until = Capture(), asyncio.Event()
     task = asyncio.create_task(capture(url, topics, until, seen))
-    began = time.monotonic()
-    while True:
+    deadline = time.monotonic() + HANG_S
+    while not (enough(seen) or task.done() or time.monotonic() > deadline):
         await asyncio.sleep(0.1)
-        now, found = time.monotonic(), monitor_readers(probe, read)
-        came = IMU in seen.channels and all(
-            len(seen.messages.get(topic, ())) >= LEAST_SAMPLES for topic in topics)
-        if (now - began >= LEAST_S and came and found == readers) or now - began > HANG_S \
-                or task.done():
-            break
     until.set()
     await task
-    return seen, found
+    return seen
+
+
+async def watch(url: str, topics: list[str], probe: Any, read: str, *,
+                readers: int) -> tuple[Capture, int]:
+    """:func:`watch_until` :data:`LEAST_S` have passed, the IMU channel is advertised, at least
+    :data:`LEAST_SAMPLES` of each watched topic came and the monitor's readers of ``read`` (the
+    IMU topic or its tap) are ``readers``. What came, and the readers just before leaving."""
+    began, found = time.monotonic(), [-1]
+
+    def enough(seen: Capture) -> bool:
+        found[0] = monitor_readers(probe, read)
+        return (time.monotonic() - began >= LEAST_S and IMU in seen.channels
+                and all(len(seen.messages.get(t, ())) >= LEAST_SAMPLES for t in topics)
+                and found[0] == readers)
+
+    seen = await watch_until(url, topics, enough)
+    return seen, found[0]
 
 
 def test_a_topic_is_subscribed_only_while_a_client_watches_it(imu_source: ImuSource) -> None:
@@ -386,20 +394,9 @@ def test_every_sample_with_max_rate_zero(imu_source: ImuSource) -> None:
     carries at most 50 a second). Watched until 300 samples came, however slowly a loaded
     machine publishes and forwards them (:data:`HANG_S` only ends a hang)."""
     monitor, url, _ = start_monitor("--max-rate", "0")
-
-    async def until_300() -> Capture:
-        seen, done = Capture(), asyncio.Event()
-        task = asyncio.create_task(capture(url, [IMU], done, seen))
-        deadline = time.monotonic() + HANG_S
-        while len(seen.messages.get(IMU, ())) < 300 and time.monotonic() < deadline \
-                and not task.done():
-            await asyncio.sleep(0.1)
-        done.set()
-        await task
-        return seen
-
     try:
-        watched = asyncio.run(until_300())
+        watched = asyncio.run(watch_until(
+            url, [IMU], lambda seen: len(seen.messages.get(IMU, ())) >= 300))
     finally:
         stop_monitor(monitor)
     periods = [messages.stamp_ns(m.header.stamp) * PUBLISH_HZ // 10**9
