@@ -16,11 +16,14 @@ decoded. An event-driven recorder (one wake-up per sample) would spend its time 
 (rmw's wait set, once per sample of every topic under rclpy) and starve the loop it records.
 
 Receive time: each sample keeps the time it arrived (rmw's reception time stamp under rclpy, the
-source time stamp under Cyclone, which keeps none), not the time it was taken. With ``sim_time``
-the recorder does what a callback recorder's ``now()`` does under ``use_sim_time``: a sample is
-stamped with the latest ``/clock`` that had arrived before it (0 before the first), worked out
-from the arrival times of the ``/clock`` samples taken in the same poll. The node itself stays
-on system time, so rclpy does not run its ``/clock`` callback a thousand times a second.
+source time stamp under Cyclone, which keeps none), not the time it was taken. A sample the
+transport dropped and the reliable writer repaired arrives after samples sent later, and is logged
+when it arrived (as rosbag2 logs it): a topic's messages in log-time order can be out of their
+publication order, none missing. With ``sim_time`` the recorder does what a callback recorder's
+``now()`` does under ``use_sim_time``: a sample is stamped with the latest ``/clock`` that had
+arrived before it (0 before the first), worked out from the arrival times of the ``/clock``
+samples taken in the same poll. The node itself stays on system time, so rclpy does not run its
+``/clock`` callback a thousand times a second.
 
 Nothing is lost in silence. A recorder that is stopped or starved (SIGSTOP, a loaded machine)
 receives nothing meanwhile, and the publishers keep only their last few samples for it: the

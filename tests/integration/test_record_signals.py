@@ -1,9 +1,15 @@
 """Recording without loss (issue 11, item 8): ``stillframe record`` on seven reliable topics at
 1 kHz, stopped by SIGINT or SIGTERM right after the publisher's last message (samples still in
-flight): the bag holds every message the publisher sent (each topic's indices 0..N-1, counted
-against the publisher's own count), and rosbags and the ``mcap`` library both read it. Killed
-with SIGKILL instead, the bag has no footer; ``stillframe bag reindex`` recovers it up to its
-last complete chunk: per topic a gap-free prefix of what was sent."""
+flight): the bag holds every message the publisher sent, once (each topic's indices 0..N-1,
+counted against the publisher's own count), and rosbags and the ``mcap`` library both read it.
+Killed with SIGKILL instead, the bag has no footer; ``stillframe bag reindex`` recovers it up to
+its last complete chunk: per topic distinct messages of what was sent.
+
+A bag is in order of arrival (each message's log time is when it was received), not in order of
+publication: a sample the transport dropped (a reader's socket full on a loaded machine) comes
+when the reliable writer repairs it, after samples sent later, and is logged then. So the tests
+compare each topic's indices as a set: a repaired sample is in the bag, later than its
+neighbours."""
 
 from __future__ import annotations
 
@@ -105,7 +111,7 @@ def test_record_stopped_by_signal_loses_nothing(ros_domain: int, tmp_path: Path,
                                                 sig: int) -> None:
     bag, sent, err = _run(tmp_path, sig, 1000)
     for topic, indices in _indices(bag).items():   # rosbags
-        assert indices == list(range(sent)), topic
+        assert sorted(indices) == list(range(sent)), topic
     by_rosbags, by_mcap = _records(bag)             # the mcap library: the same bytes
     assert by_rosbags == by_mcap, err[-2000:]
     assert len(by_mcap) == sent * len(TOPICS)
@@ -123,9 +129,10 @@ def test_killed_recorder_bag_reindexed_up_to_last_complete_chunk(ros_domain: int
     summary = json.loads(report.stdout)
     assert summary["truncated"] is True
     found = _indices(bag)
-    # chunks hold messages in arrival order: each topic recovers a gap-free prefix
+    # chunks hold messages in arrival order: each topic recovers distinct messages that were
+    # sent (a prefix of what arrived, which a repaired sample can leave out of publication order)
     for topic, indices in found.items():
-        assert indices == list(range(len(indices))), topic
+        assert len(set(indices)) == len(indices) and set(indices) <= set(range(sent)), topic
     total = sum(len(v) for v in found.values())
     assert total == summary["messages"] and 0 < total < sent * len(TOPICS)
     assert (bag / f"{bag.name}.mcap.damaged").exists()

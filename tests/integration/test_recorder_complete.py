@@ -51,7 +51,9 @@ def stamps_by_topic(bag: Path) -> dict[str, list[int]]:
 
 
 def sample_indices(stamps: list[int]) -> list[int]:
-    return [round(ns / (1e9 / RATE_HZ)) for ns in stamps]
+    """The sample indices of a topic's stamps, in the order they were published: a bag is in
+    order of arrival, where a sample the reliable writer repaired comes after later ones."""
+    return sorted(round(ns / (1e9 / RATE_HZ)) for ns in stamps)
 
 
 @pytest.mark.parametrize("backend", BACKENDS)
@@ -67,7 +69,7 @@ def test_launch_record_at_1khz_holds_every_sample_of_every_loop_topic(
     assert steps == RATE_HZ
     stamps = stamps_by_topic(bag)
     for topic in PER_SAMPLE:
-        # every sample time once, in order (the header stamps are the simulator's, not ours)
+        # every sample time once (the header stamps are the simulator's, not ours)
         assert sample_indices(stamps[topic]) == list(range(1, steps + 1)) or \
             sample_indices(stamps[topic]) == list(range(steps)), topic
     # the launch's count against the simulator's: nothing beyond the stamp grids either
