@@ -11,12 +11,15 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 from catkin_pkg.package import parse_package
 
 from stillframe.locations import REPO_ROOT
+from stillframe.loop.closed_loop import run_closed_loop
 from tests.support.middleware import finish, run_stillframe
-from tests.support.nodes import stop
+from tests.support.nodes import assert_same_histories, stop
+from tests.support.scenes import thesis_scene
 
 pytestmark = pytest.mark.slow
 
@@ -131,8 +134,8 @@ def test_installed_nodes_close_the_loop_like_one_process(
         ros_domain: int, monkeypatch: pytest.MonkeyPatch) -> None:
     """sim_node, estimator_node and controller_node started from the install space with the
     workstation's parameter file (ros_ws/config) and an absolute ``scene`` on the full
-    thesis_lqg scene, in lock-step: the reductions and peaks equal the one-process
-    ``stillframe closed-loop`` run's to the last bit."""
+    thesis_lqg scene, in lock-step: every history equals the one-process loop's, and the
+    reductions and peaks the ``stillframe closed-loop`` run's, to the last bit."""
     monkeypatch.setenv("STILLFRAME_RMW", backend)
     monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     ros_args = ["--ros-args", "--params-file", str(PARAMS), "-p", f"scene:={SCENE}"]
@@ -151,5 +154,7 @@ def test_installed_nodes_close_the_loop_like_one_process(
     nodes = json.loads((tmp_path / "closed_loop_result.json").read_text())
     assert nodes["steps"] == one_process["steps"] == 1600
     assert nodes["complete"] is True
+    with np.load(tmp_path / "closed_loop_result.npz") as histories:   # sample by sample
+        assert_same_histories(histories, run_closed_loop(thesis_scene("thesis_lqg", [])))
     for key in ("reduction_pct", "peak_uncontrolled", "peak_controlled", "peak_command"):
         assert nodes[key] == one_process[key], key

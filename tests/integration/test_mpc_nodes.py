@@ -14,7 +14,7 @@ import pytest
 from stillframe.app.launcher import run_scene
 from stillframe.locations import SCENES_DIR
 from stillframe.loop.closed_loop import run_closed_loop
-from tests.support.nodes import SHORT_LQG
+from tests.support.nodes import SHORT_LQG, assert_same_histories
 from tests.support.scenes import thesis_scene
 
 MPC = [*SHORT_LQG, "plant.model=scene", "model.type=lumped", "design.model=lumped",
@@ -33,8 +33,7 @@ def test_mpc_through_the_nodes_equals_one_process(ros_domain: int, tmp_path: Pat
     assert e["complete"] is True
     assert e["plant"] == reference.evaluation["plant"]     # subdivisions counted alike
     with np.load(result.history_file) as hist:
-        for key in ("t", "truth", "command", "force", "fine_floors", "fine_velocities"):
-            np.testing.assert_array_equal(hist[key], getattr(reference, key), err_msg=key)
+        assert_same_histories(hist, reference)
     assert np.max(np.abs(reference.command[:, 0])) <= 2.0
     fallbacks = reference.evaluation["controller"]["fallback"]
     assert 0 < fallbacks < reference.evaluation["controller"]["commands"] // 2  # both branches

@@ -20,10 +20,9 @@ from stillframe.config.scene import load_scene
 from stillframe.loop.closed_loop import run_closed_loop
 from tests.support.middleware import run_stillframe
 from tests.support.netns import require_netns
-from tests.support.nodes import SHORT_LQG
+from tests.support.nodes import SHORT_LQG, assert_same_histories
 from tests.support.scenes import thesis_scene
 
-COMPARED = ("t", "truth", "command", "force", "fine_floors", "fine_velocities")
 #: 2 s (64 samples) for the run under loss, whose retransmissions take wall time
 SHORTER_LQG = ["duration=2", "controller.start=1", "evaluation.window=1"]
 
@@ -53,8 +52,7 @@ def launch_netns(tmp_path: Path, overrides: list[str],
 def assert_one_process_numbers(result: dict, hist: dict[str, np.ndarray],
                                overrides: list[str]) -> None:
     reference = run_closed_loop(thesis_scene("thesis_lqg", overrides))
-    for key in COMPARED:
-        np.testing.assert_array_equal(hist[key], getattr(reference, key), err_msg=key)
+    assert_same_histories(hist, reference)
     assert result["reduction_pct"] == reference.evaluation["reduction_pct"]
     assert result["complete"] is True
 

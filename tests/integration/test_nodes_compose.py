@@ -17,7 +17,7 @@ from stillframe.contract.topics import DEFAULT_NAMESPACE, FLOOR_IMU, STATE_ESTIM
 from stillframe.locations import REPO_ROOT
 from stillframe.loop.closed_loop import run_closed_loop
 from tests.support.middleware import finish, start_python, wait_for_line
-from tests.support.nodes import SHORT_LQG
+from tests.support.nodes import SHORT_LQG, assert_same_histories
 from tests.support.scenes import thesis_scene
 from tests.support.waits import HANG_S
 
@@ -39,8 +39,7 @@ def test_composed_run_equals_one_process(ros_domain: int, tmp_path: Path, compos
     assert e["steps"] == reference.evaluation["steps"] == 192
     assert e["complete"] is True
     with np.load(result.history_file) as hist:
-        for key in ("t", "truth", "command", "force", "fine_floors", "fine_velocities"):
-            np.testing.assert_array_equal(hist[key], getattr(reference, key), err_msg=key)
+        assert_same_histories(hist, reference)
     # published as well, for the recorder (which may join a few samples late, as in the demo)
     with AnyReader([tmp_path / "bag"]) as reader:
         counts = {c.topic: c.msgcount for c in reader.connections}

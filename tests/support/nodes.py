@@ -25,6 +25,30 @@ SCENES = REPO_ROOT / "scenes"
 SHORT_LQG = ["duration=6", "controller.start=3", "evaluation.window=2"]
 
 
+#: the histories the simulator writes beside its result (sim_node ``write_result``) that a
+#: lock-step run must share with the one-process loop, sample by sample
+HISTORIES = ("t", "truth", "command", "force", "fine_floors", "fine_velocities")
+
+
+def assert_same_histories(histories: Any, reference: Any) -> None:
+    """Every history of :data:`HISTORIES` (a mapping, e.g. the simulator's ``.npz``) equals the
+    one-process loop's (``reference``, a :class:`stillframe.loop.evaluation.LoopHistory`) to the
+    last bit; a difference is named by its history, its first row and that row's time, which
+    says where timing entered the run and which node it reached first (the command before the
+    truth: the controller's side)."""
+    first = []
+    for key in HISTORIES:
+        got, want = np.asarray(histories[key]), np.asarray(getattr(reference, key))
+        assert got.shape == want.shape, (key, got.shape, want.shape)
+        rows = np.flatnonzero(np.any((got != want).reshape(len(got), -1), axis=1))
+        if rows.size:
+            times = reference.fine_t if key.startswith("fine_") else reference.t
+            row = int(rows[0])
+            first.append(f"{key}: {rows.size} rows differ, the first at row {row} "
+                         f"(t = {times[row]:.6f} s): {got[row].tolist()} != {want[row].tolist()}")
+    assert not first, "; ".join(first)
+
+
 def params_file(tmp_path: Path, scene: str, overrides: list[str], **params: Any) -> Path:
     """A ROS 2 parameter file giving every node (``/**``) the scene and ``params``."""
     path = tmp_path / "params.yaml"
