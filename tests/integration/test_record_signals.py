@@ -27,7 +27,7 @@ from stillframe.bags.full_disk import RESERVE_NAME
 from stillframe.contract import messages
 from stillframe.contract.messages import TYPESTORE
 from stillframe.locations import REPO_ROOT
-from tests.support.middleware import child_env, finish, start_python
+from tests.support.middleware import child_env, finish, start_python, wait_for_line
 
 TOPICS = [("/load/imu1", "sensor_msgs/msg/Imu"), ("/load/imu2", "sensor_msgs/msg/Imu"),
           ("/load/imu3", "sensor_msgs/msg/Imu"), ("/load/joints", "sensor_msgs/msg/JointState"),
@@ -74,7 +74,9 @@ def _run(tmp_path: Path, sig: int, n: int) -> tuple[Path, int, str]:
     recorder = _record(out)
     publisher = start_python(PUBLISHER, str(n), *(f"{t}={k}" for t, k in TOPICS))
     try:
-        assert publisher.stdout.readline().strip() == "done"
+        # read from the pipe up to "done" only: a buffered readline can take "sent N" along,
+        # where communicate() (finish) no longer sees it
+        wait_for_line(publisher, "done")
         recorder.send_signal(sig)
         _out, rec_err = finish(recorder, timeout=60)
     finally:
