@@ -23,27 +23,41 @@ from tests.support.waits import HANG_S
 DOMAIN_LOCKS = Path(tempfile.gettempdir()) / "stillframe-test-domains"
 #: the ids tests draw from (Jazzy's default ports reach 232; 0 is everyone's default)
 TEST_DOMAINS = range(1, 201)
+#: how long [s] a released id rests before it is drawn again: longer than the DDS leases
+#: (Cyclone 10 s, Fast DDS 20 s) after which a participant that a test left behind (a node
+#: still stopping on a loaded machine, or killed) has left the graph, so the next test on the id
+#: does not find it there ("another stillframe loop is running")
+DOMAIN_REST_S = 60.0
 
 
 @contextlib.contextmanager
 def held_domain() -> Iterator[int]:
     """A ROS_DOMAIN_ID (1..200) no other test run on this machine holds, for as long as the
     ``with`` lasts. The id is drawn at random and held by an exclusive lock on its file, so two
-    suites (or two workers of one suite) never share a domain; when every id is held the draw
-    waits for one."""
+    suites (or two workers of one suite) never share a domain; the file keeps the time the id
+    was released, and an id released less than :data:`DOMAIN_REST_S` ago is not drawn. When
+    every id is held or resting the draw waits for one."""
     DOMAIN_LOCKS.mkdir(exist_ok=True)
     ids = list(TEST_DOMAINS)
     random.SystemRandom().shuffle(ids)
     while True:
         for domain in ids:
-            handle = (DOMAIN_LOCKS / f"{domain}.lock").open("a")
+            handle = (DOMAIN_LOCKS / f"{domain}.lock").open("a+")
             try:
                 fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
             except BlockingIOError:
                 handle.close()
                 continue
             with handle:
-                yield domain
+                handle.seek(0)
+                released = float(handle.read().strip() or 0.0)
+                if time.time() - released < DOMAIN_REST_S:
+                    continue
+                try:
+                    yield domain
+                finally:
+                    handle.truncate(0)
+                    handle.write(f"{time.time()}\n")
             return
         time.sleep(0.1)
 
