@@ -32,7 +32,7 @@ from stillframe.locations import REPO_ROOT
 from stillframe.loop.closed_loop import run_closed_loop
 from stillframe.loop.writer_gate import REASONS
 from stillframe.monitor.foxglove_client import Capture, capture
-from tests.support.middleware import child_env, finish, start_python
+from tests.support.middleware import child_env, finish, start_python, wait_for_line
 from tests.support.nodes import SCENES, SHORT_LQG, read_lines, run_loop_beside, run_loop_until
 from tests.support.scenes import thesis_scene
 from tests.support.waits import HANG_S
@@ -185,7 +185,7 @@ def test_a_writing_peer_is_refused_counted_and_named(
     refused sample, and the run is the one-process loop's to the last bit."""
     monkeypatch.setenv("STILLFRAME_RMW", backend)
     peer = start_python(PUB_PEER)
-    assert peer.stdout.readline().strip() == "ready"
+    wait_for_line(peer, "ready")
     said = read_lines(peer.stdout)
 
     def done(sim_log: list[str]) -> bool:
@@ -422,7 +422,7 @@ def test_a_real_time_run_beside_a_writer_names_it_and_strict_fails(ros_domain: i
     ``foreign_writers`` and not as the controller's refused commands (they are not the
     figures'), and ``--strict`` ends the run with exit code 6 and one line naming it."""
     peer = start_python(PUB_PEER)
-    assert peer.stdout.readline().strip() == "ready"
+    wait_for_line(peer, "ready")
     try:
         run = launch("--mode", "realtime", "--strict", "--json")
         out, err = run.communicate(timeout=300)

@@ -34,7 +34,7 @@ from stillframe.loop import writer_gate
 from stillframe.loop.closed_loop import run_closed_loop
 from stillframe.middleware import api
 from stillframe.middleware.api import create_node, spin_until
-from tests.support.middleware import child_env, finish
+from tests.support.middleware import child_env, finish, wait_for_line
 from tests.support.nodes import (
     SHORT_LQG,
     Statuses,
@@ -159,7 +159,7 @@ def _flood_run(tmp_path: Path, topic_set: str, flood_s: float, duration: float) 
         return float(statuses.latest.get("/frame/sim_node", (0, "", {}))[2].get("sim_time_s", 0))
 
     try:
-        assert all(w.stdout.readline().strip() == "ready" for w in writers)
+        assert all(wait_for_line(w, "ready") for w in writers)
         assert spin_until(watch, lambda: all(w.poll() is not None for w in writers), HANG_S)
         flooded = loop_time() - 3.0                 # the writers started at the loop's 3 s
         assert spin_until(watch, lambda: sim.poll() is not None, HANG_S)
@@ -271,7 +271,7 @@ def test_garbage_cdr_on_the_wire_is_dropped_and_counted(ros_domain: int) -> None
         [sys.executable, str(REPO_ROOT / "tests" / "support" / "counting_reader.py"), backend],
         env=child_env(), cwd=REPO_ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
         text=True) for backend in ("rclpy", "dds")}
-    assert all(r.stdout.readline().strip() == "ready" for r in readers.values())
+    assert all(wait_for_line(r, "ready") for r in readers.values())
     writer = subprocess.Popen([sys.executable, str(WRITER), "rclpy", "2000", "2", "own", "0",
                                str(len(readers))],
                               env=child_env(), cwd=REPO_ROOT, stdout=subprocess.PIPE,

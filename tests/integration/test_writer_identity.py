@@ -26,7 +26,7 @@ from stillframe.locations import REPO_ROOT
 from stillframe.loop.closed_loop import run_closed_loop
 from stillframe.loop.writer_gate import REASONS
 from stillframe.middleware.api import create_node, spin_until
-from tests.support.middleware import child_env, finish
+from tests.support.middleware import child_env, finish, wait_for_line
 from tests.support.nodes import SHORT_LQG, Statuses, params_file, start_node, stop
 from tests.support.scenes import thesis_scene
 from tests.support.waits import HANG_S
@@ -52,7 +52,7 @@ def test_stray_simulator_is_ignored_counted_and_named(ros_domain: int, tmp_path:
     strays = [subprocess.Popen([sys.executable, str(STRAY), backend, from_s], env=child_env(),
                                cwd=REPO_ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                                text=True) for backend in BACKENDS]
-    assert all(s.stdout.readline().strip() == "ready" for s in strays)
+    assert all(wait_for_line(s, "ready") for s in strays)
     peers = [start_node(name, params) for name in ("estimator_node", "controller_node")]
     sim = start_node("sim_node", params)
     probe = create_node("identity_probe", argv=["test"])
