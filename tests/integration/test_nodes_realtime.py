@@ -17,13 +17,14 @@ from sim_node.node import SimNode
 from stillframe.contract import topics
 from stillframe.locations import REPO_ROOT
 from stillframe.loop.closed_loop import run_closed_loop
-from stillframe.middleware.api import create_node
+from stillframe.middleware.api import create_node, spin_until
 from stillframe.node_runtime.declarations import SimParameterValues
 from stillframe.node_runtime.support import LoopParameters
 from stillframe.plant.frame_plant import FramePlant
 from tests.support.middleware import child_env, finish, start_python, wait_for_line
 from tests.support.nodes import params_file, run_loop, start_node, stop, wait_for_log
 from tests.support.scenes import thesis_scene
+from tests.support.waits import HANG_S
 
 OPEN_LOOP = ["controller.type=none", "estimator.type=none"]
 
@@ -119,6 +120,13 @@ def test_realtime_sim_holds_zero_while_half_the_commands_miss(ros_domain: int) -
         sim = SimNode(node, LoopParameters(scene, "realtime", 1.0),
                       {SimParameterValues: SimParameterValues(
                           discovery_timeout_s=2.0, command_timeout_periods=1_000_000)})
+        # the commander on the simulator's graph (its /clock reader, its command writer) before
+        # the run: the simulator's discovery wait is for an estimator and a controller, which
+        # this test does not start, and a loaded machine can take longer than it to discover
+        command = f"{topics.DEFAULT_NAMESPACE}/pendulum/torque_cmd"
+        assert spin_until(node, lambda: bool(node.get_subscriptions_info_by_topic("/clock")
+                                             and node.get_publishers_info_by_topic(command)),
+                          HANG_S)
         history, _ = sim.run()
     finally:
         node.destroy_node()
