@@ -25,19 +25,16 @@ SCENES = REPO_ROOT / "scenes"
 SHORT_LQG = ["duration=6", "controller.start=3", "evaluation.window=2"]
 
 
-#: the histories the simulator writes beside its result (sim_node ``write_result``) that a
-#: lock-step run must share with the one-process loop, sample by sample
-HISTORIES = ("t", "truth", "command", "force", "fine_floors", "fine_velocities")
-
-
 def assert_same_histories(histories: Any, reference: Any) -> None:
-    """Every history of :data:`HISTORIES` (a mapping, e.g. the simulator's ``.npz``) equals the
-    one-process loop's (``reference``, a :class:`stillframe.loop.evaluation.LoopHistory`) to the
-    last bit; a difference is named by its history, its first row and that row's time, which
-    says where timing entered the run and which node it reached first (the command before the
-    truth: the controller's side)."""
+    """Every history the simulator wrote (``histories``: its ``.npz``, as sim_node's
+    ``write_result`` names them) equals the one-process loop's of that name (``reference``, a
+    :class:`stillframe.loop.evaluation.LoopHistory`) to the last bit; a difference is named by
+    its history, its first row and that row's time, which says where timing entered the run and
+    which node it reached first (the command before the truth: the controller's side)."""
+    keys = list(histories)
+    assert {"truth", "command", "fine_floors"} <= set(keys), keys
     first = []
-    for key in HISTORIES:
+    for key in keys:
         got, want = np.asarray(histories[key]), np.asarray(getattr(reference, key))
         assert got.shape == want.shape, (key, got.shape, want.shape)
         rows = np.flatnonzero(np.any((got != want).reshape(len(got), -1), axis=1))
