@@ -8,7 +8,8 @@ safe states:
    of the last estimate (its watchdog), the sim keeps running, the controller's ``/diagnostics``
    is ERROR naming the watchdog;
 2. the estimator is restarted: it starts from the current measurements (its first estimate of φ
-   is the encoder's reading, within 1e-2 rad of the truth) and control resumes;
+   is the encoder's reading, within 1e-2 rad of the truth, and so are those of the next 2 s, each
+   made with every reading of its sample: ``partial_after_s`` is long) and control resumes;
 3. the controller is killed: the sim holds the newest command it took, then applies zero once
    that is 3 periods old (``command_timeout_periods``; the miss-rate guard is off here, so that
    the safe state alone acts, whatever deadlines the machine's load made the loop miss before).
@@ -55,15 +56,18 @@ PERIOD_NS = round(1e9 / RATE_HZ)
 RECORDED = ["/frame/state_estimate", "/frame/pendulum/torque_cmd", "/frame/state_truth",
             "/frame/pendulum/joint_states"]
 OVERRIDES = ["duration=600", "controller.start=1", "evaluation.window=1"]
+PARTIAL_AFTER_S = 30.0      # far beyond any stall of a loaded machine
 
 
 class Watch:
-    """The test's own node: the newest /clock and every controller status."""
+    """The test's own node: the newest /clock, every controller status and the estimator's
+    newest status values."""
 
     def __init__(self) -> None:
         self.node = create_node("fault_probe", argv=["test"])
         self.clock_ns = 0
         self.levels: list[int] = []
+        self.estimator: dict[str, str] = {}
         self.node.create_subscription(topics.CLOCK.type_name, "/clock", self.on_clock, "clock")
         self.node.create_subscription(topics.DIAGNOSTICS.type_name, "/diagnostics",
                                       self.on_status, "default")
@@ -73,6 +77,9 @@ class Watch:
 
     def on_status(self, msg: object) -> None:
         self.levels += [s.level for s in msg.status if s.name == "/frame/controller_node"]
+        for s in msg.status:
+            if s.name == "/frame/estimator_node":
+                self.estimator = {kv.key: kv.value for kv in s.values}
 
     def until(self, condition: object, timeout: float = 60) -> None:
         assert spin_until(self.node, condition, timeout)
@@ -93,9 +100,12 @@ def _by_topic(bag: Path) -> dict[str, list]:
 @pytest.mark.slow
 def test_kill_and_restart_estimator_then_kill_controller(ros_domain: int, tmp_path: Path) -> None:
     bag = tmp_path / "bag"
+    # the estimator waits for every reading of a sample (PARTIAL_AFTER_S): a restarted filter
+    # that does not yet know the velocities drifts by φ' T in a period without the encoder's
+    # reading, and a loaded machine's late reading must not be what step 2 measures
     params = params_file(tmp_path, "thesis_lqg", OVERRIDES, mode="realtime",
                          command_miss_limit=0.0, diagnostics_period_s=0.05,
-                         await_recorder=RECORDED)
+                         await_recorder=RECORDED, partial_after_s=PARTIAL_AFTER_S)
     recorder = subprocess.Popen([sys.executable, "-m", "stillframe", "record", "-o", str(bag),
                                  *RECORDED], env=child_env(), cwd=REPO_ROOT,
                                 stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
@@ -118,6 +128,8 @@ def test_kill_and_restart_estimator_then_kill_controller(ros_domain: int, tmp_pa
         watch.until(lambda: len(watch.levels) > seen + 2 and watch.levels[-1] == 0)
         resumed = watch.clock_ns
         watch.until(lambda: watch.clock_ns >= resumed + 2e9)
+        counts = {k: watch.estimator.get(k) for k in ("partial_updates", "late_inputs",
+                                                      "refilters")}
         controller.kill()                                          # 3. SIGKILL the controller
         controller.wait()
         killed = watch.clock_ns
@@ -173,10 +185,10 @@ def test_kill_and_restart_estimator_then_kill_controller(ros_domain: int, tmp_pa
     following = [abs(physical_state(estimated[ns])[3] - physical_state(truth[ns])[3])
                  for ns in estimates if first_after < ns <= first_after + 64 * PERIOD_NS]
     print(f"restarted estimator: first φ error {first[3] - true_phi:.2e} rad (φ = {true_phi:.3f}),"
-          f" largest of the next {len(following)}: {max(following):.2e} rad")
+          f" largest of the next {len(following)}: {max(following):.2e} rad; {counts}")
     assert first[3] == encoder[first_after].position[0]
     assert abs(first[3] - true_phi) < 1e-2
-    assert len(following) >= 32 and max(following) < 1e-2
+    assert len(following) >= 32 and max(following) < 1e-2, (following, counts)
     assert any(v != 0.0 for ns, v in commands.items() if ns > first_after)   # control resumed
     # 3. the controller killed: the applied torque (effort, reported at t for [t - T, t)). The
     # newest command the sim took is the recorder's last, or one period after it (the SIGKILL
