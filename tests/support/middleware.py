@@ -7,6 +7,7 @@ import fcntl
 import os
 import random
 import select
+import signal
 import subprocess
 import sys
 import tempfile
@@ -28,6 +29,8 @@ TEST_DOMAINS = range(1, 201)
 #: still stopping on a loaded machine, or killed) has left the graph, so the next test on the id
 #: does not find it there ("another stillframe loop is running")
 DOMAIN_REST_S = 60.0
+#: how long [s] an aborted process has to write its threads' stacks before it is killed
+ABORT_S = 20.0
 
 
 @contextlib.contextmanager
@@ -75,8 +78,11 @@ def isolated_domain(monkeypatch: pytest.MonkeyPatch) -> Iterator[int]:
 
 
 def child_env() -> dict[str, str]:
-    """The environment for a subprocess: this one (with ROS_DOMAIN_ID) plus the repo on the path."""
-    return dict(os.environ, PYTHONPATH=str(REPO_ROOT), PYTHONUNBUFFERED="1")
+    """The environment for a subprocess: this one (with ROS_DOMAIN_ID) plus the repo on the path,
+    and Python's fault handler on, so that a child that hangs prints where each of its threads
+    is when :func:`finish` aborts it."""
+    return dict(os.environ, PYTHONPATH=str(REPO_ROOT), PYTHONUNBUFFERED="1",
+                PYTHONFAULTHANDLER="1")
 
 
 def start_python(code: str, *args: str, env: dict[str, str] | None = None) -> subprocess.Popen:
@@ -126,13 +132,20 @@ def wait_for_line(proc: subprocess.Popen, text: str, timeout: float = HANG_S) ->
 
 
 def finish(proc: subprocess.Popen, timeout: float = HANG_S) -> tuple[str, str]:
-    """Wait for the process, killing it on timeout; its remaining stdout and stderr."""
+    """Wait for the process; its remaining stdout and stderr. On timeout it is aborted (SIGABRT:
+    the fault handler of :func:`child_env` writes every thread's Python stack, which works while
+    the main thread is stuck in C code), killed if that does not end it, and the failure shows
+    the end of its stderr."""
     try:
         return proc.communicate(timeout=timeout)
     except subprocess.TimeoutExpired:
-        proc.kill()
-        _out, err = proc.communicate()
-        raise AssertionError(f"process did not finish; stderr: {err[-2000:]}") from None
+        proc.send_signal(signal.SIGABRT)
+        try:
+            _out, err = proc.communicate(timeout=ABORT_S)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            _out, err = proc.communicate()
+        raise AssertionError(f"process did not finish; stderr: {err[-6000:]}") from None
 
 
 def niced(increment: int) -> int:
