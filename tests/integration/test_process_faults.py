@@ -60,14 +60,12 @@ PARTIAL_AFTER_S = 30.0      # far beyond any stall of a loaded machine
 
 
 class Watch:
-    """The test's own node: the newest /clock, every controller status and the estimator's
-    newest status values."""
+    """The test's own node: the newest /clock and every controller status."""
 
     def __init__(self) -> None:
         self.node = create_node("fault_probe", argv=["test"])
         self.clock_ns = 0
         self.levels: list[int] = []
-        self.estimator: dict[str, str] = {}
         self.node.create_subscription(topics.CLOCK.type_name, "/clock", self.on_clock, "clock")
         self.node.create_subscription(topics.DIAGNOSTICS.type_name, "/diagnostics",
                                       self.on_status, "default")
@@ -77,9 +75,6 @@ class Watch:
 
     def on_status(self, msg: object) -> None:
         self.levels += [s.level for s in msg.status if s.name == "/frame/controller_node"]
-        for s in msg.status:
-            if s.name == "/frame/estimator_node":
-                self.estimator = {kv.key: kv.value for kv in s.values}
 
     def until(self, condition: object, timeout: float = 60) -> None:
         assert spin_until(self.node, condition, timeout)
@@ -113,6 +108,7 @@ def test_kill_and_restart_estimator_then_kill_controller(ros_domain: int, tmp_pa
     controller = start_node("controller_node", params)
     sim = start_node("sim_node", params)
     watch = Watch()
+    statuses = Statuses(watch.node)
     procs = [recorder, estimator, controller, sim]
     try:
         watch.until(lambda: watch.clock_ns >= 3e9)
@@ -128,8 +124,8 @@ def test_kill_and_restart_estimator_then_kill_controller(ros_domain: int, tmp_pa
         watch.until(lambda: len(watch.levels) > seen + 2 and watch.levels[-1] == 0)
         resumed = watch.clock_ns
         watch.until(lambda: watch.clock_ns >= resumed + 2e9)
-        counts = {k: watch.estimator.get(k) for k in ("partial_updates", "late_inputs",
-                                                      "refilters")}
+        values = statuses.latest.get("/frame/estimator_node", (0, "", {}))[2]
+        counts = {k: values.get(k) for k in ("partial_updates", "late_inputs", "refilters")}
         controller.kill()                                          # 3. SIGKILL the controller
         controller.wait()
         killed = watch.clock_ns
